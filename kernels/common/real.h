@@ -1,0 +1,33 @@
+/* real.h — the scalar vocabulary shared by OpenCL C kernels and their C++ reference.
+ *
+ * Every model's maths is written once, as plain functions over `real`, in a .cl file that
+ *   - the OpenCL build compiles with real = float, or real = double when the host passes
+ *     -DSPECBAKE_REAL_DOUBLE (only on devices with cl_khr_fp64), and
+ *   - the C++ reference path #includes inside a namespace that defines real = double
+ *     (see src/jobs/<kind>/reference.hpp).
+ * Literals go through R(x) so that float builds stay in float.
+ */
+#ifndef SPECBAKE_REAL_H
+#define SPECBAKE_REAL_H
+
+#ifdef __OPENCL_C_VERSION__
+#  ifdef SPECBAKE_INJECTED_BUILD_FAILURE
+#    error "build failure injected through SPECBAKE_INJECT_BUILD_FAILURE (fault test)"
+#  endif
+#  ifdef SPECBAKE_REAL_DOUBLE
+#    pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double real;
+#  else
+typedef float real;
+#  endif
+#  define GLOBAL __global
+#  define FN
+#else
+/* C++: the including namespace has `using real = double;` and the <cmath> names in scope. */
+#  define GLOBAL
+#  define FN inline
+#endif
+
+#define R(x) ((real)(x))
+
+#endif

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Installs what specbake needs from Debian 12 packages (only what is missing),
+# then configures and builds into build/ (Release).
+#   scripts/setup.sh            install + build
+#   SPECBAKE_NO_INSTALL=1 ...   skip the apt step (already provisioned machines)
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+
+packages=(
+  build-essential cmake pkg-config
+  ocl-icd-opencl-dev opencl-headers opencl-clhpp-headers pocl-opencl-icd clinfo
+  libvkfft-dev libopenexr-dev libpng-dev libglm-dev libboost-math-dev
+  libspdlog-dev libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libssl-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libfftw3-dev
+  python3-numpy
+)
+
+if [ "${SPECBAKE_NO_INSTALL:-0}" != 1 ]; then
+  missing=()
+  for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if [ ${#missing[@]} -gt 0 ]; then
+    echo "setup: installing ${missing[*]}"
+    sudo_cmd=()
+    [ "$(id -u)" -ne 0 ] && sudo_cmd=(sudo)
+    "${sudo_cmd[@]}" apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+  fi
+fi
+
+build_type=${SPECBAKE_BUILD_TYPE:-Release}
+cmake -S "$root" -B "$root/build" -DCMAKE_BUILD_TYPE="$build_type" ${SPECBAKE_CMAKE_ARGS:-}
+cmake --build "$root/build" -j "$(nproc)"

@@ -1,0 +1,55 @@
+#include "cl/buffers.hpp"
+
+namespace specbake::cl_util {
+
+cl::Buffer upload_real(Device& dev, const std::vector<double>& values) {
+  return checked("uploading a buffer", [&] {
+    const std::size_t n = std::max<std::size_t>(values.size(), 1);
+    if (dev.info().fp64) {
+      std::vector<double> v(values);
+      v.resize(n);
+      return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(double), v.data());
+    }
+    std::vector<float> v(values.begin(), values.end());
+    v.resize(n);
+    return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(float), v.data());
+  });
+}
+
+cl::Buffer device_real(Device& dev, std::size_t count) {
+  return checked("allocating a device buffer", [&] {
+    const std::size_t elem = dev.info().fp64 ? sizeof(double) : sizeof(float);
+    return cl::Buffer(dev.context(), CL_MEM_READ_WRITE, std::max<std::size_t>(count, 1) * elem);
+  });
+}
+
+std::vector<double> download_real(Device& dev, const cl::Buffer& buf, std::size_t count) {
+  return checked("reading a device buffer", [&] {
+    if (dev.info().fp64) {
+      std::vector<double> v(count);
+      if (count) dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, count * sizeof(double), v.data());
+      return v;
+    }
+    std::vector<float> f(count);
+    if (count) dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, count * sizeof(float), f.data());
+    return std::vector<double>(f.begin(), f.end());
+  });
+}
+
+void set_real_arg(Device& dev, cl::Kernel& k, cl_uint index, double value) {
+  checked("setting a kernel argument", [&] {
+    if (dev.info().fp64) k.setArg(index, value);
+    else k.setArg(index, static_cast<float>(value));
+    return 0;
+  });
+}
+
+void run_1d(Device& dev, cl::Kernel& k, std::size_t count) {
+  checked("running a kernel", [&] {
+    dev.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(count), cl::NullRange);
+    dev.queue().finish();
+    return 0;
+  });
+}
+
+}  // namespace specbake::cl_util

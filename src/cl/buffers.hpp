@@ -1,0 +1,18 @@
+#pragma once
+// Moving `real` arrays between the host (always double) and a device whose kernels were
+// built with real = float or real = double (Device::real_options()).
+#include <CL/opencl.hpp>
+
+#include <vector>
+
+#include "cl/device.hpp"
+
+namespace specbake::cl_util {
+
+cl::Buffer upload_real(Device& dev, const std::vector<double>& values);
+cl::Buffer device_real(Device& dev, std::size_t count);  // uninitialised, read-write
+std::vector<double> download_real(Device& dev, const cl::Buffer& buf, std::size_t count);
+void set_real_arg(Device& dev, cl::Kernel& k, cl_uint index, double value);
+void run_1d(Device& dev, cl::Kernel& k, std::size_t count);  // enqueue + finish
+
+}  // namespace specbake::cl_util

@@ -1,0 +1,70 @@
+#pragma once
+// OpenCL device selection, program building and error mapping.
+// Build logs and OpenCL error codes surface as DeviceError with names, logged via spdlog.
+#include <CL/opencl.hpp>
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/errors.hpp"
+
+namespace specbake::cl_util {
+
+struct DeviceInfo {
+  int platform_index = 0;
+  int device_index = 0;
+  std::string platform;
+  std::string name;
+  std::string version;
+  std::string type;  // cpu | gpu | accelerator | other
+  bool fp64 = false;
+  unsigned long long global_mem_bytes = 0;
+  unsigned long long max_alloc_bytes = 0;
+  unsigned compute_units = 0;
+};
+
+// Name of an OpenCL status code, e.g. -11 -> "CL_BUILD_PROGRAM_FAILURE".
+const char* error_name(int code);
+
+std::vector<DeviceInfo> list_devices();  // empty when no platform is installed
+
+// Picks a device: "auto" (first CPU device, else first device), "cpu", "gpu",
+// or a case-insensitive substring of the device or platform name.
+// Throws DeviceError naming the selector and the devices seen.
+DeviceInfo select_device(const std::string& selector);
+
+class Device {
+ public:
+  explicit Device(const DeviceInfo& info);
+  const DeviceInfo& info() const { return info_; }
+  cl::Context& context() { return context_; }
+  cl::CommandQueue& queue() { return queue_; }
+  // Builds the embedded kernel file (includes resolved), once per (path, options); the
+  // build log goes to spdlog, and a failed build throws DeviceError carrying the log.
+  cl::Program build(const std::string& kernel_path, const std::string& options = "");
+  // Options selecting `real` = double where the device has cl_khr_fp64.
+  std::string real_options() const { return info_.fp64 ? "-DSPECBAKE_REAL_DOUBLE" : ""; }
+  // "Device name (Platform, OpenCL x.y)"
+  std::string description() const;
+
+ private:
+  DeviceInfo info_;
+  cl::Device device_;
+  cl::Context context_;
+  cl::CommandQueue queue_;
+  std::map<std::string, cl::Program> programs_;
+};
+
+// Runs f, turning cl::Error into DeviceError("<what>: CL_NAME (code)").
+template <class F>
+auto checked(const char* what, F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const cl::Error& e) {
+    throw DeviceError(std::string(what) + ": " + e.what() + " returned " + error_name(e.err()) + " (" +
+                      std::to_string(e.err()) + ")");
+  }
+}
+
+}  // namespace specbake::cl_util

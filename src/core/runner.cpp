@@ -1,0 +1,234 @@
+#include "core/runner.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <ctime>
+#include <map>
+#include <memory>
+#include <set>
+
+#include "cl/device.hpp"
+#include "core/hash.hpp"
+#include "core/resources.hpp"
+#include "core/version.hpp"
+#include "io/bundle.hpp"
+#include "jobs/job.hpp"
+
+namespace specbake {
+
+using nlohmann::json;
+
+std::vector<Config> load_configs(const std::vector<fs::path>& paths) {
+  std::vector<fs::path> files;
+  for (const auto& p : paths) {
+    std::error_code ec;
+    if (fs::is_directory(p, ec)) {
+      std::vector<fs::path> found;
+      for (const auto& e : fs::directory_iterator(p, ec)) {
+        const auto ext = e.path().extension();
+        if (e.is_regular_file() && (ext == ".yaml" || ext == ".yml")) found.push_back(e.path());
+      }
+      if (ec) throw IoError("cannot list " + p.string() + ": " + ec.message());
+      if (found.empty()) throw InputError({p, 0, 0, ""}, "folder holds no *.yaml config");
+      std::sort(found.begin(), found.end());
+      files.insert(files.end(), found.begin(), found.end());
+    } else {
+      files.push_back(p);
+    }
+  }
+  std::vector<Config> configs;
+  std::map<std::pair<std::string, std::string>, Location> seen;  // (output, name)
+  for (const auto& f : files) {
+    Config c = load_config(f);
+    for (const auto& j : c.jobs) {
+      const auto key = std::make_pair(fs::weakly_canonical(c.output).string(), j.name);
+      if (auto it = seen.find(key); it != seen.end())
+        throw InputError(j.where, "job name '" + j.name + "' is also used by " + it->second.str() +
+                                      " with the same output folder");
+      seen.emplace(key, j.where);
+    }
+    configs.push_back(std::move(c));
+  }
+  return configs;
+}
+
+std::string job_hash(const JobSpec& job) {
+  Sha256 h;
+  json identity = {{"tool", "specbake"}, {"version", kVersion}, {"config", job.normalised}};
+  for (const auto& [label, sha] : job.inputs) identity["inputs"][label] = sha;
+  h.update(identity.dump());
+  for (const auto& k : kernel_files(job.kind)) {
+    h.update(k);
+    h.update(resource(k));
+  }
+  return h.hex();
+}
+
+ExitCode exit_code(const std::vector<JobReport>& reports) {
+  for (const auto& r : reports)
+    if (r.status == "failed") return r.code;
+  return ExitCode::ok;
+}
+
+namespace {
+
+std::string utc_now() {
+  std::time_t t = std::time(nullptr);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
+  return buf;
+}
+
+json device_json(const cl_util::DeviceInfo& d) {
+  return {{"name", d.name}, {"platform", d.platform}, {"version", d.version}, {"type", d.type}, {"fp64", d.fp64}};
+}
+
+// Opens each selected device once per run.
+class Devices {
+ public:
+  cl_util::Device& get(const std::string& selector) {
+    const cl_util::DeviceInfo info = cl_util::select_device(selector);
+    const auto key = std::make_pair(info.platform_index, info.device_index);
+    auto it = open_.find(key);
+    if (it == open_.end()) {
+      spdlog::info("device: {} [{}]", info.name, info.platform);
+      it = open_.emplace(key, std::make_unique<cl_util::Device>(info)).first;
+    }
+    return *it->second;
+  }
+
+ private:
+  std::map<std::pair<int, int>, std::unique_ptr<cl_util::Device>> open_;
+};
+
+}  // namespace
+
+Runner::Runner(std::vector<Config> configs, RunOptions options, RunProgress progress)
+    : configs_(std::move(configs)), options_(std::move(options)), progress_(std::move(progress)) {}
+
+std::vector<Runner::Item> Runner::select() const {
+  std::set<std::string> known;
+  for (const auto& c : configs_)
+    for (const auto& j : c.jobs) known.insert(j.name);
+  for (const auto& o : options_.only)
+    if (!known.count(o)) throw UsageError("--only names job '" + o + "', which no given config defines");
+  std::vector<Item> items;
+  for (const auto& c : configs_)
+    for (const auto& j : c.jobs) {
+      if (!options_.only.empty() && std::find(options_.only.begin(), options_.only.end(), j.name) == options_.only.end())
+        continue;
+      items.push_back({&c, &j, options_.out ? *options_.out : c.output, options_.device ? *options_.device : c.device,
+                       job_hash(j)});
+    }
+  return items;
+}
+
+std::vector<JobReport> Runner::plan() {
+  std::vector<JobReport> reports;
+  Devices devices;
+  for (const auto& it : select()) {
+    JobReport r{it.config->file.string(), it.job->name, it.job->kind, "planned", "", ExitCode::ok, it.hash};
+    BundleStore store(it.output);
+    r.bundle = store.bundle_dir(it.job->name, it.hash.substr(0, 12));
+    const bool current = store.is_complete(it.job->name, it.hash.substr(0, 12));
+    r.reason = current ? (options_.force ? "up to date; --force rebuilds it" : "up to date; would be skipped")
+                       : "would be built";
+    try {
+      JobContext ctx{devices.get(it.device)};
+      r.parameters = plan_job(*it.job, ctx);
+    } catch (const Error& e) {
+      r.status = "failed";
+      r.code = e.exit_code();
+      r.reason = e.what();
+    }
+    reports.push_back(std::move(r));
+  }
+  return reports;
+}
+
+std::vector<JobReport> Runner::run() {
+  const auto items = select();
+  // Output folders are checked before any job runs: an unwritable one stops the run.
+  std::set<fs::path> roots;
+  for (const auto& it : items) roots.insert(it.output);
+  for (const auto& root : roots) BundleStore(root).check_writable();
+
+  std::vector<JobReport> reports;
+  Devices devices;
+  for (const auto& it : items) {
+    const std::string& name = it.job->name;
+    const std::string hash12 = it.hash.substr(0, 12);
+    JobReport r{it.config->file.string(), name, it.job->kind, "", "", ExitCode::ok, it.hash};
+    BundleStore store(it.output);
+    r.bundle = store.bundle_dir(name, hash12);
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      store.clean_stale(name);
+      if (!options_.force && store.is_complete(name, hash12)) {
+        store.set_latest(name, hash12);
+        r.status = "up-to-date";
+        r.reason = "a complete bundle with this hash exists";
+        spdlog::info("{}: up to date ({})", name, r.bundle.string());
+        reports.push_back(std::move(r));
+        continue;
+      }
+      spdlog::info("{}: baking ({} job)", name, it.job->kind);
+      cl_util::Device& dev = devices.get(it.device);
+      auto last_log = std::chrono::steady_clock::now() - std::chrono::seconds(10);
+      JobContext ctx{dev, [&](std::string_view stage, double f) {
+                       if (progress_) progress_(name, stage, f);
+                       const auto now = std::chrono::steady_clock::now();
+                       if (now - last_log > std::chrono::seconds(2) || f >= 1.0) {
+                         spdlog::info("{}: {} ({:.0f} %)", name, stage, 100.0 * f);
+                         last_log = now;
+                       }
+                     }};
+      const auto tb = std::chrono::steady_clock::now();
+      BakeResult result = bake_job(*it.job, ctx);
+      const double bake_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tb).count();
+      for (const auto& w : result.warnings) spdlog::warn("{}: {}", name, w);
+
+      json manifest = {
+          {"schema", "specbake.bundle/1"},
+          {"tool", {{"name", "specbake"}, {"version", kVersion}}},
+          {"job", {{"name", name}, {"kind", it.job->kind}, {"hash", it.hash}, {"config_file", fs::absolute(it.config->file).string()}}},
+          {"config", it.job->normalised},
+          {"inputs", json::object()},
+          {"kernels", json::object()},
+          {"device", device_json(dev.info())},
+          {"parameters", result.parameters},
+          {"accuracy", result.accuracy},
+          {"warnings", result.warnings},
+          {"created_utc", utc_now()},
+      };
+      for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
+      for (const auto& k : kernel_files(it.job->kind)) manifest["kernels"][k] = sha256_hex(resource(k));
+      const auto tw = std::chrono::steady_clock::now();
+      manifest["timings_s"] = {{"bake", bake_s}};
+      r.bundle = store.publish(name, hash12, manifest, result.files);
+      const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tw).count();
+      r.status = "built";
+      r.parameters = result.parameters;
+      r.accuracy = result.accuracy;
+      r.warnings = result.warnings;
+      r.timings = {{"bake_s", bake_s}, {"write_s", write_s}};
+      spdlog::info("{}: wrote {}", name, r.bundle.string());
+    } catch (const Error& e) {
+      r.status = "failed";
+      r.code = e.exit_code();
+      r.reason = e.what();
+      spdlog::error("{}: {}", name, e.what());
+    } catch (const std::exception& e) {
+      r.status = "failed";
+      r.code = ExitCode::job_failed;
+      r.reason = e.what();
+      spdlog::error("{}: {}", name, e.what());
+    }
+    r.timings["total_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    reports.push_back(std::move(r));
+  }
+  return reports;
+}
+
+}  // namespace specbake

@@ -1,0 +1,179 @@
+#include "io/bundle.hpp"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <stdio.h>
+#include <unistd.h>
+
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+
+#include <spdlog/spdlog.h>
+
+#include "core/errors.hpp"
+#include "core/hash.hpp"
+
+namespace specbake {
+
+static_assert(std::endian::native == std::endian::little, "bundle .bin files are written as little-endian");
+static_assert(sizeof(float) == 4 && std::numeric_limits<float>::is_iec559, "float32 must be IEEE 754 binary32");
+
+std::string float32_le(const std::vector<double>& values, const std::string& what) {
+  std::string out(values.size() * sizeof(float), '\0');
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const float f = static_cast<float>(values[i]);
+    if (!std::isfinite(f))
+      throw JobError(what + ": non-finite value " + std::to_string(values[i]) + " at flat index " + std::to_string(i));
+    std::memcpy(out.data() + i * sizeof(float), &f, sizeof(float));
+  }
+  return out;
+}
+
+namespace {
+
+[[noreturn]] void io_fail(const std::string& what, const fs::path& p, int err = errno) {
+  throw IoError(what + " " + p.string() + ": " + std::strerror(err));
+}
+
+void write_file_synced(const fs::path& p, std::string_view bytes) {
+  const int fd = ::open(p.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) io_fail("cannot create", p);
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t w = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      const int err = errno;
+      ::close(fd);
+      io_fail("cannot write", p, err);
+    }
+    done += static_cast<std::size_t>(w);
+  }
+  if (::fsync(fd) != 0) {
+    const int err = errno;
+    ::close(fd);
+    io_fail("cannot flush", p, err);
+  }
+  if (::close(fd) != 0) io_fail("cannot close", p);
+}
+
+void sync_dir(const fs::path& p) {
+  const int fd = ::open(p.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd >= 0) {
+    ::fsync(fd);
+    ::close(fd);
+  }
+}
+
+void make_dirs(const fs::path& p) {
+  std::error_code ec;
+  fs::create_directories(p, ec);
+  if (ec) throw IoError("cannot create folder " + p.string() + ": " + ec.message());
+}
+
+}  // namespace
+
+void BundleStore::check_writable() const {
+  make_dirs(root_);
+  const fs::path probe = root_ / (".write-test-" + std::to_string(::getpid()));
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) io_fail("output folder is not writable:", root_);
+  ::close(fd);
+  ::unlink(probe.c_str());
+}
+
+bool BundleStore::is_complete(const std::string& job, const std::string& hash12) const {
+  const fs::path dir = bundle_dir(job, hash12);
+  std::ifstream in(dir / "manifest.json");
+  if (!in) return false;
+  try {
+    const auto m = nlohmann::json::parse(in);
+    for (const auto& f : m.at("files")) {
+      std::error_code ec;
+      const auto size = fs::file_size(dir / f.at("path").get<std::string>(), ec);
+      if (ec || size != f.at("bytes").get<std::uintmax_t>()) return false;
+    }
+    return true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+void BundleStore::set_latest(const std::string& job, const std::string& hash12) const {
+  const fs::path dir = job_dir(job);
+  const fs::path tmp = dir / (".latest-" + std::to_string(::getpid()));
+  std::error_code ec;
+  fs::remove(tmp, ec);
+  if (::symlink(hash12.c_str(), tmp.c_str()) != 0) io_fail("cannot create link", tmp);
+  if (::rename(tmp.c_str(), (dir / "latest").c_str()) != 0) io_fail("cannot update", dir / "latest");
+  sync_dir(dir);
+}
+
+void BundleStore::clean_stale(const std::string& job) const {
+  std::error_code ec;
+  const fs::path dir = job_dir(job);
+  if (!fs::is_directory(dir, ec)) return;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    const bool tmp = name.rfind(".tmp-", 0) == 0, old = name.rfind(".old-", 0) == 0,
+               link = name.rfind(".latest-", 0) == 0;
+    if (!tmp && !old && !link) continue;
+    const auto dash = name.rfind('-');
+    const long pid = std::strtol(name.c_str() + dash + 1, nullptr, 10);
+    if (pid > 0 && pid != ::getpid() && ::kill(static_cast<pid_t>(pid), 0) == 0) continue;  // still running
+    if (pid == ::getpid()) continue;
+    spdlog::info("removing stale {} left by an interrupted run", e.path().string());
+    fs::remove_all(e.path(), ec);
+  }
+}
+
+fs::path BundleStore::publish(const std::string& job, const std::string& hash12, nlohmann::json manifest,
+                              const std::vector<OutputFile>& files) const {
+  const fs::path dir = job_dir(job);
+  make_dirs(dir);
+  const std::string pid = std::to_string(::getpid());
+  const fs::path tmp = dir / (".tmp-" + hash12 + "-" + pid);
+  std::error_code ec;
+  fs::remove_all(tmp, ec);
+  make_dirs(tmp);
+  try {
+    nlohmann::json list = nlohmann::json::array();
+    for (const auto& f : files) {
+      const fs::path p = tmp / f.path;
+      make_dirs(p.parent_path());
+      write_file_synced(p, f.bytes);
+      nlohmann::json entry = {{"path", f.path}, {"sha256", sha256_hex(f.bytes)}, {"bytes", f.bytes.size()}};
+      if (!f.dtype.empty()) entry["dtype"] = f.dtype;
+      if (!f.shape.empty()) entry["shape"] = f.shape;
+      if (!f.layout.empty()) entry["layout"] = f.layout;
+      if (!f.units.empty()) entry["units"] = f.units;
+      if (!f.description.empty()) entry["description"] = f.description;
+      list.push_back(entry);
+    }
+    manifest["files"] = list;
+    write_file_synced(tmp / "manifest.json", manifest.dump(2) + "\n");
+    sync_dir(tmp);
+
+    const fs::path final_dir = bundle_dir(job, hash12);
+    if (fs::exists(final_dir, ec)) {
+      // Rebuild (--force): swap atomically so a reader always sees one complete bundle.
+      if (::renameat2(AT_FDCWD, tmp.c_str(), AT_FDCWD, final_dir.c_str(), RENAME_EXCHANGE) != 0)
+        io_fail("cannot replace", final_dir);
+      fs::remove_all(tmp, ec);  // now holds the previous bundle
+    } else if (::rename(tmp.c_str(), final_dir.c_str()) != 0) {
+      io_fail("cannot publish", final_dir);
+    }
+    sync_dir(dir);
+    set_latest(job, hash12);
+    return final_dir;
+  } catch (...) {
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+}
+
+}  // namespace specbake

@@ -1,0 +1,57 @@
+#pragma once
+// Versioned bundles on disk:
+//   <output>/<job>/<hash12>/manifest.json + files     one complete bake
+//   <output>/<job>/latest -> <hash12>                 the newest complete bundle (symlink)
+// A bundle is written into <output>/<job>/.tmp-<hash12>-<pid>, fsynced, and renamed into
+// place; `latest` is replaced last by an atomic rename. A killed run leaves at most a
+// stale .tmp-* folder, which the next run removes. The writer knows nothing of job kinds.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace specbake {
+
+namespace fs = std::filesystem;
+
+struct OutputFile {
+  std::string path;                // relative to the bundle, e.g. "matrices.bin", "preview/sky.png"
+  std::string bytes;
+  std::string dtype;               // "float32" for .bin, "" for text/images
+  std::vector<std::int64_t> shape; // outermost first
+  std::string layout;              // e.g. "[n][row][col], row-major, little-endian"
+  std::string units;
+  std::string description;
+};
+
+// Little-endian float32 bytes of values (rounded to nearest); throws JobError naming
+// `what` and the first index if any value is not finite.
+std::string float32_le(const std::vector<double>& values, const std::string& what);
+
+class BundleStore {
+ public:
+  explicit BundleStore(fs::path output_root) : root_(std::move(output_root)) {}
+  const fs::path& root() const { return root_; }
+  fs::path job_dir(const std::string& job) const { return root_ / job; }
+  fs::path bundle_dir(const std::string& job, const std::string& hash12) const { return job_dir(job) / hash12; }
+
+  // True when the bundle's manifest exists and every file it lists has the recorded size.
+  bool is_complete(const std::string& job, const std::string& hash12) const;
+  // Points `latest` at an existing bundle (atomic).
+  void set_latest(const std::string& job, const std::string& hash12) const;
+  // Removes .tmp-* folders left by runs that no longer exist.
+  void clean_stale(const std::string& job) const;
+  // Writes files and manifest (the manifest's "files" list is filled in here) and
+  // publishes the bundle atomically, then updates `latest`. Returns the bundle path.
+  fs::path publish(const std::string& job, const std::string& hash12, nlohmann::json manifest,
+                   const std::vector<OutputFile>& files) const;
+  // Fails with IoError if the output root cannot be created or written.
+  void check_writable() const;
+
+ private:
+  fs::path root_;
+};
+
+}  // namespace specbake

@@ -1,0 +1,29 @@
+#include "jobs/job.hpp"
+
+#include "core/resources.hpp"
+#include "jobs/dispersion/dispersion_job.hpp"
+
+namespace specbake {
+
+namespace {
+template <class... F>
+struct overloaded : F... {
+  using F::operator()...;
+};
+}  // namespace
+
+nlohmann::json plan_job(const JobSpec& job, JobContext& ctx) {
+  return std::visit(overloaded{[&](const DispersionSpec& s) { return dispersion::plan(s, ctx); }}, job.spec);
+}
+
+BakeResult bake_job(const JobSpec& job, JobContext& ctx) {
+  return std::visit(overloaded{[&](const DispersionSpec& s) { return dispersion::bake(s, ctx); }}, job.spec);
+}
+
+std::vector<std::string> kernel_files(const std::string& kind) {
+  auto files = resource_paths("kernels/common/");
+  for (auto& f : resource_paths("kernels/" + kind + "/")) files.push_back(f);
+  return files;
+}
+
+}  // namespace specbake

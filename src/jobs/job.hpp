@@ -1,0 +1,39 @@
+#pragma once
+// What every job kind offers the runner: resolve its parameters (plan) and bake its files.
+// Jobs read typed specs (core/config.hpp), never YAML, and return files, never write them.
+#include <functional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cl/device.hpp"
+#include "core/config.hpp"
+#include "io/bundle.hpp"
+
+namespace specbake {
+
+// stage: short text ("sampling", "matrices", ...); fraction in [0, 1] of the job.
+using Progress = std::function<void(std::string_view stage, double fraction)>;
+
+struct JobContext {
+  cl_util::Device& device;
+  Progress progress = [](std::string_view, double) {};
+};
+
+struct BakeResult {
+  nlohmann::json parameters;  // resolved values (auto → number, ...)
+  nlohmann::json accuracy;    // measured error figures
+  std::vector<std::string> warnings;
+  std::vector<OutputFile> files;
+};
+
+// Resolved parameters only (what `specbake plan` shows); may use the device.
+nlohmann::json plan_job(const JobSpec& job, JobContext& ctx);
+BakeResult bake_job(const JobSpec& job, JobContext& ctx);
+
+// Embedded kernel files a kind depends on (their contents enter the bundle hash).
+std::vector<std::string> kernel_files(const std::string& kind);
+
+}  // namespace specbake
