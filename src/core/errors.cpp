@@ -1,15 +1,18 @@
 #include "core/errors.hpp"
 
+#include <sstream>
+
 namespace specbake {
 
 std::string Location::str() const {
-  std::string s = file.string();
+  std::ostringstream s;
+  s << file.string();
   if (line > 0) {
-    s += ":" + std::to_string(line);
-    if (column > 0) s += ":" + std::to_string(column);
+    s << ':' << line;
+    if (column > 0) s << ':' << column;
   }
-  if (!key.empty()) s += (s.empty() ? "" : ": ") + key;
-  return s;
+  if (!key.empty()) s << (file.empty() && line == 0 ? "" : ": ") << key;
+  return s.str();
 }
 
 InputError::InputError(Location where, const std::string& what_expected)

@@ -1,0 +1,124 @@
+#pragma once
+// Internal to the config loader: a YAML node together with the key path that reached it,
+// so that every error names file, line, column and key, and says what was expected.
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "core/config.hpp"
+
+namespace specbake::config_detail {
+
+// A YAML node with the path used to reach it, so errors name file, line, column and key.
+struct At {
+  YAML::Node node;
+  std::string key;
+  const fs::path* file;
+
+  Location loc() const {
+    const auto m = node.Mark();
+    Location l{*file, 0, 0, key};
+    if (m.line >= 0) {
+      l.line = m.line + 1;
+      l.column = m.column + 1;
+    }
+    return l;
+  }
+  [[noreturn]] void fail(const std::string& expected) const { throw InputError(loc(), expected); }
+
+  std::string shown() const {
+    if (node.IsScalar()) return "'" + node.Scalar() + "'";
+    if (node.IsSequence()) return "a list";
+    if (node.IsMap()) return "a mapping";
+    return "nothing";
+  }
+
+  At child(const std::string& k) const { return {node[k], key.empty() ? k : key + "." + k, file}; }
+  At item(std::size_t i) const { return {node[i], key + "[" + std::to_string(i) + "]", file}; }
+  bool has(const std::string& k) const { return node.IsMap() && node[k]; }
+
+  void expect_map(const char* what) const {
+    if (!node.IsMap()) fail(std::string("expected ") + what + " (a mapping), got " + shown());
+  }
+  // Rejects unknown and duplicate keys.
+  void allow_keys(std::initializer_list<const char*> allowed) const {
+    std::set<std::string> seen;
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      const std::string k = it->first.Scalar();
+      At key_at{it->first, key.empty() ? k : key + "." + k, file};
+      if (!seen.insert(k).second) key_at.fail("duplicate key '" + k + "'");
+      bool ok = false;
+      std::string list;
+      for (const char* a : allowed) {
+        ok = ok || k == a;
+        list += std::string(list.empty() ? "" : ", ") + a;
+      }
+      if (!ok) key_at.fail("unknown key '" + k + "'; expected one of: " + list);
+    }
+  }
+
+  double number() const {
+    if (!node.IsScalar()) fail("expected a number, got " + shown());
+    try {
+      const double v = node.as<double>();
+      if (!std::isfinite(v)) fail("expected a finite number, got " + shown());
+      return v;
+    } catch (const YAML::Exception&) {
+      fail("expected a number, got " + shown());
+    }
+  }
+  double number_in(double lo, double hi, const char* range_text) const {
+    const double v = number();
+    if (!(v >= lo && v <= hi)) fail(std::string("expected a number ") + range_text + ", got " + shown());
+    return v;
+  }
+  double positive() const {
+    const double v = number();
+    if (!(v > 0)) fail("expected a number > 0, got " + shown());
+    return v;
+  }
+  long long integer() const {
+    if (!node.IsScalar()) fail("expected an integer, got " + shown());
+    try {
+      return node.as<long long>();
+    } catch (const YAML::Exception&) {
+      fail("expected an integer, got " + shown());
+    }
+  }
+  std::string string() const {
+    if (!node.IsScalar()) fail("expected a string, got " + shown());
+    return node.Scalar();
+  }
+  template <class E>
+  E choice(std::initializer_list<std::pair<const char*, E>> options) const {
+    const std::string s = node.IsScalar() ? node.Scalar() : "";
+    std::string list;
+    for (auto& [name, value] : options) {
+      if (s == name) return value;
+      list += std::string(list.empty() ? "" : " | ") + name;
+    }
+    fail("expected one of " + list + ", got " + shown());
+  }
+  std::vector<double> numbers(std::size_t min_len, std::size_t max_len) const {
+    if (!node.IsSequence()) fail("expected a list of numbers, got " + shown());
+    if (node.size() < min_len || node.size() > max_len) {
+      fail(min_len == max_len ? "expected a list of " + std::to_string(min_len) + " numbers"
+                              : "expected a list of " + std::to_string(min_len) + " to " +
+                                    std::to_string(max_len) + " numbers");
+    }
+    std::vector<double> out;
+    for (std::size_t i = 0; i < node.size(); ++i) out.push_back(item(i).number());
+    return out;
+  }
+};
+
+
+// Per-kind parsers (config_<kind>.cpp): fill `norm` with the canonical form of everything that
+// defines the result, and `inputs` with (label, sha256) of the data the job reads.
+using Inputs = std::vector<std::pair<std::string, std::string>>;
+DispersionSpec parse_dispersion(const At& job, nlohmann::json& norm, Inputs& inputs);
+
+}  // namespace specbake::config_detail

@@ -1,0 +1,79 @@
+#include "io/exr.hpp"
+
+#include <ImfChannelList.h>
+#include <ImfFrameBuffer.h>
+#include <ImfHeader.h>
+#include <ImfInputFile.h>
+#include <ImfOutputFile.h>
+#include <ImfStdIO.h>
+#include <ImfStringAttribute.h>
+#include <Iex.h>
+
+#include <sstream>
+
+#include "core/errors.hpp"
+
+namespace specbake {
+
+std::string exr_bytes(const ExrImage& img) {
+  const std::size_t nc = img.channels.size();
+  if (img.width <= 0 || img.height <= 0 || nc == 0 ||
+      img.pixels.size() != static_cast<std::size_t>(img.width) * img.height * nc)
+    throw JobError("EXR image has inconsistent size");
+  try {
+    Imf::Header header(img.width, img.height);
+    header.compression() = Imf::ZIP_COMPRESSION;
+    const Imf::PixelType type = img.half ? Imf::HALF : Imf::FLOAT;
+    for (const auto& c : img.channels) header.channels().insert(c, Imf::Channel(type));
+    for (const auto& [k, v] : img.attributes) header.insert(k, Imf::StringAttribute(v));
+    // Half storage needs a half buffer; float storage reads the floats directly.
+    std::vector<Imath::half> halves;
+    if (img.half) halves.assign(img.pixels.begin(), img.pixels.end());
+    Imf::FrameBuffer fb;
+    const std::size_t elem = img.half ? sizeof(Imath::half) : sizeof(float);
+    char* base = img.half ? reinterpret_cast<char*>(halves.data())
+                          : reinterpret_cast<char*>(const_cast<float*>(img.pixels.data()));
+    for (std::size_t c = 0; c < nc; ++c)
+      fb.insert(img.channels[c], Imf::Slice(type, base + c * elem, elem * nc, elem * nc * img.width));
+    Imf::StdOSStream os;
+    {
+      Imf::OutputFile file(os, header);
+      file.setFrameBuffer(fb);
+      file.writePixels(img.height);
+    }
+    return os.str();
+  } catch (const std::exception& e) {
+    throw JobError(std::string("EXR encoding failed: ") + e.what());
+  }
+}
+
+ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels) {
+  try {
+    std::istringstream is(bytes);
+    Imf::StdISStream in;
+    in.str(bytes);
+    Imf::InputFile file(in);
+    const auto dw = file.header().dataWindow();
+    ExrImage img;
+    img.width = dw.max.x - dw.min.x + 1;
+    img.height = dw.max.y - dw.min.y + 1;
+    img.channels = channels;
+    img.pixels.assign(static_cast<std::size_t>(img.width) * img.height * channels.size(), 0.0f);
+    Imf::FrameBuffer fb;
+    const std::size_t nc = channels.size();
+    char* base = reinterpret_cast<char*>(img.pixels.data()) -
+                 (static_cast<std::ptrdiff_t>(dw.min.x) + static_cast<std::ptrdiff_t>(dw.min.y) * img.width) * nc * sizeof(float);
+    for (std::size_t c = 0; c < nc; ++c)
+      fb.insert(channels[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float), sizeof(float) * nc,
+                                        sizeof(float) * nc * img.width));
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    for (auto it = file.header().begin(); it != file.header().end(); ++it)
+      if (auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) img.attributes[it.name()] = s->value();
+    return img;
+  } catch (const std::exception& e) {
+    throw InputError({"", 0, 0, ""}, std::string("expected an OpenEXR image: ") + e.what());
+  }
+}
+
+}  // namespace specbake

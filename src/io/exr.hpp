@@ -1,0 +1,21 @@
+#pragma once
+// OpenEXR encoding of float images into bytes (ZIP compression), for bundle files.
+#include <map>
+#include <string>
+#include <vector>
+
+namespace specbake {
+
+struct ExrImage {
+  int width = 0, height = 0;
+  std::vector<std::string> channels;  // e.g. {"R", "G", "B"}; stored in this order per pixel
+  std::vector<float> pixels;          // [height][width][channels.size()], row 0 at the top
+  bool half = false;                  // store as 16-bit half instead of 32-bit float
+  std::map<std::string, std::string> attributes;  // extra string header attributes
+};
+
+std::string exr_bytes(const ExrImage& image);
+// Decodes an EXR (any pixel type) into float, channels in the given order (tests, readers).
+ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels);
+
+}  // namespace specbake
