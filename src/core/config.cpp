@@ -96,8 +96,10 @@ Config parse_config(const std::string& text, const fs::path& file) {
     js.kind = kind_at.string();
     if (js.kind == "dispersion") {
       js.spec = config_detail::parse_dispersion(job, js.normalised, js.inputs);
-    } else if (js.kind == "diffraction" || js.kind == "atmosphere") {
-      kind_at.fail("job kind '" + js.kind + "' is not available in this version of specbake; available: dispersion");
+    } else if (js.kind == "diffraction") {
+      js.spec = config_detail::parse_diffraction(job, js.normalised, js.inputs);
+    } else if (js.kind == "atmosphere") {
+      js.spec = config_detail::parse_atmosphere(job, js.normalised, js.inputs);
     } else {
       kind_at.fail("expected kind dispersion | diffraction | atmosphere, got " + kind_at.shown());
     }

@@ -50,7 +50,15 @@ struct DispersionSpec {
   double spread = 4.0;
 };
 
-using KindSpec = std::variant<DispersionSpec>;
+// ---- diffraction job (parsed in config_diffraction.cpp) ----------------------------------
+struct DiffractionSpec {
+};
+
+// ---- atmosphere job (parsed in config_atmosphere.cpp) ------------------------------------
+struct AtmosphereSpec {
+};
+
+using KindSpec = std::variant<DispersionSpec, DiffractionSpec, AtmosphereSpec>;
 
 struct JobSpec {
   std::string name;

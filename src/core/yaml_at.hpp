@@ -120,5 +120,7 @@ struct At {
 // defines the result, and `inputs` with (label, sha256) of the data the job reads.
 using Inputs = std::vector<std::pair<std::string, std::string>>;
 DispersionSpec parse_dispersion(const At& job, nlohmann::json& norm, Inputs& inputs);
+DiffractionSpec parse_diffraction(const At& job, nlohmann::json& norm, Inputs& inputs);
+AtmosphereSpec parse_atmosphere(const At& job, nlohmann::json& norm, Inputs& inputs);
 
 }  // namespace specbake::config_detail

@@ -1,6 +1,8 @@
 #include "jobs/job.hpp"
 
 #include "core/resources.hpp"
+#include "jobs/atmosphere/atmosphere_job.hpp"
+#include "jobs/diffraction/diffraction_job.hpp"
 #include "jobs/dispersion/dispersion_job.hpp"
 
 namespace specbake {
@@ -13,11 +15,17 @@ struct overloaded : F... {
 }  // namespace
 
 nlohmann::json plan_job(const JobSpec& job, JobContext& ctx) {
-  return std::visit(overloaded{[&](const DispersionSpec& s) { return dispersion::plan(s, ctx); }}, job.spec);
+  return std::visit(overloaded{[&](const DispersionSpec& s) { return dispersion::plan(s, ctx); },
+                               [&](const DiffractionSpec& s) { return diffraction::plan(s, ctx); },
+                               [&](const AtmosphereSpec& s) { return atmosphere::plan(s, ctx); }},
+                    job.spec);
 }
 
 BakeResult bake_job(const JobSpec& job, JobContext& ctx) {
-  return std::visit(overloaded{[&](const DispersionSpec& s) { return dispersion::bake(s, ctx); }}, job.spec);
+  return std::visit(overloaded{[&](const DispersionSpec& s) { return dispersion::bake(s, ctx); },
+                               [&](const DiffractionSpec& s) { return diffraction::bake(s, ctx); },
+                               [&](const AtmosphereSpec& s) { return atmosphere::bake(s, ctx); }},
+                    job.spec);
 }
 
 std::vector<std::string> kernel_files(const std::string& kind) {
