@@ -11,6 +11,8 @@
 #include "core/hash.hpp"
 #include "core/runner.hpp"
 #include "core/version.hpp"
+#include "io/bundle.hpp"
+#include "io/bundle_diff.hpp"
 
 using namespace specbake;
 using nlohmann::json;
@@ -118,6 +120,45 @@ int cmd_inspect(const fs::path& dir) {
   return 0;
 }
 
+void write_report(const fs::path& path, const std::vector<JobReport>& reports) {
+  // Written beside its final name and renamed, so readers never see half a report.
+  const fs::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream o(tmp);
+    o << report_json(reports).dump(2) << "\n";
+    if (!o.flush()) throw IoError("cannot write report " + tmp.string());
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) throw IoError("cannot write report " + path.string() + ": " + ec.message());
+}
+
+std::string index_text(const std::vector<std::int64_t>& idx) {
+  std::string s = "[";
+  for (std::size_t i = 0; i < idx.size(); ++i) s += (i ? "," : "") + std::to_string(idx[i]);
+  return s + "]";
+}
+
+int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_rel) {
+  const BundleDiff d = diff_bundles(a, b, fail_abs, fail_rel);
+  for (const auto& f : d.files) {
+    std::cout << "  " << f.status << "  " << f.path;
+    if (f.numeric && f.status == "differs")
+      std::cout << "  max abs " << f.max_abs << " at " << index_text(f.at_abs) << ", max rel " << f.max_rel << " at "
+                << index_text(f.at_rel) << ", " << f.exceeding << " beyond thresholds";
+    std::cout << "\n";
+  }
+  if (!d.changed.empty()) {
+    std::cout << "manifest changes:\n";
+    for (auto it = d.changed.begin(); it != d.changed.end(); ++it)
+      std::cout << "  " << it.key() << ": " << it.value()[0].dump() << " -> " << it.value()[1].dump() << "\n";
+  }
+  const bool ok = diff_passes(d);
+  std::cout << (ok ? "within thresholds" : "DIFFERS beyond thresholds") << " (fail-abs " << fail_abs << ", fail-rel "
+            << fail_rel << ")\n";
+  return ok ? 0 : static_cast<int>(ExitCode::job_failed);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -128,6 +169,7 @@ int main(int argc, char** argv) {
   CLI::App app{"specbake — bakes lookup tables for real-time spectral rendering (OpenCL)"};
   app.set_version_flag("--version", std::string("specbake ") + kVersion);
   app.require_subcommand(1);
+  app.fallthrough();  // -v/-q also after the sub-command
   app.option_defaults()->always_capture_default();
   int verbose = 0;
   bool quiet = false;
@@ -135,8 +177,10 @@ int main(int argc, char** argv) {
   app.add_flag("-q,--quiet", quiet, "only errors");
 
   std::vector<std::string> configs, only;
-  std::string out, device, inspect_dir;
+  std::string out, device, inspect_dir, report, shard, gc_dir, diff_old, diff_new;
   bool force = false;
+  int keep = 3;
+  double fail_abs = 0.0, fail_rel = 0.0;
 
   auto* run = app.add_subcommand("run", "bake every job of the configs into versioned bundles");
   run->add_option("configs", configs, "config files (YAML) or folders of them")->required();
@@ -144,6 +188,8 @@ int main(int argc, char** argv) {
   run->add_option("--device", device, "OpenCL device: auto | cpu | gpu | part of a device name (default: config's, else auto)");
   run->add_option("--only", only, "only these jobs (comma-separated names)");
   run->add_flag("--force", force, "rebuild bundles that are up to date");
+  run->add_option("--report", report, "write a JSON summary of every job (status, reason, parameters, accuracy, timings, bundle)");
+  run->add_option("--shard", shard, "run only shard I of N (I/N, 0-based): a deterministic, balanced split of the jobs");
 
   auto* plan = app.add_subcommand("plan", "show what `run` would do and the resolved parameters; writes nothing");
   plan->add_option("configs", configs, "config files (YAML) or folders of them")->required();
@@ -151,8 +197,19 @@ int main(int argc, char** argv) {
   plan->add_option("--device", device, "OpenCL device used to resolve `auto` parameters");
   plan->add_option("--only", only, "only these jobs (comma-separated names)");
   plan->add_flag("--force", force, "report up-to-date bundles as to be rebuilt");
+  plan->add_option("--shard", shard, "plan only shard I of N (I/N, 0-based)");
 
   app.add_subcommand("devices", "list OpenCL platforms and devices, and which one `auto` picks");
+
+  auto* gc = app.add_subcommand("gc", "prune old bundles in an output folder, never the one `latest` points at");
+  gc->add_option("output", gc_dir, "output folder (holding <job>/<hash12>/ bundles)")->required();
+  gc->add_option("--keep", keep, "bundles to keep per job (newest first)")->check(CLI::Range(1, 1000000));
+
+  auto* diff = app.add_subcommand("diff", "compare two bundles file by file; non-zero exit past the thresholds");
+  diff->add_option("old", diff_old, "old bundle folder")->required();
+  diff->add_option("new", diff_new, "new bundle folder")->required();
+  diff->add_option("--fail-abs", fail_abs, "allowed absolute difference per float32 element (element fails if |a-b| > abs + rel*max(|a|,|b|))")->check(CLI::NonNegativeNumber);
+  diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(CLI::NonNegativeNumber);
 
   auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
   inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest)")->required();
@@ -171,17 +228,25 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("devices")) return cmd_devices();
     if (app.got_subcommand("inspect")) return cmd_inspect(inspect_dir);
+    if (app.got_subcommand("gc")) {
+      const auto removed = BundleStore(gc_dir).gc(keep);
+      std::cout << "removed " << removed.size() << " bundle(s)\n";
+      return 0;
+    }
+    if (app.got_subcommand("diff")) return cmd_diff(diff_old, diff_new, fail_abs, fail_rel);
 
     RunOptions opts;
     if (!out.empty()) opts.out = fs::path(out);
     if (!device.empty()) opts.device = device;
     opts.only = split_commas(only);
     opts.force = force;
+    if (!shard.empty()) std::tie(opts.shard_index, opts.shard_count) = parse_shard(shard);
     std::vector<fs::path> paths(configs.begin(), configs.end());
     Runner runner(load_configs(paths), opts);
     const bool is_plan = app.got_subcommand("plan");
     const auto reports = is_plan ? runner.plan() : runner.run();
     print_reports(reports, is_plan);
+    if (!report.empty()) write_report(report, reports);
     return static_cast<int>(exit_code(reports));
   } catch (const Error& e) {
     spdlog::error("{}", e.what());

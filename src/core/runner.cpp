@@ -6,6 +6,7 @@
 #include <ctime>
 #include <map>
 #include <memory>
+#include <numeric>
 #include <set>
 
 #include "cl/device.hpp"
@@ -18,6 +19,17 @@
 namespace specbake {
 
 using nlohmann::json;
+
+namespace {
+std::string utc_now() {
+  std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+}  // namespace
 
 std::vector<Config> load_configs(const std::vector<fs::path>& paths) {
   std::vector<fs::path> files;
@@ -65,6 +77,59 @@ std::string job_hash(const JobSpec& job) {
   return h.hex();
 }
 
+std::pair<int, int> parse_shard(const std::string& text) {
+  const auto slash = text.find('/');
+  try {
+    if (slash == std::string::npos) throw std::invalid_argument("no slash");
+    std::size_t a = 0, b = 0;
+    const int i = std::stoi(text.substr(0, slash), &a), n = std::stoi(text.substr(slash + 1), &b);
+    if (a != slash || b != text.size() - slash - 1 || n < 1 || i < 0 || i >= n) throw std::invalid_argument("range");
+    return {i, n};
+  } catch (const std::exception&) {
+    throw UsageError("--shard expects I/N with 0 <= I < N (e.g. 0/4), got '" + text + "'");
+  }
+}
+
+std::vector<int> assign_shards(const std::vector<std::pair<std::string, double>>& name_cost, int count) {
+  std::vector<std::size_t> order(name_cost.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    if (name_cost[a].second != name_cost[b].second) return name_cost[a].second > name_cost[b].second;
+    return name_cost[a].first < name_cost[b].first;
+  });
+  std::vector<double> load(count, 0.0);
+  std::vector<int> shard(name_cost.size(), 0);
+  for (std::size_t idx : order) {
+    const int s = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
+    shard[idx] = s;
+    load[s] += name_cost[idx].second;
+  }
+  return shard;
+}
+
+nlohmann::json report_json(const std::vector<JobReport>& reports) {
+  json jobs = json::array();
+  int built = 0, current = 0, failed = 0;
+  for (const auto& r : reports) {
+    built += r.status == "built";
+    current += r.status == "up-to-date";
+    failed += r.status == "failed";
+    json j = {{"name", r.name},          {"kind", r.kind},
+              {"config", r.config},      {"status", r.status},
+              {"reason", r.reason},      {"hash", r.hash},
+              {"bundle", r.bundle.string()}, {"parameters", r.parameters},
+              {"accuracy", r.accuracy},  {"timings", r.timings},
+              {"warnings", r.warnings}};
+    if (r.status == "failed") j["exit_code"] = static_cast<int>(r.code);
+    jobs.push_back(j);
+  }
+  return {{"schema", "specbake.report/1"},
+          {"tool", {{"name", "specbake"}, {"version", kVersion}}},
+          {"created_utc", utc_now()},
+          {"summary", {{"built", built}, {"up_to_date", current}, {"failed", failed}}},
+          {"jobs", jobs}};
+}
+
 ExitCode exit_code(const std::vector<JobReport>& reports) {
   for (const auto& r : reports)
     if (r.status == "failed") return r.code;
@@ -72,13 +137,6 @@ ExitCode exit_code(const std::vector<JobReport>& reports) {
 }
 
 namespace {
-
-std::string utc_now() {
-  std::time_t t = std::time(nullptr);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
-  return buf;
-}
 
 json device_json(const cl_util::DeviceInfo& d) {
   return {{"name", d.name}, {"platform", d.platform}, {"version", d.version}, {"type", d.type}, {"fp64", d.fp64}};
@@ -121,6 +179,16 @@ std::vector<Runner::Item> Runner::select() const {
       items.push_back({&c, &j, options_.out ? *options_.out : c.output, options_.device ? *options_.device : c.device,
                        job_hash(j)});
     }
+  if (options_.shard_count > 1) {
+    std::vector<std::pair<std::string, double>> name_cost;
+    for (const auto& it : items) name_cost.emplace_back(it.config->file.string() + "\n" + it.job->name, estimated_cost(*it.job));
+    const auto shard = assign_shards(name_cost, options_.shard_count);
+    std::vector<Item> mine;
+    for (std::size_t i = 0; i < items.size(); ++i)
+      if (shard[i] == options_.shard_index) mine.push_back(items[i]);
+    spdlog::info("shard {}/{}: {} of {} jobs", options_.shard_index, options_.shard_count, mine.size(), items.size());
+    items = std::move(mine);
+  }
   return items;
 }
 
@@ -128,7 +196,12 @@ std::vector<JobReport> Runner::plan() {
   std::vector<JobReport> reports;
   Devices devices;
   for (const auto& it : select()) {
-    JobReport r{it.config->file.string(), it.job->name, it.job->kind, "planned", "", ExitCode::ok, it.hash};
+    JobReport r;
+    r.config = it.config->file.string();
+    r.name = it.job->name;
+    r.kind = it.job->kind;
+    r.status = "planned";
+    r.hash = it.hash;
     BundleStore store(it.output);
     r.bundle = store.bundle_dir(it.job->name, it.hash.substr(0, 12));
     const bool current = store.is_complete(it.job->name, it.hash.substr(0, 12));
@@ -159,11 +232,16 @@ std::vector<JobReport> Runner::run() {
   for (const auto& it : items) {
     const std::string& name = it.job->name;
     const std::string hash12 = it.hash.substr(0, 12);
-    JobReport r{it.config->file.string(), name, it.job->kind, "", "", ExitCode::ok, it.hash};
+    JobReport r;
+    r.config = it.config->file.string();
+    r.name = name;
+    r.kind = it.job->kind;
+    r.hash = it.hash;
     BundleStore store(it.output);
     r.bundle = store.bundle_dir(name, hash12);
     const auto t0 = std::chrono::steady_clock::now();
     try {
+      JobLock lock(store.job_dir(name), name);
       store.clean_stale(name);
       if (!options_.force && store.is_complete(name, hash12)) {
         store.set_latest(name, hash12);

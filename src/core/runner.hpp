@@ -21,7 +21,17 @@ struct RunOptions {
   std::optional<std::string> device;    // overrides every config's device
   std::vector<std::string> only;        // job names; empty = all
   bool force = false;                   // rebuild bundles that are up to date
+  int shard_index = 0, shard_count = 1; // --shard I/N: run only shard I (0-based) of N
 };
+
+// Parses "I/N" (0 <= I < N); throws UsageError.
+std::pair<int, int> parse_shard(const std::string& text);
+
+// Deterministic, balanced split of jobs into `count` shards: jobs sorted by estimated cost
+// (descending, ties by name) go one by one to the shard with the least total so far.
+// Returns the shard of each job, in the order given.
+std::vector<int> assign_shards(const std::vector<std::pair<std::string, double>>& name_cost, int count);
+
 
 struct JobReport {
   std::string config;
@@ -35,6 +45,9 @@ struct JobReport {
   nlohmann::json parameters, accuracy, timings;
   std::vector<std::string> warnings;
 };
+
+// JSON summary of a run (what --report writes).
+nlohmann::json report_json(const std::vector<JobReport>& reports);
 
 // (job name, stage, fraction of that job done)
 using RunProgress = std::function<void(const std::string& job, std::string_view stage, double fraction)>;

@@ -1,10 +1,12 @@
 #include "io/bundle.hpp"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <signal.h>
 #include <stdio.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <bit>
 #include <cerrno>
 #include <cmath>
@@ -113,22 +115,71 @@ void BundleStore::set_latest(const std::string& job, const std::string& hash12) 
   sync_dir(dir);
 }
 
+JobLock::JobLock(const fs::path& job_dir, const std::string& job) {
+  make_dirs(job_dir);
+  const fs::path p = job_dir / ".lock";
+  fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0) io_fail("cannot open lock", p);
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    spdlog::info("{}: another run holds {}; waiting for it", job, p.string());
+    while (::flock(fd_, LOCK_EX) != 0)
+      if (errno != EINTR) io_fail("cannot lock", p);
+  }
+}
+
+JobLock::~JobLock() {
+  if (fd_ >= 0) ::close(fd_);  // releases the lock
+}
+
 void BundleStore::clean_stale(const std::string& job) const {
   std::error_code ec;
   const fs::path dir = job_dir(job);
   if (!fs::is_directory(dir, ec)) return;
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
-    const bool tmp = name.rfind(".tmp-", 0) == 0, old = name.rfind(".old-", 0) == 0,
-               link = name.rfind(".latest-", 0) == 0;
-    if (!tmp && !old && !link) continue;
-    const auto dash = name.rfind('-');
-    const long pid = std::strtol(name.c_str() + dash + 1, nullptr, 10);
-    if (pid > 0 && pid != ::getpid() && ::kill(static_cast<pid_t>(pid), 0) == 0) continue;  // still running
-    if (pid == ::getpid()) continue;
-    spdlog::info("removing stale {} left by an interrupted run", e.path().string());
+    if (name.rfind(".tmp-", 0) != 0 && name.rfind(".latest-", 0) != 0) continue;
+    spdlog::info("removing {} left by an interrupted run", e.path().string());
     fs::remove_all(e.path(), ec);
   }
+}
+
+std::vector<fs::path> BundleStore::gc(int keep) const {
+  std::vector<fs::path> removed;
+  std::error_code ec;
+  if (!fs::is_directory(root_, ec)) throw IoError("no output folder " + root_.string());
+  for (const auto& job : fs::directory_iterator(root_, ec)) {
+    if (!job.is_directory() || job.path().filename().string().front() == '.') continue;
+    const std::string name = job.path().filename().string();
+    JobLock lock(job.path(), name);
+    fs::path latest;
+    if (fs::is_symlink(job.path() / "latest", ec)) latest = fs::read_symlink(job.path() / "latest", ec);
+    std::vector<std::pair<std::string, fs::path>> bundles;  // (created, dir)
+    for (const auto& b : fs::directory_iterator(job.path(), ec)) {
+      if (!b.is_directory() || b.is_symlink() || b.path().filename().string().front() == '.') continue;
+      std::string created;
+      try {
+        std::ifstream in(b.path() / "manifest.json");
+        created = nlohmann::json::parse(in).value("created_utc", "");
+      } catch (const std::exception&) {
+        continue;  // not a bundle: leave it alone
+      }
+      bundles.emplace_back(created, b.path());
+    }
+    std::sort(bundles.begin(), bundles.end(), [](const auto& a, const auto& b) { return a > b; });
+    int kept = 0;
+    for (const auto& [created, dir] : bundles) {
+      const bool is_latest = dir.filename() == latest.filename();
+      if (is_latest || kept < keep) {
+        ++kept;
+        continue;
+      }
+      spdlog::info("gc: removing {}", dir.string());
+      fs::remove_all(dir, ec);
+      if (ec) throw IoError("cannot remove " + dir.string() + ": " + ec.message());
+      removed.push_back(dir);
+    }
+  }
+  return removed;
 }
 
 fs::path BundleStore::publish(const std::string& job, const std::string& hash12, nlohmann::json manifest,

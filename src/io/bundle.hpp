@@ -30,6 +30,19 @@ struct OutputFile {
 // `what` and the first index if any value is not finite.
 std::string float32_le(const std::vector<double>& values, const std::string& what);
 
+// An exclusive advisory lock (flock) on <output>/<job>/.lock, held while a run checks,
+// bakes and publishes that job; a second run on the same output waits for it.
+class JobLock {
+ public:
+  JobLock(const fs::path& job_dir, const std::string& job);
+  ~JobLock();
+  JobLock(const JobLock&) = delete;
+  JobLock& operator=(const JobLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
 class BundleStore {
  public:
   explicit BundleStore(fs::path output_root) : root_(std::move(output_root)) {}
@@ -41,8 +54,12 @@ class BundleStore {
   bool is_complete(const std::string& job, const std::string& hash12) const;
   // Points `latest` at an existing bundle (atomic).
   void set_latest(const std::string& job, const std::string& hash12) const;
-  // Removes .tmp-* folders left by runs that no longer exist.
+  // Removes .tmp-* folders and .latest-* links left by interrupted runs. Call with the job's
+  // lock held: no live run can then be writing them.
   void clean_stale(const std::string& job) const;
+  // Prunes bundles of every job under the root, keeping the `keep` newest (by manifest
+  // creation time) and always the one `latest` points at. Returns the removed folders.
+  std::vector<fs::path> gc(int keep) const;
   // Writes files and manifest (the manifest's "files" list is filled in here) and
   // publishes the bundle atomically, then updates `latest`. Returns the bundle path.
   fs::path publish(const std::string& job, const std::string& hash12, nlohmann::json manifest,

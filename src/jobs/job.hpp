@@ -33,6 +33,9 @@ struct BakeResult {
 nlohmann::json plan_job(const JobSpec& job, JobContext& ctx);
 BakeResult bake_job(const JobSpec& job, JobContext& ctx);
 
+// Relative cost of a job (arbitrary units, comparable across kinds) for balancing shards.
+double estimated_cost(const JobSpec& job);
+
 // Embedded kernel files a kind depends on (their contents enter the bundle hash).
 std::vector<std::string> kernel_files(const std::string& kind);
 

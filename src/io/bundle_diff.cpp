@@ -1,0 +1,148 @@
+#include "io/bundle_diff.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "core/errors.hpp"
+
+namespace specbake {
+
+using nlohmann::json;
+
+namespace {
+
+json read_manifest(const fs::path& dir) {
+  std::ifstream in(dir / "manifest.json");
+  if (!in) throw IoError("cannot read " + (dir / "manifest.json").string());
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw InputError({dir / "manifest.json", 0, 0, ""}, std::string("expected a JSON manifest: ") + e.what());
+  }
+}
+
+std::string read_bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  if (!in) throw IoError("cannot read " + p.string());
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::vector<float> as_floats(const std::string& b) {
+  std::vector<float> v(b.size() / 4);
+  std::memcpy(v.data(), b.data(), v.size() * 4);
+  return v;
+}
+
+std::vector<std::int64_t> unravel(std::size_t flat, const std::vector<std::int64_t>& shape) {
+  std::vector<std::int64_t> idx(shape.size());
+  for (std::size_t k = shape.size(); k-- > 0;) {
+    idx[k] = static_cast<std::int64_t>(flat % static_cast<std::size_t>(shape[k]));
+    flat /= static_cast<std::size_t>(shape[k]);
+  }
+  return idx;
+}
+
+void flatten(const json& j, const std::string& prefix, std::map<std::string, json>& out) {
+  if (j.is_object() && !j.empty()) {
+    for (auto it = j.begin(); it != j.end(); ++it) flatten(it.value(), prefix.empty() ? it.key() : prefix + "." + it.key(), out);
+  } else {
+    out[prefix] = j;
+  }
+}
+
+}  // namespace
+
+BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double fail_abs, double fail_rel) {
+  const json a = read_manifest(old_dir), b = read_manifest(new_dir);
+  BundleDiff d;
+  std::map<std::string, json> fa, fb;
+  for (const char* k : {"config", "inputs", "kernels", "parameters", "tool", "device"}) {
+    if (a.contains(k)) flatten(a[k], k, fa);
+    if (b.contains(k)) flatten(b[k], k, fb);
+  }
+  d.changed = json::object();
+  for (const auto& [k, v] : fa) {
+    auto it = fb.find(k);
+    if (it == fb.end()) d.changed[k] = {v, nullptr};
+    else if (it->second != v) d.changed[k] = {v, it->second};
+  }
+  for (const auto& [k, v] : fb)
+    if (!fa.count(k)) d.changed[k] = {nullptr, v};
+
+  std::map<std::string, json> files_a, files_b;
+  for (const auto& f : a.at("files")) files_a[f.at("path")] = f;
+  for (const auto& f : b.at("files")) files_b[f.at("path")] = f;
+  for (const auto& [path, fa_entry] : files_a) {
+    FileDiff fd;
+    fd.path = path;
+    auto it = files_b.find(path);
+    if (it == files_b.end()) {
+      fd.status = "removed";
+      d.files.push_back(fd);
+      continue;
+    }
+    const json& fb_entry = it->second;
+    const bool numeric = fa_entry.value("dtype", "") == "float32" && fb_entry.value("dtype", "") == "float32";
+    if (fa_entry.value("shape", json::array()) != fb_entry.value("shape", json::array())) {
+      fd.status = "shape-changed";
+      d.files.push_back(fd);
+      continue;
+    }
+    // The files themselves are compared, not the sha256 the manifests claim.
+    const std::string ba = read_bytes(old_dir / path), bb = read_bytes(new_dir / path);
+    fd.numeric = numeric;
+    if (ba == bb) {
+      fd.status = "same";
+      d.files.push_back(fd);
+      continue;
+    }
+    fd.status = "differs";
+    if (numeric) {
+      const auto va = as_floats(ba), vb = as_floats(bb);
+      const auto shape = fa_entry.value("shape", std::vector<std::int64_t>{});
+      if (va.size() != vb.size()) {
+        fd.status = "shape-changed";
+      } else {
+        std::size_t ia = 0, ir = 0;
+        for (std::size_t i = 0; i < va.size(); ++i) {
+          const double x = va[i], y = vb[i];
+          const double ab = std::fabs(x - y);
+          const double den = std::max(std::fabs(x), std::fabs(y));
+          const double rel = den > 0.0 ? ab / den : 0.0;
+          if (!(ab <= fd.max_abs)) fd.max_abs = ab, ia = i;  // NaN counts as the largest
+          if (!(rel <= fd.max_rel)) fd.max_rel = rel, ir = i;
+          if (!(ab <= fail_abs + fail_rel * den)) ++fd.exceeding;
+        }
+        const std::vector<std::int64_t> dims =
+            shape.empty() ? std::vector<std::int64_t>{static_cast<std::int64_t>(va.size())} : shape;
+        fd.at_abs = unravel(ia, dims);
+        fd.at_rel = unravel(ir, dims);
+      }
+    }
+    d.files.push_back(fd);
+  }
+  for (const auto& [path, entry] : files_b)
+    if (!files_a.count(path)) {
+      FileDiff fd;
+      fd.path = path;
+      fd.status = "added";
+      d.files.push_back(fd);
+    }
+  return d;
+}
+
+bool diff_passes(const BundleDiff& d) {
+  for (const auto& f : d.files) {
+    if (f.status == "same") continue;
+    if (f.status != "differs") return false;
+    if (f.exceeding > 0) return false;
+  }
+  return true;
+}
+
+}  // namespace specbake

@@ -1,0 +1,40 @@
+#pragma once
+// Comparing two bundles (`specbake diff`): per file, the largest absolute and relative
+// difference and where it is; and the manifest entries that changed.
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace specbake {
+
+namespace fs = std::filesystem;
+
+struct FileDiff {
+  std::string path;
+  std::string status;  // same | differs | added | removed | shape-changed
+  bool numeric = false;  // float32 data compared element by element
+  double max_abs = 0.0, max_rel = 0.0;
+  std::vector<std::int64_t> at_abs, at_rel;  // multi-index (manifest shape) of each maximum
+  std::size_t exceeding = 0;  // elements with |a − b| > fail_abs + fail_rel·max(|a|, |b|)
+};
+
+struct BundleDiff {
+  std::vector<FileDiff> files;
+  // Flattened manifest keys (config, inputs, kernels, parameters, tool, device) whose values
+  // differ: key → [old, new].
+  nlohmann::json changed;
+};
+
+// Relative difference: |a − b| / max(|a|, |b|), 0 when both are 0. An element exceeds the
+// thresholds when |a − b| > fail_abs + fail_rel·max(|a|, |b|) (numpy.allclose's rule, symmetric).
+BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double fail_abs, double fail_rel);
+
+// True if no float32 element exceeds the thresholds and no file was added, removed or
+// reshaped. Non-numeric files (JSON/GLSL copies, EXR, previews) render the numeric data
+// and are reported but do not decide.
+bool diff_passes(const BundleDiff& d);
+
+}  // namespace specbake
