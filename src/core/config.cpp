@@ -1,13 +1,15 @@
 #include "core/config.hpp"
 
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <sstream>
 #include <regex>
 #include <set>
-#include <sstream>
+#include <vector>
 
 #include "core/yaml_at.hpp"
 
@@ -37,6 +39,59 @@ using config_detail::At;
 
 namespace {
 constexpr std::size_t kMaxConfigBytes = 1 << 20;  // a config is a few kB; refuse huge documents
+constexpr std::size_t kMaxExpandedNodes = 100000;  // nodes counted with every alias expanded
+
+// Pre-scan of the event stream: counts nodes as if every alias were expanded (so "billion
+// laughs" alias bombs are refused before any traversal) and the number of documents.
+class NodeBudget : public YAML::EventHandler {
+ public:
+  std::size_t expanded = 0, documents = 0;
+  YAML::Mark worst;
+
+  void OnDocumentStart(const YAML::Mark&) override { ++documents; }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark& m, YAML::anchor_t a) override { leaf(m, a, 1); }
+  void OnAlias(const YAML::Mark& m, YAML::anchor_t a) override { leaf(m, 0, size_of_.count(a) ? size_of_[a] : 1); }
+  void OnScalar(const YAML::Mark& m, const std::string&, YAML::anchor_t a, const std::string&) override { leaf(m, a, 1); }
+  void OnSequenceStart(const YAML::Mark& m, const std::string&, YAML::anchor_t a, YAML::EmitterStyle::value) override {
+    open(m, a);
+  }
+  void OnSequenceEnd() override { close(); }
+  void OnMapStart(const YAML::Mark& m, const std::string&, YAML::anchor_t a, YAML::EmitterStyle::value) override {
+    open(m, a);
+  }
+  void OnMapEnd() override { close(); }
+
+ private:
+  struct Open {
+    YAML::anchor_t anchor;
+    std::size_t size;
+  };
+  std::vector<Open> stack_;
+  bool over_ = false;
+  std::map<YAML::anchor_t, std::size_t> size_of_;
+
+  void add(const YAML::Mark& m, std::size_t n) {
+    expanded += n;
+    if (!stack_.empty()) stack_.back().size += n;
+    if (expanded > kMaxExpandedNodes && !over_) over_ = true, worst = m;
+  }
+  void leaf(const YAML::Mark& m, YAML::anchor_t a, std::size_t n) {
+    if (a) size_of_[a] = n;
+    add(m, n);
+  }
+  void open(const YAML::Mark& m, YAML::anchor_t a) {
+    stack_.push_back({a, 1});
+    expanded += 1;
+    if (expanded > kMaxExpandedNodes && !over_) over_ = true, worst = m;
+  }
+  void close() {
+    const Open o = stack_.back();
+    stack_.pop_back();
+    if (o.anchor) size_of_[o.anchor] = o.size;
+    if (!stack_.empty()) stack_.back().size += o.size;
+  }
+};
 }  // namespace
 
 Config parse_config(const std::string& text, const fs::path& file) {
@@ -45,6 +100,17 @@ Config parse_config(const std::string& text, const fs::path& file) {
                                             " bytes; expected at most " + std::to_string(kMaxConfigBytes));
   YAML::Node root;
   try {
+    NodeBudget budget;
+    std::istringstream scan(text);
+    YAML::Parser parser(scan);
+    while (parser.HandleNextDocument(budget)) {
+      if (budget.expanded > kMaxExpandedNodes)
+        throw InputError({file, budget.worst.line + 1, budget.worst.column + 1, ""},
+                         "document expands to more than " + std::to_string(kMaxExpandedNodes) +
+                             " nodes (alias bomb?); expected a small config");
+    }
+    if (budget.documents > 1)
+      throw InputError({file, 0, 0, ""}, "expected one YAML document, found " + std::to_string(budget.documents));
     root = YAML::Load(text);
   } catch (const YAML::ParserException& e) {
     throw InputError({file, e.mark.line + 1, e.mark.column + 1, ""}, "malformed YAML: " + e.msg);
