@@ -1,9 +1,29 @@
 #pragma once
+#include "jobs/atmosphere/pass.hpp"
+#include "jobs/atmosphere/render.hpp"
 #include "jobs/job.hpp"
 
 namespace specbake::atmosphere {
 
 nlohmann::json plan(const AtmosphereSpec& spec, JobContext& ctx);
 BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx);
+
+// The LUTs of a bake (final textures in R,G,B), with what the manifest reports about them.
+struct Baked {
+  Luts luts;
+  Spectrum spectrum;
+  int orders_used = 0;
+  bool converged = true;
+  nlohmann::json orders;       // per order: max/mean of what it adds to scattering and irradiance
+  nlohmann::json passes;       // wavelengths of each pass, orders used
+  nlohmann::json self_checks;  // device vs double reference, per stage
+  double self_check_worst = 0.0;
+};
+// Runs every pass on the device (self_check_texels > 0: recompute that many texels of each
+// stage in double from the device's own inputs).
+Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress,
+                int self_check_texels = 0);
+// The same bake on the host in double (small sizes: tests).
+Baked bake_luts_reference(const AtmosphereSpec& spec);
 
 }  // namespace specbake::atmosphere

@@ -1,0 +1,441 @@
+#include "jobs/atmosphere/pass.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "jobs/atmosphere/reference.hpp"
+
+namespace specbake::atmosphere {
+
+using cl_util::Device;
+
+int pass_width_for(std::size_t channels) {
+  for (int w : kPassWidths)
+    if (static_cast<std::size_t>(w) >= channels) return w;
+  return kPassWidths[std::size(kPassWidths) - 1];
+}
+
+const char* to_string(Tex t) {
+  switch (t) {
+    case Tex::transmittance: return "transmittance";
+    case Tex::delta_irradiance: return "delta_irradiance";
+    case Tex::delta_rayleigh: return "delta_rayleigh";
+    case Tex::delta_mie: return "delta_mie";
+    case Tex::delta_multiple: return "delta_multiple";
+    case Tex::density: return "density";
+  }
+  return "?";
+}
+
+namespace {
+
+const char* kKernels = "kernels/atmosphere/kernels.cl";
+
+// Parameter block, and the values the layout kernel must echo back.
+struct Block {
+  std::vector<unsigned char> bytes;
+  std::vector<double> echo_reals;  // solar[0], albedo[NCH-1], absorption constant[1], rb, g, reserved
+  std::vector<int> echo_ints;      // transmittance_w, nu_size, sizeof
+};
+
+template <class P>
+Block block_of(const P& a, int nch, bool dbl, std::vector<unsigned char> bytes) {
+  Block b;
+  b.bytes = std::move(bytes);
+  b.echo_reals = {a.solar_irradiance[0], a.ground_albedo[nch - 1], a.absorption_density.constant_term[1],
+                  a.bottom_radius, a.mie_g, a.reserved};
+  b.echo_ints = {a.transmittance_w, a.nu_size, static_cast<int>(b.bytes.size())};
+  (void)dbl;
+  return b;
+}
+
+Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
+  switch (width) {
+    case 3: {
+      const auto a = ref3::make_parameters(m, ch);
+      return block_of(a, 3, dbl, ref3::parameter_block(a, dbl));
+    }
+    case 4: {
+      const auto a = ref4::make_parameters(m, ch);
+      return block_of(a, 4, dbl, ref4::parameter_block(a, dbl));
+    }
+  }
+  throw JobError("atmosphere: no pass of width " + std::to_string(width));
+}
+
+class DeviceBackend final : public PassBackend {
+ public:
+  DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
+      : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), block_(make_block(m, ch, width, dbl)) {
+    const std::string options = std::string("-DNCH=") + std::to_string(width) + " -DNU_MAX=" +
+                                std::to_string(m.sizes.nu) + (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
+    if (dbl && !dev.info().fp64) throw DeviceError("precision: double needs a device with cl_khr_fp64");
+    program_ = dev.build(kKernels, options);
+    n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
+    n_e_ = 1LL * sizes_.irradiance_w * sizes_.irradiance_h;
+    n_s_ = sizes_.scattering_texels();
+    cl_util::checked("allocating atmosphere textures", [&] {
+      T_ = alloc(n_t_);
+      dE_ = alloc(n_e_);
+      dR_ = alloc(n_s_);
+      dM_ = alloc(n_s_);
+      dS_ = alloc(n_s_);
+      J_ = alloc(n_s_);
+      return 0;
+    });
+    check_layout();
+  }
+  int channels() const override { return width_; }
+
+  void transmittance() override { launch("transmittance_texture", n_t_, {&T_}); }
+  void direct_irradiance() override { launch("direct_irradiance_texture", n_e_, {&T_, &dE_}); }
+  void single_scattering() override { launch("single_scattering_texture", n_s_, {&T_, &dR_, &dM_}); }
+  void scattering_density(int order) override {
+    cl_util::checked("scattering_density_texture", [&] {
+      cl::Kernel k(program_, "scattering_density_texture");
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      k.setArg(1, T_);
+      k.setArg(2, dR_);
+      k.setArg(3, dM_);
+      k.setArg(4, dS_);
+      k.setArg(5, dE_);
+      k.setArg(6, order);
+      k.setArg(7, J_);
+      enqueue(k, n_s_);
+      return 0;
+    });
+  }
+  void indirect_irradiance(int order) override {
+    cl_util::checked("indirect_irradiance_texture", [&] {
+      cl::Kernel k(program_, "indirect_irradiance_texture");
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      k.setArg(1, dR_);
+      k.setArg(2, dM_);
+      k.setArg(3, dS_);
+      k.setArg(4, order);
+      k.setArg(5, dE_);
+      enqueue(k, n_e_);
+      return 0;
+    });
+  }
+  void multiple_scattering() override { launch("multiple_scattering_texture", n_s_, {&T_, &J_, &dS_}); }
+
+  std::vector<double> read(Tex t) override {
+    const long long n = texels(t) * width_;
+    return cl_util::checked("reading an atmosphere texture", [&] {
+      std::vector<double> out(n);
+      if (dbl_) {
+        dev_.queue().enqueueReadBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), out.data());
+      } else {
+        std::vector<float> f(n);
+        dev_.queue().enqueueReadBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data());
+        std::copy(f.begin(), f.end(), out.begin());
+      }
+      return out;
+    });
+  }
+  void write(Tex t, const std::vector<double>& v) override {
+    const long long n = texels(t) * width_;
+    if (static_cast<long long>(v.size()) != n) throw JobError(std::string("wrong size for ") + to_string(t));
+    cl_util::checked("writing an atmosphere texture", [&] {
+      if (dbl_) {
+        dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), v.data());
+      } else {
+        std::vector<float> f(v.begin(), v.end());
+        dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data());
+      }
+      return 0;
+    });
+  }
+
+ private:
+  cl::Buffer alloc(long long texels) {
+    return cl::Buffer(dev_.context(), CL_MEM_READ_WRITE,
+                      std::max<long long>(texels, 1) * width_ * (dbl_ ? sizeof(double) : sizeof(float)));
+  }
+  long long texels(Tex t) const {
+    if (t == Tex::transmittance) return n_t_;
+    if (t == Tex::delta_irradiance) return n_e_;
+    return n_s_;
+  }
+  cl::Buffer& buffer(Tex t) {
+    switch (t) {
+      case Tex::transmittance: return T_;
+      case Tex::delta_irradiance: return dE_;
+      case Tex::delta_rayleigh: return dR_;
+      case Tex::delta_mie: return dM_;
+      case Tex::delta_multiple: return dS_;
+      case Tex::density: return J_;
+    }
+    return T_;
+  }
+  void enqueue(cl::Kernel& k, long long n) {
+    dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange);
+    dev_.queue().finish();
+  }
+  void launch(const char* name, long long n, std::initializer_list<cl::Buffer*> buffers) {
+    cl_util::checked(name, [&] {
+      cl::Kernel k(program_, name);
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      cl_uint i = 1;
+      for (cl::Buffer* b : buffers) k.setArg(i++, *b);
+      enqueue(k, n);
+      return 0;
+    });
+  }
+  // The device must read the parameter block exactly as the host wrote it.
+  void check_layout() {
+    cl_util::checked("atmosphere_layout", [&] {
+      cl::Buffer reals(dev_.context(), CL_MEM_READ_WRITE, 6 * (dbl_ ? sizeof(double) : sizeof(float)));
+      cl::Buffer ints(dev_.context(), CL_MEM_READ_WRITE, 3 * sizeof(int));
+      cl::Kernel k(program_, "atmosphere_layout");
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      k.setArg(1, reals);
+      k.setArg(2, ints);
+      enqueue(k, 1);
+      std::vector<double> r(6);
+      if (dbl_) {
+        dev_.queue().enqueueReadBuffer(reals, CL_TRUE, 0, 6 * sizeof(double), r.data());
+      } else {
+        std::vector<float> f(6);
+        dev_.queue().enqueueReadBuffer(reals, CL_TRUE, 0, 6 * sizeof(float), f.data());
+        std::copy(f.begin(), f.end(), r.begin());
+      }
+      std::vector<int> iv(3);
+      dev_.queue().enqueueReadBuffer(ints, CL_TRUE, 0, 3 * sizeof(int), iv.data());
+      for (int i = 0; i < 6; ++i) {
+        const double want = dbl_ ? block_.echo_reals[i] : static_cast<float>(block_.echo_reals[i]);
+        if (r[i] != want)
+          throw DeviceError("atmosphere parameter block: the device reads real #" + std::to_string(i) + " as " +
+                            std::to_string(r[i]) + ", the host wrote " + std::to_string(want));
+      }
+      if (iv != block_.echo_ints)
+        throw DeviceError("atmosphere parameter block: the device's layout (" + std::to_string(iv[2]) +
+                          " bytes) differs from the host's (" + std::to_string(block_.echo_ints[2]) + " bytes)");
+      return 0;
+    });
+  }
+
+  Device& dev_;
+  Sizes sizes_;
+  int width_;
+  bool dbl_;
+  Block block_;
+  cl::Program program_;
+  long long n_t_ = 0, n_e_ = 0, n_s_ = 0;
+  cl::Buffer T_, dE_, dR_, dM_, dS_, J_;
+};
+
+struct ChannelStats {
+  std::vector<double> max, mean;
+};
+ChannelStats stats_of(const std::vector<double>& v, int w) {
+  ChannelStats s{std::vector<double>(w, 0.0), std::vector<double>(w, 0.0)};
+  const std::size_t n = v.size() / w;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int c = 0; c < w; ++c) {
+      s.max[c] = std::max(s.max[c], v[i * w + c]);
+      s.mean[c] += v[i * w + c];
+    }
+  for (int c = 0; c < w; ++c) s.mean[c] /= std::max<std::size_t>(n, 1);
+  return s;
+}
+
+// max over texels of |add| / acc, where acc exceeds kAutoFloor × its channel's maximum.
+double relative_change(const std::vector<double>& add, const std::vector<double>& acc, int w) {
+  std::vector<double> floor(w, 0.0);
+  const std::size_t n = acc.size() / w;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int c = 0; c < w; ++c) floor[c] = std::max(floor[c], acc[i * w + c]);
+  for (double& f : floor) f *= kAutoFloor;
+  double rel = 0.0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int c = 0; c < w; ++c) {
+      const double a = acc[i * w + c];
+      if (a > floor[c] && a > 0.0) rel = std::max(rel, std::fabs(add[i * w + c]) / a);
+    }
+  return rel;
+}
+
+template <class HB>
+StageCheck check_with(PassBackend& b, const Model& m, const Channels& ch, const std::string& stage, int order,
+                      int count, double floor) {
+  HB h(m, ch);
+  const int w = b.channels();
+  std::vector<Tex> inputs, outputs;
+  if (stage == "transmittance") {
+    outputs = {Tex::transmittance};
+  } else if (stage == "direct_irradiance") {
+    inputs = {Tex::transmittance};
+    outputs = {Tex::delta_irradiance};
+  } else if (stage == "single_scattering") {
+    inputs = {Tex::transmittance};
+    outputs = {Tex::delta_rayleigh, Tex::delta_mie};
+  } else if (stage == "scattering_density") {
+    inputs = {Tex::transmittance, Tex::delta_irradiance, Tex::delta_rayleigh, Tex::delta_mie, Tex::delta_multiple};
+    outputs = {Tex::density};
+  } else if (stage == "indirect_irradiance") {
+    inputs = {Tex::delta_rayleigh, Tex::delta_mie, Tex::delta_multiple};
+    outputs = {Tex::delta_irradiance};
+  } else {
+    inputs = {Tex::transmittance, Tex::density};
+    outputs = {Tex::delta_multiple};
+  }
+  for (Tex t : inputs) h.write(t, b.read(t));
+  std::vector<std::vector<double>> dev;
+  for (Tex t : outputs) dev.push_back(b.read(t));
+  const long long n = static_cast<long long>(dev[0].size()) / w;
+  const int k_out = static_cast<int>(outputs.size());
+  std::vector<double> scale(k_out * w, 0.0);
+  for (int o = 0; o < k_out; ++o)
+    for (long long i = 0; i < n; ++i)
+      for (int c = 0; c < w; ++c) scale[o * w + c] = std::max(scale[o * w + c], std::fabs(dev[o][i * w + c]));
+  StageCheck r{stage, order, static_cast<int>(std::min<long long>(count, n)), 0.0};
+  std::vector<double> errs(r.texels, 0.0);
+  parallel_for(r.texels, [&](long long k) {
+    // spread over the texture: a fixed multiplicative stride (coprime with most sizes)
+    const long long id = (k * 2654435761LL + 12345) % n;
+    std::vector<double> want(2 * w);
+    h.texel(stage, order, id, want.data());
+    double e = 0.0;
+    for (int o = 0; o < k_out; ++o)
+      for (int c = 0; c < w; ++c) {
+        const double ref = want[o * w + c], got = dev[o][id * w + c];
+        e = std::max(e, std::fabs(got - ref) / (std::fabs(ref) + floor * scale[o * w + c] + 1e-300));
+      }
+    errs[k] = e;
+  });
+  for (double e : errs) r.max_rel = std::max(r.max_rel, e);
+  return r;
+}
+
+}  // namespace
+
+std::unique_ptr<PassBackend> make_device_backend(Device& dev, const Model& m, const Channels& ch, int width,
+                                                 bool double_precision) {
+  return std::make_unique<DeviceBackend>(dev, m, ch, width, double_precision);
+}
+
+std::unique_ptr<PassBackend> make_host_backend(const Model& m, const Channels& ch, int width) {
+  switch (width) {
+    case 3: return std::make_unique<ref3::HostBackend>(m, ch);
+    case 4: return std::make_unique<ref4::HostBackend>(m, ch);
+  }
+  throw JobError("atmosphere: no reference pass of width " + std::to_string(width));
+}
+
+StageCheck check_stage(PassBackend& b, const Model& m, const Channels& ch, const std::string& stage, int order,
+                       int count, double floor) {
+  switch (b.channels()) {
+    case 3: return check_with<ref3::HostBackend>(b, m, ch, stage, order, count, floor);
+    case 4: return check_with<ref4::HostBackend>(b, m, ch, stage, order, count, floor);
+  }
+  throw JobError("atmosphere: no reference pass of width " + std::to_string(b.channels()));
+}
+
+std::vector<double> inverse_rayleigh_phase(const Model& m) {
+  const auto a = ref3::make_parameters(m, Channels{});
+  const Sizes& s = m.sizes;
+  const int wd = s.scattering_width();
+  std::vector<double> out(s.scattering_texels());
+  parallel_for(static_cast<long long>(out.size()), [&](long long id) {
+    double r, mu, mu_s, nu;
+    int ground;
+    ref3::scattering_params_from_texel(&a, static_cast<int>(id % wd), static_cast<int>((id / wd) % s.mu),
+                                       static_cast<int>(id / (1LL * wd * s.mu)), &r, &mu, &mu_s, &nu, &ground);
+    out[id] = 1.0 / ref3::rayleigh_phase(nu);
+  });
+  return out;
+}
+
+PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
+                    double p0, double p1, const StageHook& on_stage, const OrderHook& on_order) {
+  const int w = b.channels();
+  const int cap = plan.auto_orders ? kMaxAutoOrders : plan.orders;
+  // rough relative cost of the stages, for progress only
+  const double total = 0.12 + 0.72 * std::max(0, (plan.auto_orders ? 6 : cap) - 1);
+  double done = 0.0;
+  auto step = [&](const char* stage, double cost) {
+    done += cost;
+    progress(stage, p0 + (p1 - p0) * std::min(1.0, done / total));
+  };
+  auto hook = [&](const std::string& stage, int order) {
+    if (on_stage) on_stage(stage, order, b);
+  };
+  auto timed = [&](const char* what, int order, auto&& f) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    spdlog::debug("atmosphere: {} (order {}) took {:.3f} s", what, order,
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  };
+
+  PassResult r;
+  r.width = w;
+  timed("transmittance", 0, [&] { b.transmittance(); });
+  hook("transmittance", 0);
+  timed("direct irradiance", 0, [&] { b.direct_irradiance(); });
+  hook("direct_irradiance", 0);
+  r.transmittance = b.read(Tex::transmittance);
+  r.direct_irradiance = b.read(Tex::delta_irradiance);
+  step("transmittance", 0.02);
+  timed("single scattering", 1, [&] { b.single_scattering(); });
+  hook("single_scattering", 1);
+  r.scattering = b.read(Tex::delta_rayleigh);
+  r.single_mie = b.read(Tex::delta_mie);
+  r.irradiance.assign(r.direct_irradiance.size(), 0.0);
+  step("single scattering", 0.1);
+  {
+    OrderStats o;
+    o.order = 1;
+    const auto s = stats_of(r.scattering, w);
+    o.scattering_max = s.max;
+    o.scattering_mean = s.mean;
+    o.relative = 1.0;
+    r.orders.push_back(o);
+    if (on_order) on_order(1, r.scattering, {});
+  }
+  r.orders_used = 1;
+  r.converged = !plan.auto_orders;
+  const std::vector<double> inv_phase = cap >= 2 ? inverse_rayleigh_phase(m) : std::vector<double>{};
+  for (int n = 2; n <= cap; ++n) {
+    timed("scattering density", n, [&] { b.scattering_density(n); });
+    hook("scattering_density", n);
+    step("scattering density", 0.55);
+    timed("indirect irradiance", n - 1, [&] { b.indirect_irradiance(n - 1); });
+    hook("indirect_irradiance", n - 1);
+    const std::vector<double> dE = b.read(Tex::delta_irradiance);
+    for (std::size_t i = 0; i < dE.size(); ++i) r.irradiance[i] += dE[i];
+    {
+      const auto s = stats_of(dE, w);
+      r.orders[n - 2].irradiance_max = s.max;
+      r.orders[n - 2].irradiance_mean = s.mean;
+      if (on_order) on_order(n - 1, {}, dE);
+    }
+    step("indirect irradiance", 0.02);
+    timed("multiple scattering", n, [&] { b.multiple_scattering(); });
+    hook("multiple_scattering", n);
+    std::vector<double> add = b.read(Tex::delta_multiple);
+    for (std::size_t i = 0; i < add.size(); ++i) add[i] *= inv_phase[i / w];
+    for (std::size_t i = 0; i < add.size(); ++i) r.scattering[i] += add[i];
+    OrderStats o;
+    o.order = n;
+    const auto s = stats_of(add, w);
+    o.scattering_max = s.max;
+    o.scattering_mean = s.mean;
+    o.relative = std::max(relative_change(add, r.scattering, w), relative_change(dE, r.irradiance, w));
+    r.orders.push_back(o);
+    if (on_order) on_order(n, add, {});
+    r.orders_used = n;
+    step("multiple scattering", 0.15);
+    spdlog::debug("atmosphere: order {} adds at most {:.3e} (relative)", n, o.relative);
+    if (plan.auto_orders && o.relative < plan.tolerance) {
+      r.converged = true;
+      break;
+    }
+  }
+  return r;
+}
+
+}  // namespace specbake::atmosphere
