@@ -1,13 +1,18 @@
 #include "support/testing.hpp"
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <random>
 #include <sstream>
+
+#include "core/hash.hpp"
 
 namespace specbake::testing {
 
@@ -55,32 +60,81 @@ TempDir::~TempDir() {
   fs::remove_all(path_, ec);
 }
 
+pid_t spawn_cli(const std::vector<std::string>& args, const fs::path& cwd, const fs::path& out_file,
+                const fs::path& err_file) {
+  // Everything the child needs is prepared before fork (only async-signal-safe calls after).
+  const std::string exe = specbake_exe().string();
+  std::vector<char*> argv;
+  argv.push_back(const_cast<char*>(exe.c_str()));
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    if (!cwd.empty() && ::chdir(cwd.c_str()) != 0) _exit(127);
+    const int o = ::open(out_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int e = ::open(err_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (o < 0 || e < 0) _exit(127);
+    ::dup2(o, 1);
+    ::dup2(e, 2);
+    ::execv(exe.c_str(), argv.data());
+    _exit(127);
+  }
+  if (pid < 0) ADD_FAILURE() << "fork failed: " << std::strerror(errno);
+  return pid;
+}
+
 CliResult run_cli(const std::vector<std::string>& args, const fs::path& cwd) {
   // stdout and stderr go to temp files (no pipe deadlock on large output).
   TempDir tmp;
   const fs::path out_path = tmp / "stdout", err_path = tmp / "stderr";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    if (!cwd.empty() && ::chdir(cwd.c_str()) != 0) _exit(127);
-    FILE* o = std::fopen(out_path.c_str(), "w");
-    FILE* e = std::fopen(err_path.c_str(), "w");
-    ::dup2(fileno(o), 1);
-    ::dup2(fileno(e), 2);
-    std::vector<char*> argv;
-    const std::string exe = specbake_exe().string();
-    argv.push_back(const_cast<char*>(exe.c_str()));
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(exe.c_str(), argv.data());
-    _exit(127);
-  }
+  const pid_t pid = spawn_cli(args, cwd, out_path, err_path);
   int status = 0;
-  ::waitpid(pid, &status, 0);
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
   CliResult r;
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   r.out = read_file(out_path);
   r.err = read_file(err_path);
   return r;
 }
+
+TreeSnapshot snapshot(const fs::path& root) {
+  TreeSnapshot s;
+  std::error_code ec;
+  if (!fs::exists(fs::symlink_status(root, ec))) return s;
+  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
+    const std::string rel = fs::relative(it->path(), root).string();
+    if (it->is_symlink()) s.links[rel] = fs::read_symlink(it->path()).string();
+    else if (it->is_directory()) s.dirs.push_back(rel);
+    else if (it->is_regular_file()) s.files[rel] = sha256_file(it->path());
+  }
+  std::sort(s.dirs.begin(), s.dirs.end());
+  return s;
+}
+
+std::map<std::string, fs::file_time_type> mtimes(const fs::path& root) {
+  std::map<std::string, fs::file_time_type> m;
+  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it)
+    if (it->is_regular_file() && !it->is_symlink()) m[fs::relative(it->path(), root).string()] = it->last_write_time();
+  return m;
+}
+
+std::string line_col(const std::string& text, const std::string& needle, int occurrence) {
+  std::size_t pos = std::string::npos, from = 0;
+  for (int k = 0; k < occurrence; ++k) {
+    pos = text.find(needle, from);
+    if (pos == std::string::npos) {
+      ADD_FAILURE() << "'" << needle << "' occurs fewer than " << occurrence << " times in:\n" << text;
+      return "?";
+    }
+    from = pos + 1;
+  }
+  const std::size_t line_start = text.rfind('\n', pos == 0 ? 0 : pos - 1);
+  const long line = 1 + std::count(text.begin(), text.begin() + static_cast<long>(pos), '\n');
+  const std::size_t col = line_start == std::string::npos || pos == 0 ? pos + 1 : pos - line_start;
+  return std::to_string(line) + ":" + std::to_string(col);
+}
+
+bool running_as_root() { return ::geteuid() == 0; }
 
 }  // namespace specbake::testing

@@ -1,6 +1,9 @@
 #pragma once
 // Helpers shared by the tests: reference data, temporary folders, running the CLI.
+#include <sys/types.h>
+
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -38,5 +41,27 @@ struct CliResult {
 };
 // Runs the specbake binary with args (no shell), capturing its output.
 CliResult run_cli(const std::vector<std::string>& args, const fs::path& cwd = {});
+// Starts the specbake binary without waiting; stdout/stderr go to the given files.
+pid_t spawn_cli(const std::vector<std::string>& args, const fs::path& cwd, const fs::path& out_file,
+                const fs::path& err_file);
+
+// Everything under root (dot-files included, symlinks not followed): regular files by their
+// sha256, symlinks by their target, folders by name. Paths are relative to root.
+struct TreeSnapshot {
+  std::map<std::string, std::string> files;  // path -> sha256
+  std::map<std::string, std::string> links;  // path -> link target
+  std::vector<std::string> dirs;
+  bool operator==(const TreeSnapshot&) const = default;
+};
+TreeSnapshot snapshot(const fs::path& root);
+// Modification times of the regular files under root (relative path -> mtime).
+std::map<std::string, fs::file_time_type> mtimes(const fs::path& root);
+
+// "line:column" (1-based) where the occurrence-th copy of needle starts in text.
+std::string line_col(const std::string& text, const std::string& needle, int occurrence = 1);
+
+// Under root, chmod does not stop writes: tests that need an unwritable folder must use
+// another way (a path below a regular file).
+bool running_as_root();
 
 }  // namespace specbake::testing
