@@ -1,0 +1,40 @@
+#pragma once
+// Batched 2D complex FFTs on the OpenCL device with VkFFT (OpenCL backend).
+// Forward sign: F[kv][ku] = Σ_{iy,ix} f[iy][ix]·e^{−2πi(ku·ix/W + kv·iy/H)} (numpy.fft.fft2),
+// unnormalised, in place on `batch` consecutive W×H arrays of interleaved (re, im) pairs,
+// row-major [iy][ix]. Any sizes (VkFFT uses Bluestein's algorithm for large prime factors).
+#include <CL/opencl.hpp>
+
+#include <cstddef>
+#include <memory>
+
+#include "cl/device.hpp"
+
+namespace specbake::cl_util {
+
+enum class FftPrecision { single, double_ };
+
+class Fft2d {
+ public:
+  // Compiles the plan (VkFFT generates and builds its kernels); DeviceError on failure.
+  Fft2d(Device& dev, std::size_t width, std::size_t height, std::size_t batch, FftPrecision precision);
+  ~Fft2d();
+  Fft2d(const Fft2d&) = delete;
+  Fft2d& operator=(const Fft2d&) = delete;
+
+  // In-place forward transform of `buffer` (at least bytes() long); waits for completion.
+  void forward(cl::Buffer& buffer);
+  std::size_t bytes() const;  // batch·W·H·2·sizeof(element)
+  std::size_t width() const { return width_; }
+  std::size_t height() const { return height_; }
+  std::size_t batch() const { return batch_; }
+
+ private:
+  struct Impl;
+  Device& dev_;
+  std::size_t width_, height_, batch_;
+  FftPrecision precision_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace specbake::cl_util

@@ -1,0 +1,253 @@
+#include "jobs/diffraction/terms.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "cl/buffers.hpp"
+#include "cl/fft.hpp"
+#include "jobs/diffraction/reference.hpp"
+
+namespace specbake::diffraction {
+
+namespace {
+constexpr double kTwoPi = 6.283185307179586476925287;
+constexpr std::size_t kWorkspaceBytes = 64u << 20;  // FFT batch buffer cap
+const char* kKernels = "kernels/diffraction/kernels.cl";
+
+int expansion_id(Expansion e) { return e == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV; }
+
+// Twiddles e^{−2πi·k·j/m} for j = 0…m−1.
+std::vector<cplx> twiddles(int k, int m) {
+  std::vector<cplx> t(m);
+  for (int j = 0; j < m; ++j) {
+    const long long r = (static_cast<long long>(k) * j) % m;  // exact reduction keeps the angle small
+    const double a = -kTwoPi * static_cast<double>(r) / m;
+    t[j] = {std::cos(a), std::sin(a)};
+  }
+  return t;
+}
+}  // namespace
+
+const Band& band_for(const std::vector<Band>& bands, double kappa) {
+  for (const auto& b : bands)
+    if (kappa <= b.kappa_hi) return b;
+  return bands.back();
+}
+
+Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress) {
+  const std::size_t count = static_cast<std::size_t>(f.count());
+  int max_terms = 0;
+  for (const auto& b : plan.bands) max_terms = std::max(max_terms, b.terms);
+  const std::size_t fit = std::max<std::size_t>(1, kWorkspaceBytes / (count * 2 * sizeof(float)));
+  const int batch = static_cast<int>(std::min<std::size_t>({static_cast<std::size_t>(max_terms),
+                                                            static_cast<std::size_t>(DIFFRACTION_MAX_BATCH), fit}));
+  Terms t;
+  t.bins = plan.bins;
+  t.count = plan.total_terms;
+  cl::Program program = dev.build(kKernels, dev.real_options());
+  cl_util::Fft2d fft(dev, f.width, f.height, batch, cl_util::FftPrecision::single);
+  return cl_util::checked("diffraction terms", [&] {
+    cl::Buffer h = cl_util::upload_real(dev, f.h_um);
+    cl::Buffer work(dev.context(), CL_MEM_READ_WRITE, fft.bytes());
+    const std::size_t out_floats = 2 * t.per_term() * t.count;
+    cl::Buffer out(dev.context(), CL_MEM_WRITE_ONLY, out_floats * sizeof(float));
+    cl::Kernel inputs(program, "diffraction_term_inputs"), crop(program, "diffraction_crop");
+    const float scale = static_cast<float>(1.0 / static_cast<double>(count));
+    int done = 0;
+    for (const auto& band : plan.bands)
+      for (int n0 = 0; n0 < band.terms; n0 += batch) {
+        const int n = std::min(batch, band.terms - n0);
+        inputs.setArg(0, h);
+        inputs.setArg(1, static_cast<int>(count));
+        cl_util::set_real_arg(dev, inputs, 2, f.c);
+        cl_util::set_real_arg(dev, inputs, 3, f.s > 0 ? 1.0 / f.s : 0.0);
+        inputs.setArg(4, expansion_id(band.expansion));
+        cl_util::set_real_arg(dev, inputs, 5, band.kappa0);
+        cl_util::set_real_arg(dev, inputs, 6, band.delta);
+        inputs.setArg(7, n0);
+        inputs.setArg(8, n);
+        inputs.setArg(9, work);
+        dev.queue().enqueueNDRangeKernel(inputs, cl::NullRange, cl::NDRange(count), cl::NullRange);
+        fft.forward(work);
+        crop.setArg(0, work);
+        crop.setArg(1, f.width);
+        crop.setArg(2, f.height);
+        crop.setArg(3, n);
+        crop.setArg(4, t.bins.ku_min);
+        crop.setArg(5, t.bins.ku_count());
+        crop.setArg(6, t.bins.kv_min);
+        crop.setArg(7, t.bins.kv_count());
+        crop.setArg(8, scale);
+        crop.setArg(9, band.first_term + n0);
+        crop.setArg(10, out);
+        dev.queue().enqueueNDRangeKernel(crop, cl::NullRange, cl::NDRange(t.per_term() * n), cl::NullRange);
+        done += n;
+        progress("FFT terms", 0.1 + 0.6 * done / std::max(1, t.count));
+      }
+    t.values.resize(out_floats);
+    dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, out_floats * sizeof(float), t.values.data());
+    return t;
+  });
+}
+
+std::vector<cplx> reference_inputs(const Field& f, const Band& band, int n_first, int count) {
+  const std::size_t m = static_cast<std::size_t>(f.count());
+  std::vector<cplx> q(m * count);
+  double re[DIFFRACTION_MAX_BATCH], im[DIFFRACTION_MAX_BATCH];
+  for (int n0 = 0; n0 < count; n0 += DIFFRACTION_MAX_BATCH) {
+    const int n = std::min(DIFFRACTION_MAX_BATCH, count - n0);
+    for (std::size_t i = 0; i < m; ++i) {
+      ref::term_inputs(f.h_um[i], f.c, f.s > 0 ? 1.0 / f.s : 0.0, expansion_id(band.expansion), band.kappa0,
+                       band.delta, n_first + n0, n, re, im);
+      for (int j = 0; j < n; ++j) q[(n0 + j) * m + i] = {re[j], im[j]};
+    }
+  }
+  return q;
+}
+
+std::vector<cplx> host_dft(const std::vector<cplx>& field, int width, int height, const Bins& bins) {
+  // Rows first: R[iy][ku] = Σ_ix f[iy][ix]·e^{−2πi ku ix/W}; then columns over iy.
+  const int nu = bins.ku_count(), nv = bins.kv_count();
+  std::vector<cplx> rows(static_cast<std::size_t>(height) * nu);
+  for (int a = 0; a < nu; ++a) {
+    const auto tw = twiddles(bins.ku_min + a, width);
+    for (int iy = 0; iy < height; ++iy) {
+      cplx s = 0.0;
+      const cplx* row = field.data() + static_cast<std::size_t>(iy) * width;
+      for (int ix = 0; ix < width; ++ix) s += row[ix] * tw[ix];
+      rows[static_cast<std::size_t>(iy) * nu + a] = s;
+    }
+  }
+  std::vector<cplx> out(static_cast<std::size_t>(nv) * nu);
+  const double inv = 1.0 / (static_cast<double>(width) * height);
+  for (int b = 0; b < nv; ++b) {
+    const auto tw = twiddles(bins.kv_min + b, height);
+    for (int a = 0; a < nu; ++a) {
+      cplx s = 0.0;
+      for (int iy = 0; iy < height; ++iy) s += rows[static_cast<std::size_t>(iy) * nu + a] * tw[iy];
+      out[static_cast<std::size_t>(b) * nu + a] = s * inv;
+    }
+  }
+  return out;
+}
+
+std::vector<cplx> reference_terms(const Field& f, const std::vector<Band>& bands, const Bins& bins) {
+  std::vector<cplx> out;
+  const std::size_t m = static_cast<std::size_t>(f.count());
+  for (const auto& band : bands) {
+    const auto q = reference_inputs(f, band, 0, band.terms);
+    for (int n = 0; n < band.terms; ++n) {
+      std::vector<cplx> one(q.begin() + n * m, q.begin() + (n + 1) * m);
+      const auto F = host_dft(one, f.width, f.height, bins);
+      out.insert(out.end(), F.begin(), F.end());
+    }
+  }
+  return out;
+}
+
+std::vector<cplx> reference_terms_at(const Field& f, const std::vector<Band>& bands,
+                                     const std::vector<std::pair<int, int>>& bins) {
+  int total = 0;
+  for (const auto& b : bands) total += b.terms;
+  const std::size_t nb = bins.size(), m = static_cast<std::size_t>(f.count());
+  std::vector<std::vector<cplx>> tx, ty;
+  for (const auto& [ku, kv] : bins) {
+    tx.push_back(twiddles(ku, f.width));
+    ty.push_back(twiddles(kv, f.height));
+  }
+  std::vector<cplx> out(static_cast<std::size_t>(total) * nb);
+  for (const auto& band : bands) {
+    const auto q = reference_inputs(f, band, 0, band.terms);
+    for (int n = 0; n < band.terms; ++n)
+      for (std::size_t b = 0; b < nb; ++b) {
+        cplx s = 0.0;
+        for (int iy = 0; iy < f.height; ++iy) {
+          cplx r = 0.0;
+          const cplx* row = q.data() + n * m + static_cast<std::size_t>(iy) * f.width;
+          for (int ix = 0; ix < f.width; ++ix) r += row[ix] * tx[b][ix];
+          s += r * ty[b][iy];
+        }
+        out[(band.first_term + n) * nb + b] = s / static_cast<double>(m);
+      }
+  }
+  return out;
+}
+
+struct ExactDft::Impl {
+  cl_util::Device* dev = nullptr;
+  const Field* f = nullptr;
+  Bins bins;
+  std::unique_ptr<cl_util::Fft2d> fft;
+};
+
+ExactDft::ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins) : impl_(std::make_unique<Impl>()) {
+  impl_->f = &f;
+  impl_->bins = bins;
+  if (dev && dev->info().fp64) {
+    impl_->dev = dev;
+    impl_->fft = std::make_unique<cl_util::Fft2d>(*dev, f.width, f.height, 1, cl_util::FftPrecision::double_);
+  }
+}
+ExactDft::~ExactDft() = default;
+bool ExactDft::on_device() const { return impl_->fft != nullptr; }
+
+std::vector<cplx> ExactDft::operator()(double kappa) {
+  const Field& f = *impl_->f;
+  const Bins& bins = impl_->bins;
+  const std::size_t m = static_cast<std::size_t>(f.count());
+  std::vector<cplx> p(m);
+  for (std::size_t i = 0; i < m; ++i) p[i] = std::polar(1.0, kappa * f.h_um[i]);
+  if (!impl_->fft) {
+    auto out = host_dft(p, f.width, f.height, bins);
+    for (auto& v : out) v *= static_cast<double>(m);
+    return out;
+  }
+  cl_util::Device& dev = *impl_->dev;
+  return cl_util::checked("exact DFT", [&] {
+    cl::Buffer buf(dev.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, m * sizeof(cplx), p.data());
+    impl_->fft->forward(buf);
+    dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, m * sizeof(cplx), p.data());
+    std::vector<cplx> out(static_cast<std::size_t>(bins.ku_count()) * bins.kv_count());
+    for (int kv = bins.kv_min; kv <= bins.kv_max; ++kv)
+      for (int ku = bins.ku_min; ku <= bins.ku_max; ++ku)
+        out[static_cast<std::size_t>(kv - bins.kv_min) * bins.ku_count() + (ku - bins.ku_min)] =
+            p[static_cast<std::size_t>(ref::bin_index(kv, f.height)) * f.width + ref::bin_index(ku, f.width)];
+    return out;
+  });
+}
+
+namespace {
+template <class Get>
+std::vector<cplx> reconstruct_with(Get get, const Bins& bins, const Band& band, const Field& f, double kappa) {
+  std::vector<double> coef(band.terms);
+  ref::expansion_coefficients(expansion_id(band.expansion), kappa, band.kappa0, band.delta, f.s, band.terms,
+                              coef.data());
+  const std::size_t per = static_cast<std::size_t>(bins.ku_count()) * bins.kv_count();
+  std::vector<cplx> p(per, 0.0);
+  for (int n = 0; n < band.terms; ++n)
+    for (std::size_t i = 0; i < per; ++i) p[i] += coef[n] * get(band.first_term + n, i);
+  const cplx front = static_cast<double>(f.count()) * std::polar(1.0, kappa * f.c);
+  for (auto& v : p) v *= front;
+  return p;
+}
+}  // namespace
+
+std::vector<cplx> reconstruct(const Terms& t, const Band& band, const Field& f, double kappa) {
+  const std::size_t per = t.per_term();
+  return reconstruct_with(
+      [&](int n, std::size_t i) {
+        const std::size_t k = n * per + i;
+        return cplx(t.values[2 * k], t.values[2 * k + 1]);
+      },
+      t.bins, band, f, kappa);
+}
+
+std::vector<cplx> reconstruct(const std::vector<cplx>& terms, const Bins& bins, const Band& band, const Field& f,
+                              double kappa) {
+  const std::size_t per = static_cast<std::size_t>(bins.ku_count()) * bins.kv_count();
+  return reconstruct_with([&](int n, std::size_t i) { return terms[n * per + i]; }, bins, band, f, kappa);
+}
+
+}  // namespace specbake::diffraction
