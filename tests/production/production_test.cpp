@@ -1,0 +1,357 @@
+// Production use: run reports, sharding, locking between concurrent runs, gc, diff, and the
+// fault paths (kernel build failure, full disk, unwritable output). Each fault must leave the
+// previous bundle and `latest` intact and report clearly with the documented exit code.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <map>
+#include <set>
+
+#include "core/hash.hpp"
+#include "core/runner.hpp"
+#include "support/testing.hpp"
+
+namespace specbake {
+namespace {
+
+using testing::read_file;
+using testing::read_json;
+using testing::TempDir;
+using testing::write_file;
+
+const char* kConfig = R"(specbake: 1
+jobs:
+  - name: prism-a
+    kind: dispersion
+    samples: 8
+    material: {glass: N-BK7}
+  - name: prism-b
+    kind: dispersion
+    samples: 12
+    sampling: gauss-legendre
+    material: {n_d: 1.6, v_d: 40}
+)";
+
+struct Spawned {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+// Runs the CLI with extra environment variables and an optional file-size limit (bytes; 0 =
+// none). SIGXFSZ is ignored in the child so a write past the limit fails with EFBIG, as a
+// full disk fails with ENOSPC.
+Spawned spawn(const std::vector<std::string>& args, const std::map<std::string, std::string>& env = {},
+              rlim_t fsize_limit = 0) {
+  TempDir tmp;
+  const auto out_path = tmp / "out", err_path = tmp / "err";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    FILE* o = std::fopen(out_path.c_str(), "w");
+    FILE* e = std::fopen(err_path.c_str(), "w");
+    ::dup2(fileno(o), 1);
+    ::dup2(fileno(e), 2);
+    for (const auto& [k, v] : env) ::setenv(k.c_str(), v.c_str(), 1);
+    if (fsize_limit) {
+      ::signal(SIGXFSZ, SIG_IGN);
+      rlimit rl{fsize_limit, fsize_limit};
+      ::setrlimit(RLIMIT_FSIZE, &rl);
+    }
+    std::vector<char*> argv;
+    const std::string exe = testing::specbake_exe().string();
+    argv.push_back(const_cast<char*>(exe.c_str()));
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    ::execv(exe.c_str(), argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  Spawned r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  r.out = read_file(out_path);
+  r.err = read_file(err_path);
+  return r;
+}
+
+// sha256 of every file under dir (relative path → hash), `latest` link targets included.
+std::map<std::string, std::string> snapshot(const fs::path& dir) {
+  std::map<std::string, std::string> s;
+  for (auto it = fs::recursive_directory_iterator(dir); it != fs::recursive_directory_iterator(); ++it) {
+    const auto rel = fs::relative(it->path(), dir).string();
+    if (it->is_symlink()) s[rel] = "-> " + fs::read_symlink(it->path()).string();
+    else if (it->is_regular_file() && it->path().filename() != ".lock") s[rel] = sha256_file(it->path());
+  }
+  return s;
+}
+
+std::set<std::string> hidden_entries(const fs::path& job_dir) {
+  std::set<std::string> s;
+  for (const auto& e : fs::directory_iterator(job_dir)) {
+    const auto n = e.path().filename().string();
+    if (n.front() == '.' && n != ".lock") s.insert(n);
+  }
+  return s;
+}
+
+TEST(Production, ReportListsEveryJobWithStatusParametersAndTimings) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  auto r = spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--report", (t / "r.json").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto rep = read_json(t / "r.json");
+  EXPECT_EQ(rep["schema"], "specbake.report/1");
+  EXPECT_EQ(rep["summary"]["built"], 2);
+  ASSERT_EQ(rep["jobs"].size(), 2u);
+  for (const auto& j : rep["jobs"]) {
+    EXPECT_EQ(j["status"], "built");
+    EXPECT_TRUE(fs::is_directory(j["bundle"].get<std::string>()));
+    EXPECT_GT(j["parameters"]["samples"].get<int>(), 0);
+    EXPECT_TRUE(j["accuracy"].contains("sum_K_minus_I_max_abs"));
+    EXPECT_GE(j["timings"]["total_s"].get<double>(), 0.0);
+  }
+  // Second run: both up to date, reported as such.
+  r = spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--report", (t / "r.json").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  rep = read_json(t / "r.json");
+  EXPECT_EQ(rep["summary"]["up_to_date"], 2);
+}
+
+TEST(Production, FailingJobDoesNotStopOthersAndRunExitsNonZero) {
+  TempDir t;
+  // prism-bad cannot meet its tolerance with any N ≤ 4096 (ΔE 1e-9 is below float roundoff
+  // of the picture), so it fails at run time; prism-a must still be written.
+  write_file(t / "c.yaml", R"(specbake: 1
+jobs:
+  - {name: prism-bad, kind: dispersion, samples: auto, tolerance_de2000: 1e-9, material: {n_d: 1.5, v_d: 60}}
+  - {name: prism-a, kind: dispersion, samples: 4, material: {n_d: 1.5, v_d: 60}}
+)");
+  auto r = spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--report", (t / "r.json").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_NE(r.err.find("prism-bad"), std::string::npos);
+  EXPECT_TRUE(fs::exists(t / "out" / "prism-a" / "latest" / "manifest.json"));
+  EXPECT_FALSE(fs::exists(t / "out" / "prism-bad" / "latest"));
+  const auto rep = read_json(t / "r.json");
+  EXPECT_EQ(rep["summary"]["failed"], 1);
+  EXPECT_EQ(rep["summary"]["built"], 1);
+}
+
+TEST(Production, ShardsPartitionJobsDeterministicallyAndBalanced) {
+  std::vector<std::pair<std::string, double>> jobs;
+  for (int i = 0; i < 23; ++i) jobs.emplace_back("job" + std::to_string(i), 1.0 + (i % 5) * 3.0);
+  for (int n : {1, 2, 3, 7}) {
+    const auto a = assign_shards(jobs, n), b = assign_shards(jobs, n);
+    EXPECT_EQ(a, b);  // deterministic
+    std::vector<double> load(n, 0.0);
+    double total = 0.0, biggest = 0.0;
+    for (std::size_t i = 0; i < jobs.size(); ++i) {
+      ASSERT_GE(a[i], 0);
+      ASSERT_LT(a[i], n);
+      load[a[i]] += jobs[i].second;
+      total += jobs[i].second;
+      biggest = std::max(biggest, jobs[i].second);
+    }
+    // Greedy largest-first: no shard exceeds the mean by more than one job's cost.
+    for (double l : load) EXPECT_LE(l, total / n + biggest);
+  }
+  EXPECT_EQ(parse_shard("2/5"), std::make_pair(2, 5));
+  for (const char* bad : {"5/5", "-1/3", "1", "a/b", "1/0", "1/2x"}) EXPECT_THROW(parse_shard(bad), UsageError) << bad;
+}
+
+TEST(Production, ShardedRunsTogetherBuildEveryJobOnce) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  std::set<std::string> built;
+  for (int i = 0; i < 3; ++i) {
+    const auto rep_path = t / ("r" + std::to_string(i) + ".json");
+    auto r = spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--shard",
+                    std::to_string(i) + "/3", "--report", rep_path.string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto rep = read_json(rep_path);
+    for (const auto& j : rep["jobs"]) EXPECT_TRUE(built.insert(j["name"].get<std::string>()).second) << j["name"];
+  }
+  EXPECT_EQ(built, (std::set<std::string>{"prism-a", "prism-b"}));
+  EXPECT_EQ(spawn({"run", (t / "c.yaml").string(), "--shard", "3/3"}).exit_code, 2);
+}
+
+TEST(Production, ConcurrentRunsOnOneOutputDoNotCorruptIt) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  const std::string out = (t / "out").string();
+  std::vector<pid_t> pids;
+  for (int i = 0; i < 3; ++i) {
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      const auto r = spawn({"run", (t / "c.yaml").string(), "--out", out, "-q",
+                            "--report", (t / ("r" + std::to_string(i) + ".json")).string()});
+      _exit(r.exit_code);
+    }
+    pids.push_back(pid);
+  }
+  for (pid_t p : pids) {
+    int st = 0;
+    ::waitpid(p, &st, 0);
+    EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0);
+  }
+  // Each job was built by exactly one run; the others waited for its lock and skipped.
+  std::map<std::string, int> built;
+  for (int i = 0; i < 3; ++i) {
+    const auto rep = read_json(t / ("r" + std::to_string(i) + ".json"));
+    for (const auto& j : rep["jobs"]) built[j["name"].get<std::string>()] += j["status"] == "built";
+  }
+  EXPECT_EQ(built["prism-a"], 1);
+  EXPECT_EQ(built["prism-b"], 1);
+  for (const char* job : {"prism-a", "prism-b"}) {
+    EXPECT_TRUE(hidden_entries(fs::path(out) / job).empty());
+    EXPECT_EQ(spawn({"inspect", (fs::path(out) / job / "latest").string()}).exit_code, 0);
+  }
+}
+
+TEST(Production, InjectedKernelBuildFailureKeepsPreviousBundle) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  const std::string out = (t / "out").string();
+  ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", out}).exit_code, 0);
+  const auto before = snapshot(out);
+  const auto r = spawn({"run", (t / "c.yaml").string(), "--out", out, "--force"},
+                       {{"SPECBAKE_INJECT_BUILD_FAILURE", "kernels/dispersion"}});
+  EXPECT_EQ(r.exit_code, 4) << r.err;                             // device/OpenCL failure
+  EXPECT_NE(r.err.find("CL_BUILD_PROGRAM_FAILURE"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("build failure injected"), std::string::npos) << r.err;  // the build log
+  EXPECT_EQ(snapshot(out), before);
+}
+
+TEST(Production, FullDiskFailsWithIoErrorAndKeepsPreviousBundle) {
+  // A 256 KiB tmpfs, mounted in a private user + mount namespace (no root needed): bake once,
+  // fill the disk, rebuild with --force. The rebuild must fail with an I/O error (exit 5)
+  // and leave the first bundle and `latest` as they were.
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  const std::string exe = testing::specbake_exe().string(), disk = (t / "disk").string();
+  fs::create_directories(disk);
+  const std::string script =
+      "set -u; mount -t tmpfs -o size=256k tmpfs " + disk + " || exit 99; cd " + t.path().string() + "; " +
+      exe + " run c.yaml --out " + disk + " -q >/dev/null 2>&1 || exit 98; " +
+      "find " + disk + " -type f ! -name .lock -exec sha256sum {} + | sort > before.txt; " +
+      "readlink " + disk + "/prism-a/latest >> before.txt; " +
+      "dd if=/dev/zero of=" + disk + "/filler bs=4k 2>/dev/null; " +
+      exe + " run c.yaml --out " + disk + " --force 2> err.txt; echo $? > rc.txt; " +
+      "rm " + disk + "/filler; " +
+      "find " + disk + " -type f ! -name .lock -exec sha256sum {} + | sort > after.txt; " +
+      "readlink " + disk + "/prism-a/latest >> after.txt; " +
+      "ls -a " + disk + "/prism-a " + disk + "/prism-b > entries.txt; " +
+      exe + " inspect " + disk + "/prism-a/latest > /dev/null; echo $? > inspect.txt";
+  const int rc = std::system(("unshare -rm sh -c '" + script + "'").c_str());
+  if (WEXITSTATUS(rc) == 99) GTEST_SKIP() << "this machine cannot mount a tmpfs in a user namespace";
+  ASSERT_EQ(WEXITSTATUS(rc), 0);
+  EXPECT_EQ(read_file(t / "rc.txt"), "5\n") << read_file(t / "err.txt");
+  EXPECT_NE(read_file(t / "err.txt").find("No space left on device"), std::string::npos) << read_file(t / "err.txt");
+  EXPECT_EQ(read_file(t / "after.txt"), read_file(t / "before.txt"));
+  EXPECT_EQ(read_file(t / "inspect.txt"), "0\n");
+  EXPECT_EQ(read_file(t / "entries.txt").find(".tmp-"), std::string::npos) << read_file(t / "entries.txt");
+}
+
+TEST(Production, UnwritableOutputIsRefusedBeforeAnyJobRuns) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  write_file(t / "a-file", "not a folder");
+  // A path below a regular file cannot be created, whoever runs the test (root included).
+  const auto r = spawn({"run", (t / "c.yaml").string(), "--out", (t / "a-file" / "out").string()});
+  EXPECT_EQ(r.exit_code, 5) << r.err;
+  EXPECT_NE(r.err.find((t / "a-file" / "out").string()), std::string::npos) << r.err;
+}
+
+TEST(Production, GcKeepsNewestAndLatest) {
+  TempDir t;
+  const std::string out = (t / "out").string();
+  // Three configs of one job → three bundles; then the oldest config again → latest = oldest.
+  for (int n : {4, 5, 6, 4}) {
+    write_file(t / "c.yaml", "specbake: 1\njobs: [{name: p, kind: dispersion, samples: " + std::to_string(n) +
+                                 ", material: {n_d: 1.5, v_d: 60}}]\n");
+    ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", out}).exit_code, 0);
+    ::usleep(1100 * 1000);  // manifests record creation time to the second
+  }
+  const auto latest = fs::read_symlink(fs::path(out) / "p" / "latest");
+  auto bundles = [&] {
+    std::set<std::string> s;
+    for (const auto& e : fs::directory_iterator(fs::path(out) / "p"))
+      if (e.is_directory() && !e.is_symlink() && e.path().filename().string().front() != '.')
+        s.insert(e.path().filename().string());
+    return s;
+  };
+  ASSERT_EQ(bundles().size(), 3u);
+  ASSERT_EQ(spawn({"gc", out, "--keep", "1"}).exit_code, 0);
+  // Kept: the newest bundle (N=6) and latest (the N=4 bundle, created first, re-selected by
+  // the last run), although latest is the oldest. The N=5 bundle is gone.
+  const auto left = bundles();
+  ASSERT_EQ(left.size(), 2u);
+  EXPECT_TRUE(left.count(latest.string()));
+  std::set<int> samples;
+  for (const auto& b : left) samples.insert(read_json(fs::path(out) / "p" / b / "manifest.json")["config"]["samples"].get<int>());
+  EXPECT_EQ(samples, (std::set<int>{4, 6}));
+  EXPECT_EQ(spawn({"inspect", (fs::path(out) / "p" / "latest").string()}).exit_code, 0);
+}
+
+TEST(Production, DiffReportsWhereAndFailsPastThresholds) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string()}).exit_code, 0);
+  const fs::path a = t / "out" / "prism-a" / "latest";
+  fs::copy(a, t / "copy", fs::copy_options::recursive);
+  EXPECT_EQ(spawn({"diff", a.string(), (t / "copy").string()}).exit_code, 0);
+  // Scale K_2[1][2] by (1 + 1e-3).
+  auto k = testing::read_f32(t / "copy" / "matrices.bin");
+  const std::size_t flat = 2 * 9 + 1 * 3 + 2;
+  k[flat] *= 1.001f;
+  write_file(t / "copy" / "matrices.bin", std::string(reinterpret_cast<const char*>(k.data()), k.size() * 4));
+  auto r = spawn({"diff", a.string(), (t / "copy").string(), "--fail-rel", "1e-4"});
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("matrices.bin"), std::string::npos);
+  EXPECT_NE(r.out.find("[2,1,2]"), std::string::npos) << r.out;
+  // 1e-3 relative change: passes a 2e-3 relative threshold (float rounding adds < 1e-7).
+  EXPECT_EQ(spawn({"diff", a.string(), (t / "copy").string(), "--fail-rel", "2e-3"}).exit_code, 0);
+  // Different jobs: parameters differ and are listed.
+  r = spawn({"diff", a.string(), (t / "out" / "prism-b" / "latest").string(), "--fail-rel", "1"});
+  EXPECT_NE(r.out.find("config.samples"), std::string::npos) << r.out;
+  EXPECT_EQ(r.exit_code, 1);  // shapes differ (8 vs 12 samples)
+}
+
+TEST(Production, ByteIdenticalAcrossRunsAndDeviceSelectors) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  std::vector<std::map<std::string, std::string>> snaps;
+  int i = 0;
+  for (const char* dev : {"auto", "cpu", "auto", "portable"}) {
+    const auto out = t / ("out" + std::to_string(i++));
+    ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", out.string(), "--device", dev}).exit_code, 0);
+    auto s = snapshot(out);
+    std::erase_if(s, [](const auto& kv) { return kv.first.find("manifest.json") != std::string::npos; });
+    snaps.push_back(s);
+  }
+  for (std::size_t k = 1; k < snaps.size(); ++k) EXPECT_EQ(snaps[k], snaps[0]);
+}
+
+TEST(Production, AliasBombAndMultiDocumentConfigsAreRefused) {
+  TempDir t;
+  std::string bomb = "specbake: 1\nx0: &a0 [1,1,1,1,1,1,1,1,1,1]\n";
+  for (int i = 1; i < 8; ++i)
+    bomb += "x" + std::to_string(i) + ": &a" + std::to_string(i) + " [*a" + std::to_string(i - 1) + ",*a" +
+            std::to_string(i - 1) + ",*a" + std::to_string(i - 1) + ",*a" + std::to_string(i - 1) + ",*a" +
+            std::to_string(i - 1) + ",*a" + std::to_string(i - 1) + ",*a" + std::to_string(i - 1) + ",*a" +
+            std::to_string(i - 1) + ",*a" + std::to_string(i - 1) + ",*a" + std::to_string(i - 1) + "]\n";
+  write_file(t / "bomb.yaml", bomb + "jobs: []\n");
+  auto r = spawn({"run", (t / "bomb.yaml").string(), "--out", (t / "out").string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("alias"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(t / "out"));
+  write_file(t / "two.yaml", std::string(kConfig) + "---\nspecbake: 1\n");
+  r = spawn({"run", (t / "two.yaml").string(), "--out", (t / "out").string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("one YAML document"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(t / "out"));
+}
+
+}  // namespace
+}  // namespace specbake
