@@ -1,0 +1,362 @@
+// The `specbake` command and the bundles it writes: manifest contents, sha256 checks through
+// `inspect`, skip-if-unchanged, --force, determinism, --only, --out, plan, devices, help,
+// usage errors, and a changed config giving a new bundle that `latest` moves to.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <regex>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/hash.hpp"
+#include "core/version.hpp"
+#include "support/testing.hpp"
+
+namespace {
+
+namespace t = specbake::testing;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::string config(int samples, const std::string& output = "out", const std::string& extra_jobs = "") {
+  return "specbake: 1\noutput: " + output +
+         "\njobs:\n  - name: prism\n    kind: dispersion\n    samples: " + std::to_string(samples) +
+         "\n    sampling: gauss-legendre\n    range_nm: [390, 780]\n    material: {glass: N-BK7}\n" + extra_jobs;
+}
+
+const std::set<std::string> kDataFiles = {"wavelengths.bin", "weights.bin",     "matrices.bin",   "ior_offsets.bin",
+                                          "ior.bin",         "dispersion.json", "dispersion.glsl"};
+
+// The files of a bundle without the manifest (whose timestamps and timings differ per run).
+std::map<std::string, std::string> data_files(const fs::path& bundle) {
+  auto s = t::snapshot(bundle).files;
+  s.erase("manifest.json");
+  return s;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  fs::path cfg(const std::string& text, const std::string& name = "c.yaml") {
+    t::write_file(tmp_ / name, text);
+    return tmp_ / name;
+  }
+  t::CliResult run(std::vector<std::string> args) { return t::run_cli(args, tmp_.path()); }
+  // Builds config(samples) into tmp/out and returns the bundle folder.
+  fs::path build(int samples = 6) {
+    const auto r = run({"run", cfg(config(samples)).string()});
+    EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+    return fs::canonical(tmp_ / "out" / "prism" / "latest");
+  }
+  t::TempDir tmp_;
+};
+
+TEST_F(Cli, ManifestDescribesTheBundle) {
+  const fs::path b = build(6);
+  const json m = t::read_json(b / "manifest.json");
+  EXPECT_EQ(m.at("schema"), "specbake.bundle/1");
+  EXPECT_EQ(m.at("tool").at("name"), "specbake");
+  EXPECT_EQ(m.at("tool").at("version"), specbake::kVersion);
+  // The job and its hash: 64 hex digits, the bundle folder is named by the first 12.
+  EXPECT_EQ(m.at("job").at("name"), "prism");
+  EXPECT_EQ(m.at("job").at("kind"), "dispersion");
+  const std::string hash = m.at("job").at("hash");
+  EXPECT_TRUE(std::regex_match(hash, std::regex("[0-9a-f]{64}"))) << hash;
+  EXPECT_EQ(b.filename().string(), hash.substr(0, 12));
+  EXPECT_EQ(fs::read_symlink(tmp_ / "out" / "prism" / "latest").string(), hash.substr(0, 12));
+  // The normalised config holds what defines the result.
+  const json& c = m.at("config");
+  EXPECT_EQ(c.at("samples"), 6);
+  EXPECT_EQ(c.at("sampling"), "gauss-legendre");
+  EXPECT_EQ(c.at("range_nm"), json::array({390.0, 780.0}));
+  EXPECT_EQ(c.at("material").at("glass"), "N-BK7");
+  // Inputs and kernels with the sha256 of the files they were embedded from.
+  const auto src = t::source_dir();
+  EXPECT_EQ(m.at("inputs").at("data/cie/cie1931_2deg_1nm.csv"),
+            specbake::sha256_file(src / "data/cie/cie1931_2deg_1nm.csv"));
+  EXPECT_EQ(m.at("inputs").at("data/glass/glasses.csv"), specbake::sha256_file(src / "data/glass/glasses.csv"));
+  ASSERT_TRUE(m.at("kernels").contains("kernels/dispersion/dispersion.cl"));
+  for (auto& [path, sha] : m.at("kernels").items()) EXPECT_EQ(sha, specbake::sha256_file(src / path)) << path;
+  EXPECT_FALSE(m.at("device").at("name").get<std::string>().empty());
+  EXPECT_TRUE(m.contains("created_utc"));
+  EXPECT_TRUE(m.at("timings_s").contains("bake"));
+  // Resolved parameters and accuracy figures.
+  const json& p = m.at("parameters");
+  EXPECT_EQ(p.at("samples"), 6);
+  EXPECT_EQ(p.at("material").at("ior_model"), "sellmeier");
+  const json& a = m.at("accuracy");
+  for (const char* k : {"prism_mean_de2000", "sum_K_minus_I_max_abs", "sum_K_minus_I_bound", "device_vs_reference",
+                        "cauchy_vs_sellmeier"})
+    EXPECT_TRUE(a.contains(k)) << k;
+  EXPECT_LE(a.at("sum_K_minus_I_max_abs").get<double>(), a.at("sum_K_minus_I_bound").get<double>());
+  // Every file: listed once, sha256 and size match, .bin shapes as documented.
+  const std::map<std::string, std::vector<std::int64_t>> shapes = {
+      {"wavelengths.bin", {6}}, {"weights.bin", {6, 3}}, {"matrices.bin", {6, 3, 3}}, {"ior_offsets.bin", {6}},
+      {"ior.bin", {6}}};
+  std::set<std::string> listed;
+  for (const auto& f : m.at("files")) {
+    const std::string path = f.at("path");
+    EXPECT_TRUE(listed.insert(path).second) << "listed twice: " << path;
+    EXPECT_EQ(f.at("sha256"), specbake::sha256_file(b / path)) << path;
+    EXPECT_EQ(f.at("bytes").get<std::uintmax_t>(), fs::file_size(b / path)) << path;
+    if (auto it = shapes.find(path); it != shapes.end()) {
+      EXPECT_EQ(f.at("dtype"), "float32") << path;
+      EXPECT_EQ(f.at("shape").get<std::vector<std::int64_t>>(), it->second) << path;
+      std::int64_t count = 1;
+      for (auto d : it->second) count *= d;
+      EXPECT_EQ(f.at("bytes").get<std::int64_t>(), 4 * count) << path;
+      EXPECT_TRUE(f.contains("units")) << path;
+      EXPECT_NE(f.at("layout").get<std::string>().find("little-endian"), std::string::npos) << path;
+    }
+  }
+  EXPECT_EQ(listed, kDataFiles);
+  // Nothing in the folder that the manifest does not list.
+  std::set<std::string> present;
+  for (const auto& e : fs::directory_iterator(b)) present.insert(e.path().filename().string());
+  present.erase("manifest.json");
+  EXPECT_EQ(present, kDataFiles);
+}
+
+TEST_F(Cli, InspectChecksEveryFile) {
+  const fs::path b = build();
+  auto r = run({"inspect", (tmp_ / "out" / "prism" / "latest").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("all 7 files match their sha256"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("prism_mean_de2000"), std::string::npos) << r.out;  // accuracy figures shown
+  // One flipped byte (same size) is found.
+  {
+    std::fstream f(b / "matrices.bin", std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(17);
+    f.put('\x5a');
+  }
+  r = run({"inspect", b.string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("SHA256 MISMATCH  matrices.bin"), std::string::npos) << r.out;
+  // A missing file too.
+  fs::remove(b / "ior.bin");
+  r = run({"inspect", b.string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("MISSING  ior.bin"), std::string::npos) << r.out;
+  // Not a bundle: an I/O error naming the manifest.
+  r = run({"inspect", tmp_.path().string()});
+  EXPECT_EQ(r.exit_code, 5) << r.err;
+  EXPECT_NE(r.err.find("manifest.json"), std::string::npos) << r.err;
+}
+
+TEST_F(Cli, UnchangedJobIsSkippedAndNotRewritten) {
+  const fs::path b = build();
+  const auto before = t::snapshot(tmp_ / "out");
+  const auto times = t::mtimes(b);
+  // Coarse file-system timestamps must not hide a rewrite.
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const auto r = run({"run", (tmp_ / "c.yaml").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("status:  up-to-date"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 built, 1 up to date, 0 failed"), std::string::npos) << r.out;
+  EXPECT_EQ(t::mtimes(b), times);
+  EXPECT_TRUE(t::snapshot(tmp_ / "out") == before);
+}
+
+TEST_F(Cli, ForceRebuildsTheSameBytes) {
+  const fs::path b = build();
+  const auto data = data_files(b);
+  const auto m0 = t::read_json(b / "manifest.json");
+  const auto times = t::mtimes(b);
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const auto r = run({"run", (tmp_ / "c.yaml").string(), "--force"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("1 built, 0 up to date"), std::string::npos) << r.out;
+  EXPECT_NE(t::mtimes(b), times) << "--force did not rewrite the bundle";
+  EXPECT_EQ(data_files(b), data);
+  EXPECT_EQ(t::read_json(b / "manifest.json").at("job").at("hash"), m0.at("job").at("hash"));
+  EXPECT_EQ(fs::read_symlink(tmp_ / "out" / "prism" / "latest"), b.filename());
+}
+
+// A truncated file makes the bundle incomplete (sizes are checked before skipping): rebuilt.
+TEST_F(Cli, IncompleteBundleIsRebuilt) {
+  const fs::path b = build();
+  const auto data = data_files(b);
+  fs::resize_file(b / "weights.bin", 12);
+  const auto r = run({"run", (tmp_ / "c.yaml").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("1 built"), std::string::npos) << r.out;
+  EXPECT_EQ(data_files(b), data);
+}
+
+TEST_F(Cli, SameInputsGiveIdenticalBytes) {
+  const fs::path c = cfg(config(12));
+  // Two runs into different folders, from different working directories.
+  fs::create_directories(tmp_ / "elsewhere");
+  auto r1 = t::run_cli({"run", c.string(), "--out", (tmp_ / "one").string()}, tmp_.path());
+  auto r2 = t::run_cli({"run", c.string(), "--out", (tmp_ / "two").string()}, tmp_ / "elsewhere");
+  ASSERT_EQ(r1.exit_code, 0) << r1.err;
+  ASSERT_EQ(r2.exit_code, 0) << r2.err;
+  const fs::path b1 = fs::canonical(tmp_ / "one" / "prism" / "latest"), b2 = fs::canonical(tmp_ / "two" / "prism" / "latest");
+  EXPECT_EQ(b1.filename(), b2.filename());
+  const auto d1 = data_files(b1);
+  EXPECT_EQ(d1.size(), kDataFiles.size());
+  EXPECT_EQ(d1, data_files(b2));
+  // The manifests differ only in when and how long.
+  json m1 = t::read_json(b1 / "manifest.json"), m2 = t::read_json(b2 / "manifest.json");
+  for (json* m : {&m1, &m2}) {
+    m->erase("created_utc");
+    m->erase("timings_s");
+  }
+  EXPECT_EQ(m1, m2);
+}
+
+TEST_F(Cli, OnlyRunsTheNamedJobs) {
+  const std::string second = "  - name: second\n    kind: dispersion\n    samples: 4\n    material: {n_d: 1.6, v_d: 40}\n";
+  const std::string third = "  - name: third\n    kind: dispersion\n    samples: 5\n    material: {n_d: 1.6, v_d: 40}\n";
+  const fs::path c = cfg(config(4, "out", second + third));
+  auto r = run({"run", c.string(), "--only", "second"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "second" / "latest" / "manifest.json"));
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism"));
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "third"));
+  r = run({"run", c.string(), "--only", "prism,third"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("2 built, 0 up to date"), std::string::npos) << r.out;
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "prism" / "latest"));
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "third" / "latest"));
+  // A name no config defines is a usage error (2), naming it; nothing runs.
+  const auto before = t::snapshot(tmp_ / "out");
+  r = run({"run", c.string(), "--only", "fourth", "--force"});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_NE(r.err.find("fourth"), std::string::npos) << r.err;
+  EXPECT_TRUE(t::snapshot(tmp_ / "out") == before);
+}
+
+// `output` is relative to the config file (not the working directory); --out overrides it.
+TEST_F(Cli, OutputFolderResolution) {
+  fs::create_directories(tmp_ / "cfgdir");
+  fs::create_directories(tmp_ / "cwd");
+  t::write_file(tmp_ / "cfgdir" / "c.yaml", config(4, "../baked"));
+  auto r = t::run_cli({"run", (tmp_ / "cfgdir" / "c.yaml").string()}, tmp_ / "cwd");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(tmp_ / "baked" / "prism" / "latest" / "manifest.json"));
+  EXPECT_FALSE(fs::exists(tmp_ / "cwd" / "baked"));
+  r = t::run_cli({"run", (tmp_ / "cfgdir" / "c.yaml").string(), "--out", "over"}, tmp_ / "cwd");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(tmp_ / "cwd" / "over" / "prism" / "latest" / "manifest.json"));
+  // Without `output`: ./assets of the working directory.
+  t::write_file(tmp_ / "cfgdir" / "noout.yaml", config(4).replace(config(4).find("output: out\n"), 12, ""));
+  r = t::run_cli({"run", (tmp_ / "cfgdir" / "noout.yaml").string()}, tmp_ / "cwd");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(tmp_ / "cwd" / "assets" / "prism" / "latest" / "manifest.json"));
+}
+
+TEST_F(Cli, PlanWritesNothing) {
+  const fs::path c = cfg(config(7));
+  auto r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("prism"), std::string::npos);
+  EXPECT_NE(r.out.find("would be built"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"samples\":7"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(tmp_ / "out"));
+  // After a run: up to date, and still nothing changes.
+  build(7);
+  const auto before = t::snapshot(tmp_ / "out");
+  r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("up to date"), std::string::npos) << r.out;
+  EXPECT_TRUE(t::snapshot(tmp_ / "out") == before);
+  r = run({"plan", c.string(), "--out", (tmp_ / "planned").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "planned"));
+}
+
+// A changed config is a new hash: a new bundle folder, `latest` moves to it, the old bundle
+// stays; going back to the old config finds the old bundle up to date and moves `latest` back.
+TEST_F(Cli, ChangedConfigGivesNewBundleAndMovesLatest) {
+  const fs::path b1 = build(6);
+  const auto old_bundle = t::snapshot(b1);
+  const fs::path b2 = build(7);
+  EXPECT_NE(b1.filename(), b2.filename());
+  EXPECT_EQ(fs::read_symlink(tmp_ / "out" / "prism" / "latest"), b2.filename());
+  EXPECT_TRUE(t::snapshot(b1) == old_bundle);
+  EXPECT_EQ(t::read_f32(b2 / "wavelengths.bin").size(), 7u);
+  const auto r = run({"run", cfg(config(6)).string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("up-to-date"), std::string::npos) << r.out;
+  EXPECT_EQ(fs::read_symlink(tmp_ / "out" / "prism" / "latest"), b1.filename());
+  // Whitespace, comments and key order do not change the hash; any value does.
+  const std::string reordered =
+      "# same job\nspecbake: 1\njobs:\n  - kind: dispersion\n    name: prism\n    range_nm: [390.0, 780]\n"
+      "    material: {glass: N-BK7}\n    sampling: gauss-legendre\n    samples: 6\noutput: out\n";
+  const auto r2 = run({"run", cfg(reordered).string()});
+  EXPECT_EQ(r2.exit_code, 0) << r2.err;
+  EXPECT_NE(r2.out.find("up-to-date"), std::string::npos) << r2.out;
+}
+
+TEST_F(Cli, DevicesListsPocl) {
+  const auto r = run({"devices"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("Portable Computing Language"), std::string::npos) << r.out;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex(R"((^|\n)\* \[\d+\.\d+\] )")))
+      << "no device marked as the auto pick:\n" << r.out;
+  EXPECT_NE(r.out.find("type: cpu"), std::string::npos) << r.out;
+}
+
+TEST_F(Cli, VersionAndHelp) {
+  auto r = run({"--version"});
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_NE(r.out.find(std::string("specbake ") + specbake::kVersion), std::string::npos) << r.out;
+  r = run({"--help"});
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* s : {"run", "plan", "devices", "inspect", "--version", "-v", "-q"})
+    EXPECT_NE(r.out.find(s), std::string::npos) << s << " missing from --help:\n" << r.out;
+  r = run({"run", "--help"});
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* s : {"--out", "--device", "--only", "--force"})
+    EXPECT_NE(r.out.find(s), std::string::npos) << s << " missing from run --help:\n" << r.out;
+  // Defaults are shown: where output goes without --out, which device without --device.
+  EXPECT_NE(r.out.find("else ./assets"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("else auto"), std::string::npos) << r.out;
+}
+
+TEST_F(Cli, UsageErrorsExitTwo) {
+  const fs::path c = cfg(config(4));
+  const std::vector<std::vector<std::string>> bad = {
+      {},                                   // no subcommand
+      {"bake", c.string()},                 // unknown subcommand
+      {"run"},                              // no config
+      {"run", c.string(), "--bogus"},       // unknown option
+      {"run", c.string(), "--out"},         // option without its value
+      {"inspect"},                          // no bundle folder
+      {"devices", "extra"},                 // stray argument
+  };
+  for (const auto& args : bad) {
+    std::string shown;
+    for (const auto& a : args) shown += a + " ";
+    const auto r = run(args);
+    EXPECT_EQ(r.exit_code, 2) << "specbake " << shown << "\n" << r.out << r.err;
+  }
+  EXPECT_FALSE(fs::exists(tmp_ / "out"));
+}
+
+// -q: errors only; -vv: debug output (samples: auto logs every N it tries at debug level).
+TEST_F(Cli, QuietAndVerbose) {
+  const fs::path c = cfg(config(4));
+  auto r = run({"-q", "run", c.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err.find("[info]"), std::string::npos) << r.err;
+  r = run({"-q", "run", (tmp_ / "missing.yaml").string()});
+  EXPECT_EQ(r.exit_code, 5);
+  EXPECT_NE(r.err.find("[error]"), std::string::npos) << r.err;
+  const fs::path a = cfg(
+      "specbake: 1\noutput: out\njobs:\n  - name: auto\n    kind: dispersion\n    samples: auto\n"
+      "    tolerance_de2000: 20\n    material: {n_d: 1.5, v_d: 50}\n",
+      "auto.yaml");
+  r = run({"-vv", "run", a.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.err.find("[info]"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("[debug] samples: auto: N = 1 gives"), std::string::npos) << r.err;
+  r = run({"run", a.string(), "--force"});
+  EXPECT_EQ(r.err.find("[debug]"), std::string::npos) << r.err;
+}
+
+}  // namespace
