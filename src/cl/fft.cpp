@@ -42,6 +42,7 @@ Fft2d::Fft2d(Device& dev, std::size_t width, std::size_t height, std::size_t bat
   config.bufferSize = &impl_->buffer_bytes;
   config.doublePrecision = precision == FftPrecision::double_ ? 1 : 0;
   config.makeForwardPlanOnly = 1;
+  config.specifyOffsetsAtLaunch = 1;
   const VkFFTResult r = initializeVkFFT(&impl_->app, config);
   if (r != VKFFT_SUCCESS) {
     clReleaseMemObject(impl_->plan_buffer);
@@ -63,11 +64,12 @@ std::size_t Fft2d::bytes() const {
   return batch_ * width_ * height_ * 2 * (precision_ == FftPrecision::double_ ? sizeof(double) : sizeof(float));
 }
 
-void Fft2d::forward(cl::Buffer& buffer) {
+void Fft2d::forward(cl::Buffer& buffer, std::size_t first_array) {
   cl_mem mem = buffer();
   VkFFTLaunchParams launch{};
   launch.commandQueue = &impl_->queue;
   launch.buffer = &mem;
+  launch.bufferOffset = first_array * (bytes() / batch_);
   const VkFFTResult r = VkFFTAppend(&impl_->app, -1, &launch);
   if (r != VKFFT_SUCCESS)
     throw DeviceError("VkFFT forward transform failed (VkFFTResult " + std::to_string(static_cast<int>(r)) + ")");

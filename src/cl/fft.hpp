@@ -22,8 +22,9 @@ class Fft2d {
   Fft2d(const Fft2d&) = delete;
   Fft2d& operator=(const Fft2d&) = delete;
 
-  // In-place forward transform of `buffer` (at least bytes() long); waits for completion.
-  void forward(cl::Buffer& buffer);
+  // In-place forward transform of the `batch` arrays of `buffer` starting at array index
+  // `first_array` (the buffer holds at least (first_array + batch) arrays); waits for completion.
+  void forward(cl::Buffer& buffer, std::size_t first_array = 0);
   std::size_t bytes() const;  // batch·W·H·2·sizeof(element)
   std::size_t width() const { return width_; }
   std::size_t height() const { return height_; }

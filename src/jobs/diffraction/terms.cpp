@@ -47,10 +47,11 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
   t.bins = plan.bins;
   t.count = plan.total_terms;
   cl::Program program = dev.build(kKernels, dev.real_options());
-  cl_util::Fft2d fft(dev, f.width, f.height, batch, cl_util::FftPrecision::single);
+  // One transform per launch: on PoCL a batched VkFFT plan is slower per array than single ones.
+  cl_util::Fft2d fft(dev, f.width, f.height, 1, cl_util::FftPrecision::single);
   return cl_util::checked("diffraction terms", [&] {
     cl::Buffer h = cl_util::upload_real(dev, f.h_um);
-    cl::Buffer work(dev.context(), CL_MEM_READ_WRITE, fft.bytes());
+    cl::Buffer work(dev.context(), CL_MEM_READ_WRITE, fft.bytes() * batch);
     const std::size_t out_floats = 2 * t.per_term() * t.count;
     cl::Buffer out(dev.context(), CL_MEM_WRITE_ONLY, out_floats * sizeof(float));
     cl::Kernel inputs(program, "diffraction_term_inputs"), crop(program, "diffraction_crop");
@@ -70,7 +71,7 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
         inputs.setArg(8, n);
         inputs.setArg(9, work);
         dev.queue().enqueueNDRangeKernel(inputs, cl::NullRange, cl::NDRange(count), cl::NullRange);
-        fft.forward(work);
+        for (int j = 0; j < n; ++j) fft.forward(work, j);
         crop.setArg(0, work);
         crop.setArg(1, f.width);
         crop.setArg(2, f.height);
