@@ -330,21 +330,31 @@ FN void transmittance_to_top(const AtmosphereParameters* a, GLOBAL const real* T
   transmittance_uv(a, r, mu, &u, &v);
   texture_2d(T, a->transmittance_w, a->transmittance_h, u, v, out);
 }
+/* T to the top from the fixed end of the segments that transmittance_along_from() measures:
+ * T(r, −mu) for rays that hit the ground, T(r, mu) otherwise. */
+FN void transmittance_fixed_end(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, int hits_ground,
+                                real* out) {
+  transmittance_to_top(a, T, r, hits_ground ? -mu : mu, out);
+}
 /* T between (r, mu) and the point at distance d along the ray, from two lookups; rays that
- * hit the ground use the reversed (upward) segments so that no lookup crosses the ground. */
-FN void transmittance_along(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real d,
-                            int hits_ground, real* out) {
+ * hit the ground use the reversed (upward) segments so that no lookup crosses the ground.
+ * fixed: transmittance_fixed_end(r, mu), which loops over d compute once. */
+FN void transmittance_along_from(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real d,
+                                 int hits_ground, const real* fixed, real* out) {
   const real r_d = clamp_radius(a, radius_along(r, mu, d));
   const real mu_d = clamp_cosine((r * mu + d) / r_d);
-  real num[NCH], den[NCH];
-  if (hits_ground) {
-    transmittance_to_top(a, T, r_d, -mu_d, num);
-    transmittance_to_top(a, T, r, -mu, den);
-  } else {
-    transmittance_to_top(a, T, r, mu, num);
-    transmittance_to_top(a, T, r_d, mu_d, den);
+  real moving[NCH];
+  transmittance_to_top(a, T, r_d, hits_ground ? -mu_d : mu_d, moving);
+  for (int c = 0; c < NCH; ++c) {
+    const real num = hits_ground ? moving[c] : fixed[c], den = hits_ground ? fixed[c] : moving[c];
+    out[c] = den > R(0.0) ? fmin(num / den, R(1.0)) : R(0.0);
   }
-  for (int c = 0; c < NCH; ++c) out[c] = den[c] > R(0.0) ? fmin(num[c] / den[c], R(1.0)) : R(0.0);
+}
+FN void transmittance_along(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real d,
+                            int hits_ground, real* out) {
+  real fixed[NCH];
+  transmittance_fixed_end(a, T, r, mu, hits_ground, fixed);
+  transmittance_along_from(a, T, r, mu, d, hits_ground, fixed, out);
 }
 /* T to the sun times the visible fraction of the sun disc above the horizon (smoothstep). */
 FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu_s, real* out) {
@@ -368,13 +378,14 @@ FN real mie_phase(real g, real nu) {
 FN void single_scattering(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real mu_s, real nu,
                           int hits_ground, real* rayleigh, real* mie) {
   const real dx = distance_to_nearest_boundary(a, r, mu, hits_ground) / (real)SCATTERING_STEPS;
-  real sum_r[NCH], sum_m[NCH], t_view[NCH], t_sun[NCH];
+  real sum_r[NCH], sum_m[NCH], t_view[NCH], t_sun[NCH], t_fixed[NCH];
   for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = R(0.0);
+  transmittance_fixed_end(a, T, r, mu, hits_ground, t_fixed);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     const real d_i = (real)i * dx;
     const real r_d = clamp_radius(a, radius_along(r, mu, d_i));
     const real mu_s_d = clamp_cosine((r * mu_s + d_i * nu) / r_d);
-    transmittance_along(a, T, r, mu, d_i, hits_ground, t_view);
+    transmittance_along_from(a, T, r, mu, d_i, hits_ground, t_fixed, t_view);
     transmittance_to_sun(a, T, r_d, mu_s_d, t_sun);
     const real w = (i == 0 || i == SCATTERING_STEPS) ? R(0.5) : R(1.0);
     const real rho_r = profile_density(&a->rayleigh_density, r_d - a->bottom_radius) * w;
@@ -467,6 +478,14 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* T, 
   GLOBAL const real* source = order == 2 ? delta_rayleigh : delta_multiple;
   real slices_r[NU_MAX * NCH], slices_m[NU_MAX * NCH];
   real uvwz[4];
+  /* phi_m and 2π − phi_m share cos(phi) (so the phase functions, since omega_y = 0) and the
+   * length of the ground normal: the loop visits them in pairs, sin(phi) = ±sin_phi[m]. */
+  real cos_phi[DENSITY_SPHERE_STEPS], sin_phi[DENSITY_SPHERE_STEPS];
+  for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
+    const real phi = ((real)m + R(0.5)) * d_angle;
+    cos_phi[m] = cos(phi);
+    sin_phi[m] = sin(phi);
+  }
   for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
     const real theta = ((real)l + R(0.5)) * d_angle;
     const real cos_theta = cos(theta), sin_theta = sin(theta);
@@ -479,26 +498,34 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* T, 
       transmittance_along(a, T, r, cos_theta, distance_to_ground, 1, ground_term);
       for (int c = 0; c < NCH; ++c) ground_term[c] *= a->ground_albedo[c] / ATM_PI;
     }
+    /* ground normal n = r·z + distance·omega_i: |n| does not depend on phi */
+    const real n_z = r + cos_theta * distance_to_ground;
+    const real n_xy = sin_theta * distance_to_ground;
+    const real inv_n = R(1.0) / sqrt(n_xy * n_xy + n_z * n_z);
     /* (u_mu_s, u_mu, u_r) are the same for every phi: look the slices up once per theta. */
     scattering_uvwz(a, r, cos_theta, mu_s, R(0.0), ground, uvwz);
     scattering_slices(a, source, uvwz[1], uvwz[2], uvwz[3], slices_r);
     if (order == 2) scattering_slices(a, delta_mie, uvwz[1], uvwz[2], uvwz[3], slices_m);
     const real d_omega = d_angle * d_angle * sin_theta;
-    for (int m = 0; m < 2 * DENSITY_SPHERE_STEPS; ++m) {
-      const real phi = ((real)m + R(0.5)) * d_angle;
-      const real omega_i[3] = {cos(phi) * sin_theta, sin(phi) * sin_theta, cos_theta};
-      real incident[NCH];
-      incident_from_slices(a, slices_r, slices_m, dot3(omega_s, omega_i), order, incident);
-      if (ground) {
-        const real n[3] = {omega_i[0] * distance_to_ground, omega_i[1] * distance_to_ground,
-                           r + omega_i[2] * distance_to_ground};
-        real e[NCH];
-        get_irradiance(a, delta_irradiance, a->bottom_radius, dot3(n, omega_s) / sqrt(dot3(n, n)), e);
-        for (int c = 0; c < NCH; ++c) incident[c] += ground_term[c] * e[c];
-      }
-      const real nu2 = dot3(omega, omega_i);
+    for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
+      const real wx = cos_phi[m] * sin_theta, wy = sin_phi[m] * sin_theta;
+      const real nu2 = wx * omega[0] + cos_theta * omega[2];
       const real pr = rayleigh_phase(nu2) * d_omega, pm = mie_phase(a->mie_g, nu2) * d_omega;
-      for (int c = 0; c < NCH; ++c) out[c] += incident[c] * (beta_r[c] * pr + beta_m[c] * pm);
+      real incident[NCH], pair[NCH];
+      for (int c = 0; c < NCH; ++c) pair[c] = R(0.0);
+      for (int side = 0; side < 2; ++side) {
+        const real wy_s = side == 0 ? wy : -wy;
+        incident_from_slices(a, slices_r, slices_m, wx * omega_s[0] + wy_s * omega_s[1] + cos_theta * omega_s[2],
+                             order, incident);
+        if (ground) {
+          const real mu_g = (distance_to_ground * (wx * omega_s[0] + wy_s * omega_s[1]) + n_z * omega_s[2]) * inv_n;
+          real e[NCH];
+          get_irradiance(a, delta_irradiance, a->bottom_radius, mu_g, e);
+          for (int c = 0; c < NCH; ++c) incident[c] += ground_term[c] * e[c];
+        }
+        for (int c = 0; c < NCH; ++c) pair[c] += incident[c];
+      }
+      for (int c = 0; c < NCH; ++c) out[c] += pair[c] * (beta_r[c] * pr + beta_m[c] * pm);
     }
   }
 }
@@ -507,15 +534,16 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* T, 
 FN void multiple_scattering(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J, real r,
                             real mu, real mu_s, real nu, int hits_ground, real* out) {
   const real dx = distance_to_nearest_boundary(a, r, mu, hits_ground) / (real)SCATTERING_STEPS;
-  real j[NCH], t[NCH];
+  real j[NCH], t[NCH], t_fixed[NCH];
   for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
+  transmittance_fixed_end(a, T, r, mu, hits_ground, t_fixed);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     const real d_i = (real)i * dx;
     const real r_i = clamp_radius(a, radius_along(r, mu, d_i));
     const real mu_i = clamp_cosine((r * mu + d_i) / r_i);
     const real mu_s_i = clamp_cosine((r * mu_s + d_i * nu) / r_i);
     get_scattering(a, J, r_i, mu_i, mu_s_i, nu, hits_ground, j);
-    transmittance_along(a, T, r, mu, d_i, hits_ground, t);
+    transmittance_along_from(a, T, r, mu, d_i, hits_ground, t_fixed, t);
     const real w = ((i == 0 || i == SCATTERING_STEPS) ? R(0.5) : R(1.0)) * dx;
     for (int c = 0; c < NCH; ++c) out[c] += j[c] * t[c] * w;
   }
