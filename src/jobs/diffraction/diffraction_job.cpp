@@ -235,7 +235,7 @@ json plan_json(const DiffractionSpec& spec, const Field& f, const Plan& p) {
   j["y_max"] = p.y_max;
   j["bands"] = bands_json(p.bands);
   j["bins"] = {{"ku", {p.bins.ku_min, p.bins.ku_max}}, {"kv", {p.bins.kv_min, p.bins.kv_max}}};
-  j["estimated_error_over_M2"] = p.estimated_error;
+  j["estimated_error_over_M2"] = std::isfinite(p.estimated_error) ? json(p.estimated_error) : json("infinite");
   j["tolerance"] = spec.tolerance;
   return j;
 }
@@ -292,7 +292,7 @@ BakeResult bake(const DiffractionSpec& spec, JobContext& ctx) {
                 {"at_kappa", m.at_kappa},
                 {"tolerance", spec.tolerance},
                 {"meets_tolerance", meets},
-                {"bound_estimate_over_M2", p.estimated_error},
+                {"bound_estimate_over_M2", std::isfinite(p.estimated_error) ? json(p.estimated_error) : json("infinite")},
                 {"kappas", m.kappas},
                 {"per_kappa_over_M2", m.per_kappa},
                 {"reference", exact.on_device() ? "double-precision VkFFT DFT of exp(i kappa h) on the device"

@@ -156,6 +156,8 @@ Plan make_plan(const DiffractionSpec& spec, const Field& f, double target) {
 }
 
 nlohmann::json bands_json(const std::vector<Band>& bands) {
+  // JSON has no infinity: a bound that does not converge is written as the string "infinite".
+  auto finite = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json("infinite"); };
   nlohmann::json a = nlohmann::json::array();
   for (const auto& b : bands) {
     nlohmann::json j = {{"expansion", b.expansion == Expansion::taylor ? "taylor" : "chebyshev"},
@@ -163,8 +165,8 @@ nlohmann::json bands_json(const std::vector<Band>& bands) {
                         {"kappa_expansion", b.kappa0},
                         {"first_term", b.first_term},
                         {"terms", b.terms},
-                        {"bound_truncation_over_M2", b.bound_truncation},
-                        {"bound_roundoff_over_M2", b.bound_roundoff}};
+                        {"bound_truncation_over_M2", finite(b.bound_truncation)},
+                        {"bound_roundoff_over_M2", finite(b.bound_roundoff)}};
     if (b.expansion == Expansion::chebyshev) j["delta"] = b.delta;
     a.push_back(j);
   }
