@@ -179,6 +179,15 @@ std::vector<Runner::Item> Runner::select() const {
       items.push_back({&c, &j, options_.out ? *options_.out : c.output, options_.device ? *options_.device : c.device,
                        job_hash(j)});
     }
+  // load_configs rejects a job name used twice for one output folder; --out puts every
+  // config's jobs into one folder, so the same check is needed again here.
+  if (options_.out) {
+    std::map<std::string, const JobSpec*> seen;
+    for (const auto& it : items)
+      if (auto [first, fresh] = seen.emplace(it.job->name, it.job); !fresh)
+        throw UsageError("--out " + options_.out->string() + " would put job '" + it.job->name + "' of " +
+                         first->second->where.str() + " and of " + it.job->where.str() + " into one bundle folder");
+  }
   if (options_.shard_count > 1) {
     std::vector<std::pair<std::string, double>> name_cost;
     for (const auto& it : items) name_cost.emplace_back(it.config->file.string() + "\n" + it.job->name, estimated_cost(*it.job));

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <regex>
 #include <set>
@@ -12,8 +13,10 @@
 #include <thread>
 #include <vector>
 
+#include "core/errors.hpp"
 #include "core/hash.hpp"
 #include "core/version.hpp"
+#include "io/bundle.hpp"
 #include "support/testing.hpp"
 
 namespace {
@@ -336,6 +339,66 @@ TEST_F(Cli, UsageErrorsExitTwo) {
     EXPECT_EQ(r.exit_code, 2) << "specbake " << shown << "\n" << r.out << r.err;
   }
   EXPECT_FALSE(fs::exists(tmp_ / "out"));
+}
+
+// --out gathers every config's jobs in one folder: two configs with a job of the same name
+// would then share a bundle folder (and `latest`). A usage error naming both; nothing runs.
+TEST_F(Cli, OutCannotMergeTwoJobsOfTheSameName) {
+  fs::create_directories(tmp_ / "a");
+  fs::create_directories(tmp_ / "b");
+  t::write_file(tmp_ / "a" / "c.yaml", config(4));
+  t::write_file(tmp_ / "b" / "c.yaml", config(5));
+  // Each into its own output (relative to its file): fine.
+  auto r = run({"run", (tmp_ / "a" / "c.yaml").string(), (tmp_ / "b" / "c.yaml").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  r = run({"run", (tmp_ / "a" / "c.yaml").string(), (tmp_ / "b" / "c.yaml").string(), "--out", "merged"});
+  EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
+  EXPECT_NE(r.err.find((tmp_ / "a" / "c.yaml").string() + ":4:5"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find((tmp_ / "b" / "c.yaml").string() + ":4:5"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "merged"));
+  r = run({"plan", (tmp_ / "a" / "c.yaml").string(), (tmp_ / "b" / "c.yaml").string(), "--out", "merged"});
+  EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
+  // --only picking one of them is fine.
+  const std::string second = "  - name: other\n    kind: dispersion\n    samples: 4\n    material: {n_d: 1.6, v_d: 40}\n";
+  t::write_file(tmp_ / "b" / "c.yaml", config(5, "out", second));
+  r = run({"run", (tmp_ / "a" / "c.yaml").string(), (tmp_ / "b" / "c.yaml").string(), "--out", "merged", "--only", "other"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+}
+
+// Device problems exit 4 and name what failed: a selector nothing matches, a kernel that does
+// not build (the build log is shown). An up-to-date bundle is skipped without the device.
+TEST_F(Cli, DeviceErrorsExitFour) {
+  const fs::path c = cfg(config(4));
+  auto r = run({"run", c.string(), "--device", "no-such-device"});
+  EXPECT_EQ(r.exit_code, 4) << r.out << r.err;
+  EXPECT_NE(r.err.find("no-such-device"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism" / "latest"));
+  r = run({"plan", c.string(), "--device", "no-such-device"});
+  EXPECT_EQ(r.exit_code, 4) << r.out << r.err;
+  r = t::run_cli({"run", c.string()}, tmp_.path(), {"SPECBAKE_INJECT_BUILD_FAILURE=kernels/dispersion/kernels.cl"});
+  EXPECT_EQ(r.exit_code, 4) << r.out << r.err;
+  EXPECT_NE(r.err.find("kernels/dispersion/kernels.cl"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("build failure injected"), std::string::npos) << "no build log in:\n" << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism" / "latest"));
+  build(4);
+  r = run({"run", c.string(), "--device", "no-such-device"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("up-to-date"), std::string::npos) << r.out;
+}
+
+// Non-finite values never reach a bundle: the float32 writer refuses them (and values that
+// overflow float32), naming the array and the index.
+TEST(BundleWriter, RefusesNonFiniteValues) {
+  EXPECT_EQ(specbake::float32_le({1.0, -2.5}, "x").size(), 8u);
+  for (double bad : {std::nan(""), HUGE_VAL, -HUGE_VAL, 1e39}) {
+    try {
+      specbake::float32_le({0.0, 1.0, bad}, "weights");
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const specbake::JobError& e) {
+      EXPECT_NE(std::string(e.what()).find("weights"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("index 2"), std::string::npos) << e.what();
+    }
+  }
 }
 
 // -q: errors only; -vv: debug output (samples: auto logs every N it tries at debug level).

@@ -61,13 +61,18 @@ TempDir::~TempDir() {
 }
 
 pid_t spawn_cli(const std::vector<std::string>& args, const fs::path& cwd, const fs::path& out_file,
-                const fs::path& err_file) {
-  // Everything the child needs is prepared before fork (only async-signal-safe calls after).
+                const fs::path& err_file, const std::vector<std::string>& env) {
+  // Everything the child needs is prepared before fork: the test process may have OpenCL
+  // threads, so the child makes only async-signal-safe calls until it execs.
   const std::string exe = specbake_exe().string();
   std::vector<char*> argv;
   argv.push_back(const_cast<char*>(exe.c_str()));
   for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
+  std::vector<char*> envp;
+  for (char** e = environ; *e; ++e) envp.push_back(*e);
+  for (const auto& e : env) envp.push_back(const_cast<char*>(e.c_str()));
+  envp.push_back(nullptr);
   const pid_t pid = ::fork();
   if (pid == 0) {
     if (!cwd.empty() && ::chdir(cwd.c_str()) != 0) _exit(127);
@@ -76,18 +81,18 @@ pid_t spawn_cli(const std::vector<std::string>& args, const fs::path& cwd, const
     if (o < 0 || e < 0) _exit(127);
     ::dup2(o, 1);
     ::dup2(e, 2);
-    ::execv(exe.c_str(), argv.data());
+    ::execve(exe.c_str(), argv.data(), envp.data());
     _exit(127);
   }
   if (pid < 0) ADD_FAILURE() << "fork failed: " << std::strerror(errno);
   return pid;
 }
 
-CliResult run_cli(const std::vector<std::string>& args, const fs::path& cwd) {
+CliResult run_cli(const std::vector<std::string>& args, const fs::path& cwd, const std::vector<std::string>& env) {
   // stdout and stderr go to temp files (no pipe deadlock on large output).
   TempDir tmp;
   const fs::path out_path = tmp / "stdout", err_path = tmp / "stderr";
-  const pid_t pid = spawn_cli(args, cwd, out_path, err_path);
+  const pid_t pid = spawn_cli(args, cwd, out_path, err_path, env);
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }

@@ -39,11 +39,13 @@ struct CliResult {
   std::string out;  // stdout
   std::string err;  // stderr
 };
-// Runs the specbake binary with args (no shell), capturing its output.
-CliResult run_cli(const std::vector<std::string>& args, const fs::path& cwd = {});
+// Runs the specbake binary with args (no shell), capturing its output. env: extra
+// "NAME=value" entries on top of this process's environment.
+CliResult run_cli(const std::vector<std::string>& args, const fs::path& cwd = {},
+                  const std::vector<std::string>& env = {});
 // Starts the specbake binary without waiting; stdout/stderr go to the given files.
 pid_t spawn_cli(const std::vector<std::string>& args, const fs::path& cwd, const fs::path& out_file,
-                const fs::path& err_file);
+                const fs::path& err_file, const std::vector<std::string>& env = {});
 
 // Everything under root (dot-files included, symlinks not followed): regular files by their
 // sha256, symlinks by their target, folders by name. Paths are relative to root.
