@@ -54,6 +54,7 @@ case "$engine" in
     if [ "$engine" = docker-podman ]; then
       container_docker_socket
       socket_pid=$CONTAINER_SOCKET_PID
+      export DOCKER_BUILDKIT=0 # podman's API serves the classic builder, not BuildKit
     fi
     ;;
   *) fail "SPECBAKE_ENGINE must be docker, podman or docker-podman, not '$engine'" ;;
