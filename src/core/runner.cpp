@@ -289,6 +289,10 @@ std::vector<JobReport> Runner::run() {
           {"warnings", result.warnings},
           {"created_utc", utc_now()},
       };
+      for (auto b = result.manifest_blocks.begin(); b != result.manifest_blocks.end(); ++b) {
+        if (manifest.contains(b.key())) throw JobError("manifest block '" + b.key() + "' clashes with a standard key");
+        manifest[b.key()] = b.value();
+      }
       for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
       for (const auto& k : kernel_files(it.job->kind)) manifest["kernels"][k] = sha256_hex(resource(k));
       const auto tw = std::chrono::steady_clock::now();

@@ -27,6 +27,8 @@ struct BakeResult {
   nlohmann::json accuracy;    // measured error figures
   std::vector<std::string> warnings;
   std::vector<OutputFile> files;
+  // Kind-specific top-level manifest blocks named in a kind's contract (e.g. "diffraction").
+  nlohmann::json manifest_blocks = nlohmann::json::object();
 };
 
 // Resolved parameters only (what `specbake plan` shows); may use the device.
