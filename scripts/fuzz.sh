@@ -16,8 +16,8 @@ for t in "${targets[@]}"; do
   seeds="$root/tests/fuzz/corpus/${t%_fuzz}"
   scratch=$(mktemp -d)
   echo "fuzz: $t for ${seconds}s (seeds: $seeds)"
-  (cd "$root/build-fuzz" && "./$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
-      -print_final_stats=1 "$scratch" "$seeds")
+  "$root/build-fuzz/tests/fuzz/$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
+      -artifact_prefix="$root/build-fuzz/" -print_final_stats=1 "$scratch" "$seeds"
   rm -rf "$scratch"
 done
 echo "fuzz: all targets ran ${seconds}s without a crash"
