@@ -83,6 +83,15 @@ TEST_F(Cli, ManifestDescribesTheBundle) {
   EXPECT_EQ(m.at("inputs").at("data/glass/glasses.csv"), specbake::sha256_file(src / "data/glass/glasses.csv"));
   ASSERT_TRUE(m.at("kernels").contains("kernels/dispersion/dispersion.cl"));
   for (auto& [path, sha] : m.at("kernels").items()) EXPECT_EQ(sha, specbake::sha256_file(src / path)) << path;
+  // ... and every kernel source the dispersion program can include is among them (a change
+  // to any of them must change the hash).
+  std::set<std::string> sources, hashed;
+  for (const char* d : {"kernels/common", "kernels/dispersion"})
+    for (const auto& e : fs::directory_iterator(src / d))
+      if (e.path().extension() == ".cl" || e.path().extension() == ".h")
+        sources.insert(fs::relative(e.path(), src).string());
+  for (auto& [path, sha] : m.at("kernels").items()) hashed.insert(path);
+  EXPECT_EQ(hashed, sources);
   EXPECT_FALSE(m.at("device").at("name").get<std::string>().empty());
   EXPECT_TRUE(m.contains("created_utc"));
   EXPECT_TRUE(m.at("timings_s").contains("bake"));
@@ -399,6 +408,55 @@ TEST(BundleWriter, RefusesNonFiniteValues) {
       EXPECT_NE(std::string(e.what()).find("index 2"), std::string::npos) << e.what();
     }
   }
+}
+
+// Non-finite values in an output fail the job (exit 1) and nothing is published: a
+// Sellmeier material with a pole (λ² = C) inside the range gives n² < 0 at some samples.
+TEST_F(Cli, NonFiniteOutputFailsTheJob) {
+  const fs::path c = cfg(
+      "specbake: 1\noutput: out\njobs:\n  - name: pole\n    kind: dispersion\n    samples: 4\n"
+      "    material: {sellmeier: {B: [1.0], C: [0.25]}}\n");
+  const auto r = run({"run", c.string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_NE(r.err.find("non-finite"), std::string::npos) << r.err;
+  EXPECT_NE(r.out.find("0 built, 0 up to date, 1 failed"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "pole" / "latest"));
+  if (fs::exists(tmp_ / "out" / "pole"))
+    for (const auto& e : fs::directory_iterator(tmp_ / "out" / "pole"))
+      EXPECT_EQ(e.path().filename().string().front(), '.') << "left behind: " << e.path();
+}
+
+// A folder argument runs every *.yaml / *.yml in it (sorted); a folder without one is an
+// invalid input (3) naming the folder.
+TEST_F(Cli, FolderOfConfigs) {
+  t::write_file(tmp_ / "cfgs" / "a.yaml", config(4, "../out"));
+  t::write_file(tmp_ / "cfgs" / "b.yml",
+                "specbake: 1\noutput: ../out\njobs:\n  - name: second\n    kind: dispersion\n    samples: 3\n"
+                "    material: {n_d: 1.6, v_d: 40}\n");
+  t::write_file(tmp_ / "cfgs" / "notes.txt", "not a config: {{{\n");
+  auto r = run({"run", (tmp_ / "cfgs").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("2 built"), std::string::npos) << r.out;
+  EXPECT_LT(r.out.find("prism ("), r.out.find("second ("));  // a.yaml before b.yml
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "prism" / "latest"));
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "second" / "latest"));
+  fs::create_directories(tmp_ / "empty");
+  r = run({"run", (tmp_ / "empty").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find((tmp_ / "empty").string()), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("no *.yaml"), std::string::npos) << r.err;
+}
+
+// `plan` resolves samples: auto (the search runs) and shows the choice, writing nothing.
+TEST_F(Cli, PlanResolvesAuto) {
+  const fs::path c = cfg(
+      "specbake: 1\noutput: out\njobs:\n  - name: auto\n    kind: dispersion\n    samples: auto\n"
+      "    tolerance_de2000: 20\n    material: {n_d: 1.5, v_d: 50}\n");
+  const auto r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("\"samples_auto\":{"), std::string::npos) << r.out;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("\"chosen\":[0-9]+"))) << r.out;
+  EXPECT_FALSE(fs::exists(tmp_ / "out"));
 }
 
 // -q: errors only; -vv: debug output (samples: auto logs every N it tries at debug level).
