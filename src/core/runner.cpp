@@ -262,6 +262,7 @@ std::vector<JobReport> Runner::run() {
       }
       spdlog::info("{}: baking ({} job)", name, it.job->kind);
       cl_util::Device& dev = devices.get(it.device);
+      check_device_memory(*it.job, dev.info());
       auto last_log = std::chrono::steady_clock::now() - std::chrono::seconds(10);
       JobContext ctx{dev, [&](std::string_view stage, double f) {
                        if (progress_) progress_(name, stage, f);

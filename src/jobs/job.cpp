@@ -37,6 +37,42 @@ double estimated_cost(const JobSpec& job) {
                     job.spec);
 }
 
+MemoryEstimate estimated_device_memory(const JobSpec& job) {
+  return std::visit(
+      overloaded{
+          [](const DispersionSpec&) {
+            // N ≤ 4096 samples and a prism picture of a few thousand pixels: kilobytes.
+            return MemoryEstimate{std::uint64_t{1} << 22, std::uint64_t{1} << 20};
+          },
+          [](const DiffractionSpec& s) {
+            const std::uint64_t w = s.procedural ? s.procedural->size : (s.field ? s.field->width : 0);
+            const std::uint64_t h = s.procedural ? s.procedural->size : (s.field ? s.field->height : 0);
+            // Complex float fields of the heightfield's size: the term input, the FFT buffer and
+            // the cropped terms (at most the full field per term, counted as two fields), plus a
+            // complex double field for the exact transforms of the self-check.
+            const std::uint64_t field = w * h * 8;
+            return MemoryEstimate{4 * field + 2 * field, 2 * field};
+          },
+          [](const AtmosphereSpec& s) {
+            // Per wavelength batch, about ten 4-channel float 4D textures live at once (deltas,
+            // accumulated scattering, single Mie, density), plus the small 2D ones.
+            const std::uint64_t texels = std::uint64_t(s.scattering_r) * s.scattering_mu * s.scattering_mu_s * s.scattering_nu;
+            const std::uint64_t texture = texels * 4 * (s.double_precision ? 8 : 4);
+            return MemoryEstimate{10 * texture + (std::uint64_t{1} << 24), texture};
+          }},
+      job.spec);
+}
+
+void check_device_memory(const JobSpec& job, const cl_util::DeviceInfo& di) {
+  const MemoryEstimate need = estimated_device_memory(job);
+  if (need.total_bytes > di.global_mem_bytes || need.largest_buffer > di.max_alloc_bytes)
+    throw InputError(job.where, "job '" + job.name + "' needs about " + std::to_string(need.total_bytes >> 20) +
+                                    " MiB of device memory (largest buffer " + std::to_string(need.largest_buffer >> 20) +
+                                    " MiB) but " + di.name + " has " + std::to_string(di.global_mem_bytes >> 20) +
+                                    " MiB (largest buffer " + std::to_string(di.max_alloc_bytes >> 20) +
+                                    " MiB); expected smaller sizes");
+}
+
 std::vector<std::string> kernel_files(const std::string& kind) {
   auto files = resource_paths("kernels/common/");
   for (auto& f : resource_paths("kernels/" + kind + "/")) files.push_back(f);

@@ -1,6 +1,7 @@
 #pragma once
 // What every job kind offers the runner: resolve its parameters (plan) and bake its files.
 // Jobs read typed specs (core/config.hpp), never YAML, and return files, never write them.
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <string_view>
@@ -37,6 +38,16 @@ BakeResult bake_job(const JobSpec& job, JobContext& ctx);
 
 // Relative cost of a job (arbitrary units, comparable across kinds) for balancing shards.
 double estimated_cost(const JobSpec& job);
+
+// Device memory a job will need, estimated from its spec before anything is allocated.
+struct MemoryEstimate {
+  std::uint64_t total_bytes = 0;    // all device buffers alive at once
+  std::uint64_t largest_buffer = 0; // the biggest single allocation
+};
+MemoryEstimate estimated_device_memory(const JobSpec& job);
+// Refuses (InputError at the job's config entry) a job whose estimate exceeds the device's
+// global memory or its largest allocation, before anything is allocated.
+void check_device_memory(const JobSpec& job, const cl_util::DeviceInfo& device);
 
 // Embedded kernel files a kind depends on (their contents enter the bundle hash).
 std::vector<std::string> kernel_files(const std::string& kind);

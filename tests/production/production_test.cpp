@@ -12,6 +12,7 @@
 
 #include "core/hash.hpp"
 #include "core/runner.hpp"
+#include "jobs/job.hpp"
 #include "support/testing.hpp"
 
 namespace specbake {
@@ -351,6 +352,36 @@ TEST(Production, AliasBombAndMultiDocumentConfigsAreRefused) {
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("one YAML document"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(t / "out"));
+}
+
+}  // namespace
+}  // namespace specbake
+
+namespace specbake {
+namespace {
+
+TEST(Production, JobsTooBigForTheDeviceAreRefusedBeforeAllocation) {
+  const Config c = parse_config(R"(specbake: 1
+jobs:
+  - name: big
+    kind: diffraction
+    procedural: {type: sine-grating, size: 4096, dx_um: 0.0625, period_um: 2.0, amplitude_um: 0.15}
+)", "mem.yaml");
+  cl_util::DeviceInfo small;
+  small.name = "small device";
+  small.global_mem_bytes = 256ull << 20;
+  small.max_alloc_bytes = 64ull << 20;
+  try {
+    check_device_memory(c.jobs.at(0), small);
+    FAIL() << "a 4096² field (128 MiB per complex float field) must not fit 256 MiB";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.where().line, 3);  // the job's entry
+    EXPECT_NE(std::string(e.what()).find("small device"), std::string::npos) << e.what();
+  }
+  cl_util::DeviceInfo big = small;
+  big.global_mem_bytes = 8ull << 30;
+  big.max_alloc_bytes = 2ull << 30;
+  EXPECT_NO_THROW(check_device_memory(c.jobs.at(0), big));
 }
 
 }  // namespace
