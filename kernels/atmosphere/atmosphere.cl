@@ -133,6 +133,13 @@ FN real distance_to_nearest_boundary(const AtmosphereParameters* a, real r, real
 }
 /* Radius after travelling d along (r, mu): |x + d ω|. */
 FN real radius_along(real r, real mu, real d) { return sqrt(d * d + R(2.0) * r * mu * d + r * r); }
+/* Altitude after travelling d along (r, mu), (r_d² − rb²)/(r_d + rb) with r_d² − rb² summed from
+ * small terms: r_d − rb would round to ±0.5 m in float32 and could put a ground-level sample
+ * below the ground, where the density profiles switch layers. */
+FN real altitude_along(const AtmosphereParameters* a, real r, real mu, real d) {
+  const real rho2 = d * d + R(2.0) * r * mu * d + (r - a->bottom_radius) * (r + a->bottom_radius);
+  return rho2 / (sqrt(fmax(rho2, R(0.0)) + a->bottom_radius * a->bottom_radius) + a->bottom_radius);
+}
 
 /* ---- density profiles ---------------------------------------------------------------- */
 FN real layer_density(const DensityProfile* p, int layer, real h) {
@@ -145,14 +152,19 @@ FN real profile_density(const DensityProfile* p, real h) {
 }
 
 /* ---- transmittance (paper Eq. 5) ----------------------------------------------------- */
-/* ∫ ρ_i dt from (r, mu) to the top boundary for the three profiles (trapezoid, 500 steps). */
-FN void optical_lengths_to_top(const AtmosphereParameters* a, real r, real mu, real* l_rayleigh, real* l_mie,
-                               real* l_absorption) {
+/* ∫ ρ_i dt from (r, mu) to the top boundary for the three profiles (trapezoid, 500 steps).
+ * above_ground: the ray does not reach below the ground (every texel of the texture), so the
+ * altitude is computed without cancellation and clamped at 0 — a tangent ray touches the
+ * ground, where rounding would otherwise put a sample below it and switch density layers.
+ * Otherwise (rays through the planet, which no texture uses) the altitude is r_d − rb as is. */
+FN void optical_lengths_to_top(const AtmosphereParameters* a, real r, real mu, int above_ground, real* l_rayleigh,
+                               real* l_mie, real* l_absorption) {
   const real dx = distance_to_top(a, r, mu) / (real)TRANSMITTANCE_STEPS;
   real sr = R(0.0), sm = R(0.0), sa = R(0.0);
   for (int i = 0; i <= TRANSMITTANCE_STEPS; ++i) {
     const real d_i = (real)i * dx;
-    const real h = radius_along(r, mu, d_i) - a->bottom_radius;
+    const real h = above_ground ? fmax(altitude_along(a, r, mu, d_i), R(0.0))
+                                : radius_along(r, mu, d_i) - a->bottom_radius;
     const real w = (i == 0 || i == TRANSMITTANCE_STEPS) ? R(0.5) : R(1.0);
     sr += profile_density(&a->rayleigh_density, h) * w;
     sm += profile_density(&a->mie_density, h) * w;
@@ -162,10 +174,10 @@ FN void optical_lengths_to_top(const AtmosphereParameters* a, real r, real mu, r
   *l_mie = sm * dx;
   *l_absorption = sa * dx;
 }
-/* T(r, mu → top) by direct integration. */
-FN void transmittance_to_top_integral(const AtmosphereParameters* a, real r, real mu, real* t) {
+/* T(r, mu → top) by direct integration (above_ground: see optical_lengths_to_top). */
+FN void transmittance_to_top_integral(const AtmosphereParameters* a, real r, real mu, int above_ground, real* t) {
   real lr, lm, la;
-  optical_lengths_to_top(a, r, mu, &lr, &lm, &la);
+  optical_lengths_to_top(a, r, mu, above_ground, &lr, &lm, &la);
   for (int c = 0; c < NCH; ++c)
     t[c] = exp(-(a->rayleigh_scattering[c] * lr + a->mie_extinction[c] * lm + a->absorption_extinction[c] * la));
 }

@@ -25,7 +25,7 @@ __kernel void transmittance_texture(AtmosphereParameters a, __global real* T) {
   real r, mu, t[NCH];
   r_mu_from_transmittance_uv(&a, ((real)i + R(0.5)) / (real)a.transmittance_w,
                              ((real)j + R(0.5)) / (real)a.transmittance_h, &r, &mu);
-  transmittance_to_top_integral(&a, r, mu, t);
+  transmittance_to_top_integral(&a, r, mu, 1, t);
   for (int c = 0; c < NCH; ++c) T[id * NCH + c] = t[c];
 }
 

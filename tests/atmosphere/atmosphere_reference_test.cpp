@@ -97,7 +97,8 @@ TEST(AtmosphereReference, TransmittancePoints) {
   for (const auto& row : csv.rows) {
     const double r = row[csv.col("r_m")] * 1e-3, mu = row[csv.col("mu")];
     double t[3], tt[3], u, v;
-    ref3::transmittance_to_top_integral(&e.a, r, mu, t);
+    // rays through the planet keep the reference's literal altitude (no texture uses them)
+    ref3::transmittance_to_top_integral(&e.a, r, mu, row[csv.col("ray_intersects_ground")] == 0.0, t);
     ref3::transmittance_to_top(&e.a, T.data.data(), r, mu, tt);
     ref3::transmittance_uv(&e.a, r, mu, &u, &v);
     // u grows past 1 below the horizon (up to ~16): relative agreement of the same maths

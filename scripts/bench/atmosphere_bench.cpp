@@ -1,0 +1,133 @@
+// Speed against error of the atmosphere bake (issue 4): orders 1..8 and auto, sizes half /
+// default / double, spectrum rgb / spectral 16 / 48. Error: GetSkyRadiance from our LUTs at
+// the 60 reference sky-radiance points against Bruneton's reference implementation (rgb
+// runs; max over points and channels of |ours − ref| / (|ref| + 1e-3 max|ref|)), which does
+// not depend on the texture sizes. process_cpu_s counts every thread (PoCL's workers too).
+//   build-atmosphere/scripts/bench/atmosphere_bench --benchmark_filter='Rgb/4/1'
+#include <benchmark/benchmark.h>
+#include <sys/resource.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "jobs/atmosphere/atmosphere_job.hpp"
+
+using namespace specbake;
+using namespace specbake::atmosphere;
+
+namespace {
+
+double cpu_seconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+cl_util::Device& device() {
+  static cl_util::Device d(cl_util::select_device("auto"));
+  return d;
+}
+
+AtmosphereSpec earth(int scale_percent) {
+  AtmosphereSpec s;
+  s.rayleigh_density[1] = DensityLayer{0, 1, -1.0 / 8.0, 0, 0};
+  s.mie_density[1] = DensityLayer{0, 1, -1.0 / 1.2, 0, 0};
+  s.ozone_density[0] = DensityLayer{25.0, 0, 0, 1.0 / 15.0, -2.0 / 3.0};
+  s.ozone_density[1] = DensityLayer{0, 0, 0, -1.0 / 15.0, 8.0 / 3.0};
+  auto sc = [&](int v) { return std::max(2, v * scale_percent / 100); };
+  s.transmittance_mu = sc(256);
+  s.transmittance_r = sc(64);
+  s.irradiance_mu_s = sc(64);
+  s.irradiance_r = sc(16);
+  s.scattering_r = sc(32);
+  s.scattering_mu = sc(128) / 2 * 2;
+  s.scattering_mu_s = sc(32);
+  s.scattering_nu = sc(8);
+  return s;
+}
+
+struct SkyPoint {
+  double alt_km, view_mu, sun_mu, az, rad[3];
+};
+std::vector<SkyPoint> sky_points() {
+  std::ifstream f(std::string(SPECBAKE_BENCH_REFDATA) + "/atmosphere/sky_radiance_points.csv");
+  std::vector<SkyPoint> out;
+  std::string line;
+  bool header = true;
+  while (std::getline(f, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    if (header) {
+      header = false;
+      continue;
+    }
+    std::stringstream ss(line);
+    std::vector<double> v;
+    std::string t;
+    while (std::getline(ss, t, ',')) v.push_back(std::stod(t));
+    out.push_back({v[0] * 1e-3, v[1], v[2], v[3], {v[5], v[6], v[7]}});
+  }
+  return out;
+}
+
+double sky_error(const Baked& b) {
+  static const auto pts = sky_points();
+  const Renderer render(b.luts);
+  double mx = 0.0, e = 0.0;
+  for (const auto& p : pts)
+    for (double v : p.rad) mx = std::max(mx, std::fabs(v));
+  for (const auto& p : pts) {
+    const Vec3 camera{0, 0, b.luts.model.bottom_radius_km + p.alt_km};
+    const Vec3 view{std::sqrt(1 - p.view_mu * p.view_mu), 0, p.view_mu};
+    const double s = std::sqrt(1 - p.sun_mu * p.sun_mu);
+    const Vec3 sun{s * std::cos(p.az), s * std::sin(p.az), p.sun_mu};
+    const Vec3 l = render.sky_radiance(camera, view, sun, nullptr);
+    for (int c = 0; c < 3; ++c) e = std::max(e, std::fabs(l[c] - p.rad[c]) / (std::fabs(p.rad[c]) + 1e-3 * mx));
+  }
+  return e;
+}
+
+void run(benchmark::State& state, AtmosphereSpec spec, bool rgb_error) {
+  const auto quiet = [](std::string_view, double) {};
+  double err = 0.0, cpu = 0.0;
+  int orders = 0;
+  for (auto _ : state) {
+    const double c0 = cpu_seconds();
+    const Baked b = bake_luts(spec, device(), quiet, 0);
+    cpu += cpu_seconds() - c0;
+    orders = b.orders_used;
+    if (rgb_error) err = sky_error(b);
+  }
+  state.counters["process_cpu_s"] = cpu / state.iterations();
+  state.counters["orders_used"] = orders;
+  if (rgb_error) state.counters["sky_max_rel_err"] = err;
+}
+
+// Args: orders (0 = auto), size percent
+void Rgb(benchmark::State& state) {
+  AtmosphereSpec s = earth(static_cast<int>(state.range(1)));
+  if (state.range(0) == 0) s.orders.reset();
+  else s.orders = static_cast<int>(state.range(0));
+  run(state, s, true);
+}
+BENCHMARK(Rgb)
+    ->ArgsProduct({{1, 2, 3, 4, 6, 8, 0}, {50}})
+    ->Args({4, 100})
+    ->Args({8, 100})
+    ->Args({4, 200})
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime()
+    ->Iterations(1);
+
+// Args: wavelengths, size percent (4 orders)
+void Spectral(benchmark::State& state) {
+  AtmosphereSpec s = earth(static_cast<int>(state.range(1)));
+  s.spectral = true;
+  s.count = static_cast<int>(state.range(0));
+  run(state, s, false);
+}
+BENCHMARK(Spectral)->Args({16, 50})->Args({16, 100})->Args({48, 100})->Unit(benchmark::kSecond)->UseRealTime()->Iterations(1);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,76 @@
+// The atmosphere job through the CLI: bundle contents, EXR attributes, GLSL, previews, errors.
+#include <gtest/gtest.h>
+
+#include "io/exr.hpp"
+#include "support/testing.hpp"
+
+using namespace specbake::testing;
+
+namespace {
+
+const char* kSmall = R"(specbake: 1
+jobs:
+  - name: sky
+    kind: atmosphere
+    preset: earth
+    orders: 3
+    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}
+    layout: [3d, tiled2d]
+)";
+
+}  // namespace
+
+TEST(AtmosphereCli, BakesABundleWithEveryFile) {
+  TempDir dir;
+  write_file(dir / "a.yaml", kSmall);
+  const auto r = run_cli({"run", (dir / "a.yaml").string(), "--out", (dir / "out").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto b = dir / "out" / "sky" / "latest";
+  const auto m = read_json(b / "manifest.json");
+  EXPECT_EQ(m["parameters"]["orders"]["used"], 3);
+  EXPECT_EQ(m["parameters"]["orders"]["per_order"].size(), 3u);
+  EXPECT_EQ(m["parameters"]["wavelengths_nm"].size(), 3u);
+  EXPECT_TRUE(m["parameters"]["luminance_conversion"].contains("sky_spectral_radiance_to_luminance_lm_per_W"));
+  EXPECT_LE(m["accuracy"]["self_check"]["worst"].get<double>(), 0.25);
+  // shapes, outermost first
+  EXPECT_EQ(read_f32(b / "transmittance.bin").size(), 8u * 32 * 3);
+  EXPECT_EQ(read_f32(b / "irradiance.bin").size(), 4u * 16 * 3);
+  EXPECT_EQ(read_f32(b / "scattering.bin").size(), 4u * 8 * 18 * 3);
+  EXPECT_EQ(read_f32(b / "single_mie_scattering.bin").size(), 4u * 8 * 18 * 3);
+  const auto tiled = read_f32(b / "scattering_tiled2d.bin"), flat = read_f32(b / "scattering.bin");
+  ASSERT_EQ(tiled.size(), flat.size());
+  // column = r·NU·MU_S + ν·MU_S + μ_s of row mu: texel (r=2, mu=5, x=7)
+  EXPECT_EQ(tiled[((5 * 4 + 2) * 18 + 7) * 3 + 1], flat[((2 * 8 + 5) * 18 + 7) * 3 + 1]);
+  for (const char* f : {"transmittance.exr", "irradiance.exr", "scattering.exr", "scattering_tiled2d.exr",
+                        "single_mie_scattering.exr"}) {
+    const auto img = specbake::exr_read(read_file(b / f), {"R", "G", "B"});
+    EXPECT_GT(img.width, 0) << f;
+    EXPECT_TRUE(img.attributes.count("specbake.layout")) << f;
+  }
+  const std::string glsl = read_file(b / "sampling.glsl");
+  for (const char* fn : {"GetScatteringTextureUvwzFromRMuMuSNu", "GetScattering3D", "GetScatteringTiled2D",
+                         "GetTransmittanceTextureUvFromRMu", "GetIrradianceTextureUvFromRMuS"})
+    EXPECT_NE(glsl.find(fn), std::string::npos) << fn;
+  EXPECT_TRUE(fs::exists(b / "preview" / "planet_from_space.png"));
+  EXPECT_TRUE(fs::exists(b / "preview" / "sky_fisheye_sun_+20deg.png"));
+}
+
+TEST(AtmosphereCli, BadConfigsAreInputErrors) {
+  TempDir dir;
+  const std::string base = "specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n";
+  const std::pair<const char*, const char*> cases[] = {
+      {"    colour: blue\n", "unknown key 'colour'"},
+      {"    sizes: {scattering: {mu: 7}}\n", "even mu"},
+      {"    orders: 0\n", "orders"},
+      {"    top_radius_km: 6000\n", "top_radius_km"},
+      {"    ozone: {layer: tent-40-25-10km}\n", "A < B < C"},
+      {"    spectrum: {min_nm: 300}\n", "min_nm"},
+  };
+  for (const auto& [extra, needle] : cases) {
+    write_file(dir / "bad.yaml", base + extra);
+    const auto r = run_cli({"run", (dir / "bad.yaml").string(), "--out", (dir / "out").string()});
+    EXPECT_EQ(r.exit_code, 3) << extra;
+    EXPECT_NE((r.err + r.out).find(needle), std::string::npos) << extra << " -> " << r.err;
+    EXPECT_NE((r.err + r.out).find("bad.yaml"), std::string::npos);
+  }
+}
