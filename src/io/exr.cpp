@@ -22,7 +22,7 @@ std::string exr_bytes(const ExrImage& img) {
     throw JobError("EXR image has inconsistent size");
   try {
     Imf::Header header(img.width, img.height);
-    header.compression() = Imf::ZIP_COMPRESSION;
+    header.compression() = img.zip ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
     const Imf::PixelType type = img.half ? Imf::HALF : Imf::FLOAT;
     for (const auto& c : img.channels) header.channels().insert(c, Imf::Channel(type));
     for (const auto& [k, v] : img.attributes) header.insert(k, Imf::StringAttribute(v));
