@@ -23,6 +23,7 @@
 #include <sstream>
 
 #include "cl/device.hpp"
+#include "cl/fft.hpp"
 #include "jobs/diffraction/diffraction_job.hpp"
 #include "jobs/diffraction/planning.hpp"
 #include "jobs/diffraction/terms.hpp"
@@ -135,6 +136,20 @@ void BM_WholeJob(benchmark::State& state) {
   state.counters["err_f32"] = r.accuracy["error"]["max_over_M2"].get<double>();
 }
 
+// VkFFT alone: `count` in-place float32 transforms of one 1024² (or 128²) array, one per
+// launch as the job runs them (each waits for completion).
+void BM_VkFft(benchmark::State& state) {
+  const int m = state.range(0) == 0 ? 128 : 1024;
+  const int count = static_cast<int>(state.range(1));
+  cl_util::Fft2d fft(device(), m, m, 1, cl_util::FftPrecision::single);
+  std::vector<float> v(2 * static_cast<std::size_t>(m) * m, 0.0f);
+  for (std::size_t i = 0; i < v.size(); i += 2) v[i] = std::sin(0.001f * static_cast<float>(i / 2));
+  cl::Buffer buf(device().context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, v.size() * sizeof(float), v.data());
+  fft.forward(buf);  // warm-up
+  for (auto _ : state)
+    for (int k = 0; k < count; ++k) fft.forward(buf);
+}
+
 #ifdef SPECBAKE_HAVE_FFTW
 void BM_FftwBaseline(benchmark::State& state) {
   const int m = state.range(0) == 0 ? 128 : 1024;
@@ -166,6 +181,7 @@ void sweep(benchmark::internal::Benchmark* b) {
 
 BENCHMARK(BM_Terms)->Apply(sweep)->Unit(benchmark::kMillisecond)->Iterations(2);
 BENCHMARK(BM_WholeJob)->Args({0, 0})->Args({0, 1})->Args({1, 0})->Args({1, 1})->Unit(benchmark::kMillisecond)->Iterations(2);
+BENCHMARK(BM_VkFft)->Args({0, 10})->Args({1, 1})->Args({1, 10})->Args({1, 20})->Unit(benchmark::kMillisecond)->Iterations(3);
 #ifdef SPECBAKE_HAVE_FFTW
 BENCHMARK(BM_FftwBaseline)
     ->Args({0, 10})->Args({1, 1})->Args({1, 10})->Args({1, 20})->Args({1, 40})

@@ -179,7 +179,9 @@ TEST(DiffractionCli, SineGratingBundleFollowsTheContract) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const fs::path b = dir / "out/d/latest";
   const auto m = tst::read_json(b / "manifest.json");
-  const auto& dj = m["parameters"]["diffraction"];
+  // The contract puts the block at the manifest's top level, not among the parameters.
+  EXPECT_FALSE(m["parameters"].contains("diffraction"));
+  const auto& dj = m["diffraction"];
   const int M = dj["size"].get<int>(), kmin = dj["bins"][0].get<int>(), kmax = dj["bins"][1].get<int>();
   const int K = kmax - kmin + 1, T = dj["terms"].get<int>();
   EXPECT_EQ(M, 64);
@@ -232,8 +234,8 @@ TEST(DiffractionCli, FixedTermsBelowToleranceAreFlaggedAndAutoFailsClearly) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE((r.out + r.err).find("FIXED TERMS DO NOT MEET THE TOLERANCE"), std::string::npos) << r.err;
   const auto m = tst::read_json(dir / "out/d/latest/manifest.json");
-  EXPECT_EQ(m["parameters"]["diffraction"]["error"]["meets_tolerance"], false);
-  EXPECT_GT(m["parameters"]["diffraction"]["error"]["max_over_M2"].get<double>(), 1e-4);
+  EXPECT_EQ(m["diffraction"]["error"]["meets_tolerance"], false);
+  EXPECT_GT(m["diffraction"]["error"]["max_over_M2"].get<double>(), 1e-4);
   EXPECT_FALSE(m["warnings"].empty());
   // y_max ≈ 20 with a tolerance beyond float32: auto refuses with a message, exit code 1.
   tst::write_file(dir / "auto.yaml", config(field + "    expansion: taylor\n    tolerance: 1e-10\n"));
@@ -245,7 +247,7 @@ TEST(DiffractionCli, FixedTermsBelowToleranceAreFlaggedAndAutoFailsClearly) {
   r = tst::run_cli({"run", (dir / "cheb.yaml").string(), "--out", (dir / "out3").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto mc = tst::read_json(dir / "out3/d/latest/manifest.json");
-  EXPECT_LE(mc["parameters"]["diffraction"]["error"]["max_over_M2"].get<double>(), 1e-6);
+  EXPECT_LE(mc["diffraction"]["error"]["max_over_M2"].get<double>(), 1e-6);
 }
 
 TEST(DiffractionCli, ExampleConfigsAndRawNonSquareInput) {
@@ -263,7 +265,7 @@ TEST(DiffractionCli, ExampleConfigsAndRawNonSquareInput) {
   const auto r = tst::run_cli({"run", (dir / "c.yaml").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto m = tst::read_json(dir / "out/d/latest/manifest.json");
-  const auto& dj = m["parameters"]["diffraction"];
+  const auto& dj = m["diffraction"];
   EXPECT_EQ(dj["size"], nlohmann::json({24, 10}));
   EXPECT_EQ(dj["bins"]["ku"], nlohmann::json({-12, 11}));
   EXPECT_EQ(dj["bins"]["kv"], nlohmann::json({-5, 4}));

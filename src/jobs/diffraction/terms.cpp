@@ -36,7 +36,26 @@ const Band& band_for(const std::vector<Band>& bands, double kappa) {
   return bands.back();
 }
 
-Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress) {
+void Timings::add(const std::string& stage, double seconds) {
+  spdlog::debug("diffraction: {} {:.3f} s", stage, seconds);
+  for (auto& [name, total] : stages_)
+    if (name == stage) {
+      total += seconds;
+      return;
+    }
+  stages_.emplace_back(stage, seconds);
+}
+
+nlohmann::json Timings::json() const {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [name, total] : stages_) j[name] = total;
+  return j;
+}
+
+Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress,
+                   Timings* timings) {
+  Timings local;
+  Timings& tm = timings ? *timings : local;
   const std::size_t count = static_cast<std::size_t>(f.count());
   int max_terms = 0;
   for (const auto& b : plan.bands) max_terms = std::max(max_terms, b.terms);
@@ -46,9 +65,11 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
   Terms t;
   t.bins = plan.bins;
   t.count = plan.total_terms;
-  cl::Program program = dev.build(kKernels, dev.real_options());
+  cl::Program program = tm.time("terms: kernel build", [&] { return dev.build(kKernels, dev.real_options()); });
   // One transform per launch: on PoCL a batched VkFFT plan is slower per array than single ones.
-  cl_util::Fft2d fft(dev, f.width, f.height, 1, cl_util::FftPrecision::single);
+  cl_util::Fft2d fft = tm.time("terms: FFT plan", [&] {
+    return cl_util::Fft2d(dev, f.width, f.height, 1, cl_util::FftPrecision::single);
+  });
   return cl_util::checked("diffraction terms", [&] {
     cl::Buffer h = cl_util::upload_real(dev, f.h_um);
     cl::Buffer work(dev.context(), CL_MEM_READ_WRITE, fft.bytes() * batch);
@@ -70,8 +91,13 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
         inputs.setArg(7, n0);
         inputs.setArg(8, n);
         inputs.setArg(9, work);
-        dev.queue().enqueueNDRangeKernel(inputs, cl::NullRange, cl::NDRange(count), cl::NullRange);
-        for (int j = 0; j < n; ++j) fft.forward(work, j);
+        tm.time("terms: inputs", [&] {
+          dev.queue().enqueueNDRangeKernel(inputs, cl::NullRange, cl::NDRange(count), cl::NullRange);
+          dev.queue().finish();
+        });
+        tm.time("terms: FFT", [&] {
+          for (int j = 0; j < n; ++j) fft.forward(work, j);
+        });
         crop.setArg(0, work);
         crop.setArg(1, f.width);
         crop.setArg(2, f.height);
@@ -83,12 +109,17 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
         crop.setArg(8, scale);
         crop.setArg(9, band.first_term + n0);
         crop.setArg(10, out);
-        dev.queue().enqueueNDRangeKernel(crop, cl::NullRange, cl::NDRange(t.per_term() * n), cl::NullRange);
+        tm.time("terms: crop", [&] {
+          dev.queue().enqueueNDRangeKernel(crop, cl::NullRange, cl::NDRange(t.per_term() * n), cl::NullRange);
+          dev.queue().finish();
+        });
         done += n;
         progress("FFT terms", 0.1 + 0.6 * done / std::max(1, t.count));
       }
     t.values.resize(out_floats);
-    dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, out_floats * sizeof(float), t.values.data());
+    tm.time("terms: download", [&] {
+      dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, out_floats * sizeof(float), t.values.data());
+    });
     return t;
   });
 }
@@ -150,29 +181,42 @@ std::vector<cplx> reference_terms(const Field& f, const std::vector<Band>& bands
 
 std::vector<cplx> reference_terms_at(const Field& f, const std::vector<Band>& bands,
                                      const std::vector<std::pair<int, int>>& bins) {
-  int total = 0;
-  for (const auto& b : bands) total += b.terms;
-  const std::size_t nb = bins.size(), m = static_cast<std::size_t>(f.count());
+  int total = 0;  // indexed by first_term + n: bands may be subsets of a plan's terms
+  for (const auto& b : bands) total = std::max(total, b.first_term + b.terms);
+  const std::size_t nb = bins.size(), T = static_cast<std::size_t>(total);
   std::vector<std::vector<cplx>> tx, ty;
   for (const auto& [ku, kv] : bins) {
     tx.push_back(twiddles(ku, f.width));
     ty.push_back(twiddles(kv, f.height));
   }
-  std::vector<cplx> out(static_cast<std::size_t>(total) * nb);
-  for (const auto& band : bands) {
-    const auto q = reference_inputs(f, band, 0, band.terms);
-    for (int n = 0; n < band.terms; ++n)
-      for (std::size_t b = 0; b < nb; ++b) {
-        cplx s = 0.0;
-        for (int iy = 0; iy < f.height; ++iy) {
-          cplx r = 0.0;
-          const cplx* row = q.data() + n * m + static_cast<std::size_t>(iy) * f.width;
-          for (int ix = 0; ix < f.width; ++ix) r += row[ix] * tx[b][ix];
-          s += r * ty[b][iy];
+  // One pass over the samples, rows in parallel: row iy's sums Σ_ix q_n·tx go into its own
+  // slot, then the rows are added in order (the result does not depend on the thread count).
+  std::vector<cplx> per_row(static_cast<std::size_t>(f.height) * T * nb);
+  const double inv_s = f.s > 0 ? 1.0 / f.s : 0.0;
+  parallel_for(f.height, [&](long long iy) {
+    cplx* row_sum = per_row.data() + static_cast<std::size_t>(iy) * T * nb;
+    std::vector<cplx> acc(T * nb);
+    double re[DIFFRACTION_MAX_BATCH], im[DIFFRACTION_MAX_BATCH];
+    for (int ix = 0; ix < f.width; ++ix) {
+      const double h = f.h_um[static_cast<std::size_t>(iy) * f.width + ix];
+      for (const auto& band : bands)
+        for (int n0 = 0; n0 < band.terms; n0 += DIFFRACTION_MAX_BATCH) {
+          const int n = std::min(DIFFRACTION_MAX_BATCH, band.terms - n0);
+          ref::term_inputs(h, f.c, inv_s, expansion_id(band.expansion), band.kappa0, band.delta, n0, n, re, im);
+          for (int j = 0; j < n; ++j) {
+            const cplx q(re[j], im[j]);
+            cplx* a = acc.data() + static_cast<std::size_t>(band.first_term + n0 + j) * nb;
+            for (std::size_t b = 0; b < nb; ++b) a[b] += q * tx[b][ix];
+          }
         }
-        out[(band.first_term + n) * nb + b] = s / static_cast<double>(m);
-      }
-  }
+    }
+    for (std::size_t k = 0; k < T; ++k)
+      for (std::size_t b = 0; b < nb; ++b) row_sum[k * nb + b] = acc[k * nb + b] * ty[b][iy];
+  });
+  std::vector<cplx> out(T * nb, 0.0);
+  for (int iy = 0; iy < f.height; ++iy)
+    for (std::size_t k = 0; k < T * nb; ++k) out[k] += per_row[static_cast<std::size_t>(iy) * T * nb + k];
+  for (auto& v : out) v /= static_cast<double>(f.count());
   return out;
 }
 

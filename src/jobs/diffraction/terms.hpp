@@ -3,7 +3,11 @@
 // float32, crop kernel) and, for checks, on the host in double precision with the same
 // term-input maths (reference.hpp) and direct DFTs. Also the exact P(k;κ) = DFT(e^{iκh}) in
 // double precision, and the reconstruction of P from stored terms.
+#include <chrono>
 #include <complex>
+#include <string>
+#include <thread>
+#include <algorithm>
 #include <vector>
 
 #include "cl/device.hpp"
@@ -26,8 +30,49 @@ struct Terms {
   }
 };
 
-// The device path: float32 FFTs with VkFFT.
-Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress);
+// Runs fn(i) for i in [0, n) on the hardware threads (i interleaved over threads); fn must
+// write only its own i's results, so the outcome does not depend on the thread count.
+template <class Fn>
+void parallel_for(long long n, Fn&& fn) {
+  const long long threads = std::max(1u, std::min(16u, std::thread::hardware_concurrency()));
+  if (n < 2 || threads == 1) {
+    for (long long i = 0; i < n; ++i) fn(i);
+    return;
+  }
+  std::vector<std::thread> pool;
+  for (long long t = 0; t < std::min(threads, n); ++t)
+    pool.emplace_back([&, t] {
+      for (long long i = t; i < n; i += threads) fn(i);
+    });
+  for (auto& th : pool) th.join();
+}
+
+// Wall time per stage of a bake, in seconds, in the order stages first ran; each addition is
+// also logged at debug level.
+class Timings {
+ public:
+  void add(const std::string& stage, double seconds);
+  // Runs fn() and adds its wall time to `stage`.
+  template <class Fn>
+  decltype(auto) time(const std::string& stage, Fn&& fn) {
+    const auto t0 = std::chrono::steady_clock::now();
+    struct Done {
+      Timings* t;
+      const std::string* stage;
+      std::chrono::steady_clock::time_point t0;
+      ~Done() { t->add(*stage, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()); }
+    } done{this, &stage, t0};
+    return fn();
+  }
+  nlohmann::json json() const;
+
+ private:
+  std::vector<std::pair<std::string, double>> stages_;
+};
+
+// The device path: float32 FFTs with VkFFT. Adds its sub-stages ("terms: …") to `timings`.
+Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress,
+                   Timings* timings = nullptr);
 
 // Host double-precision term inputs q_n of every sample for the band's terms [n_first, n_first+count).
 std::vector<cplx> reference_inputs(const Field& f, const Band& band, int n_first, int count);
@@ -35,7 +80,8 @@ std::vector<cplx> reference_inputs(const Field& f, const Band& band, int n_first
 std::vector<cplx> host_dft(const std::vector<cplx>& field, int width, int height, const Bins& bins);
 // Host reference terms F_n over the bins, double precision: [T][kv][ku].
 std::vector<cplx> reference_terms(const Field& f, const std::vector<Band>& bands, const Bins& bins);
-// F_n of every term at a few bins by direct sums (O(W·H) per bin and term): [T][bins.size()].
+// F_n of every term at a few bins by direct sums (O(W·H) per bin and term), in one pass over
+// the samples on the hardware threads: [T][bins.size()] with T = max(first_term + terms).
 std::vector<cplx> reference_terms_at(const Field& f, const std::vector<Band>& bands,
                                      const std::vector<std::pair<int, int>>& bins);
 
