@@ -188,6 +188,7 @@ std::vector<float> preview_rgb(const Field& f, const Plan& p, const Terms& t, co
       by_bin[i * stride + 2 * k] = t.values[2 * (k * per + i)];
       by_bin[i * stride + 2 * k + 1] = t.values[2 * (k * per + i) + 1];
     }
+  const std::vector<float> zeros(stride, 0.0f);
   parallel_for(n, [&](long long py) {
     std::vector<double> coef;
     const double v = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / n;
@@ -206,22 +207,27 @@ std::vector<float> preview_rgb(const Field& f, const Plan& p, const Terms& t, co
                                     band.terms, coef.data());
         const double fu = u / lambda_um * f.width * f.dx_um, fv = v / lambda_um * f.height * f.dx_um;
         const int u0 = static_cast<int>(std::floor(fu)), v0 = static_cast<int>(std::floor(fv));
-        double power = 0.0;
-        for (int dv = 0; dv < 2; ++dv)
-          for (int du = 0; du < 2; ++du) {
-            const int ku = u0 + du, kv = v0 + dv;
-            if (ku < b.ku_min || ku > b.ku_max || kv < b.kv_min || kv > b.kv_max) continue;
-            const double wt = (du ? fu - u0 : 1.0 - (fu - u0)) * (dv ? fv - v0 : 1.0 - (fv - v0));
-            const float* q = by_bin.data() +
-                             (static_cast<std::size_t>(kv - b.kv_min) * b.ku_count() + (ku - b.ku_min)) * stride +
-                             2 * static_cast<std::size_t>(band.first_term);
-            double re = 0.0, im = 0.0;
-            for (int k = 0; k < band.terms; ++k) {
-              re += coef[k] * q[2 * k];
-              im += coef[k] * q[2 * k + 1];
-            }
-            power += wt * (re * re + im * im);
+        // The four neighbouring bins' sums in one pass over the terms (absent bins read zeros).
+        const float* q[4];
+        double wt[4];
+        for (int c = 0; c < 4; ++c) {
+          const int du = c & 1, dv = c >> 1, ku = u0 + du, kv = v0 + dv;
+          wt[c] = (du ? fu - u0 : 1.0 - (fu - u0)) * (dv ? fv - v0 : 1.0 - (fv - v0));
+          const bool inside = ku >= b.ku_min && ku <= b.ku_max && kv >= b.kv_min && kv <= b.kv_max;
+          q[c] = inside ? by_bin.data() +
+                              (static_cast<std::size_t>(kv - b.kv_min) * b.ku_count() + (ku - b.ku_min)) * stride +
+                              2 * static_cast<std::size_t>(band.first_term)
+                        : zeros.data();
+          if (!inside) wt[c] = 0.0;
+        }
+        double re[4] = {0, 0, 0, 0}, im[4] = {0, 0, 0, 0};
+        for (int k = 0; k < band.terms; ++k)
+          for (int c = 0; c < 4; ++c) {
+            re[c] += coef[k] * q[c][2 * k];
+            im[c] += coef[k] * q[c][2 * k + 1];
           }
+        double power = 0.0;
+        for (int c = 0; c < 4; ++c) power += wt[c] * (re[c] * re[c] + im[c] * im[c]);
         const std::size_t i = static_cast<std::size_t>(py) * n + px;
         for (int c = 0; c < 3; ++c) xyz[3 * i + c] += power * spectrum[row + 1 + c] * step;
       }

@@ -18,6 +18,22 @@ const char* kKernels = "kernels/diffraction/kernels.cl";
 
 int expansion_id(Expansion e) { return e == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV; }
 
+// Signed bins [lo, hi] (hi − lo < m) as runs contiguous in an unshifted array of length m:
+// bins first_offset … first_offset+count−1 (from lo) sit at indices first_index … .
+struct BinRun {
+  std::size_t first_offset, first_index, count;
+};
+std::vector<BinRun> bin_runs(int lo, int hi, int m) {
+  std::vector<BinRun> runs;
+  for (int k = lo; k <= hi;) {
+    const int index = static_cast<int>(ref::bin_index(k, m));
+    const int count = std::min(hi - k + 1, m - index);
+    runs.push_back({static_cast<std::size_t>(k - lo), static_cast<std::size_t>(index), static_cast<std::size_t>(count)});
+    k += count;
+  }
+  return runs;
+}
+
 // Twiddles e^{−2πi·k·j/m} for j = 0…m−1.
 std::vector<cplx> twiddles(int k, int m) {
   std::vector<cplx> t(m);
@@ -73,10 +89,14 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
   return cl_util::checked("diffraction terms", [&] {
     cl::Buffer h = cl_util::upload_real(dev, f.h_um);
     cl::Buffer work(dev.context(), CL_MEM_READ_WRITE, fft.bytes() * batch);
-    const std::size_t out_floats = 2 * t.per_term() * t.count;
-    cl::Buffer out(dev.context(), CL_MEM_WRITE_ONLY, out_floats * sizeof(float));
-    cl::Kernel inputs(program, "diffraction_term_inputs"), crop(program, "diffraction_crop");
+    t.values.resize(2 * t.per_term() * t.count);
+    cl::Kernel inputs(program, "diffraction_term_inputs");
+    // The 1/M² of F_n = DFT(q_n)/M² is applied to the inputs (the FFT is linear), so the
+    // transformed arrays are read straight into the cropped terms.
     const float scale = static_cast<float>(1.0 / static_cast<double>(count));
+    const auto rows = bin_runs(t.bins.kv_min, t.bins.kv_max, f.height);
+    const auto cols = bin_runs(t.bins.ku_min, t.bins.ku_max, f.width);
+    const std::size_t pair = 2 * sizeof(float);
     int done = 0;
     for (const auto& band : plan.bands)
       for (int n0 = 0; n0 < band.terms; n0 += batch) {
@@ -90,7 +110,8 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
         cl_util::set_real_arg(dev, inputs, 6, band.delta);
         inputs.setArg(7, n0);
         inputs.setArg(8, n);
-        inputs.setArg(9, work);
+        inputs.setArg(9, scale);
+        inputs.setArg(10, work);
         tm.time("terms: inputs", [&] {
           dev.queue().enqueueNDRangeKernel(inputs, cl::NullRange, cl::NDRange(count), cl::NullRange);
           dev.queue().finish();
@@ -98,28 +119,25 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
         tm.time("terms: FFT", [&] {
           for (int j = 0; j < n; ++j) fft.forward(work, j);
         });
-        crop.setArg(0, work);
-        crop.setArg(1, f.width);
-        crop.setArg(2, f.height);
-        crop.setArg(3, n);
-        crop.setArg(4, t.bins.ku_min);
-        crop.setArg(5, t.bins.ku_count());
-        crop.setArg(6, t.bins.kv_min);
-        crop.setArg(7, t.bins.kv_count());
-        crop.setArg(8, scale);
-        crop.setArg(9, band.first_term + n0);
-        crop.setArg(10, out);
-        tm.time("terms: crop", [&] {
-          dev.queue().enqueueNDRangeKernel(crop, cl::NullRange, cl::NDRange(t.per_term() * n), cl::NullRange);
+        // Crop while reading: each term's bins are at most 2 × 2 rectangles of the unshifted array.
+        tm.time("terms: crop + download", [&] {
+          for (int j = 0; j < n; ++j)
+            for (const auto& r : rows)
+              for (const auto& c : cols) {
+                const cl::array<cl::size_type, 3> from{c.first_index * pair, static_cast<cl::size_type>(r.first_index),
+                                                       static_cast<cl::size_type>(j)};
+                const cl::array<cl::size_type, 3> to{c.first_offset * pair, static_cast<cl::size_type>(r.first_offset),
+                                                     static_cast<cl::size_type>(band.first_term + n0 + j)};
+                const cl::array<cl::size_type, 3> region{c.count * pair, static_cast<cl::size_type>(r.count), 1};
+                dev.queue().enqueueReadBufferRect(work, CL_FALSE, from, to, region, f.width * pair,
+                                                  f.width * pair * f.height, t.bins.ku_count() * pair,
+                                                  t.per_term() * pair, t.values.data());
+              }
           dev.queue().finish();
         });
         done += n;
         progress("FFT terms", 0.1 + 0.6 * done / std::max(1, t.count));
       }
-    t.values.resize(out_floats);
-    tm.time("terms: download", [&] {
-      dev.queue().enqueueReadBuffer(out, CL_TRUE, 0, out_floats * sizeof(float), t.values.data());
-    });
     return t;
   });
 }
@@ -204,9 +222,11 @@ std::vector<cplx> reference_terms_at(const Field& f, const std::vector<Band>& ba
           const int n = std::min(DIFFRACTION_MAX_BATCH, band.terms - n0);
           ref::term_inputs(h, f.c, inv_s, expansion_id(band.expansion), band.kappa0, band.delta, n0, n, re, im);
           for (int j = 0; j < n; ++j) {
-            const cplx q(re[j], im[j]);
             cplx* a = acc.data() + static_cast<std::size_t>(band.first_term + n0 + j) * nb;
-            for (std::size_t b = 0; b < nb; ++b) a[b] += q * tx[b][ix];
+            for (std::size_t b = 0; b < nb; ++b) {  // real arithmetic: no NaN-recovery call per product
+              const double wr = tx[b][ix].real(), wi = tx[b][ix].imag();
+              a[b] += cplx(re[j] * wr - im[j] * wi, re[j] * wi + im[j] * wr);
+            }
           }
         }
     }
@@ -243,7 +263,10 @@ std::vector<cplx> ExactDft::operator()(double kappa) {
   const Bins& bins = impl_->bins;
   const std::size_t m = static_cast<std::size_t>(f.count());
   std::vector<cplx> p(m);
-  for (std::size_t i = 0; i < m; ++i) p[i] = std::polar(1.0, kappa * f.h_um[i]);
+  parallel_for(f.height, [&](long long iy) {
+    for (std::size_t i = iy * static_cast<std::size_t>(f.width), e = i + f.width; i < e; ++i)
+      p[i] = std::polar(1.0, kappa * f.h_um[i]);
+  });
   if (!impl_->fft) {
     auto out = host_dft(p, f.width, f.height, bins);
     for (auto& v : out) v *= static_cast<double>(m);
@@ -253,12 +276,15 @@ std::vector<cplx> ExactDft::operator()(double kappa) {
   return cl_util::checked("exact DFT", [&] {
     cl::Buffer buf(dev.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, m * sizeof(cplx), p.data());
     impl_->fft->forward(buf);
-    dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, m * sizeof(cplx), p.data());
-    std::vector<cplx> out(static_cast<std::size_t>(bins.ku_count()) * bins.kv_count());
-    for (int kv = bins.kv_min; kv <= bins.kv_max; ++kv)
-      for (int ku = bins.ku_min; ku <= bins.ku_max; ++ku)
-        out[static_cast<std::size_t>(kv - bins.kv_min) * bins.ku_count() + (ku - bins.ku_min)] =
-            p[static_cast<std::size_t>(ref::bin_index(kv, f.height)) * f.width + ref::bin_index(ku, f.width)];
+    // Read only the bins, as rectangles of the unshifted transform.
+    const std::size_t nu = bins.ku_count(), nv = bins.kv_count(), pair = sizeof(cplx);
+    std::vector<cplx> out(nu * nv);
+    for (const auto& r : bin_runs(bins.kv_min, bins.kv_max, f.height))
+      for (const auto& c : bin_runs(bins.ku_min, bins.ku_max, f.width))
+        dev.queue().enqueueReadBufferRect(
+            buf, CL_FALSE, {c.first_index * pair, r.first_index, 0}, {c.first_offset * pair, r.first_offset, 0},
+            {c.count * pair, r.count, 1}, f.width * pair, m * pair, nu * pair, nu * nv * pair, out.data());
+    dev.queue().finish();
     return out;
   });
 }

@@ -1,6 +1,6 @@
 #pragma once
 // Computing the FFT terms F_n of a plan: on the device (term-input kernel, batched VkFFT in
-// float32, crop kernel) and, for checks, on the host in double precision with the same
+// float32, cropped while reading back) and, for checks, on the host in double precision with the same
 // term-input maths (reference.hpp) and direct DFTs. Also the exact P(k;κ) = DFT(e^{iκh}) in
 // double precision, and the reconstruction of P from stored terms.
 #include <chrono>
