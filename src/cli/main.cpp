@@ -173,7 +173,7 @@ int main(int argc, char** argv) {
   app.option_defaults()->always_capture_default();
   int verbose = 0;
   bool quiet = false;
-  app.add_flag("-v,--verbose", verbose, "more log output (-vv for debug)");
+  app.add_flag("-v,--verbose", verbose, "more log output: -v debug (kernel build logs, auto searches), -vv trace");
   app.add_flag("-q,--quiet", quiet, "only errors");
 
   std::vector<std::string> configs, only;
@@ -220,10 +220,10 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : static_cast<int>(ExitCode::usage);
   }
-  spdlog::set_level(quiet ? spdlog::level::err : verbose >= 2 ? spdlog::level::debug
-                                             : verbose == 1  ? spdlog::level::info
-                                                             : spdlog::level::info);
-  if (verbose >= 3) spdlog::set_level(spdlog::level::trace);
+  spdlog::set_level(quiet ? spdlog::level::err
+                    : verbose >= 2 ? spdlog::level::trace
+                    : verbose == 1 ? spdlog::level::debug
+                                   : spdlog::level::info);
 
   try {
     if (app.got_subcommand("devices")) return cmd_devices();

@@ -1,3 +1,4 @@
+#include <cmath>
 #include <sstream>
 
 #include "core/hash.hpp"
@@ -111,6 +112,16 @@ DispersionSpec parse_dispersion(const At& job, nlohmann::json& norm,
   nlohmann::json material_norm;
   if (!job.has("material")) job.fail("expected a 'material' key ({n_d, v_d}, {glass}, or {sellmeier})");
   d.material = parse_material(job.child("material"), material_norm, inputs);
+  if (d.material.kind == Material::Kind::sellmeier) {
+    // n² has a pole at λ = √C_i: refuse a range that contains one (the index would be infinite).
+    const At c = job.child("material").child("sellmeier").child("C");
+    for (std::size_t i = 0; i < d.material.sellmeier->C.size(); ++i) {
+      const double pole_nm = std::sqrt(d.material.sellmeier->C[i]) * 1000.0;
+      if (pole_nm >= d.range_nm.lo && pole_nm <= d.range_nm.hi)
+        c.item(i).fail("expected C_i (µm²) with its pole √C_i outside range_nm; C_i = " +
+                       std::to_string(d.material.sellmeier->C[i]) + " puts it at " + std::to_string(pole_nm) + " nm");
+    }
+  }
 
   norm = {{"kind", "dispersion"},
           {"samples", d.samples ? nlohmann::json(*d.samples) : nlohmann::json("auto")},

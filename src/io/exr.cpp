@@ -49,14 +49,18 @@ std::string exr_bytes(const ExrImage& img) {
 
 ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels) {
   try {
-    std::istringstream is(bytes);
     Imf::StdISStream in;
     in.str(bytes);
     Imf::InputFile file(in);
     const auto dw = file.header().dataWindow();
     ExrImage img;
-    img.width = dw.max.x - dw.min.x + 1;
-    img.height = dw.max.y - dw.min.y + 1;
+    const long long w = static_cast<long long>(dw.max.x) - dw.min.x + 1, h = static_cast<long long>(dw.max.y) - dw.min.y + 1;
+    // The header is untrusted: refuse sizes before allocating for them.
+    if (w < 1 || h < 1 || w > kMaxExrSide || h > kMaxExrSide)
+      throw InputError({"", 0, 0, ""}, "expected an EXR image of 1 to " + std::to_string(kMaxExrSide) +
+                                           " pixels per side, header says " + std::to_string(w) + " x " + std::to_string(h));
+    img.width = static_cast<int>(w);
+    img.height = static_cast<int>(h);
     img.channels = channels;
     img.pixels.assign(static_cast<std::size_t>(img.width) * img.height * channels.size(), 0.0f);
     Imf::FrameBuffer fb;
@@ -71,6 +75,8 @@ ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& chan
     for (auto it = file.header().begin(); it != file.header().end(); ++it)
       if (auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) img.attributes[it.name()] = s->value();
     return img;
+  } catch (const InputError&) {
+    throw;
   } catch (const std::exception& e) {
     throw InputError({"", 0, 0, ""}, std::string("expected an OpenEXR image: ") + e.what());
   }

@@ -17,6 +17,8 @@ struct ExrImage {
 };
 
 std::string exr_bytes(const ExrImage& image);
+inline constexpr int kMaxExrSide = 16384;
+
 // Decodes an EXR (any pixel type) into float, channels in the given order (tests, readers).
 ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels);
 

@@ -415,7 +415,7 @@ TEST(BundleWriter, RefusesNonFiniteValues) {
 TEST_F(Cli, NonFiniteOutputFailsTheJob) {
   const fs::path c = cfg(
       "specbake: 1\noutput: out\njobs:\n  - name: pole\n    kind: dispersion\n    samples: 4\n"
-      "    material: {sellmeier: {B: [1.0], C: [0.25]}}\n");
+      "    material: {sellmeier: {B: [5.0], C: [1.0]}}\n");  // n² < 0 below 1 µm: NaN index
   const auto r = run({"run", c.string()});
   EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
   EXPECT_NE(r.err.find("non-finite"), std::string::npos) << r.err;

@@ -84,6 +84,8 @@ std::vector<BadConfig> bad_configs() {
        {"expected an integer in [1, 4096]", "'5000'"}},
       {"unknown glass", job("    material: {glass: N-BK8}\n"), 3, "N-BK8", 1, "", "jobs[0].material.glass",
        {"unknown glass 'N-BK8'", "N-BK7"}},
+      {"Sellmeier pole inside the range", job("    material: {sellmeier: {B: [1.0, 0.2], C: [0.006, 0.25]}}\n"), 3,
+       "0.25", 1, "", "jobs[0].material.sellmeier.C[1]", {"pole", "500.0"}},
       {"unknown sampling", job("    sampling: random\n" + kMat), 3, "random", 1, "", "jobs[0].sampling",
        {"uniform | gauss-legendre | visible-pdf | inverse-square", "'random'"}},
       {"n_d out of range", job("    material: {n_d: 0.9, v_d: 64.17}\n"), 3, "0.9", 1, "", "jobs[0].material.n_d",
