@@ -87,27 +87,51 @@ FN void bessel_j_range(real x, int n_first, int n_count, real* out) {
       if ((n_first + i) & 1) out[i] = -out[i];
 }
 
+/* Taylor term inputs one at a time: taylor_first sets z = q_{n_first} = e^{iκ_0(h−c)}·(i·g)^{n_first}
+ * and g; each taylor_next turns q_n into q_{n+1} = q_n·(i·g). */
+FN void taylor_first(real h, real c, real inv_s, real kappa0, int n_first, real* zr, real* zi, real* g) {
+  const real d = h - c;
+  const real phase = kappa0 * d;
+  const real pc = cos(phase), ps = sin(phase);
+  *g = d * inv_s;
+  const real a = ipow(*g, n_first);
+  real re = pc * a, im = ps * a;
+  for (int k = 0; k < (n_first & 3); ++k) { /* × i */
+    const real t = re;
+    re = -im;
+    im = t;
+  }
+  *zr = re;
+  *zi = im;
+}
+FN void taylor_next(real g, real* zr, real* zi) {
+  const real re = *zr;
+  *zr = -*zi * g;
+  *zi = re * g;
+}
+
 /* Term inputs q_n (see the header) of one sample with height h, for n = n_first … +n_count−1.
  * kappa0 is κ_0 (taylor) or κ_m (chebyshev); delta is Δ (chebyshev only); inv_s = 1/s (0 for a
  * flat field). The phase e^{iκ_0(h−c)} is evaluated in `real` before any product. */
 FN void term_inputs(real h, real c, real inv_s, int expansion, real kappa0, real delta, int n_first, int n_count,
                     real* re, real* im) {
+  if (expansion == DIFFRACTION_TAYLOR) {
+    real zr, zi, g;
+    taylor_first(h, c, inv_s, kappa0, n_first, &zr, &zi, &g);
+    for (int j = 0; j < n_count; ++j) {
+      re[j] = zr;
+      im[j] = zi;
+      taylor_next(g, &zr, &zi);
+    }
+    return;
+  }
   const real d = h - c;
   const real phase = kappa0 * d;
   const real pc = cos(phase), ps = sin(phase);
   real amp[DIFFRACTION_MAX_BATCH];
-  if (expansion == DIFFRACTION_TAYLOR) {
-    const real g = d * inv_s;
-    real gn = ipow(g, n_first);
-    for (int j = 0; j < n_count; ++j) {
-      amp[j] = gn;
-      gn *= g;
-    }
-  } else {
-    bessel_j_range(delta * d, n_first, n_count, amp);
-    for (int j = 0; j < n_count; ++j)
-      if (n_first + j > 0) amp[j] *= R(2.0);
-  }
+  bessel_j_range(delta * d, n_first, n_count, amp);
+  for (int j = 0; j < n_count; ++j)
+    if (n_first + j > 0) amp[j] *= R(2.0);
   for (int j = 0; j < n_count; ++j) {
     /* (pc + i·ps)·i^n·amp */
     real a = pc * amp[j], b = ps * amp[j];

@@ -18,3 +18,18 @@ __kernel void diffraction_term_inputs(__global const real* h, int count, real c,
     q[2 * ((size_t)j * count + i) + 1] = (float)im[j] * scale;
   }
 }
+
+/* The Taylor case of diffraction_term_inputs (same arguments less expansion and delta), by
+ * running products: no per-item arrays. */
+__kernel void diffraction_taylor_inputs(__global const real* h, int count, real c, real inv_s, real kappa0,
+                                        int n_first, int n_count, float scale, __global float* q) {
+  const int i = get_global_id(0);
+  if (i >= count) return;
+  real zr, zi, g;
+  taylor_first(h[i], c, inv_s, kappa0, n_first, &zr, &zi, &g);
+  for (int j = 0; j < n_count; ++j) {
+    q[2 * ((size_t)j * count + i)] = (float)zr * scale;
+    q[2 * ((size_t)j * count + i) + 1] = (float)zi * scale;
+    taylor_next(g, &zr, &zi);
+  }
+}

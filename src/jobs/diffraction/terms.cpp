@@ -90,7 +90,7 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
     cl::Buffer h = cl_util::upload_real(dev, f.h_um);
     cl::Buffer work(dev.context(), CL_MEM_READ_WRITE, fft.bytes() * batch);
     t.values.resize(2 * t.per_term() * t.count);
-    cl::Kernel inputs(program, "diffraction_term_inputs");
+    cl::Kernel inputs(program, "diffraction_term_inputs"), taylor(program, "diffraction_taylor_inputs");
     // The 1/M² of F_n = DFT(q_n)/M² is applied to the inputs (the FFT is linear), so the
     // transformed arrays are read straight into the cropped terms.
     const float scale = static_cast<float>(1.0 / static_cast<double>(count));
@@ -101,19 +101,33 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
     for (const auto& band : plan.bands)
       for (int n0 = 0; n0 < band.terms; n0 += batch) {
         const int n = std::min(batch, band.terms - n0);
-        inputs.setArg(0, h);
-        inputs.setArg(1, static_cast<int>(count));
-        cl_util::set_real_arg(dev, inputs, 2, f.c);
-        cl_util::set_real_arg(dev, inputs, 3, f.s > 0 ? 1.0 / f.s : 0.0);
-        inputs.setArg(4, expansion_id(band.expansion));
-        cl_util::set_real_arg(dev, inputs, 5, band.kappa0);
-        cl_util::set_real_arg(dev, inputs, 6, band.delta);
-        inputs.setArg(7, n0);
-        inputs.setArg(8, n);
-        inputs.setArg(9, scale);
-        inputs.setArg(10, work);
+        // Taylor terms by running products (cheaper per sample); Chebyshev through the general kernel.
+        if (band.expansion == Expansion::taylor) {
+          taylor.setArg(0, h);
+          taylor.setArg(1, static_cast<int>(count));
+          cl_util::set_real_arg(dev, taylor, 2, f.c);
+          cl_util::set_real_arg(dev, taylor, 3, f.s > 0 ? 1.0 / f.s : 0.0);
+          cl_util::set_real_arg(dev, taylor, 4, band.kappa0);
+          taylor.setArg(5, n0);
+          taylor.setArg(6, n);
+          taylor.setArg(7, scale);
+          taylor.setArg(8, work);
+        } else {
+          inputs.setArg(0, h);
+          inputs.setArg(1, static_cast<int>(count));
+          cl_util::set_real_arg(dev, inputs, 2, f.c);
+          cl_util::set_real_arg(dev, inputs, 3, f.s > 0 ? 1.0 / f.s : 0.0);
+          inputs.setArg(4, expansion_id(band.expansion));
+          cl_util::set_real_arg(dev, inputs, 5, band.kappa0);
+          cl_util::set_real_arg(dev, inputs, 6, band.delta);
+          inputs.setArg(7, n0);
+          inputs.setArg(8, n);
+          inputs.setArg(9, scale);
+          inputs.setArg(10, work);
+        }
         tm.time("terms: inputs", [&] {
-          dev.queue().enqueueNDRangeKernel(inputs, cl::NullRange, cl::NDRange(count), cl::NullRange);
+          dev.queue().enqueueNDRangeKernel(band.expansion == Expansion::taylor ? taylor : inputs, cl::NullRange,
+                                           cl::NDRange(count), cl::NullRange);
           dev.queue().finish();
         });
         tm.time("terms: FFT", [&] {
