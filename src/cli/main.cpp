@@ -182,22 +182,19 @@ int main(int argc, char** argv) {
   int keep = 3;
   double fail_abs = 0.0, fail_rel = 0.0;
 
+  // `run` and `plan` select jobs the same way.
+  auto add_selection = [&](CLI::App* sub) {
+    sub->add_option("configs", configs, "config files (YAML) or folders of them")->required();
+    sub->add_option("--out", out, "output folder for every job (default: each config's `output`, else ./assets)");
+    sub->add_option("--device", device, "OpenCL device: auto | cpu | gpu | part of a device name (default: config's, else auto)");
+    sub->add_option("--only", only, "only these jobs (comma-separated names)");
+    sub->add_flag("--force", force, "rebuild bundles that are up to date");
+    sub->add_option("--shard", shard, "only shard I of N (I/N, 0-based): a deterministic, balanced split of the jobs");
+  };
   auto* run = app.add_subcommand("run", "bake every job of the configs into versioned bundles");
-  run->add_option("configs", configs, "config files (YAML) or folders of them")->required();
-  run->add_option("--out", out, "output folder for every job (default: each config's `output`, else ./assets)");
-  run->add_option("--device", device, "OpenCL device: auto | cpu | gpu | part of a device name (default: config's, else auto)");
-  run->add_option("--only", only, "only these jobs (comma-separated names)");
-  run->add_flag("--force", force, "rebuild bundles that are up to date");
+  add_selection(run);
   run->add_option("--report", report, "write a JSON summary of every job (status, reason, parameters, accuracy, timings, bundle)");
-  run->add_option("--shard", shard, "run only shard I of N (I/N, 0-based): a deterministic, balanced split of the jobs");
-
-  auto* plan = app.add_subcommand("plan", "show what `run` would do and the resolved parameters; writes nothing");
-  plan->add_option("configs", configs, "config files (YAML) or folders of them")->required();
-  plan->add_option("--out", out, "output folder to check bundles in");
-  plan->add_option("--device", device, "OpenCL device used to resolve `auto` parameters");
-  plan->add_option("--only", only, "only these jobs (comma-separated names)");
-  plan->add_flag("--force", force, "report up-to-date bundles as to be rebuilt");
-  plan->add_option("--shard", shard, "plan only shard I of N (I/N, 0-based)");
+  add_selection(app.add_subcommand("plan", "show what `run` would do and the resolved parameters; writes nothing"));
 
   app.add_subcommand("devices", "list OpenCL platforms and devices, and which one `auto` picks");
 

@@ -145,23 +145,7 @@ DiffractionSpec parse_diffraction(const At& job, nlohmann::json& norm, Inputs& i
   if (job.has("expansion"))
     d.expansion = job.child("expansion").choice<Expansion>({{"taylor", Expansion::taylor},
                                                            {"chebyshev", Expansion::chebyshev}});
-  if (job.has("terms")) {
-    const At t = job.child("terms");
-    if (t.node.IsScalar() && t.node.Scalar() == "auto") {
-      d.terms.reset();
-    } else {
-      if (!t.node.IsScalar()) t.fail("expected an integer >= 1 or 'auto', got " + t.shown());
-      long long n = 0;
-      try {
-        n = t.node.as<long long>();
-      } catch (const YAML::Exception&) {
-        t.fail("expected an integer >= 1 or 'auto', got " + t.shown());
-      }
-      if (n < 1 || n > kMaxDiffractionTerms)
-        t.fail("expected an integer in [1, " + std::to_string(kMaxDiffractionTerms) + "] or 'auto', got " + t.shown());
-      d.terms = static_cast<int>(n);
-    }
-  }
+  if (job.has("terms")) d.terms = job.child("terms").count_or_auto(1, kMaxDiffractionTerms);
   if (job.has("tolerance")) d.tolerance = job.child("tolerance").number_in(1e-12, 1.0, "in [1e-12, 1]");
   if (job.has("center"))
     d.center = job.child("center").choice<Centre>({{"mid-range", Centre::mid_range}, {"mean", Centre::mean},

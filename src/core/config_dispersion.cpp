@@ -70,25 +70,7 @@ DispersionSpec parse_dispersion(const At& job, nlohmann::json& norm,
   job.allow_keys({"name", "kind", "samples", "sampling", "range_nm", "cmf", "material",
                   "abbe_lines", "tolerance_de2000", "spread"});
   DispersionSpec d;
-  if (job.has("samples")) {
-    const At s = job.child("samples");
-    if (s.node.IsScalar() && s.node.Scalar() == "auto") {
-      d.samples.reset();
-    } else {
-      if (!s.node.IsScalar()) s.fail("expected an integer >= 1 or 'auto', got " + s.shown());
-      long long n = 0;
-      try {
-        n = s.node.as<long long>();
-      } catch (const YAML::Exception&) {
-        s.fail("expected an integer >= 1 or 'auto', got " + s.shown());
-      }
-      if (n < 1 || n > kMaxSamples)
-        s.fail("expected an integer in [1, " + std::to_string(kMaxSamples) + "] or 'auto', got " + s.shown());
-      d.samples = static_cast<int>(n);
-    }
-  } else {
-    d.samples = 16;
-  }
+  d.samples = job.has("samples") ? job.child("samples").count_or_auto(1, kMaxSamples) : std::optional<int>(16);
   if (job.has("sampling"))
     d.sampling = job.child("sampling").choice<Sampling>({{"uniform", Sampling::uniform},
                                                           {"gauss-legendre", Sampling::gauss_legendre},

@@ -4,6 +4,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -87,6 +88,20 @@ struct At {
     } catch (const YAML::Exception&) {
       fail("expected an integer, got " + shown());
     }
+  }
+  // An integer in [lo, hi], or the word `auto` (then nullopt).
+  std::optional<int> count_or_auto(long long lo, long long hi) const {
+    const std::string expected = "expected an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "] or 'auto', got ";
+    if (!node.IsScalar()) fail(expected + shown());
+    if (node.Scalar() == "auto") return std::nullopt;
+    long long n = 0;
+    try {
+      n = node.as<long long>();
+    } catch (const YAML::Exception&) {
+      fail(expected + shown());
+    }
+    if (n < lo || n > hi) fail(expected + shown());
+    return static_cast<int>(n);
   }
   std::string string() const {
     if (!node.IsScalar()) fail("expected a string, got " + shown());

@@ -193,44 +193,37 @@ double mean_of_lit(const std::vector<double>& de) {
 }
 }  // namespace
 
-PrismJudge::PrismJudge(Device& dev, const DispersionSpec& spec) : dev_(dev), spec_(spec), geo_(prism_geometry(spec)) {
-  const MaterialModel none{1.5, 50.0, std::nullopt};  // the picture does not depend on the index
-  const Tables dense = compute_device(dev, spec, dense_samples(spec), none);
-  cl::Program program = dev.build(kKernels, dev.real_options());
+cl::Buffer PrismJudge::render(const Tables& t) {
+  cl::Program program = dev_.build(kKernels, dev_.real_options());
   const auto white = white_xyz();
-  cl_util::checked("prism reference picture", [&] {
-    cl::Buffer x = cl_util::upload_real(dev, landing_x(spec, dense)), w = cl_util::upload_real(dev, dense.w_norm);
-    ref_xyz_ = cl_util::device_real(dev, 3 * geo_.pixels);
+  return cl_util::checked("prism picture", [&] {
+    cl::Buffer x = cl_util::upload_real(dev_, landing_x(spec_, t)), w = cl_util::upload_real(dev_, t.w_norm);
+    cl::Buffer xyz = cl_util::device_real(dev_, 3 * geo_.pixels);
     cl::Kernel k(program, "prism_image");
     k.setArg(0, x);
     k.setArg(1, w);
-    k.setArg(2, static_cast<int>(dense.offset.size()));
-    cl_util::set_real_arg(dev, k, 3, geo_.x0);
-    cl_util::set_real_arg(dev, k, 4, geo_.dx);
+    k.setArg(2, static_cast<int>(t.offset.size()));
+    cl_util::set_real_arg(dev_, k, 3, geo_.x0);
+    cl_util::set_real_arg(dev_, k, 4, geo_.dx);
     k.setArg(5, geo_.pixels);
-    for (int c = 0; c < 3; ++c) cl_util::set_real_arg(dev, k, 6 + c, white[c]);
-    k.setArg(9, ref_xyz_);
-    cl_util::run_1d(dev, k, geo_.pixels);
-    return 0;
+    for (int c = 0; c < 3; ++c) cl_util::set_real_arg(dev_, k, 6 + c, white[c]);
+    k.setArg(9, xyz);
+    cl_util::run_1d(dev_, k, geo_.pixels);
+    return xyz;
   });
 }
 
+PrismJudge::PrismJudge(Device& dev, const DispersionSpec& spec) : dev_(dev), spec_(spec), geo_(prism_geometry(spec)) {
+  const MaterialModel none{1.5, 50.0, std::nullopt};  // the picture does not depend on the index
+  ref_xyz_ = render(compute_device(dev, spec, dense_samples(spec), none));
+}
+
 double PrismJudge::mean_delta_e(const Tables& t) {
+  const cl::Buffer xyz = render(t);
   cl::Program program = dev_.build(kKernels, dev_.real_options());
   const auto white = white_xyz();
   return cl_util::checked("prism colour error", [&] {
-    cl::Buffer x = cl_util::upload_real(dev_, landing_x(spec_, t)), w = cl_util::upload_real(dev_, t.w_norm);
-    cl::Buffer xyz = cl_util::device_real(dev_, 3 * geo_.pixels), de = cl_util::device_real(dev_, geo_.pixels);
-    cl::Kernel img(program, "prism_image");
-    img.setArg(0, x);
-    img.setArg(1, w);
-    img.setArg(2, static_cast<int>(t.offset.size()));
-    cl_util::set_real_arg(dev_, img, 3, geo_.x0);
-    cl_util::set_real_arg(dev_, img, 4, geo_.dx);
-    img.setArg(5, geo_.pixels);
-    for (int c = 0; c < 3; ++c) cl_util::set_real_arg(dev_, img, 6 + c, white[c]);
-    img.setArg(9, xyz);
-    cl_util::run_1d(dev_, img, geo_.pixels);
+    cl::Buffer de = cl_util::device_real(dev_, geo_.pixels);
     cl::Kernel cmp(program, "prism_delta_e");
     cmp.setArg(0, xyz);
     cmp.setArg(1, ref_xyz_);

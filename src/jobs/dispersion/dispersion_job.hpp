@@ -52,6 +52,7 @@ class PrismJudge {
   const PrismGeometry& geometry() const { return geo_; }
 
  private:
+  cl::Buffer render(const Tables& t);  // XYZ [pixels, 3] of the picture of t
   cl_util::Device& dev_;
   DispersionSpec spec_;
   PrismGeometry geo_;

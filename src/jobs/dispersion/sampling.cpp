@@ -6,32 +6,34 @@
 
 namespace specbake::dispersion {
 
+namespace {
+// P_n(z) and its derivative, by the three-term recurrence.
+void legendre(int n, double z, double& p, double& dp) {
+  double p0 = 1.0, p1 = z;
+  for (int k = 2; k <= n; ++k) {
+    const double p2 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k;
+    p0 = p1;
+    p1 = p2;
+  }
+  p = p1;
+  dp = n * (z * p1 - p0) / (z * z - 1.0);
+}
+}  // namespace
+
 void gauss_legendre(int n, std::vector<double>& x, std::vector<double>& w) {
   x.assign(n, 0.0);
   w.assign(n, 0.0);
   for (int i = 0; i < (n + 1) / 2; ++i) {
     // Newton on P_n from Tricomi's initial guess; converges to double precision in a few steps.
     double z = std::cos(std::numbers::pi * (i + 0.75) / (n + 0.5));
-    double dp = 1.0;
+    double p = 0.0, dp = 1.0;
     for (int it = 0; it < 100; ++it) {
-      double p0 = 1.0, p1 = z;
-      for (int k = 2; k <= n; ++k) {
-        const double p2 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k;
-        p0 = p1;
-        p1 = p2;
-      }
-      dp = n * (z * p1 - p0) / (z * z - 1.0);
-      const double dz = p1 / dp;
+      legendre(n, z, p, dp);
+      const double dz = p / dp;
       z -= dz;
       if (std::fabs(dz) < 1e-16) break;
     }
-    double p0 = 1.0, p1 = z;
-    for (int k = 2; k <= n; ++k) {
-      const double p2 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k;
-      p0 = p1;
-      p1 = p2;
-    }
-    dp = n * (z * p1 - p0) / (z * z - 1.0);
+    legendre(n, z, p, dp);
     const double wi = 2.0 / ((1.0 - z * z) * dp * dp);
     x[i] = -z;
     x[n - 1 - i] = z;
