@@ -12,6 +12,7 @@ packages=(
   libvkfft-dev libopenexr-dev libpng-dev libglm-dev libboost-math-dev
   libspdlog-dev libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev libfftw3-dev
+  clang libclang-rt-14-dev
   python3-numpy
 )
 
