@@ -5,10 +5,10 @@
  * (src/jobs/atmosphere/reference.hpp, real = double).
  *
  * Model. A spherical planet of radius rb (bottom) under an atmosphere ending at rt (top).
- * A point is described by r (distance to the planet centre), a view direction by
- * mu = cos(view zenith angle), the sun by mu_s = cos(sun zenith angle), and
- * nu = cos(view-sun angle). Three constituents, each with a density profile in [0, 1]
- * (two layers: a·exp(b·h) + c·h + d, clamped to [0, 1], layer 0 below its width):
+ * A point is described by its altitude h = r − rb above the ground (r: distance to the planet
+ * centre), a view direction by mu = cos(view zenith angle), the sun by mu_s = cos(sun zenith
+ * angle), and nu = cos(view-sun angle). Three constituents, each with a density profile in
+ * [0, 1] (two layers: a·exp(b·h) + c·h + d, clamped to [0, 1], layer 0 below its width):
  *   Rayleigh: scattering β_R(λ) (= extinction), phase P_R(ν) = 3/(16π) (1 + ν²)
  *   Mie:      scattering β_M,s(λ), extinction β_M,e(λ), phase (Cornette–Shanks)
  *             P_M(ν) = 3/(8π) (1 − g²)/(2 + g²) (1 + ν²)/(1 + g² − 2gν)^{3/2}
@@ -32,16 +32,36 @@
  * Texture parameterisations (the reference's, texel centres at (i + 0.5)/n):
  *   coord(x, n) = 0.5/n + x (1 − 1/n),  unit(u, n) = (u − 0.5/n)/(1 − 1/n)
  *   transmittance [H][W]: u = coord((d − d_min)/(d_max − d_min), W), v = coord(ρ/H_, H)
- *   irradiance [H][W]:    u = coord(0.5 μ_s + 0.5, W), v = coord((r − rb)/(rt − rb), H)
+ *   irradiance [H][W]:    u = coord(0.5 μ_s + 0.5, W), v = coord(h/(rt − rb), H)
  *   scattering [R][MU][NU·MU_S]: see scattering_uvwz(); ν is corner-sampled (divisor NU − 1).
  * A texture holds NCH channels per texel (wavelengths), innermost.
  *
+ * Float32 and the ground. rb ≈ 6360 km has a float32 spacing of 0.49 m, comparable to the
+ * altitude of the lowest texel rows (62 m) and fatal to the discriminants of rays tangent to
+ * the ground, so r itself is never a state variable: every function takes the altitude h,
+ * which float32 holds to 2⁻²⁴ relative, and the cancelling combinations are written in it:
+ *   ρ² = r² − rb² = h (h + 2 rb),   rt² − r² = (t − h)(t + h + 2 rb)  (t = rt − rb),
+ *   distance to the ground  −rμ − √(r²μ² − ρ²) = ρ² / (√(r²μ² − ρ²) − rμ),
+ *   distance to the top (μ > 0) −rμ + √(r²μ² + rt² − r²) = (rt² − r²) / (√(…) + rμ),
+ *   altitude after d along the ray: (d² + 2 rμ d + ρ²) / (r_d + rb), or for rays that hit the
+ *   ground, measured back from the ground point: (e² + 2 s e) / (r_e + rb), s = √(r²μ² − ρ²);
+ * and texel rays carry the length d that the parameterisation defines (scattering_ray_from_uv)
+ * instead of recomputing it from mu, whose discriminant is 0 ± rounding on the tangent rows.
+ * r = rb + h then appears only in products and ratios (rμ, (rμ + d)/r_d), where its 2⁻²⁴
+ * relative rounding is harmless. All are algebraically exact rewrites of the reference's
+ * formulas. Other deviations, also exact: a one-texel axis (MU/2 = 1) maps to its midpoint
+ * instead of 0/0; a transmittance ratio with a zero denominator gives 0; ν entering a texture
+ * lookup is clamped to [−1, 1] (it can leave it by a rounding error only).
+ *
+ * Loop-invariant tables (exact refactorings used by the kernels, built by the same
+ * functions in the double path):
+ *   ray samples [R][MU][51][RAY_STRIDE]: for each texel's (h, μ) ray and sample i, what does
+ *     not depend on μ_s and ν: altitude, r/r_i and d_i/r_i (μ_s,i = (r μ_s + d_i ν)/r_i),
+ *     the (u_μ, u_r) of the sample, trapezoid weight × dx, densities, transmittance;
+ *   density incidence [R][MU_S][16][inc_stride]: for each (h, μ_s) and incident θ, the NU
+ *     ν-slices of the incoming radiance (and single Mie at order 2) and the ground geometry.
+ *
  * Compile-time settings: NCH (channels), NU_MAX (largest NU the caller uses).
- * Deviations from the literal formulas, all algebraically exact: discriminants are written
- * as (r μ)² − (r − rb)(r + rb) and the distance r − rb as ρ²/(r + rb) where float32 would
- * otherwise cancel; a one-texel axis (MU/2 = 1) maps to its midpoint instead of 0/0; a
- * transmittance ratio with a zero denominator gives 0; ν entering a texture lookup is
- * clamped to [−1, 1] (it can leave it by a rounding error only).
  */
 #include "common/real.h"
 
@@ -49,7 +69,7 @@
 #  error "NCH (channels per texel) must be defined before including atmosphere.cl"
 #endif
 #ifndef NU_MAX
-#  define NU_MAX 64
+#  define NU_MAX 64 /* the config's largest nu size */
 #endif
 
 #define ATM_PI R(3.14159265358979323846)
@@ -57,6 +77,18 @@
 #define SCATTERING_STEPS 50
 #define DENSITY_SPHERE_STEPS 16
 #define IRRADIANCE_HEMISPHERE_STEPS 32
+
+/* Ray-sample table entry (see the header). */
+#define RAY_H 0      /* altitude of the sample, km */
+#define RAY_A 1      /* r / r_i */
+#define RAY_B 2      /* d_i / r_i, km⁻¹ · km */
+#define RAY_U_MU 3   /* u_mu of (h_i, mu_i) with the texel's ground flag */
+#define RAY_U_R 4    /* u_r of h_i */
+#define RAY_W 5      /* trapezoid weight × dx, km */
+#define RAY_RHO_R 6  /* Rayleigh density at h_i */
+#define RAY_RHO_M 7  /* Mie density at h_i */
+#define RAY_T 8      /* NCH values: transmittance between the texel's point and the sample */
+#define RAY_STRIDE (RAY_T + NCH)
 
 /* Two-layer density profile; layer 0 applies at altitudes below width[0] (km). */
 typedef struct {
@@ -96,49 +128,68 @@ FN real clamp_real(real x, real lo, real hi) { return fmin(fmax(x, lo), hi); }
 FN int clamp_int(int x, int lo, int hi) { return x < lo ? lo : (x > hi ? hi : x); }
 FN real clamp_cosine(real mu) { return clamp_real(mu, R(-1.0), R(1.0)); }
 FN real clamp_distance(real d) { return fmax(d, R(0.0)); }
-FN real clamp_radius(const AtmosphereParameters* a, real r) {
-  return clamp_real(r, a->bottom_radius, a->top_radius);
-}
 FN real safe_sqrt(real x) { return sqrt(fmax(x, R(0.0))); }
 FN real smooth_step(real e0, real e1, real x) {
   const real t = clamp_real((x - e0) / (e1 - e0), R(0.0), R(1.0));
   return t * t * (R(3.0) - R(2.0) * t);
 }
 FN real dot3(const real* a, const real* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+/* t = rt − rb: the thickness of the atmosphere. */
+FN real thickness(const AtmosphereParameters* a) { return a->top_radius - a->bottom_radius; }
+FN real clamp_altitude(const AtmosphereParameters* a, real h) { return clamp_real(h, R(0.0), thickness(a)); }
+FN real radius_of(const AtmosphereParameters* a, real h) { return a->bottom_radius + h; }
 /* sqrt(rt² − rb²): the distance to the top boundary along the horizon at the ground. */
 FN real horizon_top(const AtmosphereParameters* a) {
-  return sqrt((a->top_radius - a->bottom_radius) * (a->top_radius + a->bottom_radius));
+  return sqrt(thickness(a) * (a->top_radius + a->bottom_radius));
 }
-/* ρ = sqrt(r² − rb²): the distance to the horizon from radius r. */
-FN real horizon_distance(const AtmosphereParameters* a, real r) {
-  return safe_sqrt((r - a->bottom_radius) * (r + a->bottom_radius));
+/* ρ² = r² − rb² = h (h + 2 rb), and ρ: the distance to the horizon from altitude h. */
+FN real horizon_distance2(const AtmosphereParameters* a, real h) { return h * (h + R(2.0) * a->bottom_radius); }
+FN real horizon_distance(const AtmosphereParameters* a, real h) { return safe_sqrt(horizon_distance2(a, h)); }
+/* rt² − r² = (t − h)(t + h + 2 rb). */
+FN real top_gap2(const AtmosphereParameters* a, real h) {
+  const real t = thickness(a);
+  return (t - h) * (t + h + R(2.0) * a->bottom_radius);
+}
+/* The altitude of the point at radius r_d² − rb² = rho2 (rho2 may be negative: below the ground). */
+FN real altitude_of_rho2(const AtmosphereParameters* a, real rho2) {
+  return rho2 / (sqrt(fmax(rho2 + a->bottom_radius * a->bottom_radius, R(0.0))) + a->bottom_radius);
 }
 
 /* ---- distances ----------------------------------------------------------------------- */
-/* Distance from radius r along mu to the top boundary (r ≤ rt). */
-FN real distance_to_top(const AtmosphereParameters* a, real r, real mu) {
-  const real disc = (r * mu) * (r * mu) + (a->top_radius - r) * (a->top_radius + r);
-  return clamp_distance(-r * mu + safe_sqrt(disc));
+/* Distance from altitude h along mu to the top boundary (h ≤ t). */
+FN real distance_to_top(const AtmosphereParameters* a, real h, real mu) {
+  const real r_mu = radius_of(a, h) * mu;
+  const real gap2 = top_gap2(a, h);
+  const real s = safe_sqrt(r_mu * r_mu + gap2);
+  return clamp_distance(mu > R(0.0) ? gap2 / (s + r_mu) : s - r_mu);
 }
-/* Distance from radius r along mu to the ground (r ≥ rb; meaningful when the ray hits it). */
-FN real distance_to_bottom(const AtmosphereParameters* a, real r, real mu) {
-  const real disc = (r * mu) * (r * mu) - (r - a->bottom_radius) * (r + a->bottom_radius);
-  return clamp_distance(-r * mu - safe_sqrt(disc));
+/* Distance from altitude h ≥ 0 along mu to the ground (meaningful when the ray hits it). */
+FN real distance_to_bottom(const AtmosphereParameters* a, real h, real mu) {
+  const real r_mu = radius_of(a, h) * mu;
+  const real rho2 = horizon_distance2(a, h);
+  const real den = safe_sqrt(r_mu * r_mu - rho2) - r_mu;
+  return den > R(0.0) ? clamp_distance(rho2 / den) : R(0.0);
 }
-FN int ray_hits_ground(const AtmosphereParameters* a, real r, real mu) {
-  return mu < R(0.0) && (r * mu) * (r * mu) - (r - a->bottom_radius) * (r + a->bottom_radius) >= R(0.0);
+FN int ray_hits_ground(const AtmosphereParameters* a, real h, real mu) {
+  const real r_mu = radius_of(a, h) * mu;
+  return mu < R(0.0) && r_mu * r_mu - horizon_distance2(a, h) >= R(0.0);
 }
-FN real distance_to_nearest_boundary(const AtmosphereParameters* a, real r, real mu, int hits_ground) {
-  return hits_ground ? distance_to_bottom(a, r, mu) : distance_to_top(a, r, mu);
+FN real distance_to_nearest_boundary(const AtmosphereParameters* a, real h, real mu, int hits_ground) {
+  return hits_ground ? distance_to_bottom(a, h, mu) : distance_to_top(a, h, mu);
 }
-/* Radius after travelling d along (r, mu): |x + d ω|. */
-FN real radius_along(real r, real mu, real d) { return sqrt(d * d + R(2.0) * r * mu * d + r * r); }
-/* Altitude after travelling d along (r, mu), (r_d² − rb²)/(r_d + rb) with r_d² − rb² summed from
- * small terms: r_d − rb would round to ±0.5 m in float32 and could put a ground-level sample
- * below the ground, where the density profiles switch layers. */
-FN real altitude_along(const AtmosphereParameters* a, real r, real mu, real d) {
-  const real rho2 = d * d + R(2.0) * r * mu * d + (r - a->bottom_radius) * (r + a->bottom_radius);
-  return rho2 / (sqrt(fmax(rho2, R(0.0)) + a->bottom_radius * a->bottom_radius) + a->bottom_radius);
+/* Altitude after travelling d along (h, mu): |x + d ω| − rb, without cancellation. */
+FN real altitude_along(const AtmosphereParameters* a, real h, real mu, real d) {
+  return altitude_of_rho2(a, d * d + R(2.0) * radius_of(a, h) * mu * d + horizon_distance2(a, h));
+}
+/* The point a distance e before the ground along a ray (h, mu) that hits it: measured back
+ * from the ground point, where the reversed ray rises with r_g μ_g = s = √(r²μ² − ρ²):
+ * ρ_e² = e² + 2 s e (no cancellation near the ground, where the forward form d² + 2rμd + ρ²
+ * cancels terms of size ρ²), and r_e μ_e = −(s + e). Returns the altitude and mu there. */
+FN void point_before_ground(const AtmosphereParameters* a, real h, real mu, real e, real* h_e, real* mu_e) {
+  const real r_mu = radius_of(a, h) * mu;
+  const real s = safe_sqrt(r_mu * r_mu - horizon_distance2(a, h));
+  *h_e = clamp_altitude(a, altitude_of_rho2(a, e * (e + R(2.0) * s)));
+  *mu_e = clamp_cosine(-(s + e) / radius_of(a, *h_e));
 }
 
 /* ---- density profiles ---------------------------------------------------------------- */
@@ -152,32 +203,31 @@ FN real profile_density(const DensityProfile* p, real h) {
 }
 
 /* ---- transmittance (paper Eq. 5) ----------------------------------------------------- */
-/* ∫ ρ_i dt from (r, mu) to the top boundary for the three profiles (trapezoid, 500 steps).
+/* ∫ ρ_i dt from (h, mu) to the top boundary for the three profiles (trapezoid, 500 steps).
  * above_ground: the ray does not reach below the ground (every texel of the texture), so the
- * altitude is computed without cancellation and clamped at 0 — a tangent ray touches the
- * ground, where rounding would otherwise put a sample below it and switch density layers.
- * Otherwise (rays through the planet, which no texture uses) the altitude is r_d − rb as is. */
-FN void optical_lengths_to_top(const AtmosphereParameters* a, real r, real mu, int above_ground, real* l_rayleigh,
+ * altitude is clamped at 0 — a tangent ray touches the ground, where rounding would otherwise
+ * put a sample below it and switch density layers. Otherwise (rays through the planet, which
+ * no texture uses) negative altitudes are kept, as the reference does. */
+FN void optical_lengths_to_top(const AtmosphereParameters* a, real h, real mu, int above_ground, real* l_rayleigh,
                                real* l_mie, real* l_absorption) {
-  const real dx = distance_to_top(a, r, mu) / (real)TRANSMITTANCE_STEPS;
+  const real dx = distance_to_top(a, h, mu) / (real)TRANSMITTANCE_STEPS;
   real sr = R(0.0), sm = R(0.0), sa = R(0.0);
   for (int i = 0; i <= TRANSMITTANCE_STEPS; ++i) {
-    const real d_i = (real)i * dx;
-    const real h = above_ground ? fmax(altitude_along(a, r, mu, d_i), R(0.0))
-                                : radius_along(r, mu, d_i) - a->bottom_radius;
+    const real h_i = altitude_along(a, h, mu, (real)i * dx);
+    const real y = above_ground ? fmax(h_i, R(0.0)) : h_i;
     const real w = (i == 0 || i == TRANSMITTANCE_STEPS) ? R(0.5) : R(1.0);
-    sr += profile_density(&a->rayleigh_density, h) * w;
-    sm += profile_density(&a->mie_density, h) * w;
-    sa += profile_density(&a->absorption_density, h) * w;
+    sr += profile_density(&a->rayleigh_density, y) * w;
+    sm += profile_density(&a->mie_density, y) * w;
+    sa += profile_density(&a->absorption_density, y) * w;
   }
   *l_rayleigh = sr * dx;
   *l_mie = sm * dx;
   *l_absorption = sa * dx;
 }
-/* T(r, mu → top) by direct integration (above_ground: see optical_lengths_to_top). */
-FN void transmittance_to_top_integral(const AtmosphereParameters* a, real r, real mu, int above_ground, real* t) {
+/* T(h, mu → top) by direct integration (above_ground: see optical_lengths_to_top). */
+FN void transmittance_to_top_integral(const AtmosphereParameters* a, real h, real mu, int above_ground, real* t) {
   real lr, lm, la;
-  optical_lengths_to_top(a, r, mu, above_ground, &lr, &lm, &la);
+  optical_lengths_to_top(a, h, mu, above_ground, &lr, &lm, &la);
   for (int c = 0; c < NCH; ++c)
     t[c] = exp(-(a->rayleigh_scattering[c] * lr + a->mie_extinction[c] * lm + a->absorption_extinction[c] * la));
 }
@@ -188,109 +238,133 @@ FN real unit_from_coord(real u, int n) {
   return n > 1 ? (u - R(0.5) / (real)n) / (R(1.0) - R(1.0) / (real)n) : R(0.5);
 }
 
-FN void transmittance_uv(const AtmosphereParameters* a, real r, real mu, real* u, real* v) {
+FN void transmittance_uv(const AtmosphereParameters* a, real h, real mu, real* u, real* v) {
   const real H = horizon_top(a);
-  const real rho = horizon_distance(a, r);
-  const real d = distance_to_top(a, r, mu);
-  const real d_min = a->top_radius - r, d_max = rho + H;
+  const real rho = horizon_distance(a, h);
+  const real d = distance_to_top(a, h, mu);
+  const real d_min = thickness(a) - h, d_max = rho + H;
   *u = coord_from_unit((d - d_min) / (d_max - d_min), a->transmittance_w);
   *v = coord_from_unit(rho / H, a->transmittance_h);
 }
-FN void r_mu_from_transmittance_uv(const AtmosphereParameters* a, real u, real v, real* r, real* mu) {
+FN void h_mu_from_transmittance_uv(const AtmosphereParameters* a, real u, real v, real* h, real* mu) {
   const real x_mu = unit_from_coord(u, a->transmittance_w);
   const real x_r = unit_from_coord(v, a->transmittance_h);
   const real H = horizon_top(a);
   const real rho = H * x_r;
-  *r = sqrt(rho * rho + a->bottom_radius * a->bottom_radius);
+  *h = altitude_of_rho2(a, rho * rho);
+  const real r = radius_of(a, *h);
   /* rt − r = (H² − ρ²)/(rt + r), without cancellation */
-  const real d_min = (H - rho) * (H + rho) / (a->top_radius + *r), d_max = rho + H;
+  const real d_min = (H - rho) * (H + rho) / (a->top_radius + r), d_max = rho + H;
   const real d = d_min + x_mu * (d_max - d_min);
-  *mu = d == R(0.0) ? R(1.0) : clamp_cosine(((H - rho) * (H + rho) - d * d) / (R(2.0) * *r * d));
+  *mu = d == R(0.0) ? R(1.0) : clamp_cosine(((H - rho) * (H + rho) - d * d) / (R(2.0) * r * d));
 }
 
-FN void irradiance_uv(const AtmosphereParameters* a, real r, real mu_s, real* u, real* v) {
+FN void irradiance_uv(const AtmosphereParameters* a, real h, real mu_s, real* u, real* v) {
   *u = coord_from_unit(mu_s * R(0.5) + R(0.5), a->irradiance_w);
-  *v = coord_from_unit((r - a->bottom_radius) / (a->top_radius - a->bottom_radius), a->irradiance_h);
+  *v = coord_from_unit(h / thickness(a), a->irradiance_h);
 }
-FN void r_mu_s_from_irradiance_uv(const AtmosphereParameters* a, real u, real v, real* r, real* mu_s) {
+FN void h_mu_s_from_irradiance_uv(const AtmosphereParameters* a, real u, real v, real* h, real* mu_s) {
   const real x_mu_s = unit_from_coord(u, a->irradiance_w);
   const real x_r = unit_from_coord(v, a->irradiance_h);
-  *r = a->bottom_radius + x_r * (a->top_radius - a->bottom_radius);
+  *h = x_r * thickness(a);
   *mu_s = clamp_cosine(R(2.0) * x_mu_s - R(1.0));
 }
 
-/* (r, mu, mu_s, nu) → (u_nu, u_mu_s, u_mu, u_r). The ground flag picks the half of mu:
- * rays that hit the ground map to u_mu < 0.5 (horizon at 0.5, straight down at 0), the
- * others to u_mu > 0.5 (zenith just above 0.5, horizon at 1). */
-FN void scattering_uvwz(const AtmosphereParameters* a, real r, real mu, real mu_s, real nu, int hits_ground,
-                        real* uvwz) {
-  const real H = horizon_top(a);
-  const real rho = horizon_distance(a, r);
+/* The pieces of scattering_uvwz. u_r of altitude h: */
+FN real scattering_u_r(const AtmosphereParameters* a, real h) {
+  return coord_from_unit(horizon_distance(a, h) / horizon_top(a), a->r_size);
+}
+/* u_mu of a ray at altitude h, with horizon distance rho, that reaches its boundary after d. */
+FN real scattering_u_mu_of_distance(const AtmosphereParameters* a, real h, real rho, real d, int hits_ground) {
   const int half_mu = a->mu_size / 2;
-  const real u_r = coord_from_unit(rho / H, a->r_size);
-  const real r_mu = r * mu;
-  const real disc = r_mu * r_mu - (r - a->bottom_radius) * (r + a->bottom_radius);
-  real u_mu;
   if (hits_ground) {
-    const real d = -r_mu - safe_sqrt(disc);
-    const real d_min = rho * rho / (r + a->bottom_radius), d_max = rho; /* d_min = r − rb */
-    u_mu = R(0.5) - R(0.5) * coord_from_unit(d_max == d_min ? R(0.0) : (d - d_min) / (d_max - d_min), half_mu);
-  } else {
-    const real d = -r_mu + safe_sqrt(disc + H * H);
-    const real d_min = a->top_radius - r, d_max = rho + H;
-    u_mu = R(0.5) + R(0.5) * coord_from_unit((d - d_min) / (d_max - d_min), half_mu);
+    const real d_min = h, d_max = rho;
+    return R(0.5) - R(0.5) * coord_from_unit(d_max == d_min ? R(0.0) : (d - d_min) / (d_max - d_min), half_mu);
   }
-  const real d_min = a->top_radius - a->bottom_radius, d_max = H;
-  const real d = distance_to_top(a, a->bottom_radius, mu_s);
+  const real d_min = thickness(a) - h, d_max = rho + horizon_top(a);
+  return R(0.5) + R(0.5) * coord_from_unit((d - d_min) / (d_max - d_min), half_mu);
+}
+/* u_mu: rays that hit the ground map to u_mu < 0.5 (horizon at 0.5, straight down at 0),
+ * the others to u_mu > 0.5 (zenith just above 0.5, horizon at 1). */
+FN real scattering_u_mu(const AtmosphereParameters* a, real h, real mu, int hits_ground) {
+  const real d = hits_ground ? distance_to_bottom(a, h, mu) : distance_to_top(a, h, mu);
+  return scattering_u_mu_of_distance(a, h, horizon_distance(a, h), d, hits_ground);
+}
+/* u_mu_s: 0 at mu_s_min, 1 at mu_s = 1, steep around the horizon. */
+FN real scattering_u_mu_s(const AtmosphereParameters* a, real mu_s) {
+  const real d_min = thickness(a), d_max = horizon_top(a);
+  const real d = distance_to_top(a, R(0.0), mu_s);
   const real a_s = (d - d_min) / (d_max - d_min);
-  const real D = distance_to_top(a, a->bottom_radius, a->mu_s_min);
+  const real D = distance_to_top(a, R(0.0), a->mu_s_min);
   const real A = (D - d_min) / (d_max - d_min);
-  /* 0 at mu_s_min, 1 at mu_s = 1, steep around the horizon */
-  const real u_mu_s = coord_from_unit(fmax(R(1.0) - a_s / A, R(0.0)) / (R(1.0) + a_s), a->mu_s_size);
+  return coord_from_unit(fmax(R(1.0) - a_s / A, R(0.0)) / (R(1.0) + a_s), a->mu_s_size);
+}
+/* (h, mu, mu_s, nu) → (u_nu, u_mu_s, u_mu, u_r); the ground flag picks the half of mu. */
+FN void scattering_uvwz(const AtmosphereParameters* a, real h, real mu, real mu_s, real nu, int hits_ground,
+                        real* uvwz) {
   uvwz[0] = (nu + R(1.0)) * R(0.5);
-  uvwz[1] = u_mu_s;
-  uvwz[2] = u_mu;
-  uvwz[3] = u_r;
+  uvwz[1] = scattering_u_mu_s(a, mu_s);
+  uvwz[2] = scattering_u_mu(a, h, mu, hits_ground);
+  uvwz[3] = scattering_u_r(a, h);
+}
+
+/* The ray of texture coordinates (u_mu, u_r): altitude, mu, ground flag, and the distance d
+ * to the boundary it ends on, which the parameterisation defines exactly (mu is derived from
+ * d). Ray integrals start from this d rather than from the discriminant of mu: for the rows
+ * of tangent rays that discriminant is 0 ± rounding, and its square root would make the
+ * length uncertain by √ε relative. */
+FN void scattering_ray_from_uv(const AtmosphereParameters* a, real u_mu, real u_r, real* h, real* mu, real* d,
+                               int* hits_ground) {
+  const real H = horizon_top(a);
+  const int half_mu = a->mu_size / 2;
+  const real rho = H * unit_from_coord(u_r, a->r_size);
+  *h = altitude_of_rho2(a, rho * rho);
+  const real r = radius_of(a, *h);
+  if (u_mu < R(0.5)) {
+    const real d_min = *h, d_max = rho;
+    *d = d_min + (d_max - d_min) * unit_from_coord(R(1.0) - R(2.0) * u_mu, half_mu);
+    *mu = *d == R(0.0) ? R(-1.0) : clamp_cosine(-(rho * rho + *d * *d) / (R(2.0) * r * *d));
+    *hits_ground = 1;
+  } else {
+    const real d_min = (H - rho) * (H + rho) / (a->top_radius + r), d_max = rho + H; /* d_min = rt − r */
+    *d = d_min + (d_max - d_min) * unit_from_coord(R(2.0) * u_mu - R(1.0), half_mu);
+    *mu = *d == R(0.0) ? R(1.0) : clamp_cosine(((H - rho) * (H + rho) - *d * *d) / (R(2.0) * r * *d));
+    *hits_ground = 0;
+  }
 }
 
 /* Inverse of scattering_uvwz (nu not yet clamped to the range that mu, mu_s allow). */
-FN void scattering_params_from_uvwz(const AtmosphereParameters* a, const real* uvwz, real* r, real* mu, real* mu_s,
+FN void scattering_params_from_uvwz(const AtmosphereParameters* a, const real* uvwz, real* h, real* mu, real* mu_s,
                                     real* nu, int* hits_ground) {
+  real d_ray;
+  scattering_ray_from_uv(a, uvwz[2], uvwz[3], h, mu, &d_ray, hits_ground);
   const real H = horizon_top(a);
-  const int half_mu = a->mu_size / 2;
-  const real rho = H * unit_from_coord(uvwz[3], a->r_size);
-  *r = sqrt(rho * rho + a->bottom_radius * a->bottom_radius);
-  if (uvwz[2] < R(0.5)) {
-    const real d_min = rho * rho / (*r + a->bottom_radius), d_max = rho; /* d_min = r − rb */
-    const real d = d_min + (d_max - d_min) * unit_from_coord(R(1.0) - R(2.0) * uvwz[2], half_mu);
-    *mu = d == R(0.0) ? R(-1.0) : clamp_cosine(-(rho * rho + d * d) / (R(2.0) * *r * d));
-    *hits_ground = 1;
-  } else {
-    const real d_min = (H - rho) * (H + rho) / (a->top_radius + *r), d_max = rho + H; /* d_min = rt − r */
-    const real d = d_min + (d_max - d_min) * unit_from_coord(R(2.0) * uvwz[2] - R(1.0), half_mu);
-    *mu = d == R(0.0) ? R(1.0) : clamp_cosine(((H - rho) * (H + rho) - d * d) / (R(2.0) * *r * d));
-    *hits_ground = 0;
-  }
   const real x_mu_s = unit_from_coord(uvwz[1], a->mu_s_size);
-  const real d_min = a->top_radius - a->bottom_radius, d_max = H;
-  const real D = distance_to_top(a, a->bottom_radius, a->mu_s_min);
+  const real d_min = thickness(a), d_max = H;
+  const real D = distance_to_top(a, R(0.0), a->mu_s_min);
   const real A = (D - d_min) / (d_max - d_min);
   const real a_s = (A - x_mu_s * A) / (R(1.0) + x_mu_s * A);
   const real d = d_min + fmin(a_s, A) * (d_max - d_min);
   *mu_s = d == R(0.0) ? R(1.0) : clamp_cosine((H * H - d * d) / (R(2.0) * a->bottom_radius * d));
   *nu = clamp_cosine(uvwz[0] * R(2.0) - R(1.0));
 }
+/* The ray of texel row (y, z) of the scattering texture (see scattering_ray_from_uv). */
+FN void scattering_ray_of_texel(const AtmosphereParameters* a, int y, int z, real* h, real* mu, real* d,
+                                int* hits_ground) {
+  scattering_ray_from_uv(a, ((real)y + R(0.5)) / (real)a->mu_size, ((real)z + R(0.5)) / (real)a->r_size, h, mu, d,
+                         hits_ground);
+}
 
 /* Texel (x, y, z) of the 3D scattering texture (x = nu_slice·MU_S + mu_s_index, y = mu
  * index, z = r index) → its parameters; nu is clamped to [μμ_s − √((1−μ²)(1−μ_s²)), μμ_s + √…]. */
-FN void scattering_params_from_texel(const AtmosphereParameters* a, int x, int y, int z, real* r, real* mu,
+FN void scattering_params_from_texel(const AtmosphereParameters* a, int x, int y, int z, real* h, real* mu,
                                      real* mu_s, real* nu, int* hits_ground) {
   real uvwz[4];
   uvwz[0] = a->nu_size > 1 ? (real)(x / a->mu_s_size) / (real)(a->nu_size - 1) : R(0.5);
   uvwz[1] = ((real)(x % a->mu_s_size) + R(0.5)) / (real)a->mu_s_size;
   uvwz[2] = ((real)y + R(0.5)) / (real)a->mu_size;
   uvwz[3] = ((real)z + R(0.5)) / (real)a->r_size;
-  scattering_params_from_uvwz(a, uvwz, r, mu, mu_s, nu, hits_ground);
+  scattering_params_from_uvwz(a, uvwz, h, mu, mu_s, nu, hits_ground);
   const real s = sqrt((R(1.0) - *mu * *mu) * (R(1.0) - *mu_s * *mu_s));
   *nu = clamp_real(*nu, *mu * *mu_s - s, *mu * *mu_s + s);
 }
@@ -337,44 +411,61 @@ FN void texture_3d(GLOBAL const real* tex, int wd, int h, int d, real u, real v,
 }
 
 /* ---- transmittance lookups ----------------------------------------------------------- */
-FN void transmittance_to_top(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real* out) {
+FN void transmittance_to_top(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, real* out) {
   real u, v;
-  transmittance_uv(a, r, mu, &u, &v);
+  transmittance_uv(a, h, mu, &u, &v);
   texture_2d(T, a->transmittance_w, a->transmittance_h, u, v, out);
 }
 /* T to the top from the fixed end of the segments that transmittance_along_from() measures:
- * T(r, −mu) for rays that hit the ground, T(r, mu) otherwise. */
-FN void transmittance_fixed_end(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, int hits_ground,
+ * T(h, −mu) for rays that hit the ground, T(h, mu) otherwise. */
+FN void transmittance_fixed_end(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, int hits_ground,
                                 real* out) {
-  transmittance_to_top(a, T, r, hits_ground ? -mu : mu, out);
+  transmittance_to_top(a, T, h, hits_ground ? -mu : mu, out);
 }
-/* T between (r, mu) and the point at distance d along the ray, from two lookups; rays that
- * hit the ground use the reversed (upward) segments so that no lookup crosses the ground.
- * fixed: transmittance_fixed_end(r, mu), which loops over d compute once. */
-FN void transmittance_along_from(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real d,
-                                 int hits_ground, const real* fixed, real* out) {
-  const real r_d = clamp_radius(a, radius_along(r, mu, d));
-  const real mu_d = clamp_cosine((r * mu + d) / r_d);
+/* T between a ray's origin and its point at (h_d, mu_d), from two lookups; rays that hit the
+ * ground use the reversed (upward) segments so that no lookup crosses the ground.
+ * fixed: transmittance_fixed_end() of the origin. */
+FN void transmittance_ratio(const AtmosphereParameters* a, GLOBAL const real* T, real h_d, real mu_d, int hits_ground,
+                            const real* fixed, real* out) {
   real moving[NCH];
-  transmittance_to_top(a, T, r_d, hits_ground ? -mu_d : mu_d, moving);
+  transmittance_to_top(a, T, h_d, hits_ground ? -mu_d : mu_d, moving);
   for (int c = 0; c < NCH; ++c) {
     const real num = hits_ground ? moving[c] : fixed[c], den = hits_ground ? fixed[c] : moving[c];
     out[c] = den > R(0.0) ? fmin(num / den, R(1.0)) : R(0.0);
   }
 }
-FN void transmittance_along(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real d,
+/* The point at distance d along (h, mu): altitude and mu there; rays that hit the ground are
+ * measured back from the ground point (point_before_ground). */
+FN void point_along(const AtmosphereParameters* a, real h, real mu, real d, int hits_ground, real* h_d, real* mu_d) {
+  if (hits_ground) {
+    point_before_ground(a, h, mu, fmax(distance_to_bottom(a, h, mu) - d, R(0.0)), h_d, mu_d);
+  } else {
+    *h_d = clamp_altitude(a, altitude_along(a, h, mu, d));
+    *mu_d = clamp_cosine((radius_of(a, h) * mu + d) / radius_of(a, *h_d));
+  }
+}
+/* T between (h, mu) and the point at distance d along the ray. */
+FN void transmittance_along_from(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, real d,
+                                 int hits_ground, const real* fixed, real* out) {
+  real h_d, mu_d;
+  point_along(a, h, mu, d, hits_ground, &h_d, &mu_d);
+  transmittance_ratio(a, T, h_d, mu_d, hits_ground, fixed, out);
+}
+FN void transmittance_along(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, real d,
                             int hits_ground, real* out) {
   real fixed[NCH];
-  transmittance_fixed_end(a, T, r, mu, hits_ground, fixed);
-  transmittance_along_from(a, T, r, mu, d, hits_ground, fixed, out);
+  transmittance_fixed_end(a, T, h, mu, hits_ground, fixed);
+  transmittance_along_from(a, T, h, mu, d, hits_ground, fixed, out);
 }
-/* T to the sun times the visible fraction of the sun disc above the horizon (smoothstep). */
-FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu_s, real* out) {
+/* T to the sun times the visible fraction of the sun disc above the horizon (smoothstep);
+ * the horizon's cosine −sqrt(1 − (rb/r)²) is written −ρ/r. */
+FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu_s, real* out) {
+  const real r = radius_of(a, h);
   const real sin_h = a->bottom_radius / r;
-  const real cos_h = -sqrt(fmax(R(1.0) - sin_h * sin_h, R(0.0)));
+  const real cos_h = -horizon_distance(a, h) / r;
   const real alpha = a->sun_angular_radius;
   const real visible = smooth_step(-sin_h * alpha, sin_h * alpha, mu_s - cos_h);
-  transmittance_to_top(a, T, r, mu_s, out);
+  transmittance_to_top(a, T, h, mu_s, out);
   for (int c = 0; c < NCH; ++c) out[c] *= visible;
 }
 
@@ -386,35 +477,41 @@ FN real mie_phase(real g, real nu) {
   return k * (R(1.0) + nu * nu) / (x * sqrt(x));
 }
 
-/* ---- single scattering (paper Eq. 8–9; no phase function) ----------------------------- */
-FN void single_scattering(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu, real mu_s, real nu,
-                          int hits_ground, real* rayleigh, real* mie) {
-  const real dx = distance_to_nearest_boundary(a, r, mu, hits_ground) / (real)SCATTERING_STEPS;
-  real sum_r[NCH], sum_m[NCH], t_view[NCH], t_sun[NCH], t_fixed[NCH];
-  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = R(0.0);
-  transmittance_fixed_end(a, T, r, mu, hits_ground, t_fixed);
-  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
-    const real d_i = (real)i * dx;
-    const real r_d = clamp_radius(a, radius_along(r, mu, d_i));
-    const real mu_s_d = clamp_cosine((r * mu_s + d_i * nu) / r_d);
-    transmittance_along_from(a, T, r, mu, d_i, hits_ground, t_fixed, t_view);
-    transmittance_to_sun(a, T, r_d, mu_s_d, t_sun);
-    const real w = (i == 0 || i == SCATTERING_STEPS) ? R(0.5) : R(1.0);
-    const real rho_r = profile_density(&a->rayleigh_density, r_d - a->bottom_radius) * w;
-    const real rho_m = profile_density(&a->mie_density, r_d - a->bottom_radius) * w;
-    for (int c = 0; c < NCH; ++c) {
-      const real t = t_view[c] * t_sun[c];
-      sum_r[c] += t * rho_r;
-      sum_m[c] += t * rho_m;
-    }
-  }
-  for (int c = 0; c < NCH; ++c) {
-    rayleigh[c] = sum_r[c] * dx * a->solar_irradiance[c] * a->rayleigh_scattering[c];
-    mie[c] = sum_m[c] * dx * a->solar_irradiance[c] * a->mie_scattering[c];
-  }
+/* ---- scattering lookups -------------------------------------------------------------- */
+/* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
+FN void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
+  const int wd = a->nu_size * a->mu_s_size;
+  const real x = clamp_real(uvwz[0], R(0.0), R(1.0)) * (real)(a->nu_size - 1);
+  const real x0 = floor(x);
+  const real f = x - x0;
+  real v0[NCH], v1[NCH];
+  texture_3d(tex, wd, a->mu_size, a->r_size, (x0 + uvwz[1]) / (real)a->nu_size, uvwz[2], uvwz[3], v0);
+  texture_3d(tex, wd, a->mu_size, a->r_size, (x0 + R(1.0) + uvwz[1]) / (real)a->nu_size, uvwz[2], uvwz[3], v1);
+  for (int c = 0; c < NCH; ++c) out[c] = v0[c] * (R(1.0) - f) + v1[c] * f;
+}
+FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
+                       int hits_ground, real* out) {
+  real uvwz[4];
+  scattering_uvwz(a, h, mu, mu_s, nu, hits_ground, uvwz);
+  scattering_lookup(a, tex, uvwz, out);
+}
+FN void get_irradiance(const AtmosphereParameters* a, GLOBAL const real* E, real h, real mu_s, real* out) {
+  real u, v;
+  irradiance_uv(a, h, mu_s, &u, &v);
+  texture_2d(E, a->irradiance_w, a->irradiance_h, u, v, out);
+}
+/* get_irradiance at h = 0: v is the centre of row 0, so the bilinear filter is a lerp along
+ * that row at x = u·W − 0.5 = (0.5 μ_s + 0.5)(W − 1). */
+FN void get_ground_irradiance(const AtmosphereParameters* a, GLOBAL const real* E, real mu_s, real* out) {
+  const int w = a->irradiance_w;
+  const real x = (mu_s * R(0.5) + R(0.5)) * (real)(w - 1);
+  const real x0 = floor(x);
+  const real f = x - x0;
+  GLOBAL const real* t0 = E + clamp_int((int)x0, 0, w - 1) * NCH;
+  GLOBAL const real* t1 = E + clamp_int((int)x0 + 1, 0, w - 1) * NCH;
+  for (int c = 0; c < NCH; ++c) out[c] = (R(1.0) - f) * t0[c] + f * t1[c];
 }
 
-/* ---- scattering lookups -------------------------------------------------------------- */
 /* Values of the NU slices of a scattering texture at fixed (u_mu_s, u_mu, u_r): slice s is
  * the trilinear lookup at x = (s + u_mu_s)/NU. Since u_mu_s keeps half a texel from both
  * ends, the filter never mixes two slices. */
@@ -432,25 +529,6 @@ FN void lerp_slices(const AtmosphereParameters* a, const real* slices, real nu, 
   const int s0 = clamp_int((int)x0, 0, a->nu_size - 1), s1 = clamp_int((int)x0 + 1, 0, a->nu_size - 1);
   for (int c = 0; c < NCH; ++c) out[c] = slices[s0 * NCH + c] * (R(1.0) - f) + slices[s1 * NCH + c] * f;
 }
-/* The reference's GetScattering: two trilinear lookups around nu. */
-FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real r, real mu, real mu_s, real nu,
-                       int hits_ground, real* out) {
-  real uvwz[4];
-  scattering_uvwz(a, r, mu, mu_s, nu, hits_ground, uvwz);
-  const int wd = a->nu_size * a->mu_s_size;
-  const real x = clamp_real(uvwz[0], R(0.0), R(1.0)) * (real)(a->nu_size - 1);
-  const real x0 = floor(x);
-  const real f = x - x0;
-  real v0[NCH], v1[NCH];
-  texture_3d(tex, wd, a->mu_size, a->r_size, (x0 + uvwz[1]) / (real)a->nu_size, uvwz[2], uvwz[3], v0);
-  texture_3d(tex, wd, a->mu_size, a->r_size, (x0 + R(1.0) + uvwz[1]) / (real)a->nu_size, uvwz[2], uvwz[3], v1);
-  for (int c = 0; c < NCH; ++c) out[c] = v0[c] * (R(1.0) - f) + v1[c] * f;
-}
-FN void get_irradiance(const AtmosphereParameters* a, GLOBAL const real* E, real r, real mu_s, real* out) {
-  real u, v;
-  irradiance_uv(a, r, mu_s, &u, &v);
-  texture_2d(E, a->irradiance_w, a->irradiance_h, u, v, out);
-}
 
 /* Radiance of order `order` − 1 arriving along a direction with cosine nu to the sun, from
  * precomputed slices: order 2 reads single Rayleigh/Mie (no phase function stored, so the
@@ -466,30 +544,165 @@ FN void incident_from_slices(const AtmosphereParameters* a, const real* slices_r
   }
 }
 
+/* ---- ray samples (single and multiple scattering, 50-interval trapezoid) -------------- */
+/* Entry i of the ray-sample table of the ray (h, mu, hits_ground) of length d_b (to the
+ * nearest boundary): dx = d_b / 50, fixed = transmittance_fixed_end(h, mu, hits_ground).
+ * Samples are placed by their distance to the ray's end, e = (50 − i) dx, which also gives
+ * their own distance to the boundary (for u_mu) without a discriminant. */
+FN void ray_sample(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, int hits_ground, real d_b,
+                   const real* fixed, int i, real* s) {
+  const real dx = d_b / (real)SCATTERING_STEPS;
+  const real d_i = (real)i * dx, e = (real)(SCATTERING_STEPS - i) * dx;
+  const real r = radius_of(a, h);
+  real h_i, mu_i;
+  if (hits_ground) {
+    /* r_g μ_g at the ground point, (ρ² − d_b²)/(2 d_b): 0 for the tangent row, exactly */
+    const real rho = horizon_distance(a, h);
+    const real up = d_b > R(0.0) ? (rho - d_b) * (rho + d_b) / (R(2.0) * d_b) : R(0.0);
+    h_i = clamp_altitude(a, altitude_of_rho2(a, e * (e + R(2.0) * fmax(up, R(0.0)))));
+    mu_i = clamp_cosine(-(fmax(up, R(0.0)) + e) / radius_of(a, h_i));
+  } else {
+    h_i = clamp_altitude(a, altitude_along(a, h, mu, d_i));
+    mu_i = clamp_cosine((r * mu + d_i) / radius_of(a, h_i));
+  }
+  const real r_i = radius_of(a, h_i);
+  s[RAY_H] = h_i;
+  s[RAY_A] = r / r_i;
+  s[RAY_B] = d_i / r_i;
+  s[RAY_U_MU] = scattering_u_mu_of_distance(a, h_i, horizon_distance(a, h_i), e, hits_ground);
+  s[RAY_U_R] = scattering_u_r(a, h_i);
+  s[RAY_W] = ((i == 0 || i == SCATTERING_STEPS) ? R(0.5) : R(1.0)) * dx;
+  s[RAY_RHO_R] = profile_density(&a->rayleigh_density, h_i);
+  s[RAY_RHO_M] = profile_density(&a->mie_density, h_i);
+  transmittance_ratio(a, T, h_i, mu_i, hits_ground, fixed, s + RAY_T);
+}
+/* mu_s at a sample: (r mu_s + d_i nu) / r_i. */
+FN real ray_sample_mu_s(const real* s, real mu_s, real nu) { return clamp_cosine(s[RAY_A] * mu_s + s[RAY_B] * nu); }
+
+/* ---- single scattering (paper Eq. 8–9; no phase function) ----------------------------- */
+/* One sample's contribution to the sums of single_scattering(). */
+FN void single_scattering_add(const AtmosphereParameters* a, GLOBAL const real* T, const real* s, real mu_s, real nu,
+                              real* sum_r, real* sum_m) {
+  real t_sun[NCH];
+  transmittance_to_sun(a, T, s[RAY_H], ray_sample_mu_s(s, mu_s, nu), t_sun);
+  const real wr = s[RAY_RHO_R] * s[RAY_W], wm = s[RAY_RHO_M] * s[RAY_W];
+  for (int c = 0; c < NCH; ++c) {
+    const real t = s[RAY_T + c] * t_sun[c];
+    sum_r[c] += t * wr;
+    sum_m[c] += t * wm;
+  }
+}
+FN void single_scattering_finish(const AtmosphereParameters* a, const real* sum_r, const real* sum_m, real* rayleigh,
+                                 real* mie) {
+  for (int c = 0; c < NCH; ++c) {
+    rayleigh[c] = sum_r[c] * a->solar_irradiance[c] * a->rayleigh_scattering[c];
+    mie[c] = sum_m[c] * a->solar_irradiance[c] * a->mie_scattering[c];
+  }
+}
+/* Single scattering along the ray (h, mu) of length d_b to its boundary. */
+FN void single_scattering_ray(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, real d_b,
+                              int hits_ground, real mu_s, real nu, real* rayleigh, real* mie) {
+  real sum_r[NCH], sum_m[NCH], fixed[NCH], s[RAY_STRIDE];
+  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = R(0.0);
+  transmittance_fixed_end(a, T, h, mu, hits_ground, fixed);
+  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+    ray_sample(a, T, h, mu, hits_ground, d_b, fixed, i, s);
+    single_scattering_add(a, T, s, mu_s, nu, sum_r, sum_m);
+  }
+  single_scattering_finish(a, sum_r, sum_m, rayleigh, mie);
+}
+FN void single_scattering(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, real mu_s, real nu,
+                          int hits_ground, real* rayleigh, real* mie) {
+  single_scattering_ray(a, T, h, mu, distance_to_nearest_boundary(a, h, mu, hits_ground), hits_ground, mu_s, nu,
+                        rayleigh, mie);
+}
+
+/* ---- multiple scattering of order n (paper Eq. 7, 50-interval trapezoid) --------------- */
+FN void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const real* J, const real* s, real mu_s, real nu,
+                                real* out) {
+  real uvwz[4], j[NCH];
+  uvwz[0] = (nu + R(1.0)) * R(0.5);
+  uvwz[1] = scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s, nu));
+  uvwz[2] = s[RAY_U_MU];
+  uvwz[3] = s[RAY_U_R];
+  scattering_lookup(a, J, uvwz, j);
+  for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
+}
+/* Multiple scattering along the ray (h, mu) of length d_b to its boundary. */
+FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J, real h,
+                                real mu, real d_b, int hits_ground, real mu_s, real nu, real* out) {
+  real fixed[NCH], s[RAY_STRIDE];
+  for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
+  transmittance_fixed_end(a, T, h, mu, hits_ground, fixed);
+  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+    ray_sample(a, T, h, mu, hits_ground, d_b, fixed, i, s);
+    multiple_scattering_add(a, J, s, mu_s, nu, out);
+  }
+}
+
 /* ---- scattering density J_n (paper Eq. 7's integrand, 16 × 32 midpoint rule) ---------- */
+/* Entry of the density-incidence table: what the 32 φ of incident direction θ_l share at
+ * (h, mu_s): the ν-slices of the incoming radiance, and the ground seen along θ_l. */
+#define INC_FIXED 6 /* ground flag, distance, n_z, 1/|n|, cos θ, sin θ */
+FN int incidence_stride(const AtmosphereParameters* a) { return 2 * a->nu_size * NCH + NCH + INC_FIXED; }
+#define INC_SOURCE(a) 0                                     /* NU × NCH: order − 1 (Rayleigh at order 2) */
+#define INC_MIE(a) ((a)->nu_size * NCH)                     /* NU × NCH: single Mie (order 2 only) */
+#define INC_GROUND_TERM(a) (2 * (a)->nu_size * NCH)         /* NCH: T to the ground × albedo / π */
+#define INC_GROUND(a) (INC_GROUND_TERM(a) + NCH)            /* 1 if the direction hits the ground */
+#define INC_DISTANCE(a) (INC_GROUND(a) + 1)                 /* distance to the ground, km */
+#define INC_NZ(a) (INC_GROUND(a) + 2)                       /* ground normal r + cos θ · distance */
+#define INC_INV_N(a) (INC_GROUND(a) + 3)                    /* 1 / |ground normal| (does not depend on φ) */
+#define INC_COS(a) (INC_GROUND(a) + 4)
+#define INC_SIN(a) (INC_GROUND(a) + 5)
+#define INC_MAX (2 * NU_MAX * NCH + NCH + INC_FIXED)
+
 /* delta_rayleigh/delta_mie: single scattering (used when order == 2); delta_multiple:
- * radiance of order n − 1 (order > 2); delta_irradiance: ground irradiance of order n − 2
- * (direct for order 2). Result per km per sr. */
-FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* delta_rayleigh,
-                           GLOBAL const real* delta_mie, GLOBAL const real* delta_multiple,
-                           GLOBAL const real* delta_irradiance, real r, real mu, real mu_s, real nu, int order,
+ * radiance of order n − 1 (order > 2). */
+FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* delta_rayleigh,
+                          GLOBAL const real* delta_mie, GLOBAL const real* delta_multiple, real h, real mu_s,
+                          int order, int l, real* e) {
+  const real theta = ((real)l + R(0.5)) * (ATM_PI / (real)DENSITY_SPHERE_STEPS);
+  const real cos_theta = cos(theta), sin_theta = sin(theta);
+  const int ground = ray_hits_ground(a, h, cos_theta);
+  real distance = R(0.0);
+  for (int c = 0; c < NCH; ++c) e[INC_GROUND_TERM(a) + c] = R(0.0);
+  if (ground) {
+    distance = distance_to_bottom(a, h, cos_theta);
+    transmittance_along(a, T, h, cos_theta, distance, 1, e + INC_GROUND_TERM(a));
+    for (int c = 0; c < NCH; ++c) e[INC_GROUND_TERM(a) + c] *= a->ground_albedo[c] / ATM_PI;
+  }
+  /* ground normal n = r·z + distance·omega_i */
+  const real n_z = radius_of(a, h) + cos_theta * distance;
+  const real n_xy = sin_theta * distance;
+  e[INC_GROUND(a)] = ground ? R(1.0) : R(0.0);
+  e[INC_DISTANCE(a)] = distance;
+  e[INC_NZ(a)] = n_z;
+  e[INC_INV_N(a)] = R(1.0) / sqrt(n_xy * n_xy + n_z * n_z);
+  e[INC_COS(a)] = cos_theta;
+  e[INC_SIN(a)] = sin_theta;
+  real uvwz[4];
+  scattering_uvwz(a, h, cos_theta, mu_s, R(0.0), ground, uvwz);
+  scattering_slices(a, order == 2 ? delta_rayleigh : delta_multiple, uvwz[1], uvwz[2], uvwz[3], e + INC_SOURCE(a));
+  if (order == 2) scattering_slices(a, delta_mie, uvwz[1], uvwz[2], uvwz[3], e + INC_MIE(a));
+}
+
+/* J_n at (h, mu, mu_s, nu) from the 16 incidence entries of (h, mu_s) and the ground
+ * irradiance of order n − 2 (direct for order 2). Result per km per sr. */
+FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* incidence,
+                           GLOBAL const real* delta_irradiance, real h, real mu, real mu_s, real nu, int order,
                            real* out) {
-  const real omega[3] = {sqrt(fmax(R(1.0) - mu * mu, R(0.0))), R(0.0), mu};
-  const real sun_x = omega[0] == R(0.0) ? R(0.0) : (nu - mu * mu_s) / omega[0];
+  const real omega_x = sqrt(fmax(R(1.0) - mu * mu, R(0.0)));
+  const real sun_x = omega_x == R(0.0) ? R(0.0) : (nu - mu * mu_s) / omega_x;
   const real sun_y = sqrt(fmax(R(1.0) - sun_x * sun_x - mu_s * mu_s, R(0.0)));
-  const real omega_s[3] = {sun_x, sun_y, mu_s};
   const real d_angle = ATM_PI / (real)DENSITY_SPHERE_STEPS;
-  const real rho_r = profile_density(&a->rayleigh_density, r - a->bottom_radius);
-  const real rho_m = profile_density(&a->mie_density, r - a->bottom_radius);
+  const real rho_r = profile_density(&a->rayleigh_density, h);
+  const real rho_m = profile_density(&a->mie_density, h);
   real beta_r[NCH], beta_m[NCH];
   for (int c = 0; c < NCH; ++c) {
     beta_r[c] = a->rayleigh_scattering[c] * rho_r;
     beta_m[c] = a->mie_scattering[c] * rho_m;
     out[c] = R(0.0);
   }
-  GLOBAL const real* source = order == 2 ? delta_rayleigh : delta_multiple;
-  real slices_r[NU_MAX * NCH], slices_m[NU_MAX * NCH];
-  real uvwz[4];
   /* phi_m and 2π − phi_m share cos(phi) (so the phase functions, since omega_y = 0) and the
    * length of the ground normal: the loop visits them in pairs, sin(phi) = ±sin_phi[m]. */
   real cos_phi[DENSITY_SPHERE_STEPS], sin_phi[DENSITY_SPHERE_STEPS];
@@ -498,42 +711,29 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* T, 
     cos_phi[m] = cos(phi);
     sin_phi[m] = sin(phi);
   }
+  const int stride = incidence_stride(a);
+  real e[INC_MAX];
   for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
-    const real theta = ((real)l + R(0.5)) * d_angle;
-    const real cos_theta = cos(theta), sin_theta = sin(theta);
-    const int ground = ray_hits_ground(a, r, cos_theta);
-    real distance_to_ground = R(0.0);
-    real ground_term[NCH]; /* T to the ground × albedo / π */
-    for (int c = 0; c < NCH; ++c) ground_term[c] = R(0.0);
-    if (ground) {
-      distance_to_ground = distance_to_bottom(a, r, cos_theta);
-      transmittance_along(a, T, r, cos_theta, distance_to_ground, 1, ground_term);
-      for (int c = 0; c < NCH; ++c) ground_term[c] *= a->ground_albedo[c] / ATM_PI;
-    }
-    /* ground normal n = r·z + distance·omega_i: |n| does not depend on phi */
-    const real n_z = r + cos_theta * distance_to_ground;
-    const real n_xy = sin_theta * distance_to_ground;
-    const real inv_n = R(1.0) / sqrt(n_xy * n_xy + n_z * n_z);
-    /* (u_mu_s, u_mu, u_r) are the same for every phi: look the slices up once per theta. */
-    scattering_uvwz(a, r, cos_theta, mu_s, R(0.0), ground, uvwz);
-    scattering_slices(a, source, uvwz[1], uvwz[2], uvwz[3], slices_r);
-    if (order == 2) scattering_slices(a, delta_mie, uvwz[1], uvwz[2], uvwz[3], slices_m);
+    for (int k = 0; k < stride; ++k) e[k] = incidence[l * stride + k];
+    const int ground = e[INC_GROUND(a)] != R(0.0);
+    const real cos_theta = e[INC_COS(a)], sin_theta = e[INC_SIN(a)];
+    const real distance = e[INC_DISTANCE(a)], n_z = e[INC_NZ(a)], inv_n = e[INC_INV_N(a)];
     const real d_omega = d_angle * d_angle * sin_theta;
     for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
       const real wx = cos_phi[m] * sin_theta, wy = sin_phi[m] * sin_theta;
-      const real nu2 = wx * omega[0] + cos_theta * omega[2];
+      const real nu2 = wx * omega_x + cos_theta * mu;
       const real pr = rayleigh_phase(nu2) * d_omega, pm = mie_phase(a->mie_g, nu2) * d_omega;
+      const real along = wx * sun_x + cos_theta * mu_s;
       real incident[NCH], pair[NCH];
       for (int c = 0; c < NCH; ++c) pair[c] = R(0.0);
       for (int side = 0; side < 2; ++side) {
         const real wy_s = side == 0 ? wy : -wy;
-        incident_from_slices(a, slices_r, slices_m, wx * omega_s[0] + wy_s * omega_s[1] + cos_theta * omega_s[2],
-                             order, incident);
+        incident_from_slices(a, e + INC_SOURCE(a), e + INC_MIE(a), along + wy_s * sun_y, order, incident);
         if (ground) {
-          const real mu_g = (distance_to_ground * (wx * omega_s[0] + wy_s * omega_s[1]) + n_z * omega_s[2]) * inv_n;
-          real e[NCH];
-          get_irradiance(a, delta_irradiance, a->bottom_radius, mu_g, e);
-          for (int c = 0; c < NCH; ++c) incident[c] += ground_term[c] * e[c];
+          const real mu_g = (distance * (wx * sun_x + wy_s * sun_y) + n_z * mu_s) * inv_n;
+          real g[NCH];
+          get_ground_irradiance(a, delta_irradiance, mu_g, g);
+          for (int c = 0; c < NCH; ++c) incident[c] += e[INC_GROUND_TERM(a) + c] * g[c];
         }
         for (int c = 0; c < NCH; ++c) pair[c] += incident[c];
       }
@@ -542,40 +742,21 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* T, 
   }
 }
 
-/* ---- multiple scattering of order n (paper Eq. 7, 50-interval trapezoid) --------------- */
-FN void multiple_scattering(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J, real r,
-                            real mu, real mu_s, real nu, int hits_ground, real* out) {
-  const real dx = distance_to_nearest_boundary(a, r, mu, hits_ground) / (real)SCATTERING_STEPS;
-  real j[NCH], t[NCH], t_fixed[NCH];
-  for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
-  transmittance_fixed_end(a, T, r, mu, hits_ground, t_fixed);
-  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
-    const real d_i = (real)i * dx;
-    const real r_i = clamp_radius(a, radius_along(r, mu, d_i));
-    const real mu_i = clamp_cosine((r * mu + d_i) / r_i);
-    const real mu_s_i = clamp_cosine((r * mu_s + d_i * nu) / r_i);
-    get_scattering(a, J, r_i, mu_i, mu_s_i, nu, hits_ground, j);
-    transmittance_along_from(a, T, r, mu, d_i, hits_ground, t_fixed, t);
-    const real w = ((i == 0 || i == SCATTERING_STEPS) ? R(0.5) : R(1.0)) * dx;
-    for (int c = 0; c < NCH; ++c) out[c] += j[c] * t[c] * w;
-  }
-}
-
 /* ---- ground irradiance ---------------------------------------------------------------- */
-/* Direct sun on a horizontal surface: E_sun T(r, mu_s) × the mean cosine over the visible
+/* Direct sun on a horizontal surface: E_sun T(h, mu_s) × the mean cosine over the visible
  * part of the sun disc. */
-FN void direct_irradiance(const AtmosphereParameters* a, GLOBAL const real* T, real r, real mu_s, real* out) {
+FN void direct_irradiance(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu_s, real* out) {
   const real alpha = a->sun_angular_radius;
   const real cos_factor = mu_s < -alpha ? R(0.0)
                           : (mu_s > alpha ? mu_s : (mu_s + alpha) * (mu_s + alpha) / (R(4.0) * alpha));
-  transmittance_to_top(a, T, r, mu_s, out);
+  transmittance_to_top(a, T, h, mu_s, out);
   for (int c = 0; c < NCH; ++c) out[c] *= a->solar_irradiance[c] * cos_factor;
 }
-/* Sky irradiance from scattering of order `order` (≥ 1) on a horizontal surface at r:
+/* Sky irradiance from scattering of order `order` (≥ 1) on a horizontal surface at h:
  * ∫_hemisphere L(ω) ω_z dω, 16 × 64 midpoint rule. Every ray is looked up as not hitting
  * the ground, as the reference does. */
 FN void indirect_irradiance(const AtmosphereParameters* a, GLOBAL const real* delta_rayleigh,
-                            GLOBAL const real* delta_mie, GLOBAL const real* delta_multiple, real r, real mu_s,
+                            GLOBAL const real* delta_mie, GLOBAL const real* delta_multiple, real h, real mu_s,
                             int order, real* out) {
   const real d_angle = ATM_PI / (real)IRRADIANCE_HEMISPHERE_STEPS;
   const real omega_s[3] = {sqrt(fmax(R(1.0) - mu_s * mu_s, R(0.0))), R(0.0), mu_s};
@@ -585,7 +766,7 @@ FN void indirect_irradiance(const AtmosphereParameters* a, GLOBAL const real* de
   for (int j = 0; j < IRRADIANCE_HEMISPHERE_STEPS / 2; ++j) {
     const real theta = ((real)j + R(0.5)) * d_angle;
     const real cos_theta = cos(theta), sin_theta = sin(theta);
-    scattering_uvwz(a, r, cos_theta, mu_s, R(0.0), 0, uvwz);
+    scattering_uvwz(a, h, cos_theta, mu_s, R(0.0), 0, uvwz);
     scattering_slices(a, source, uvwz[1], uvwz[2], uvwz[3], slices_r);
     if (order == 1) scattering_slices(a, delta_mie, uvwz[1], uvwz[2], uvwz[3], slices_m);
     const real w = d_angle * d_angle * sin_theta * cos_theta;
@@ -600,11 +781,13 @@ FN void indirect_irradiance(const AtmosphereParameters* a, GLOBAL const real* de
 }
 
 /* ---- rendering from the final textures (the reference's GetSkyRadiance & co.) ----------
- * scattering: single Rayleigh + Σ multiple / P_R (no phase); single_mie: single Mie. */
-FN void combined_scattering(const AtmosphereParameters* a, GLOBAL const real* S, GLOBAL const real* M, real r,
+ * scattering: single Rayleigh + Σ multiple / P_R (no phase); single_mie: single Mie.
+ * These take camera positions as vectors from the planet centre and derive h = |x| − rb:
+ * they are used on the host in double only. */
+FN void combined_scattering(const AtmosphereParameters* a, GLOBAL const real* S, GLOBAL const real* M, real h,
                             real mu, real mu_s, real nu, int hits_ground, real* scattering, real* single_mie) {
-  get_scattering(a, S, r, mu, mu_s, nu, hits_ground, scattering);
-  get_scattering(a, M, r, mu, mu_s, nu, hits_ground, single_mie);
+  get_scattering(a, S, h, mu, mu_s, nu, hits_ground, scattering);
+  get_scattering(a, M, h, mu, mu_s, nu, hits_ground, single_mie);
 }
 
 /* Sky radiance seen from `camera` (km, planet centre at the origin) along the unit vector
@@ -629,22 +812,24 @@ FN void sky_radiance(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL
     }
     return;
   }
+  const real h = r - a->bottom_radius;
   const real mu = rmu / r, mu_s = dot3(camera, sun) / r, nu = dot3(view, sun);
-  const int ground = ray_hits_ground(a, r, mu);
+  const int ground = ray_hits_ground(a, h, mu);
   if (ground) {
     for (int c = 0; c < NCH; ++c) transmittance[c] = R(0.0);
   } else {
-    transmittance_to_top(a, T, r, mu, transmittance);
+    transmittance_to_top(a, T, h, mu, transmittance);
   }
   real s[NCH], m[NCH];
   if (shadow_length == R(0.0)) {
-    combined_scattering(a, S, M, r, mu, mu_s, nu, ground, s, m);
+    combined_scattering(a, S, M, h, mu, mu_s, nu, ground, s, m);
   } else {
     const real d = shadow_length;
-    const real r_p = clamp_radius(a, radius_along(r, mu, d));
-    combined_scattering(a, S, M, r_p, (r * mu + d) / r_p, (r * mu_s + d * nu) / r_p, nu, ground, s, m);
+    const real h_p = clamp_altitude(a, altitude_along(a, h, mu, d));
+    const real r_p = radius_of(a, h_p);
+    combined_scattering(a, S, M, h_p, (r * mu + d) / r_p, (r * mu_s + d * nu) / r_p, nu, ground, s, m);
     real t[NCH];
-    transmittance_along(a, T, r, mu, shadow_length, ground, t);
+    transmittance_along(a, T, h, mu, shadow_length, ground, t);
     for (int c = 0; c < NCH; ++c) {
       s[c] *= t[c];
       m[c] *= t[c];
@@ -670,18 +855,20 @@ FN void sky_radiance_to_point(const AtmosphereParameters* a, GLOBAL const real* 
     r = a->top_radius;
     rmu += d_top;
   }
+  const real h = r - a->bottom_radius;
   const real mu = rmu / r, mu_s = dot3(camera, sun) / r, nu = dot3(view, sun);
   const real to_point[3] = {point[0] - camera[0], point[1] - camera[1], point[2] - camera[2]};
   real d = sqrt(dot3(to_point, to_point));
-  const int ground = ray_hits_ground(a, r, mu);
-  transmittance_along(a, T, r, mu, d, ground, transmittance);
+  const int ground = ray_hits_ground(a, h, mu);
+  transmittance_along(a, T, h, mu, d, ground, transmittance);
   real s[NCH], m[NCH], s_p[NCH], m_p[NCH], shadow_t[NCH];
-  combined_scattering(a, S, M, r, mu, mu_s, nu, ground, s, m);
+  combined_scattering(a, S, M, h, mu, mu_s, nu, ground, s, m);
   d = fmax(d - shadow_length, R(0.0));
-  const real r_p = clamp_radius(a, radius_along(r, mu, d));
-  combined_scattering(a, S, M, r_p, (r * mu + d) / r_p, (r * mu_s + d * nu) / r_p, nu, ground, s_p, m_p);
+  const real h_p = clamp_altitude(a, altitude_along(a, h, mu, d));
+  const real r_p = radius_of(a, h_p);
+  combined_scattering(a, S, M, h_p, (r * mu + d) / r_p, (r * mu_s + d * nu) / r_p, nu, ground, s_p, m_p);
   if (shadow_length > R(0.0)) {
-    transmittance_along(a, T, r, mu, d, ground, shadow_t);
+    transmittance_along(a, T, h, mu, d, ground, shadow_t);
   } else {
     for (int c = 0; c < NCH; ++c) shadow_t[c] = transmittance[c];
   }
@@ -702,11 +889,12 @@ FN void sun_and_sky_irradiance(const AtmosphereParameters* a, GLOBAL const real*
                                const real* point, const real* normal, const real* sun, real* sun_irradiance,
                                real* sky_irradiance) {
   const real r = sqrt(dot3(point, point));
+  const real h = r - a->bottom_radius;
   const real mu_s = dot3(point, sun) / r;
-  get_irradiance(a, E, r, mu_s, sky_irradiance);
+  get_irradiance(a, E, h, mu_s, sky_irradiance);
   const real tilt = (R(1.0) + dot3(normal, point) / r) * R(0.5);
   for (int c = 0; c < NCH; ++c) sky_irradiance[c] *= tilt;
-  transmittance_to_sun(a, T, r, mu_s, sun_irradiance);
+  transmittance_to_sun(a, T, h, mu_s, sun_irradiance);
   const real cos_n = fmax(dot3(normal, sun), R(0.0));
   for (int c = 0; c < NCH; ++c) sun_irradiance[c] *= a->solar_irradiance[c] * cos_n;
 }

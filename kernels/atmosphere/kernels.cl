@@ -1,6 +1,9 @@
-/* kernels.cl — OpenCL entry points of the atmosphere job: one work item per texel. The maths
- * is in atmosphere.cl. Textures are row-major with NCH channels innermost:
- *   transmittance [h][w][NCH], irradiance [h][w][NCH], scattering [R][MU][NU·MU_S][NCH].
+/* kernels.cl — OpenCL entry points of the atmosphere job: one work item per texel (or per
+ * table entry). The maths is in atmosphere.cl. Textures are row-major with NCH channels
+ * innermost:
+ *   transmittance [h][w][NCH], irradiance [h][w][NCH], scattering [R][MU][NU·MU_S][NCH],
+ *   ray samples [R][MU][SCATTERING_STEPS + 1][RAY_STRIDE],
+ *   density incidence [R][MU_S][DENSITY_SPHERE_STEPS][incidence_stride].
  * Built with -DNCH=<channels> -DNU_MAX=<NU> (real = float unless SPECBAKE_REAL_DOUBLE). */
 #include "atmosphere/atmosphere.cl"
 
@@ -22,10 +25,10 @@ __kernel void transmittance_texture(AtmosphereParameters a, __global real* T) {
   const int id = get_global_id(0);
   if (id >= a.transmittance_w * a.transmittance_h) return;
   const int i = id % a.transmittance_w, j = id / a.transmittance_w;
-  real r, mu, t[NCH];
-  r_mu_from_transmittance_uv(&a, ((real)i + R(0.5)) / (real)a.transmittance_w,
-                             ((real)j + R(0.5)) / (real)a.transmittance_h, &r, &mu);
-  transmittance_to_top_integral(&a, r, mu, 1, t);
+  real h, mu, t[NCH];
+  h_mu_from_transmittance_uv(&a, ((real)i + R(0.5)) / (real)a.transmittance_w,
+                             ((real)j + R(0.5)) / (real)a.transmittance_h, &h, &mu);
+  transmittance_to_top_integral(&a, h, mu, 1, t);
   for (int c = 0; c < NCH; ++c) T[id * NCH + c] = t[c];
 }
 
@@ -33,44 +36,84 @@ __kernel void direct_irradiance_texture(AtmosphereParameters a, __global const r
   const int id = get_global_id(0);
   if (id >= a.irradiance_w * a.irradiance_h) return;
   const int i = id % a.irradiance_w, j = id / a.irradiance_w;
-  real r, mu_s, e[NCH];
-  r_mu_s_from_irradiance_uv(&a, ((real)i + R(0.5)) / (real)a.irradiance_w, ((real)j + R(0.5)) / (real)a.irradiance_h,
-                            &r, &mu_s);
-  direct_irradiance(&a, T, r, mu_s, e);
+  real h, mu_s, e[NCH];
+  h_mu_s_from_irradiance_uv(&a, ((real)i + R(0.5)) / (real)a.irradiance_w, ((real)j + R(0.5)) / (real)a.irradiance_h,
+                            &h, &mu_s);
+  direct_irradiance(&a, T, h, mu_s, e);
   for (int c = 0; c < NCH; ++c) delta_E[id * NCH + c] = e[c];
 }
 
 /* id → (x, y, z) of the scattering texture and its parameters. */
-void texel_params(const AtmosphereParameters* a, int id, real* r, real* mu, real* mu_s, real* nu, int* ground) {
+void texel_params(const AtmosphereParameters* a, int id, int* x, int* y, int* z, real* h, real* mu, real* mu_s,
+                  real* nu, int* ground) {
   const int wd = a->nu_size * a->mu_s_size;
-  const int x = id % wd, y = (id / wd) % a->mu_size, z = id / (wd * a->mu_size);
-  scattering_params_from_texel(a, x, y, z, r, mu, mu_s, nu, ground);
+  *x = id % wd;
+  *y = (id / wd) % a->mu_size;
+  *z = id / (wd * a->mu_size);
+  scattering_params_from_texel(a, *x, *y, *z, h, mu, mu_s, nu, ground);
 }
 
-__kernel void single_scattering_texture(AtmosphereParameters a, __global const real* T, __global real* delta_R,
+/* Entry i of the ray of texel row (z, y): one work item per entry. */
+__kernel void ray_sample_table(AtmosphereParameters a, __global const real* T, __global real* samples) {
+  const int id = get_global_id(0);
+  const int n = SCATTERING_STEPS + 1;
+  if (id >= a.r_size * a.mu_size * n) return;
+  const int i = id % n, y = (id / n) % a.mu_size, z = id / (n * a.mu_size);
+  real h, mu, d, fixed[NCH], s[RAY_STRIDE];
+  int ground;
+  scattering_ray_of_texel(&a, y, z, &h, &mu, &d, &ground);
+  transmittance_fixed_end(&a, T, h, mu, ground, fixed);
+  ray_sample(&a, T, h, mu, ground, d, fixed, i, s);
+  for (int k = 0; k < RAY_STRIDE; ++k) samples[id * RAY_STRIDE + k] = s[k];
+}
+
+__kernel void single_scattering_texture(AtmosphereParameters a, __global const real* T,
+                                        __global const real* samples, __global real* delta_R,
                                         __global real* delta_M) {
   const int id = get_global_id(0);
   if (id >= a.r_size * a.mu_size * a.nu_size * a.mu_s_size) return;
-  real r, mu, mu_s, nu, ray[NCH], mie[NCH];
-  int ground;
-  texel_params(&a, id, &r, &mu, &mu_s, &nu, &ground);
-  single_scattering(&a, T, r, mu, mu_s, nu, ground, ray, mie);
+  real h, mu, mu_s, nu, sum_r[NCH], sum_m[NCH], s[RAY_STRIDE], ray[NCH], mie[NCH];
+  int x, y, z, ground;
+  texel_params(&a, id, &x, &y, &z, &h, &mu, &mu_s, &nu, &ground);
+  __global const real* row = samples + (z * a.mu_size + y) * (SCATTERING_STEPS + 1) * RAY_STRIDE;
+  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = R(0.0);
+  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+    for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
+    single_scattering_add(&a, T, s, mu_s, nu, sum_r, sum_m);
+  }
+  single_scattering_finish(&a, sum_r, sum_m, ray, mie);
   for (int c = 0; c < NCH; ++c) {
     delta_R[id * NCH + c] = ray[c];
     delta_M[id * NCH + c] = mie[c];
   }
 }
 
-__kernel void scattering_density_texture(AtmosphereParameters a, __global const real* T,
-                                         __global const real* delta_R, __global const real* delta_M,
-                                         __global const real* delta_S, __global const real* delta_E, int order,
-                                         __global real* J) {
+/* Entry (z, mu_s index, θ index) of the density-incidence table. */
+__kernel void density_incidence_table(AtmosphereParameters a, __global const real* T,
+                                      __global const real* delta_R, __global const real* delta_M,
+                                      __global const real* delta_S, int order, __global real* incidence) {
+  const int id = get_global_id(0);
+  if (id >= a.r_size * a.mu_s_size * DENSITY_SPHERE_STEPS) return;
+  const int l = id % DENSITY_SPHERE_STEPS, xs = (id / DENSITY_SPHERE_STEPS) % a.mu_s_size,
+            z = id / (DENSITY_SPHERE_STEPS * a.mu_s_size);
+  real h, mu, mu_s, nu, e[INC_MAX];
+  int ground;
+  scattering_params_from_texel(&a, xs, 0, z, &h, &mu, &mu_s, &nu, &ground);
+  density_incidence(&a, T, delta_R, delta_M, delta_S, h, mu_s, order, l, e);
+  const int stride = incidence_stride(&a);
+  for (int k = 0; k < stride; ++k) incidence[id * stride + k] = e[k];
+}
+
+__kernel void scattering_density_texture(AtmosphereParameters a, __global const real* incidence,
+                                         __global const real* delta_E, int order, __global real* J) {
   const int id = get_global_id(0);
   if (id >= a.r_size * a.mu_size * a.nu_size * a.mu_s_size) return;
-  real r, mu, mu_s, nu, j[NCH];
-  int ground;
-  texel_params(&a, id, &r, &mu, &mu_s, &nu, &ground);
-  scattering_density(&a, T, delta_R, delta_M, delta_S, delta_E, r, mu, mu_s, nu, order, j);
+  real h, mu, mu_s, nu, j[NCH];
+  int x, y, z, ground;
+  texel_params(&a, id, &x, &y, &z, &h, &mu, &mu_s, &nu, &ground);
+  __global const real* block =
+      incidence + (z * a.mu_s_size + x % a.mu_s_size) * DENSITY_SPHERE_STEPS * incidence_stride(&a);
+  scattering_density(&a, block, delta_E, h, mu, mu_s, nu, order, j);
   for (int c = 0; c < NCH; ++c) J[id * NCH + c] = j[c];
 }
 
@@ -80,20 +123,25 @@ __kernel void indirect_irradiance_texture(AtmosphereParameters a, __global const
   const int id = get_global_id(0);
   if (id >= a.irradiance_w * a.irradiance_h) return;
   const int i = id % a.irradiance_w, j = id / a.irradiance_w;
-  real r, mu_s, e[NCH];
-  r_mu_s_from_irradiance_uv(&a, ((real)i + R(0.5)) / (real)a.irradiance_w, ((real)j + R(0.5)) / (real)a.irradiance_h,
-                            &r, &mu_s);
-  indirect_irradiance(&a, delta_R, delta_M, delta_S, r, mu_s, order, e);
+  real h, mu_s, e[NCH];
+  h_mu_s_from_irradiance_uv(&a, ((real)i + R(0.5)) / (real)a.irradiance_w, ((real)j + R(0.5)) / (real)a.irradiance_h,
+                            &h, &mu_s);
+  indirect_irradiance(&a, delta_R, delta_M, delta_S, h, mu_s, order, e);
   for (int c = 0; c < NCH; ++c) delta_E[id * NCH + c] = e[c];
 }
 
-__kernel void multiple_scattering_texture(AtmosphereParameters a, __global const real* T, __global const real* J,
-                                          __global real* delta_S) {
+__kernel void multiple_scattering_texture(AtmosphereParameters a, __global const real* samples,
+                                          __global const real* J, __global real* delta_S) {
   const int id = get_global_id(0);
   if (id >= a.r_size * a.mu_size * a.nu_size * a.mu_s_size) return;
-  real r, mu, mu_s, nu, s[NCH];
-  int ground;
-  texel_params(&a, id, &r, &mu, &mu_s, &nu, &ground);
-  multiple_scattering(&a, T, J, r, mu, mu_s, nu, ground, s);
-  for (int c = 0; c < NCH; ++c) delta_S[id * NCH + c] = s[c];
+  real h, mu, mu_s, nu, out[NCH], s[RAY_STRIDE];
+  int x, y, z, ground;
+  texel_params(&a, id, &x, &y, &z, &h, &mu, &mu_s, &nu, &ground);
+  __global const real* row = samples + (z * a.mu_size + y) * (SCATTERING_STEPS + 1) * RAY_STRIDE;
+  for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
+  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+    for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
+    multiple_scattering_add(&a, J, s, mu_s, nu, out);
+  }
+  for (int c = 0; c < NCH; ++c) delta_S[id * NCH + c] = out[c];
 }

@@ -15,6 +15,7 @@ using nlohmann::json;
 
 constexpr int kMaxAxis = 4096;
 constexpr long long kMaxScatteringTexels = 1LL << 26;
+constexpr int kMaxNu = 64;  // NU_MAX of the double reference (kernels/atmosphere/atmosphere.cl)
 
 bool is_false(const At& at) { return at.node.IsScalar() && (at.node.Scalar() == "false" || at.node.Scalar() == "off"); }
 
@@ -151,7 +152,13 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
       if (s.scattering_mu % 2) sc.child("mu").fail("expected an even mu size (half for rays that hit the ground, half for the others)");
     }
     if (sc.has("mu_s")) s.scattering_mu_s = size_at(sc.child("mu_s"));
-    if (sc.has("nu")) s.scattering_nu = size_at(sc.child("nu"));
+    if (sc.has("nu")) {
+      s.scattering_nu = size_at(sc.child("nu"));
+      // the kernels keep one texel row of NU slices per channel in private arrays (NU_MAX)
+      if (s.scattering_nu > kMaxNu)
+        sc.child("nu").fail("expected a nu size of at most " + std::to_string(kMaxNu) + ", got " +
+                            std::to_string(s.scattering_nu));
+    }
     const long long texels = 1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu;
     if (texels > kMaxScatteringTexels)
       sc.fail("expected at most " + std::to_string(kMaxScatteringTexels) + " scattering texels, got " +

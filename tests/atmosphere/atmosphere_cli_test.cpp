@@ -31,7 +31,8 @@ TEST(AtmosphereCli, BakesABundleWithEveryFile) {
   EXPECT_EQ(m["parameters"]["orders"]["per_order"].size(), 3u);
   EXPECT_EQ(m["parameters"]["wavelengths_nm"].size(), 3u);
   EXPECT_TRUE(m["parameters"]["luminance_conversion"].contains("sky_spectral_radiance_to_luminance_lm_per_W"));
-  EXPECT_LE(m["accuracy"]["self_check"]["worst"].get<double>(), 0.25);
+  EXPECT_LE(m["accuracy"]["self_check"]["worst"].get<double>(), 2e-3);  // the job's bound (atmosphere_job.cpp)
+  EXPECT_TRUE(m["atmosphere"]["timings_s"]["total"].contains("scattering_density"));
   // shapes, outermost first
   EXPECT_EQ(read_f32(b / "transmittance.bin").size(), 8u * 32 * 3);
   EXPECT_EQ(read_f32(b / "irradiance.bin").size(), 4u * 16 * 3);

@@ -18,6 +18,8 @@ struct Baked {
   nlohmann::json passes;       // wavelengths of each pass, orders used
   nlohmann::json self_checks;  // device vs double reference, per stage
   double self_check_worst = 0.0;
+  // Wall seconds per stage summed over passes ("total" by stage name, "per_order" by order).
+  nlohmann::json timings;
 };
 // Runs every pass on the device (self_check_texels > 0: recompute that many texels of each
 // stage in double from the device's own inputs).

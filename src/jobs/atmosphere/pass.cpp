@@ -33,6 +33,11 @@ namespace {
 
 const char* kKernels = "kernels/atmosphere/kernels.cl";
 
+// Table shapes, from atmosphere.cl's macros (visible here through reference.hpp): ray samples
+// [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][DENSITY_SPHERE_STEPS][(2 NU + 1) NCH + INC_FIXED].
+constexpr int kScatteringSteps = SCATTERING_STEPS, kDensitySphereSteps = DENSITY_SPHERE_STEPS, kRayFixed = RAY_T,
+              kIncidenceFixed = INC_FIXED;
+
 // Parameter block, and the values the layout kernel must echo back.
 struct Block {
   std::vector<unsigned char> bytes;
@@ -76,7 +81,11 @@ class DeviceBackend final : public PassBackend {
     n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
     n_e_ = 1LL * sizes_.irradiance_w * sizes_.irradiance_h;
     n_s_ = sizes_.scattering_texels();
+    n_ray_ = 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1) * (kRayFixed + width);
+    n_inc_ = 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps * (2 * sizes_.nu * width + width + kIncidenceFixed);
     cl_util::checked("allocating atmosphere textures", [&] {
+      rays_ = alloc_reals(n_ray_);
+      incidence_ = alloc_reals(n_inc_);
       T_ = alloc(n_t_);
       dE_ = alloc(n_e_);
       dR_ = alloc(n_s_);
@@ -91,18 +100,31 @@ class DeviceBackend final : public PassBackend {
 
   void transmittance() override { launch("transmittance_texture", n_t_, {&T_}); }
   void direct_irradiance() override { launch("direct_irradiance_texture", n_e_, {&T_, &dE_}); }
-  void single_scattering() override { launch("single_scattering_texture", n_s_, {&T_, &dR_, &dM_}); }
+  // The ray-sample table depends on T only: built here, reused by every multiple_scattering().
+  void single_scattering() override {
+    launch("ray_sample_table", 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1), {&T_, &rays_});
+    launch("single_scattering_texture", n_s_, {&T_, &rays_, &dR_, &dM_});
+  }
   void scattering_density(int order) override {
-    cl_util::checked("scattering_density_texture", [&] {
-      cl::Kernel k(program_, "scattering_density_texture");
+    cl_util::checked("density_incidence_table", [&] {
+      cl::Kernel k(program_, "density_incidence_table");
       k.setArg(0, block_.bytes.size(), block_.bytes.data());
       k.setArg(1, T_);
       k.setArg(2, dR_);
       k.setArg(3, dM_);
       k.setArg(4, dS_);
-      k.setArg(5, dE_);
-      k.setArg(6, order);
-      k.setArg(7, J_);
+      k.setArg(5, order);
+      k.setArg(6, incidence_);
+      enqueue(k, 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps);
+      return 0;
+    });
+    cl_util::checked("scattering_density_texture", [&] {
+      cl::Kernel k(program_, "scattering_density_texture");
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      k.setArg(1, incidence_);
+      k.setArg(2, dE_);
+      k.setArg(3, order);
+      k.setArg(4, J_);
       enqueue(k, n_s_);
       return 0;
     });
@@ -120,7 +142,7 @@ class DeviceBackend final : public PassBackend {
       return 0;
     });
   }
-  void multiple_scattering() override { launch("multiple_scattering_texture", n_s_, {&T_, &J_, &dS_}); }
+  void multiple_scattering() override { launch("multiple_scattering_texture", n_s_, {&rays_, &J_, &dS_}); }
 
   std::vector<double> read(Tex t) override {
     const long long n = texels(t) * width_;
@@ -151,9 +173,10 @@ class DeviceBackend final : public PassBackend {
   }
 
  private:
-  cl::Buffer alloc(long long texels) {
+  cl::Buffer alloc(long long texels) { return alloc_reals(texels * width_); }
+  cl::Buffer alloc_reals(long long n) {
     return cl::Buffer(dev_.context(), CL_MEM_READ_WRITE,
-                      std::max<long long>(texels, 1) * width_ * (dbl_ ? sizeof(double) : sizeof(float)));
+                      std::max<long long>(n, 1) * (dbl_ ? sizeof(double) : sizeof(float)));
   }
   long long texels(Tex t) const {
     if (t == Tex::transmittance) return n_t_;
@@ -224,8 +247,8 @@ class DeviceBackend final : public PassBackend {
   bool dbl_;
   Block block_;
   cl::Program program_;
-  long long n_t_ = 0, n_e_ = 0, n_s_ = 0;
-  cl::Buffer T_, dE_, dR_, dM_, dS_, J_;
+  long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
+  cl::Buffer T_, dE_, dR_, dM_, dS_, J_, rays_, incidence_;
 };
 
 struct ChannelStats {
@@ -341,10 +364,10 @@ std::vector<double> inverse_rayleigh_phase(const Model& m) {
   const int wd = s.scattering_width();
   std::vector<double> out(s.scattering_texels());
   parallel_for(static_cast<long long>(out.size()), [&](long long id) {
-    double r, mu, mu_s, nu;
+    double h, mu, mu_s, nu;
     int ground;
     ref3::scattering_params_from_texel(&a, static_cast<int>(id % wd), static_cast<int>((id / wd) % s.mu),
-                                       static_cast<int>(id / (1LL * wd * s.mu)), &r, &mu, &mu_s, &nu, &ground);
+                                       static_cast<int>(id / (1LL * wd * s.mu)), &h, &mu, &mu_s, &nu, &ground);
     out[id] = 1.0 / ref3::rayleigh_phase(nu);
   });
   return out;
@@ -361,26 +384,39 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     done += cost;
     progress(stage, p0 + (p1 - p0) * std::min(1.0, done / total));
   };
-  auto hook = [&](const std::string& stage, int order) {
-    if (on_stage) on_stage(stage, order, b);
-  };
-  auto timed = [&](const char* what, int order, auto&& f) {
-    const auto t0 = std::chrono::steady_clock::now();
-    f();
-    spdlog::debug("atmosphere: {} (order {}) took {:.3f} s", what, order,
-                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-  };
-
   PassResult r;
   r.width = w;
+  using Clock = std::chrono::steady_clock;
+  auto last = Clock::now();  // end of the last timed stage: the time in between is host work
+  auto record = [&](const std::string& stage, int order, Clock::time_point t0) {
+    const auto t1 = Clock::now();
+    const double host = std::chrono::duration<double>(t0 - last).count();
+    if (host > 0.0) r.timings.push_back({"host", order, host});
+    const double sec = std::chrono::duration<double>(t1 - t0).count();
+    r.timings.push_back({stage, order, sec});
+    spdlog::debug("atmosphere: {} (order {}) took {:.3f} s", stage, order, sec);
+    last = t1;
+  };
+  auto hook = [&](const std::string& stage, int order) {
+    if (!on_stage) return;
+    const auto t0 = Clock::now();
+    on_stage(stage, order, b);
+    record("self_check", order, t0);
+  };
+  auto timed = [&](const char* what, int order, auto&& f) {
+    const auto t0 = Clock::now();
+    f();
+    record(what, order, t0);
+  };
+
   timed("transmittance", 0, [&] { b.transmittance(); });
   hook("transmittance", 0);
-  timed("direct irradiance", 0, [&] { b.direct_irradiance(); });
+  timed("direct_irradiance", 0, [&] { b.direct_irradiance(); });
   hook("direct_irradiance", 0);
   r.transmittance = b.read(Tex::transmittance);
   r.direct_irradiance = b.read(Tex::delta_irradiance);
   step("transmittance", 0.02);
-  timed("single scattering", 1, [&] { b.single_scattering(); });
+  timed("single_scattering", 1, [&] { b.single_scattering(); });
   hook("single_scattering", 1);
   r.scattering = b.read(Tex::delta_rayleigh);
   r.single_mie = b.read(Tex::delta_mie);
@@ -400,10 +436,10 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   r.converged = !plan.auto_orders;
   const std::vector<double> inv_phase = cap >= 2 ? inverse_rayleigh_phase(m) : std::vector<double>{};
   for (int n = 2; n <= cap; ++n) {
-    timed("scattering density", n, [&] { b.scattering_density(n); });
+    timed("scattering_density", n, [&] { b.scattering_density(n); });
     hook("scattering_density", n);
     step("scattering density", 0.55);
-    timed("indirect irradiance", n - 1, [&] { b.indirect_irradiance(n - 1); });
+    timed("indirect_irradiance", n - 1, [&] { b.indirect_irradiance(n - 1); });
     hook("indirect_irradiance", n - 1);
     const std::vector<double> dE = b.read(Tex::delta_irradiance);
     for (std::size_t i = 0; i < dE.size(); ++i) r.irradiance[i] += dE[i];
@@ -414,7 +450,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
       if (on_order) on_order(n - 1, {}, dE);
     }
     step("indirect irradiance", 0.02);
-    timed("multiple scattering", n, [&] { b.multiple_scattering(); });
+    timed("multiple_scattering", n, [&] { b.multiple_scattering(); });
     hook("multiple_scattering", n);
     std::vector<double> add = b.read(Tex::delta_multiple);
     for (std::size_t i = 0; i < add.size(); ++i) add[i] *= inv_phase[i / w];
@@ -435,6 +471,8 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
       break;
     }
   }
+  const double tail = std::chrono::duration<double>(Clock::now() - last).count();
+  if (tail > 0.0) r.timings.push_back({"host", r.orders_used, tail});
   return r;
 }
 

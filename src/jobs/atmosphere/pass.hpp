@@ -53,8 +53,15 @@ struct OrderStats {
   double relative = 0.0;  // max over texels of (what this order adds)/(accumulated), see docs
 };
 
+struct StageTime {
+  std::string stage;  // "transmittance", ..., "self_check" (the hooks), "host" (reads and sums between stages)
+  int order = 0;
+  double seconds = 0.0;  // wall time
+};
+
 struct PassResult {
   int width = 0;
+  std::vector<StageTime> timings;  // in the order they ran
   std::vector<double> transmittance, direct_irradiance, irradiance, scattering, single_mie;
   std::vector<OrderStats> orders;  // 1..orders_used (order 1: single scattering)
   int orders_used = 0;

@@ -46,18 +46,19 @@ Vec3 Renderer::sun_and_sky_irradiance(const Vec3& point, const Vec3& normal, con
 }
 Vec3 Renderer::scattering_3d(double r, double mu, double mu_s, double nu, bool ground, bool mie) const {
   Vec3 v{};
-  ref3::get_scattering(&impl_->a, mie ? impl_->luts->single_mie.data() : impl_->luts->scattering.data(), r, mu, mu_s,
+  ref3::get_scattering(&impl_->a, mie ? impl_->luts->single_mie.data() : impl_->luts->scattering.data(),
+                       r - impl_->a.bottom_radius, mu, mu_s,
                        nu, ground ? 1 : 0, v.data());
   return v;
 }
 Vec3 Renderer::transmittance_to_top(double r, double mu) const {
   Vec3 v{};
-  ref3::transmittance_to_top(&impl_->a, impl_->luts->transmittance.data(), r, mu, v.data());
+  ref3::transmittance_to_top(&impl_->a, impl_->luts->transmittance.data(), r - impl_->a.bottom_radius, mu, v.data());
   return v;
 }
 Vec3 Renderer::irradiance(double r, double mu_s) const {
   Vec3 v{};
-  ref3::get_irradiance(&impl_->a, impl_->luts->irradiance.data(), r, mu_s, v.data());
+  ref3::get_irradiance(&impl_->a, impl_->luts->irradiance.data(), r - impl_->a.bottom_radius, mu_s, v.data());
   return v;
 }
 
@@ -77,7 +78,7 @@ Vec3 sample_tiled2d(const Model& m, const std::vector<double>& tiled, double r, 
   const auto a = ref3::make_parameters(m, Channels{});
   const Sizes& s = m.sizes;
   double uvwz[4];
-  ref3::scattering_uvwz(&a, r, mu, mu_s, nu, ground ? 1 : 0, uvwz);
+  ref3::scattering_uvwz(&a, r - a.bottom_radius, mu, mu_s, nu, ground ? 1 : 0, uvwz);
   // the lines below mirror GetScatteringTiled2D in sampling_glsl()
   const double x = std::clamp(uvwz[0], 0.0, 1.0) * (s.nu - 1);
   const double s0 = std::floor(x), f = x - s0;
