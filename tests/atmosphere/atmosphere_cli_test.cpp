@@ -62,6 +62,7 @@ TEST(AtmosphereCli, BadConfigsAreInputErrors) {
   const std::pair<const char*, const char*> cases[] = {
       {"    colour: blue\n", "unknown key 'colour'"},
       {"    sizes: {scattering: {mu: 7}}\n", "even mu"},
+      {"    sizes: {scattering: {nu: 65}}\n", "at most 64"},
       {"    orders: 0\n", "orders"},
       {"    top_radius_km: 6000\n", "top_radius_km"},
       {"    ozone: {layer: tent-40-25-10km}\n", "A < B < C"},
