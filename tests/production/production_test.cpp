@@ -321,7 +321,17 @@ TEST(Production, DiffReportsWhereAndFailsPastThresholds) {
 
 TEST(Production, ByteIdenticalAcrossRunsAndDeviceSelectors) {
   TempDir t;
-  write_file(t / "c.yaml", kConfig);
+  // One job of each kind, small enough to run four times.
+  write_file(t / "c.yaml", std::string(kConfig) + R"(  - name: grating
+    kind: diffraction
+    procedural: {type: sine-grating, size: 64, dx_um: 0.0625, period_um: 2.0, amplitude_um: 0.15}
+    terms: 8
+    tolerance: 1e-2
+  - name: tiny-sky
+    kind: atmosphere
+    orders: 2
+    sizes: {transmittance: [16, 8], irradiance: [8, 4], scattering: {r: 4, mu: 8, mu_s: 4, nu: 2}}
+)");
   std::vector<std::map<std::string, std::string>> snaps;
   int i = 0;
   for (const char* dev : {"auto", "cpu", "auto", "portable"}) {
