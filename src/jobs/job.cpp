@@ -1,5 +1,7 @@
 #include "jobs/job.hpp"
 
+#include <algorithm>
+
 #include "core/resources.hpp"
 #include "jobs/atmosphere/atmosphere_job.hpp"
 #include "jobs/diffraction/diffraction_job.hpp"
@@ -54,11 +56,17 @@ MemoryEstimate estimated_device_memory(const JobSpec& job) {
             return MemoryEstimate{4 * field + 2 * field, 2 * field};
           },
           [](const AtmosphereSpec& s) {
-            // Per wavelength batch, about ten 4-channel float 4D textures live at once (deltas,
-            // accumulated scattering, single Mie, density), plus the small 2D ones.
+            // One pass (up to 4 channels) keeps four 4D textures on the device (the two single
+            // scattering deltas, the multiple-scattering delta and the density), a ray-sample
+            // table per (r, mu) texel row (51 samples × 12 values) and a density incidence table
+            // per (r, mu_s) (16 directions × (8·nu + 10) values), plus the small 2D textures.
+            const std::uint64_t real = s.double_precision ? 8 : 4;
             const std::uint64_t texels = std::uint64_t(s.scattering_r) * s.scattering_mu * s.scattering_mu_s * s.scattering_nu;
-            const std::uint64_t texture = texels * 4 * (s.double_precision ? 8 : 4);
-            return MemoryEstimate{10 * texture + (std::uint64_t{1} << 24), texture};
+            const std::uint64_t texture = texels * 4 * real;
+            const std::uint64_t rays = std::uint64_t(s.scattering_r) * s.scattering_mu * 51 * 12 * real;
+            const std::uint64_t incidence = std::uint64_t(s.scattering_r) * s.scattering_mu_s * 16 * (8 * s.scattering_nu + 10) * real;
+            return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24),
+                                  std::max({texture, rays, incidence})};
           }},
       job.spec);
 }
