@@ -1,5 +1,7 @@
 #include "jobs/atmosphere/pass.hpp"
 
+#include <variant>
+
 #include <spdlog/spdlog.h>
 
 #include <chrono>
@@ -106,41 +108,12 @@ class DeviceBackend final : public PassBackend {
     launch("single_scattering_texture", n_s_, {&T_, &rays_, &dR_, &dM_});
   }
   void scattering_density(int order) override {
-    cl_util::checked("density_incidence_table", [&] {
-      cl::Kernel k(program_, "density_incidence_table");
-      k.setArg(0, block_.bytes.size(), block_.bytes.data());
-      k.setArg(1, T_);
-      k.setArg(2, dR_);
-      k.setArg(3, dM_);
-      k.setArg(4, dS_);
-      k.setArg(5, order);
-      k.setArg(6, incidence_);
-      enqueue(k, 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps);
-      return 0;
-    });
-    cl_util::checked("scattering_density_texture", [&] {
-      cl::Kernel k(program_, "scattering_density_texture");
-      k.setArg(0, block_.bytes.size(), block_.bytes.data());
-      k.setArg(1, incidence_);
-      k.setArg(2, dE_);
-      k.setArg(3, order);
-      k.setArg(4, J_);
-      enqueue(k, n_s_);
-      return 0;
-    });
+    launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps,
+           {&T_, &dR_, &dM_, &dS_, order, &incidence_});
+    launch("scattering_density_texture", n_s_, {&incidence_, &dE_, order, &J_});
   }
   void indirect_irradiance(int order) override {
-    cl_util::checked("indirect_irradiance_texture", [&] {
-      cl::Kernel k(program_, "indirect_irradiance_texture");
-      k.setArg(0, block_.bytes.size(), block_.bytes.data());
-      k.setArg(1, dR_);
-      k.setArg(2, dM_);
-      k.setArg(3, dS_);
-      k.setArg(4, order);
-      k.setArg(5, dE_);
-      enqueue(k, n_e_);
-      return 0;
-    });
+    launch("indirect_irradiance_texture", n_e_, {&dR_, &dM_, &dS_, order, &dE_});
   }
   void multiple_scattering() override { launch("multiple_scattering_texture", n_s_, {&rays_, &J_, &dS_}); }
 
@@ -198,12 +171,17 @@ class DeviceBackend final : public PassBackend {
     dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange);
     dev_.queue().finish();
   }
-  void launch(const char* name, long long n, std::initializer_list<cl::Buffer*> buffers) {
+  // Runs kernel `name` over n work items with the parameter block, then `args` in order
+  // (device buffers, or the scattering order as an int).
+  void launch(const char* name, long long n, std::initializer_list<std::variant<cl::Buffer*, int>> args) {
     cl_util::checked(name, [&] {
       cl::Kernel k(program_, name);
       k.setArg(0, block_.bytes.size(), block_.bytes.data());
       cl_uint i = 1;
-      for (cl::Buffer* b : buffers) k.setArg(i++, *b);
+      for (const auto& a : args) {
+        if (const auto* b = std::get_if<cl::Buffer*>(&a)) k.setArg(i++, **b);
+        else k.setArg(i++, std::get<int>(a));
+      }
       enqueue(k, n);
       return 0;
     });
