@@ -56,15 +56,18 @@ MemoryEstimate estimated_device_memory(const JobSpec& job) {
             return MemoryEstimate{4 * field + 2 * field, 2 * field};
           },
           [](const AtmosphereSpec& s) {
-            // One pass (up to 4 channels) keeps four 4D textures on the device (the two single
-            // scattering deltas, the multiple-scattering delta and the density), a ray-sample
-            // table per (r, mu) texel row (51 samples × 12 values) and a density incidence table
-            // per (r, mu_s) (16 directions × (8·nu + 10) values), plus the small 2D textures.
+            // One pass of w channels (atmosphere::channels_per_pass) keeps four 4D textures on
+            // the device (the two single-scattering deltas, the multiple-scattering delta and the
+            // density), a ray-sample table per (r, mu) texel row (51 samples × (8 + w) values)
+            // and a density incidence table per (r, mu_s) (16 directions × ((2·nu + 1)·w + 6)
+            // values), plus the small 2D textures.
+            const std::uint64_t w = atmosphere::channels_per_pass(s);
             const std::uint64_t real = s.double_precision ? 8 : 4;
             const std::uint64_t texels = std::uint64_t(s.scattering_r) * s.scattering_mu * s.scattering_mu_s * s.scattering_nu;
-            const std::uint64_t texture = texels * 4 * real;
-            const std::uint64_t rays = std::uint64_t(s.scattering_r) * s.scattering_mu * 51 * 12 * real;
-            const std::uint64_t incidence = std::uint64_t(s.scattering_r) * s.scattering_mu_s * 16 * (8 * s.scattering_nu + 10) * real;
+            const std::uint64_t texture = texels * w * real;
+            const std::uint64_t rays = std::uint64_t(s.scattering_r) * s.scattering_mu * 51 * (8 + w) * real;
+            const std::uint64_t incidence =
+                std::uint64_t(s.scattering_r) * s.scattering_mu_s * 16 * ((2 * s.scattering_nu + 1) * w + 6) * real;
             return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24),
                                   std::max({texture, rays, incidence})};
           }},

@@ -25,7 +25,6 @@ namespace {
 constexpr double kCheckFloor = 1e-3;
 constexpr double kCheckTolerance = 2e-3;
 
-
 using MakeBackend = std::function<std::unique_ptr<PassBackend>(const Channels&, int width)>;
 
 struct OrderAccumulator {
@@ -93,7 +92,7 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   out.luts.rgb = rgb;
   const PassPlan plan{spec.orders.value_or(kMaxAutoOrders), !spec.orders.has_value(), spec.tolerance};
   const int n = static_cast<int>(all.size());
-  const int width = sp.spectral ? pass_width_for(std::min(n, 4)) : 3;
+  const int width = channels_per_pass(spec);
   const int passes = (n + width - 1) / width;
   const Sizes& s = m.sizes;
   const std::size_t n_t = 1ULL * s.transmittance_w * s.transmittance_h, n_e = 1ULL * s.irradiance_w * s.irradiance_h,
@@ -259,7 +258,7 @@ json parameters_json(const AtmosphereSpec& spec) {
   p["orders_requested"] = spec.orders ? json(*spec.orders) : json("auto");
   p["tolerance"] = spec.tolerance;
   p["precision"] = spec.double_precision ? "float64" : "float32";
-  const int width = sp.spectral ? pass_width_for(std::min<std::size_t>(sp.lambda_nm.size(), 4)) : 3;
+  const int width = channels_per_pass(spec);
   p["passes"] = (sp.lambda_nm.size() + width - 1) / width;
   p["channels_per_pass"] = width;
   p["length_unit"] = "km (texture values do not depend on it)";
@@ -295,6 +294,11 @@ Baked bake_luts_reference(const AtmosphereSpec& spec) {
   return bake_impl(
       spec, [&](const Channels& ch, int width) { return make_host_backend(m, ch, width); },
       [](std::string_view, double) {}, 0);
+}
+
+int channels_per_pass(const AtmosphereSpec& spec) {
+  const Spectrum sp = spectrum_of(spec);
+  return sp.spectral ? pass_width_for(sp.lambda_nm.size()) : 3;
 }
 
 json plan(const AtmosphereSpec& spec, JobContext&) { return parameters_json(spec); }

@@ -8,6 +8,12 @@ namespace specbake::atmosphere {
 nlohmann::json plan(const AtmosphereSpec& spec, JobContext& ctx);
 BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx);
 
+// Channels per pass: 3 (R, G, B) for rgb; for spectral bakes the smallest of kPassWidths that
+// holds every wavelength, else the widest (then ⌈n / 16⌉ passes). A pass's geometry (ray
+// tables, incidence directions, phase functions, texture coordinates) does not depend on its
+// channel count, so one wide pass costs much less than several narrow ones.
+int channels_per_pass(const AtmosphereSpec& spec);
+
 // The LUTs of a bake (final textures in R,G,B), with what the manifest reports about them.
 struct Baked {
   Luts luts;

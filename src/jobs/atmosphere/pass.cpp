@@ -7,7 +7,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "jobs/atmosphere/reference.hpp"
+#include "jobs/atmosphere/reference_widths.hpp"
 
 namespace specbake::atmosphere {
 
@@ -47,29 +47,17 @@ struct Block {
   std::vector<int> echo_ints;      // transmittance_w, nu_size, sizeof
 };
 
-template <class P>
-Block block_of(const P& a, int nch, bool dbl, std::vector<unsigned char> bytes) {
-  Block b;
-  b.bytes = std::move(bytes);
-  b.echo_reals = {a.solar_irradiance[0], a.ground_albedo[nch - 1], a.absorption_density.constant_term[1],
-                  a.bottom_radius, a.mie_g, a.reserved};
-  b.echo_ints = {a.transmittance_w, a.nu_size, static_cast<int>(b.bytes.size())};
-  (void)dbl;
-  return b;
-}
-
 Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
-  switch (width) {
-    case 3: {
-      const auto a = ref3::make_parameters(m, ch);
-      return block_of(a, 3, dbl, ref3::parameter_block(a, dbl));
-    }
-    case 4: {
-      const auto a = ref4::make_parameters(m, ch);
-      return block_of(a, 4, dbl, ref4::parameter_block(a, dbl));
-    }
-  }
-  throw JobError("atmosphere: no pass of width " + std::to_string(width));
+  return with_width(width, [&](auto ref) {
+    using W = decltype(ref);
+    const auto a = W::parameters(m, ch);
+    Block b;
+    b.bytes = W::block(a, dbl);
+    b.echo_reals = {a.solar_irradiance[0], a.ground_albedo[W::channels - 1], a.absorption_density.constant_term[1],
+                    a.bottom_radius, a.mie_g, a.reserved};
+    b.echo_ints = {a.transmittance_w, a.nu_size, static_cast<int>(b.bytes.size())};
+    return b;
+  });
 }
 
 class DeviceBackend final : public PassBackend {
@@ -320,20 +308,16 @@ std::unique_ptr<PassBackend> make_device_backend(Device& dev, const Model& m, co
 }
 
 std::unique_ptr<PassBackend> make_host_backend(const Model& m, const Channels& ch, int width) {
-  switch (width) {
-    case 3: return std::make_unique<ref3::HostBackend>(m, ch);
-    case 4: return std::make_unique<ref4::HostBackend>(m, ch);
-  }
-  throw JobError("atmosphere: no reference pass of width " + std::to_string(width));
+  return with_width(width, [&](auto ref) -> std::unique_ptr<PassBackend> {
+    return std::make_unique<typename decltype(ref)::Backend>(m, ch);
+  });
 }
 
 StageCheck check_stage(PassBackend& b, const Model& m, const Channels& ch, const std::string& stage, int order,
                        int count, double floor) {
-  switch (b.channels()) {
-    case 3: return check_with<ref3::HostBackend>(b, m, ch, stage, order, count, floor);
-    case 4: return check_with<ref4::HostBackend>(b, m, ch, stage, order, count, floor);
-  }
-  throw JobError("atmosphere: no reference pass of width " + std::to_string(b.channels()));
+  return with_width(b.channels(), [&](auto ref) {
+    return check_with<typename decltype(ref)::Backend>(b, m, ch, stage, order, count, floor);
+  });
 }
 
 std::vector<double> inverse_rayleigh_phase(const Model& m) {

@@ -20,7 +20,7 @@
 namespace specbake::atmosphere {
 
 // Channel widths with a compiled reference path (and so a self-check).
-inline constexpr int kPassWidths[] = {3, 4};
+inline constexpr int kPassWidths[] = {3, 4, 8, 16};
 int pass_width_for(std::size_t channels);  // smallest of kPassWidths ≥ channels, else the largest
 
 enum class Tex { transmittance, delta_irradiance, delta_rayleigh, delta_mie, delta_multiple, density };

@@ -1,7 +1,7 @@
 #pragma once
 // The double-precision reference of the atmosphere maths: kernels/atmosphere/atmosphere.cl
-// compiled as C++ with real = double, once per channel width (ref3, ref4), each followed by
-// the host backend and helpers of host_pass.inc.
+// compiled as C++ with real = double and 3 channels (ref3: R, G, B), followed by the host
+// backend and helpers of host_pass.inc. The other pass widths are in reference_widths.hpp.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -40,15 +40,5 @@ SPECBAKE_ATMOSPHERE_REF_PROLOGUE
 #include "jobs/atmosphere/host_pass.inc"
 #undef NCH
 }  // namespace ref3
-
-namespace ref4 {
-SPECBAKE_ATMOSPHERE_REF_PROLOGUE
-#define NCH 4
-#include "atmosphere/atmosphere.cl"
-#include "jobs/atmosphere/host_pass.inc"
-#undef NCH
-}  // namespace ref4
-
-#undef SPECBAKE_ATMOSPHERE_REF_PROLOGUE
 
 }  // namespace specbake::atmosphere
