@@ -58,18 +58,28 @@ struct Plan {
 Field make_field(const DiffractionSpec& spec);
 Field centre_field(Heightfield hf, Centre centre);
 
-// Truncation bound of a band with half-width `half_y` = Δ·s after `terms` terms (over M²):
-// taylor (half_y)^T/T!; chebyshev 2·(z/2)^T/T!/(1 − (z/2)/(T+1)), z = half_y (∞ if not convergent).
-double truncation_bound(Expansion e, double half_y, int terms);
-// Roundoff estimate over M²: 4u·Σ_{n<T} max|coef_n|·max|q_n| (see docs/diffraction.md).
-double roundoff_estimate(Expansion e, double half_y, int terms, double unit_roundoff);
+// Upper bounds of the moments μ_n = mean over the samples of |g|^n, n = 0…n_max, from a
+// histogram of |g| (each sample counted at its bin's upper edge, so μ_n is never
+// underestimated). The expansions' errors are sums over samples of |g_j|^n times the bounds
+// below: a field whose heights stay mostly near the centre needs fewer terms than one at ±s
+// everywhere (μ_n = 1 bounds every field).
+std::vector<double> abs_g_moments(const Field& f, int n_max);
+
+// Truncation bound of a band with half-width `half_y` = Δ·s after `terms` terms (over M²),
+// times μ_T (`moment`, 1 for any field): taylor (half_y)^T/T!; chebyshev
+// 2·(z/2)^T/T!/(1 − (z/2)/(T+1)), z = half_y (∞ if not convergent).
+double truncation_bound(Expansion e, double half_y, int terms, double moment = 1.0);
+// Roundoff estimate over M²: 4u·Σ_{n<T} max|coef_n|·rms|q_n| (see docs/diffraction.md), with
+// rms|q_n| ≤ √μ_2n from `moments` (empty: 1).
+double roundoff_estimate(Expansion e, double half_y, int terms, double unit_roundoff,
+                         const std::vector<double>& moments = {});
 
 // Bands for κ ∈ [lo, hi] split into `count` equal bands of `terms` terms each.
 std::vector<Band> make_bands(Expansion e, double kappa_lo, double kappa_hi, double s, int count, int terms,
-                             double unit_roundoff);
+                             double unit_roundoff, const std::vector<double>& moments = {});
 // The cheapest (fewest FFTs) equal-band split meeting `target`; empty if none within the term cap.
 std::vector<Band> auto_bands(Expansion e, double kappa_lo, double kappa_hi, double s, double target,
-                             double unit_roundoff);
+                             double unit_roundoff, const std::vector<double>& moments = {});
 
 Bins crop_bins(const DiffractionSpec& spec, int width, int height, double dx_um);
 Plan make_plan(const DiffractionSpec& spec, const Field& f, double target);
