@@ -259,6 +259,13 @@ FN void h_mu_from_transmittance_uv(const AtmosphereParameters* a, real u, real v
   *mu = d == R(0.0) ? R(1.0) : clamp_cosine(((H - rho) * (H + rho) - d * d) / (R(2.0) * r * d));
 }
 
+/* Texel id = j·W + i of the transmittance texture → its (h, mu), at the texel centre. */
+FN void transmittance_texel_params(const AtmosphereParameters* a, int id, real* h, real* mu) {
+  const int i = id % a->transmittance_w, j = id / a->transmittance_w;
+  h_mu_from_transmittance_uv(a, ((real)i + R(0.5)) / (real)a->transmittance_w,
+                             ((real)j + R(0.5)) / (real)a->transmittance_h, h, mu);
+}
+
 FN void irradiance_uv(const AtmosphereParameters* a, real h, real mu_s, real* u, real* v) {
   *u = coord_from_unit(mu_s * R(0.5) + R(0.5), a->irradiance_w);
   *v = coord_from_unit(h / thickness(a), a->irradiance_h);
@@ -268,6 +275,12 @@ FN void h_mu_s_from_irradiance_uv(const AtmosphereParameters* a, real u, real v,
   const real x_r = unit_from_coord(v, a->irradiance_h);
   *h = x_r * thickness(a);
   *mu_s = clamp_cosine(R(2.0) * x_mu_s - R(1.0));
+}
+/* Texel id = j·W + i of the irradiance texture → its (h, mu_s), at the texel centre. */
+FN void irradiance_texel_params(const AtmosphereParameters* a, int id, real* h, real* mu_s) {
+  const int i = id % a->irradiance_w, j = id / a->irradiance_w;
+  h_mu_s_from_irradiance_uv(a, ((real)i + R(0.5)) / (real)a->irradiance_w, ((real)j + R(0.5)) / (real)a->irradiance_h,
+                            h, mu_s);
 }
 
 /* The pieces of scattering_uvwz. u_r of altitude h: */

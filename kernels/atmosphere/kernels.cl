@@ -24,10 +24,8 @@ __kernel void atmosphere_layout(AtmosphereParameters a, __global real* reals, __
 __kernel void transmittance_texture(AtmosphereParameters a, __global real* T) {
   const int id = get_global_id(0);
   if (id >= a.transmittance_w * a.transmittance_h) return;
-  const int i = id % a.transmittance_w, j = id / a.transmittance_w;
   real h, mu, t[NCH];
-  h_mu_from_transmittance_uv(&a, ((real)i + R(0.5)) / (real)a.transmittance_w,
-                             ((real)j + R(0.5)) / (real)a.transmittance_h, &h, &mu);
+  transmittance_texel_params(&a, id, &h, &mu);
   transmittance_to_top_integral(&a, h, mu, 1, t);
   for (int c = 0; c < NCH; ++c) T[id * NCH + c] = t[c];
 }
@@ -35,10 +33,8 @@ __kernel void transmittance_texture(AtmosphereParameters a, __global real* T) {
 __kernel void direct_irradiance_texture(AtmosphereParameters a, __global const real* T, __global real* delta_E) {
   const int id = get_global_id(0);
   if (id >= a.irradiance_w * a.irradiance_h) return;
-  const int i = id % a.irradiance_w, j = id / a.irradiance_w;
   real h, mu_s, e[NCH];
-  h_mu_s_from_irradiance_uv(&a, ((real)i + R(0.5)) / (real)a.irradiance_w, ((real)j + R(0.5)) / (real)a.irradiance_h,
-                            &h, &mu_s);
+  irradiance_texel_params(&a, id, &h, &mu_s);
   direct_irradiance(&a, T, h, mu_s, e);
   for (int c = 0; c < NCH; ++c) delta_E[id * NCH + c] = e[c];
 }
@@ -122,10 +118,8 @@ __kernel void indirect_irradiance_texture(AtmosphereParameters a, __global const
                                           __global real* delta_E) {
   const int id = get_global_id(0);
   if (id >= a.irradiance_w * a.irradiance_h) return;
-  const int i = id % a.irradiance_w, j = id / a.irradiance_w;
   real h, mu_s, e[NCH];
-  h_mu_s_from_irradiance_uv(&a, ((real)i + R(0.5)) / (real)a.irradiance_w, ((real)j + R(0.5)) / (real)a.irradiance_h,
-                            &h, &mu_s);
+  irradiance_texel_params(&a, id, &h, &mu_s);
   indirect_irradiance(&a, delta_R, delta_M, delta_S, h, mu_s, order, e);
   for (int c = 0; c < NCH; ++c) delta_E[id * NCH + c] = e[c];
 }
