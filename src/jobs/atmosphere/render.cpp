@@ -261,6 +261,18 @@ std::string tone_mapped_png(int w, int h, std::vector<double> lum_rgb) {
   return png_from_linear(w, h, rgb, 1.0f);
 }
 
+// An n × n image, RGB innermost: shade(x, y) at every pixel centre, x right and y up, both in
+// (−1, 1); rows on the hardware threads.
+template <class Shade>
+std::vector<double> render_image(int n, Shade shade) {
+  std::vector<double> img(3 * n * n, 0.0);
+  parallel_for(1LL * n * n, [&](long long p) {
+    const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
+    for (int c = 0; c < 3; ++c) img[3 * p + c] = v[c];
+  });
+  return img;
+}
+
 }  // namespace
 
 std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
@@ -274,15 +286,15 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     const double e = elevation_deg * M_PI / 180.0;
     const Vec3 sun{std::cos(e), 0.0, std::sin(e)};
     const Vec3 camera{0.0, 0.0, m.bottom_radius_km + 0.001};
-    std::vector<double> img(3 * n * n, 0.0);
-    parallel_for(1LL * n * n, [&](long long p) {
-      const double dx = (2.0 * (p % n) + 1.0) / n - 1.0, dy = 1.0 - (2.0 * (p / n) + 1.0) / n;
+    const auto img = render_image(n, [&](double dx, double dy) {
+      Vec3 lum{};
       const double rho = std::sqrt(dx * dx + dy * dy);
-      if (rho > 1.0) return;
+      if (rho > 1.0) return lum;
       const double theta = rho * M_PI / 2.0, phi = std::atan2(dy, dx);
       const Vec3 view{std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
       const Vec3 l = render.sky_radiance(camera, view, sun, nullptr);
-      for (int c = 0; c < 3; ++c) img[3 * p + c] = l[c] * k_sky[c];
+      for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c];
+      return lum;
     });
     char name[64];
     std::snprintf(name, sizeof name, "preview/sky_fisheye_sun_%+03.0fdeg.png", elevation_deg);
@@ -304,9 +316,8 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     const double dist = std::sqrt(camera[0] * camera[0] + camera[1] * camera[1] + camera[2] * camera[2]);
     const double half = std::tan(std::asin(m.top_radius_km / dist)) * 1.08;
     const double albedo = luts.rgb.ground_albedo.empty() ? 0.1 : luts.rgb.ground_albedo[0];
-    std::vector<double> img(3 * w * w, 0.0);
-    parallel_for(1LL * w * w, [&](long long p) {
-      const double sx = ((2.0 * (p % w) + 1.0) / w - 1.0) * half, sy = (1.0 - (2.0 * (p / w) + 1.0) / w) * half;
+    const auto img = render_image(w, [&](double x, double y) {
+      const double sx = x * half, sy = y * half;
       const Vec3 view = normalize({fwd[0] + sx * right[0] + sy * up[0], fwd[1] + sx * right[1] + sy * up[1],
                                    fwd[2] + sx * right[2] + sy * up[2]});
       const double b = camera[0] * view[0] + camera[1] * view[1] + camera[2] * view[2];
@@ -325,7 +336,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
         const Vec3 l = render.sky_radiance(camera, view, sun, nullptr);
         for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c];
       }
-      for (int c = 0; c < 3; ++c) img[3 * p + c] = lum[c];
+      return lum;
     });
     files.push_back({"preview/planet_from_space.png", tone_mapped_png(w, w, img), "", {w, w, 3}, "8-bit sRGB", "",
                      "the planet seen from 3.2 radii away: ground (albedo " + std::to_string(albedo) +
