@@ -93,6 +93,9 @@ inline constexpr int kMaxDiffractionTerms = 512;
 struct DensityLayer {
   double width_km = 0.0, exp_term = 0.0, exp_scale_per_km = 0.0, linear_term_per_km = 0.0, constant_term = 0.0;
 };
+// A two-layer profile as the config's `density:` list writes it (also used in manifests, so a
+// manifest's profile can be pasted back into a config).
+nlohmann::json density_profile_json(const DensityLayer* layers);
 struct AtmosphereSpec {
   double bottom_radius_km = 6360.0, top_radius_km = 6420.0;
   double sun_angular_radius_rad = 0.004675;

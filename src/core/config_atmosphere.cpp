@@ -32,15 +32,6 @@ void tent(double a, double b, double c, DensityLayer* out) {
   out[1] = DensityLayer{0.0, 0.0, 0.0, -1.0 / (c - b), c / (c - b)};
 }
 
-json layer_json(const DensityLayer& l) {
-  return {{"width_km", l.width_km},
-          {"exp_term", l.exp_term},
-          {"exp_scale_per_km", l.exp_scale_per_km},
-          {"linear_term_per_km", l.linear_term_per_km},
-          {"constant_term", l.constant_term}};
-}
-json profile_json(const DensityLayer* p) { return json::array({layer_json(p[0]), layer_json(p[1])}); }
-
 // `density: [{width_km, exp_term, exp_scale_per_km, linear_term_per_km, constant_term}, ...]`,
 // one layer (used everywhere) or two (the first below its width).
 void parse_density(const At& at, DensityLayer* out) {
@@ -274,15 +265,15 @@ AtmosphereSpec parse_atmosphere(const At& job, nlohmann::json& norm, Inputs& inp
           {"ground_albedo", s.ground_albedo},
           {"solar_irradiance_scale", s.solar_irradiance_scale},
           {"rayleigh", s.rayleigh ? json{{"scattering_per_m_at_1um", s.rayleigh_scattering_per_m_at_1um},
-                                         {"density", profile_json(s.rayleigh_density)}}
+                                         {"density", density_profile_json(s.rayleigh_density)}}
                                   : json(false)},
           {"mie", s.mie ? json{{"extinction_per_m", s.mie_extinction_per_m},
                                {"angstrom_alpha", s.mie_angstrom_alpha},
                                {"single_scattering_albedo", s.mie_single_scattering_albedo},
                                {"phase_g", s.mie_phase_g},
-                               {"density", profile_json(s.mie_density)}}
+                               {"density", density_profile_json(s.mie_density)}}
                         : json(false)},
-          {"ozone", s.ozone ? json{{"column_du", s.ozone_column_du}, {"density", profile_json(s.ozone_density)}}
+          {"ozone", s.ozone ? json{{"column_du", s.ozone_column_du}, {"density", density_profile_json(s.ozone_density)}}
                             : json(false)},
           {"spectrum", s.spectral ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}} : json("rgb")},
           {"orders", s.orders ? json(*s.orders) : json("auto")},
@@ -298,3 +289,18 @@ AtmosphereSpec parse_atmosphere(const At& job, nlohmann::json& norm, Inputs& inp
 }
 
 }  // namespace specbake::config_detail
+
+namespace specbake {
+
+nlohmann::json density_profile_json(const DensityLayer* layers) {
+  nlohmann::json out = nlohmann::json::array();
+  for (int i = 0; i < 2; ++i)
+    out.push_back({{"width_km", layers[i].width_km},
+                   {"exp_term", layers[i].exp_term},
+                   {"exp_scale_per_km", layers[i].exp_scale_per_km},
+                   {"linear_term_per_km", layers[i].linear_term_per_km},
+                   {"constant_term", layers[i].constant_term}});
+  return out;
+}
+
+}  // namespace specbake

@@ -172,15 +172,8 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   return out;
 }
 
-json layer_json(const DensityLayer& l) {
-  return {{"width_km", l.width_km},
-          {"exp_term", l.exp_term},
-          {"exp_scale_per_km", l.exp_scale_per_km},
-          {"linear_term_per_km", l.linear_term_per_km},
-          {"constant_term", l.constant_term}};
-}
 json profile_json(const DensityLayer* p) {
-  return {{"layers", json::array({layer_json(p[0]), layer_json(p[1])})},
+  return {{"layers", density_profile_json(p)},
           {"meaning", "density(h) = clamp(exp_term*exp(exp_scale*h) + linear_term*h + constant_term, 0, 1), h = "
                       "altitude in km; layer 0 below its width_km"}};
 }
