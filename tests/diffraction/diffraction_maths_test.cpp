@@ -331,6 +331,23 @@ TEST(DiffractionMaths, DeviceMatchesDoubleReferenceNonSquarePrimeSizes) {
   EXPECT_LE(worst, 1e3 * 1.1102230246251565e-16 * f.count());
 }
 
+TEST(DiffractionMaths, ExactDftAtKappaZeroIsTheDcBin) {
+  // The shortcut at κ = 0 against the host DFT of e^{i·0·h} = 1 (odd size, cropped bins
+  // with DC inside, and bins without DC).
+  const Field f = centre_field(random_field(), Centre::mid_range);
+  for (const Bins& bins : {full_bins(f.width, f.height), Bins{-5, 7, -3, 2}, Bins{1, 9, -4, 4}}) {
+    ExactDft exact(&device(), f, bins);
+    const auto got = exact(0.0);
+    auto want = host_dft(std::vector<cplx>(f.count(), 1.0), f.width, f.height, bins);
+    ASSERT_EQ(got.size(), want.size());
+    double worst = 0.0;
+    for (std::size_t i = 0; i < got.size(); ++i)
+      worst = std::max(worst, std::abs(got[i] - want[i] * static_cast<double>(f.count())));
+    // host DFT of ones: O(M) terms of rounding per bin in double, |sum| ≤ M².
+    EXPECT_LE(worst, 1e3 * 1.1102230246251565e-16 * f.count());
+  }
+}
+
 TEST(DiffractionHardCases, TallFieldMeetsToleranceWithBandsOrChebyshev) {
   // A field with y_max = κ_hi·s ≈ 40: plain float32 Taylor cannot reach 1e-4 here.
   Heightfield hf;

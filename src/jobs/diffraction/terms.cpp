@@ -276,6 +276,13 @@ std::vector<cplx> ExactDft::operator()(double kappa) {
   const Field& f = *impl_->f;
   const Bins& bins = impl_->bins;
   const std::size_t m = static_cast<std::size_t>(f.count());
+  if (kappa == 0.0) {
+    // e^{i·0·h} = 1: the transform is M² at the DC bin and exactly 0 elsewhere.
+    std::vector<cplx> out(static_cast<std::size_t>(bins.ku_count()) * bins.kv_count(), 0.0);
+    if (bins.ku_min <= 0 && bins.ku_max >= 0 && bins.kv_min <= 0 && bins.kv_max >= 0)
+      out[static_cast<std::size_t>(-bins.kv_min) * bins.ku_count() - bins.ku_min] = static_cast<double>(m);
+    return out;
+  }
   std::vector<cplx> p(m);
   parallel_for(f.height, [&](long long iy) {
     for (std::size_t i = iy * static_cast<std::size_t>(f.width), e = i + f.width; i < e; ++i)
