@@ -4,7 +4,9 @@
 //     from float32 terms (err_f32) and from the same terms rounded to half (err_half).
 //   BM_WholeJob/<field>: the complete bake (terms: auto, tolerance 1e-4: planning, terms,
 //     error measurement with double DFTs, self-check, EXR, previews), counter ffts = terms,
-//     fft_ms / other_stages_ms from the bake's stage timings.
+//     fft_ms / other_stages_ms from the bake's stage timings, and, measured right after in
+//     the same run, fftw_same_count_ms (FFTW as below, `ffts` transforms) and job_over_fftw
+//     (the target is ≤ 1.5 on the 1024² field).
 //   BM_VkFft/<field>/<count>: VkFFT float32 alone, `count` transforms as the job runs them.
 //   BM_FftwBaseline/<field>/<count>: FFTW single precision, planned (FFTW_MEASURE), with as many
 //     threads as the OpenCL device has compute units, `count` in-place 2D FFTs of the field size.
@@ -18,6 +20,7 @@
 #include <fftw3.h>
 #endif
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -123,17 +126,46 @@ void BM_Terms(benchmark::State& state) {
   state.counters["K"] = p.bins.ku_count();
 }
 
+#ifdef SPECBAKE_HAVE_FFTW
+// FFTW single precision, planned with FFTW_MEASURE (planning not timed), with as many threads
+// as the OpenCL device has compute units: ms for `count` in-place 2D FFTs of m × m (best of 3).
+double fftw_ms(int m, int count) {
+  static bool threads = (fftwf_init_threads(), true);
+  (void)threads;
+  fftwf_plan_with_nthreads(static_cast<int>(device().info().compute_units));
+  fftwf_complex* buf = fftwf_alloc_complex(static_cast<std::size_t>(m) * m);
+  fftwf_plan plan = fftwf_plan_dft_2d(m, m, buf, buf, FFTW_FORWARD, FFTW_MEASURE);
+  for (int i = 0; i < m * m; ++i) {
+    buf[i][0] = std::sin(0.001f * i);
+    buf[i][1] = 0.0f;
+  }
+  double best = 1e300;
+  for (int rep = 0; rep < 3; ++rep) {
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int k = 0; k < count; ++k) fftwf_execute(plan);
+    best = std::min(best, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  fftwf_destroy_plan(plan);
+  fftwf_free(buf);
+  return best;
+}
+#endif
+
 void BM_WholeJob(benchmark::State& state) {
   const int which = static_cast<int>(state.range(0));
   const Expansion e = state.range(1) == 0 ? Expansion::taylor : Expansion::chebyshev;
   DiffractionSpec spec = spec_for(which, e);
   JobContext ctx{device()};
   BakeResult r = bake(spec, ctx);  // warm-up
+  double job_ms = 1e300;
   for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
     r = bake(spec, ctx);
+    job_ms = std::min(job_ms, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     benchmark::DoNotOptimize(r.files.data());
   }
-  state.counters["ffts"] = r.parameters["terms"].get<int>();
+  const int ffts = r.parameters["terms"].get<int>();
+  state.counters["ffts"] = ffts;
   state.counters["bands"] = static_cast<double>(r.parameters["bands"].size());
   state.counters["err_f32"] = r.accuracy["error"]["max_over_M2"].get<double>();
   // Stages of the last bake (ms): the FFTs alone, and everything else.
@@ -142,6 +174,12 @@ void BM_WholeJob(benchmark::State& state) {
   for (const auto& [stage, s] : tm.items()) total += s.get<double>();
   state.counters["fft_ms"] = 1e3 * tm["terms: FFT"].get<double>();
   state.counters["other_stages_ms"] = 1e3 * (total - tm["terms: FFT"].get<double>());
+#ifdef SPECBAKE_HAVE_FFTW
+  // Side by side: FFTW doing the job's number of FFTs, right after the job.
+  const double fftw = fftw_ms(which == 0 ? 128 : 1024, ffts);
+  state.counters["fftw_same_count_ms"] = fftw;
+  state.counters["job_over_fftw"] = job_ms / fftw;
+#endif
 }
 
 // VkFFT alone: `count` in-place float32 transforms of one 1024² (or 128²) array, one per

@@ -24,7 +24,9 @@ namespace specbake {
 static_assert(std::endian::native == std::endian::little, "bundle .bin files are written as little-endian");
 static_assert(sizeof(float) == 4 && std::numeric_limits<float>::is_iec559, "float32 must be IEEE 754 binary32");
 
-std::string float32_le(const std::vector<double>& values, const std::string& what) {
+namespace {
+template <class T>
+std::string float32_le_of(const std::vector<T>& values, const std::string& what) {
   std::string out(values.size() * sizeof(float), '\0');
   for (std::size_t i = 0; i < values.size(); ++i) {
     const float f = static_cast<float>(values[i]);
@@ -33,6 +35,14 @@ std::string float32_le(const std::vector<double>& values, const std::string& wha
     std::memcpy(out.data() + i * sizeof(float), &f, sizeof(float));
   }
   return out;
+}
+}  // namespace
+
+std::string float32_le(const std::vector<double>& values, const std::string& what) {
+  return float32_le_of(values, what);
+}
+std::string float32_le(const std::vector<float>& values, const std::string& what) {
+  return float32_le_of(values, what);
 }
 
 namespace {

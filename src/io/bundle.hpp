@@ -29,6 +29,7 @@ struct OutputFile {
 // Little-endian float32 bytes of values (rounded to nearest); throws JobError naming
 // `what` and the first index if any value is not finite.
 std::string float32_le(const std::vector<double>& values, const std::string& what);
+std::string float32_le(const std::vector<float>& values, const std::string& what);
 
 // An exclusive advisory lock (flock) on <output>/<job>/.lock, held while a run checks,
 // bakes and publishes that job; a second run on the same output waits for it.

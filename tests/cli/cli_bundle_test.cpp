@@ -398,16 +398,19 @@ TEST_F(Cli, DeviceErrorsExitFour) {
 // Non-finite values never reach a bundle: the float32 writer refuses them (and values that
 // overflow float32), naming the array and the index.
 TEST(BundleWriter, RefusesNonFiniteValues) {
-  EXPECT_EQ(specbake::float32_le({1.0, -2.5}, "x").size(), 8u);
+  EXPECT_EQ(specbake::float32_le(std::vector<double>{1.0, -2.5}, "x").size(), 8u);
   for (double bad : {std::nan(""), HUGE_VAL, -HUGE_VAL, 1e39}) {
     try {
-      specbake::float32_le({0.0, 1.0, bad}, "weights");
+      specbake::float32_le(std::vector<double>{0.0, 1.0, bad}, "weights");
       ADD_FAILURE() << "accepted " << bad;
     } catch (const specbake::JobError& e) {
       EXPECT_NE(std::string(e.what()).find("weights"), std::string::npos) << e.what();
       EXPECT_NE(std::string(e.what()).find("index 2"), std::string::npos) << e.what();
     }
   }
+  // The float overload (terms written straight from the device's floats) checks the same.
+  EXPECT_EQ(specbake::float32_le(std::vector<float>{1.0f, -2.5f}, "x").size(), 8u);
+  EXPECT_THROW(specbake::float32_le(std::vector<float>{0.0f, std::nanf("")}, "terms"), specbake::JobError);
 }
 
 // Non-finite values in an output fail the job (exit 1) and nothing is published: a

@@ -369,8 +369,7 @@ BakeResult bake(const DiffractionSpec& spec, JobContext& ctx) {
   const int ku = p.bins.ku_count(), kv = p.bins.kv_count();
   const std::string le = "little-endian float32, C order";
   tm.time("terms.bin", [&] {
-    std::vector<double> v(terms.values.begin(), terms.values.end());
-    r.files.push_back({"terms.bin", float32_le(v, "FFT terms"), "float32", {p.total_terms, kv, ku, 2},
+    r.files.push_back({"terms.bin", float32_le(terms.values, "FFT terms"), "float32", {p.total_terms, kv, ku, 2},
                        le + "; [n][kv][ku][re,im], kv and ku ascending from the bins' lower ends (fftshifted)", "1",
                        "F_n = DFT(q_n)/M^2 of every band's terms (see the manifest's diffraction block)"});
   });
