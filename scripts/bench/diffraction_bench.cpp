@@ -6,7 +6,8 @@
 //     error measurement with double DFTs, self-check, EXR, previews), counter ffts = terms,
 //     fft_ms / other_stages_ms from the bake's stage timings, and, measured right after in
 //     the same run, fftw_same_count_ms (FFTW as below, `ffts` transforms) and job_over_fftw
-//     (the target is ≤ 1.5 on the 1024² field).
+//     (the target is ≤ 1.5 on the 1024² field). SPECBAKE_BENCH_STAGES=1 prints every stage's
+//     time of the last bake to stderr.
 //   BM_VkFft/<field>/<count>: VkFFT float32 alone, `count` transforms as the job runs them.
 //   BM_FftwBaseline/<field>/<count>: FFTW single precision, planned (FFTW_MEASURE), with as many
 //     threads as the OpenCL device has compute units, `count` in-place 2D FFTs of the field size.
@@ -22,6 +23,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <random>
@@ -174,6 +177,8 @@ void BM_WholeJob(benchmark::State& state) {
   for (const auto& [stage, s] : tm.items()) total += s.get<double>();
   state.counters["fft_ms"] = 1e3 * tm["terms: FFT"].get<double>();
   state.counters["other_stages_ms"] = 1e3 * (total - tm["terms: FFT"].get<double>());
+  if (std::getenv("SPECBAKE_BENCH_STAGES"))  // every stage of the last bake, for the docs' table
+    std::fprintf(stderr, "BM_WholeJob/%d/%d stages (s): %s\n", which, static_cast<int>(state.range(1)), tm.dump().c_str());
 #ifdef SPECBAKE_HAVE_FFTW
   // Side by side: FFTW doing the job's number of FFTs, right after the job.
   const double fftw = fftw_ms(which == 0 ? 128 : 1024, ffts);
