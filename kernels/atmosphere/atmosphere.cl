@@ -699,14 +699,20 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
   if (order == 2) scattering_slices(a, delta_mie, uvwz[1], uvwz[2], uvwz[3], e + INC_MIE(a));
 }
 
-/* J_n at (h, mu, mu_s, nu) from the 16 incidence entries of (h, mu_s) and the ground
- * irradiance of order n − 2 (direct for order 2). Result per km per sr. */
+/* J_n at (h, mu, mu_s) and `count` values nu[k] (a texel row of the ν axis) from the 16
+ * incidence entries of (h, mu_s) and the ground irradiance of order n − 2 (direct for order
+ * 2); out[k·NCH + c], per km per sr. The view direction's part of each sample — the phase
+ * functions of its angle to the view, which do not depend on ν — is computed once for the
+ * whole row; each ν then only moves the sun (the incident radiance's ν and the ground's μ_s). */
 FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* incidence,
-                           GLOBAL const real* delta_irradiance, real h, real mu, real mu_s, real nu, int order,
-                           real* out) {
+                           GLOBAL const real* delta_irradiance, real h, real mu, real mu_s, const real* nu, int count,
+                           int order, real* out) {
   const real omega_x = sqrt(fmax(R(1.0) - mu * mu, R(0.0)));
-  const real sun_x = omega_x == R(0.0) ? R(0.0) : (nu - mu * mu_s) / omega_x;
-  const real sun_y = sqrt(fmax(R(1.0) - sun_x * sun_x - mu_s * mu_s, R(0.0)));
+  real sun_x[NU_MAX], sun_y[NU_MAX];
+  for (int k = 0; k < count; ++k) {
+    sun_x[k] = omega_x == R(0.0) ? R(0.0) : (nu[k] - mu * mu_s) / omega_x;
+    sun_y[k] = sqrt(fmax(R(1.0) - sun_x[k] * sun_x[k] - mu_s * mu_s, R(0.0)));
+  }
   const real d_angle = ATM_PI / (real)DENSITY_SPHERE_STEPS;
   const real rho_r = profile_density(&a->rayleigh_density, h);
   const real rho_m = profile_density(&a->mie_density, h);
@@ -714,8 +720,8 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
   for (int c = 0; c < NCH; ++c) {
     beta_r[c] = a->rayleigh_scattering[c] * rho_r;
     beta_m[c] = a->mie_scattering[c] * rho_m;
-    out[c] = R(0.0);
   }
+  for (int k = 0; k < count * NCH; ++k) out[k] = R(0.0);
   /* phi_m and 2π − phi_m share cos(phi) (so the phase functions, since omega_y = 0) and the
    * length of the ground normal: the loop visits them in pairs, sin(phi) = ±sin_phi[m]. */
   real cos_phi[DENSITY_SPHERE_STEPS], sin_phi[DENSITY_SPHERE_STEPS];
@@ -736,21 +742,25 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
       const real wx = cos_phi[m] * sin_theta, wy = sin_phi[m] * sin_theta;
       const real nu2 = wx * omega_x + cos_theta * mu;
       const real pr = rayleigh_phase(nu2) * d_omega, pm = mie_phase(a->mie_g, nu2) * d_omega;
-      const real along = wx * sun_x + cos_theta * mu_s;
-      real incident[NCH], pair[NCH];
-      for (int c = 0; c < NCH; ++c) pair[c] = R(0.0);
-      for (int side = 0; side < 2; ++side) {
-        const real wy_s = side == 0 ? wy : -wy;
-        incident_from_slices(a, e + INC_SOURCE(a), e + INC_MIE(a), along + wy_s * sun_y, order, incident);
-        if (ground) {
-          const real mu_g = (distance * (wx * sun_x + wy_s * sun_y) + n_z * mu_s) * inv_n;
-          real g[NCH];
-          get_ground_irradiance(a, delta_irradiance, mu_g, g);
-          for (int c = 0; c < NCH; ++c) incident[c] += e[INC_GROUND_TERM(a) + c] * g[c];
+      real scatter[NCH];
+      for (int c = 0; c < NCH; ++c) scatter[c] = beta_r[c] * pr + beta_m[c] * pm;
+      for (int k = 0; k < count; ++k) {
+        const real along = wx * sun_x[k] + cos_theta * mu_s;
+        real incident[NCH], pair[NCH];
+        for (int c = 0; c < NCH; ++c) pair[c] = R(0.0);
+        for (int side = 0; side < 2; ++side) {
+          const real wy_s = side == 0 ? wy : -wy;
+          incident_from_slices(a, e + INC_SOURCE(a), e + INC_MIE(a), along + wy_s * sun_y[k], order, incident);
+          if (ground) {
+            const real mu_g = (distance * (wx * sun_x[k] + wy_s * sun_y[k]) + n_z * mu_s) * inv_n;
+            real g[NCH];
+            get_ground_irradiance(a, delta_irradiance, mu_g, g);
+            for (int c = 0; c < NCH; ++c) incident[c] += e[INC_GROUND_TERM(a) + c] * g[c];
+          }
+          for (int c = 0; c < NCH; ++c) pair[c] += incident[c];
         }
-        for (int c = 0; c < NCH; ++c) pair[c] += incident[c];
+        for (int c = 0; c < NCH; ++c) out[k * NCH + c] += pair[c] * scatter[c];
       }
-      for (int c = 0; c < NCH; ++c) out[c] += pair[c] * (beta_r[c] * pr + beta_m[c] * pm);
     }
   }
 }

@@ -100,17 +100,21 @@ __kernel void density_incidence_table(AtmosphereParameters a, __global const rea
   for (int k = 0; k < stride; ++k) incidence[id * stride + k] = e[k];
 }
 
+/* One work item per texel row along ν: (z, y, mu_s index), all NU slices. */
 __kernel void scattering_density_texture(AtmosphereParameters a, __global const real* incidence,
                                          __global const real* delta_E, int order, __global real* J) {
   const int id = get_global_id(0);
-  if (id >= a.r_size * a.mu_size * a.nu_size * a.mu_s_size) return;
-  real h, mu, mu_s, nu, j[NCH];
-  int x, y, z, ground;
-  texel_params(&a, id, &x, &y, &z, &h, &mu, &mu_s, &nu, &ground);
-  __global const real* block =
-      incidence + (z * a.mu_s_size + x % a.mu_s_size) * DENSITY_SPHERE_STEPS * incidence_stride(&a);
-  scattering_density(&a, block, delta_E, h, mu, mu_s, nu, order, j);
-  for (int c = 0; c < NCH; ++c) J[id * NCH + c] = j[c];
+  if (id >= a.r_size * a.mu_size * a.mu_s_size) return;
+  const int xs = id % a.mu_s_size, y = (id / a.mu_s_size) % a.mu_size, z = id / (a.mu_s_size * a.mu_size);
+  real h, mu, mu_s, nu[NU_MAX], j[NU_MAX * NCH];
+  int ground;
+  for (int k = 0; k < a.nu_size; ++k)
+    scattering_params_from_texel(&a, k * a.mu_s_size + xs, y, z, &h, &mu, &mu_s, &nu[k], &ground);
+  __global const real* block = incidence + (z * a.mu_s_size + xs) * DENSITY_SPHERE_STEPS * incidence_stride(&a);
+  scattering_density(&a, block, delta_E, h, mu, mu_s, nu, a.nu_size, order, j);
+  const int row = (z * a.mu_size + y) * a.nu_size * a.mu_s_size;
+  for (int k = 0; k < a.nu_size; ++k)
+    for (int c = 0; c < NCH; ++c) J[(row + k * a.mu_s_size + xs) * NCH + c] = j[k * NCH + c];
 }
 
 __kernel void indirect_irradiance_texture(AtmosphereParameters a, __global const real* delta_R,

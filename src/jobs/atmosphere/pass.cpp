@@ -98,7 +98,7 @@ class DeviceBackend final : public PassBackend {
   void scattering_density(int order) override {
     launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps,
            {&T_, &dR_, &dM_, &dS_, order, &incidence_});
-    launch("scattering_density_texture", n_s_, {&incidence_, &dE_, order, &J_});
+    launch("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s, {&incidence_, &dE_, order, &J_});
   }
   void indirect_irradiance(int order) override {
     launch("indirect_irradiance_texture", n_e_, {&dR_, &dM_, &dS_, order, &dE_});
