@@ -152,6 +152,7 @@ void Rgb(benchmark::State& state) {
 }
 BENCHMARK(Rgb)
     ->ArgsProduct({{1, 2, 3, 4, 6, 8, 0}, {50}})
+    ->Args({4, 100})
     ->Args({8, 100})
     ->Unit(benchmark::kSecond)
     ->UseRealTime()
