@@ -106,19 +106,14 @@ const std::vector<double>& reference_sky() {
 
 const auto kQuiet = [](std::string_view, double) {};
 
-// The sky of the finer runs, for "against a higher-resolution run": the rows that bake them
-// run first and keep their sky here; a row run alone (filter) bakes it when first needed.
-std::vector<double>& finer_sky(bool spectral) {
-  static std::vector<double> rgb_200, spectral_48;
-  std::vector<double>& v = spectral ? spectral_48 : rgb_200;
-  if (v.empty()) {
-    AtmosphereSpec s = earth(spectral ? 100 : 200);
-    s.orders = 4;
-    s.spectral = spectral;
-    s.count = 48;
-    v = sky_values(bake_luts(s, device(), kQuiet, 0));
-  }
-  return v;
+// The finer runs of "against a higher-resolution run": 200 % rgb and 48 wavelengths at 100 %,
+// both 4 orders.
+AtmosphereSpec finer_spec(bool spectral) {
+  AtmosphereSpec s = earth(spectral ? 100 : 200);
+  s.orders = 4;
+  s.spectral = spectral;
+  s.count = 48;
+  return s;
 }
 std::vector<double>* g_keep_sky = nullptr;  // where the running row stores its sky, if it is a finer run
 
@@ -151,45 +146,43 @@ void Rgb(benchmark::State& state) {
   run(state, s, true);
 }
 BENCHMARK(Rgb)
-    ->ArgsProduct({{1, 2, 3, 4, 6, 8, 0}, {50}})
+    ->ArgsProduct({{1, 2, 3, 4, 5, 6, 7, 8, 0}, {50}})
     ->Args({4, 100})
     ->Args({8, 100})
     ->Unit(benchmark::kSecond)
     ->UseRealTime()
     ->Iterations(1);
 
-// Args: size percent (4 orders); vs_finer_run: against the 200 % bake (which runs first).
+// Rows compared with a finer run of their group: the finest row of the group runs first and
+// keeps its sky; the others compare with it (baking it first if run alone, e.g. by filter).
+void run_against_finer(benchmark::State& state, const AtmosphereSpec& s, bool finest, bool spectral) {
+  static std::vector<double> fine[2];
+  std::vector<double>& f = fine[spectral ? 1 : 0];
+  if (finest) {
+    g_keep_sky = &f;
+    run(state, s, !spectral);
+    g_keep_sky = nullptr;
+  } else {
+    if (f.empty()) f = sky_values(bake_luts(finer_spec(spectral), device(), kQuiet, 0));
+    run(state, s, !spectral, &f);
+  }
+}
+
+// Args: size percent (4 orders); vs_finer_run: against the 200 % bake.
 void RgbSize(benchmark::State& state) {
   AtmosphereSpec s = earth(static_cast<int>(state.range(0)));
   s.orders = 4;
-  static std::vector<double> fine;
-  if (state.range(0) == 200) {
-    g_keep_sky = &fine;
-    run(state, s, true);
-    g_keep_sky = nullptr;
-  } else {
-    if (fine.empty()) fine = finer_sky(false);
-    run(state, s, true, &fine);
-  }
+  run_against_finer(state, s, state.range(0) == 200, false);
 }
 BENCHMARK(RgbSize)->Arg(200)->Arg(100)->Arg(50)->Unit(benchmark::kSecond)->UseRealTime()->Iterations(1);
 
-// Args: wavelengths, size percent (4 orders); vs_finer_run: against 48 wavelengths at 100 %
-// (which runs first).
+// Args: wavelengths, size percent (4 orders); vs_finer_run: against 48 wavelengths at 100 %.
 void Spectral(benchmark::State& state) {
   AtmosphereSpec s = earth(static_cast<int>(state.range(1)));
   s.spectral = true;
   s.count = static_cast<int>(state.range(0));
   s.orders = 4;
-  static std::vector<double> fine;
-  if (state.range(0) == 48 && state.range(1) == 100) {
-    g_keep_sky = &fine;
-    run(state, s, false);
-    g_keep_sky = nullptr;
-  } else {
-    if (fine.empty()) fine = finer_sky(true);
-    run(state, s, false, &fine);
-  }
+  run_against_finer(state, s, state.range(0) == 48 && state.range(1) == 100, true);
 }
 BENCHMARK(Spectral)
     ->Args({48, 100})

@@ -131,25 +131,38 @@ void BM_Terms(benchmark::State& state) {
 
 #ifdef SPECBAKE_HAVE_FFTW
 // FFTW single precision, planned with FFTW_MEASURE (planning not timed), with as many threads
-// as the OpenCL device has compute units: ms for `count` in-place 2D FFTs of m × m (best of 3).
-double fftw_ms(int m, int count) {
-  static bool threads = (fftwf_init_threads(), true);
-  (void)threads;
-  fftwf_plan_with_nthreads(static_cast<int>(device().info().compute_units));
-  fftwf_complex* buf = fftwf_alloc_complex(static_cast<std::size_t>(m) * m);
-  fftwf_plan plan = fftwf_plan_dft_2d(m, m, buf, buf, FFTW_FORWARD, FFTW_MEASURE);
-  for (int i = 0; i < m * m; ++i) {
-    buf[i][0] = std::sin(0.001f * i);
-    buf[i][1] = 0.0f;
+// as the OpenCL device has compute units, on one m × m array transformed in place.
+struct FftwField {
+  fftwf_complex* buf = nullptr;
+  fftwf_plan plan = nullptr;
+  explicit FftwField(int m) {
+    static bool threads = (fftwf_init_threads(), true);
+    (void)threads;
+    fftwf_plan_with_nthreads(static_cast<int>(device().info().compute_units));
+    buf = fftwf_alloc_complex(static_cast<std::size_t>(m) * m);
+    plan = fftwf_plan_dft_2d(m, m, buf, buf, FFTW_FORWARD, FFTW_MEASURE);
+    for (int i = 0; i < m * m; ++i) {
+      buf[i][0] = std::sin(0.001f * i);
+      buf[i][1] = 0.0f;
+    }
   }
+  ~FftwField() {
+    fftwf_destroy_plan(plan);
+    fftwf_free(buf);
+  }
+  void run(int count) {
+    for (int k = 0; k < count; ++k) fftwf_execute(plan);
+  }
+};
+// ms for `count` FFTs of m × m, best of 3.
+double fftw_ms(int m, int count) {
+  FftwField f(m);
   double best = 1e300;
   for (int rep = 0; rep < 3; ++rep) {
     const auto t0 = std::chrono::steady_clock::now();
-    for (int k = 0; k < count; ++k) fftwf_execute(plan);
+    f.run(count);
     best = std::min(best, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
-  fftwf_destroy_plan(plan);
-  fftwf_free(buf);
   return best;
 }
 #endif
@@ -203,22 +216,10 @@ void BM_VkFft(benchmark::State& state) {
 
 #ifdef SPECBAKE_HAVE_FFTW
 void BM_FftwBaseline(benchmark::State& state) {
-  const int m = state.range(0) == 0 ? 128 : 1024;
+  FftwField f(state.range(0) == 0 ? 128 : 1024);
   const int count = static_cast<int>(state.range(1));
-  static bool threads = (fftwf_init_threads(), true);
-  (void)threads;
-  fftwf_plan_with_nthreads(static_cast<int>(device().info().compute_units));
-  fftwf_complex* buf = fftwf_alloc_complex(static_cast<std::size_t>(m) * m);
-  fftwf_plan plan = fftwf_plan_dft_2d(m, m, buf, buf, FFTW_FORWARD, FFTW_MEASURE);
-  for (int i = 0; i < m * m; ++i) {
-    buf[i][0] = std::sin(0.001f * i);
-    buf[i][1] = 0.0f;
-  }
-  for (auto _ : state)
-    for (int k = 0; k < count; ++k) fftwf_execute(plan);
+  for (auto _ : state) f.run(count);
   state.counters["threads"] = device().info().compute_units;
-  fftwf_destroy_plan(plan);
-  fftwf_free(buf);
 }
 #endif
 
