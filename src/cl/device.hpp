@@ -4,6 +4,7 @@
 #include <CL/opencl.hpp>
 
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,15 @@ class Device {
   std::string real_options() const { return info_.fp64 ? "-DSPECBAKE_REAL_DOUBLE" : ""; }
   // "Device name (Platform, OpenCL x.y)"
   std::string description() const;
+  // An object built for this device that later jobs of the same process reuse (FFT plans),
+  // made by make() (returning std::unique_ptr<T>) on first use of `key`; it lives as long as
+  // the device. Not for concurrent use: jobs run one after another.
+  template <class T, class Make>
+  T& reusable(const std::string& key, Make&& make) {
+    std::shared_ptr<void>& slot = reusable_[key];
+    if (!slot) slot = std::shared_ptr<T>(make());
+    return *static_cast<T*>(slot.get());
+  }
 
  private:
   DeviceInfo info_;
@@ -54,6 +64,7 @@ class Device {
   cl::Context context_;
   cl::CommandQueue queue_;
   std::map<std::string, cl::Program> programs_;
+  std::map<std::string, std::shared_ptr<void>> reusable_;  // declared last: released before the context
 };
 
 // Runs f, turning cl::Error into DeviceError("<what>: CL_NAME (code)").

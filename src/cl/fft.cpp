@@ -77,4 +77,10 @@ void Fft2d::forward(cl::Buffer& buffer, std::size_t first_array) {
   if (err != CL_SUCCESS) throw DeviceError(std::string("VkFFT forward transform: clFinish returned ") + error_name(err));
 }
 
+Fft2d& shared_fft(Device& dev, std::size_t width, std::size_t height, std::size_t batch, FftPrecision precision) {
+  const std::string key = "fft2d:" + std::to_string(width) + "x" + std::to_string(height) + "x" +
+                          std::to_string(batch) + (precision == FftPrecision::single ? ":f32" : ":f64");
+  return dev.reusable<Fft2d>(key, [&] { return std::make_unique<Fft2d>(dev, width, height, batch, precision); });
+}
+
 }  // namespace specbake::cl_util

@@ -83,8 +83,8 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
   t.count = plan.total_terms;
   cl::Program program = tm.time("terms: kernel build", [&] { return dev.build(kKernels, dev.real_options()); });
   // One transform per launch: on PoCL a batched VkFFT plan is slower per array than single ones.
-  cl_util::Fft2d fft = tm.time("terms: FFT plan", [&] {
-    return cl_util::Fft2d(dev, f.width, f.height, 1, cl_util::FftPrecision::single);
+  cl_util::Fft2d& fft = *tm.time("terms: FFT plan", [&] {
+    return &cl_util::shared_fft(dev, f.width, f.height, 1, cl_util::FftPrecision::single);
   });
   return cl_util::checked("diffraction terms", [&] {
     cl::Buffer h = cl_util::upload_real(dev, f.h_um);
@@ -258,7 +258,7 @@ struct ExactDft::Impl {
   cl_util::Device* dev = nullptr;
   const Field* f = nullptr;
   Bins bins;
-  std::unique_ptr<cl_util::Fft2d> fft;
+  cl_util::Fft2d* fft = nullptr;  // the device's shared double-precision plan
 };
 
 ExactDft::ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins) : impl_(std::make_unique<Impl>()) {
@@ -266,7 +266,7 @@ ExactDft::ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins) : imp
   impl_->bins = bins;
   if (dev && dev->info().fp64) {
     impl_->dev = dev;
-    impl_->fft = std::make_unique<cl_util::Fft2d>(*dev, f.width, f.height, 1, cl_util::FftPrecision::double_);
+    impl_->fft = &cl_util::shared_fft(*dev, f.width, f.height, 1, cl_util::FftPrecision::double_);
   }
 }
 ExactDft::~ExactDft() = default;
