@@ -331,6 +331,19 @@ TEST(DiffractionMaths, DeviceMatchesDoubleReferenceNonSquarePrimeSizes) {
   EXPECT_LE(worst, 1e3 * 1.1102230246251565e-16 * f.count());
 }
 
+TEST(DiffractionMaths, SharedFftPlansAreReusedAndGiveTheSameTerms) {
+  auto& a = cl_util::shared_fft(device(), 48, 40, 1, cl_util::FftPrecision::single);
+  EXPECT_EQ(&a, &cl_util::shared_fft(device(), 48, 40, 1, cl_util::FftPrecision::single));
+  EXPECT_NE(&a, &cl_util::shared_fft(device(), 40, 48, 1, cl_util::FftPrecision::single));
+  if (device().info().fp64)
+    EXPECT_NE(&a, &cl_util::shared_fft(device(), 48, 40, 1, cl_util::FftPrecision::double_));
+  // A second bake through the reused plan gives the same bits.
+  const Field f = centre_field(random_field(), Centre::mid_range);
+  const Plan p = plain_taylor(f, 6, 10.0);
+  const Terms t1 = device_terms(device(), f, p, kQuiet), t2 = device_terms(device(), f, p, kQuiet);
+  EXPECT_EQ(t1.values, t2.values);
+}
+
 TEST(DiffractionMaths, ExactDftAtKappaZeroIsTheDcBin) {
   // The shortcut at κ = 0 against the host DFT of e^{i·0·h} = 1 (odd size, cropped bins
   // with DC inside, and bins without DC).
