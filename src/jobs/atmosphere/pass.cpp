@@ -119,7 +119,7 @@ class DeviceBackend final : public PassBackend {
       return out;
     });
   }
-  void write(Tex t, const std::vector<double>& v) override {
+  void write(Tex t, std::vector<double> v) override {
     const long long n = texels(t) * width_;
     if (static_cast<long long>(v.size()) != n) throw JobError(std::string("wrong size for ") + to_string(t));
     cl_util::checked("writing an atmosphere texture", [&] {
@@ -263,10 +263,13 @@ StageCheck check_with(PassBackend& b, const Model& m, const Channels& ch, const 
     inputs = {Tex::transmittance};
     outputs = {Tex::delta_rayleigh, Tex::delta_mie};
   } else if (stage == "scattering_density") {
-    inputs = {Tex::transmittance, Tex::delta_irradiance, Tex::delta_rayleigh, Tex::delta_mie, Tex::delta_multiple};
+    // order 2 reads single scattering, later orders the previous multiple order
+    inputs = {Tex::transmittance, Tex::delta_irradiance};
+    if (order == 2) inputs.insert(inputs.end(), {Tex::delta_rayleigh, Tex::delta_mie});
+    else inputs.push_back(Tex::delta_multiple);
     outputs = {Tex::density};
   } else if (stage == "indirect_irradiance") {
-    inputs = {Tex::delta_rayleigh, Tex::delta_mie, Tex::delta_multiple};
+    inputs = order == 1 ? std::vector<Tex>{Tex::delta_rayleigh, Tex::delta_mie} : std::vector<Tex>{Tex::delta_multiple};
     outputs = {Tex::delta_irradiance};
   } else {
     inputs = {Tex::transmittance, Tex::density};

@@ -37,7 +37,7 @@ class PassBackend {
   virtual void indirect_irradiance(int order) = 0;    // ΔE ← indirect from scattering of `order`
   virtual void multiple_scattering() = 0;             // ΔS ← f(T, J)
   virtual std::vector<double> read(Tex t) = 0;        // [texels][channels()]
-  virtual void write(Tex t, const std::vector<double>& values) = 0;
+  virtual void write(Tex t, std::vector<double> values) = 0;  // [texels][channels()]
 };
 
 // The OpenCL backend: kernels built with NCH = width and float (or double) arithmetic.
