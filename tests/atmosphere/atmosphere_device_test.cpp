@@ -424,3 +424,23 @@ TEST(AtmosphereDevice, PassWidthDoesNotChangeAChannel) {
   std::printf("pass widths 4, 8, 16 against 3: worst relative difference %.3g\n", worst);
   EXPECT_LE(worst, 1e-3);
 }
+
+// A device without cl_khr_fp64 (PoCL with the capability masked): the float32 bake works and
+// self-checks within the same bound, and `precision: double` is refused with a clear error.
+TEST(AtmosphereDevice, FloatOnlyDeviceBakesAndRefusesDouble) {
+  cl_util::DeviceInfo info = cl_util::select_device("auto");
+  info.fp64 = false;
+  cl_util::Device float_only(info);
+  AtmosphereSpec s = small(earth());
+  s.orders = 3;
+  const Baked b = bake_luts(s, float_only, kQuiet, 8);
+  expect_all_finite(b);
+  EXPECT_LE(b.self_check_worst, kSelfCheckTolerance);
+  s.double_precision = true;
+  try {
+    bake_luts(s, float_only, kQuiet, 0);
+    ADD_FAILURE() << "double precision accepted on a device without fp64";
+  } catch (const DeviceError& e) {
+    EXPECT_NE(std::string(e.what()).find("cl_khr_fp64"), std::string::npos) << e.what();
+  }
+}

@@ -344,6 +344,54 @@ TEST(DiffractionMaths, SharedFftPlansAreReusedAndGiveTheSameTerms) {
   EXPECT_EQ(t1.values, t2.values);
 }
 
+// A device without cl_khr_fp64 (PoCL with the capability masked): term inputs in float, the
+// exact DFTs on the host. The terms must still match the double reference within the float32
+// FFT bound plus the float evaluation of the inputs (u·(n + 2 + κ_0·s) per term, the job's
+// self-check bound), and the whole plan must still meet its promise.
+TEST(DiffractionMaths, FloatOnlyDeviceMeetsTheBounds) {
+  cl_util::DeviceInfo info = cl_util::select_device("auto");
+  info.fp64 = false;
+  cl_util::Device float_only(info);
+  Heightfield hf;
+  hf.width = 40;
+  hf.height = 24;
+  hf.dx_um = 0.1;
+  for (int iy = 0; iy < hf.height; ++iy)
+    for (int ix = 0; ix < hf.width; ++ix)
+      hf.h_um.push_back(0.2 * std::sin(0.3 * ix + 0.1 * iy) + 0.05 * std::cos(0.7 * iy) + 0.004 * ix);
+  const Field f = centre_field(hf, Centre::mid_range);
+  DiffractionSpec spec;
+  spec.tolerance = 1e-4;
+  spec.crop = false;
+  ExactDft exact(&float_only, f, full_bins(f.width, f.height));
+  EXPECT_FALSE(exact.on_device());
+  for (Expansion e : {Expansion::taylor, Expansion::chebyshev}) {
+    spec.expansion = e;
+    const Plan p = make_plan(spec, f, spec.tolerance);
+    const Terms t = device_terms(float_only, f, p, kQuiet);
+    const auto want = reference_terms(f, p.bands, p.bins);
+    const std::size_t per = t.per_term();
+    double worst_ratio = 0.0;
+    for (const auto& band : p.bands)
+      for (int n = 0; n < band.terms; ++n) {
+        const double a = e == Expansion::taylor ? 1.0 : (n == 0 ? 1.0 : 2.0);
+        const double tol = a * kU * (2.0 + 6.0 * std::log2(4.0 * f.count()) + n + 2.0 + band.kappa0 * f.s);
+        for (std::size_t i = 0; i < per; ++i) {
+          const std::size_t k = (band.first_term + n) * per + i;
+          worst_ratio = std::max(worst_ratio, std::abs(cplx(t.values[2 * k], t.values[2 * k + 1]) - want[k]) / tol);
+        }
+      }
+    EXPECT_LE(worst_ratio, 1.0) << (e == Expansion::taylor ? "taylor" : "chebyshev");
+    double worst = 0.0;
+    for (double kappa : {p.kappa_hi * 0.5, p.kappa_hi}) {
+      const auto ex = exact(kappa);
+      const auto P = reconstruct(t, band_for(p.bands, kappa), f, kappa);
+      for (std::size_t j = 0; j < P.size(); ++j) worst = std::max(worst, std::abs(P[j] - ex[j]) / f.count());
+    }
+    EXPECT_LE(worst, spec.tolerance) << (e == Expansion::taylor ? "taylor" : "chebyshev");
+  }
+}
+
 TEST(DiffractionMaths, ExactDftAtKappaZeroIsTheDcBin) {
   // The shortcut at κ = 0 against the host DFT of e^{i·0·h} = 1 (odd size, cropped bins
   // with DC inside, and bins without DC).

@@ -85,6 +85,22 @@ TEST(DispersionReference, DevicePathMatchesRefdata) {
     }
 }
 
+// A device without cl_khr_fp64 (the same PoCL device with the capability masked, so the
+// kernels build with real = float): the float32 bounds of the error model must hold.
+TEST(DispersionReference, DevicePathMatchesRefdataWithoutFp64) {
+  cl_util::DeviceInfo info = cl_util::select_device("auto");
+  info.fp64 = false;
+  cl_util::Device float_only(info);
+  for (const Case& c : kCases)
+    for (AbbeLines l : {AbbeLines::D, AbbeLines::d}) {
+      SCOPED_TRACE(label(c));
+      const DispersionSpec spec = spec_for(c, l);
+      const Samples s = make_samples(c.sampling, spec.range_nm, c.n);
+      const Tables t = compute_device(float_only, spec, s, resolve_material(spec.material, lines_for(l)));
+      check_tables(t, c, l, 5.9604644775390625e-08, "compute_device without fp64");
+    }
+}
+
 // Σ_n K_n = Minv·Diag(Σ_n Ŵ_n)·M = I in exact arithmetic. In double: each K_n entry carries
 // ≤ 5 roundings of Σ_k |Minv_rk|·Ŵ_nk·|M_kc|; summed over n (Σ_n Ŵ_nk = 1) that is
 // 5 u·(|Minv|·|M|)_rc; Σ_n Ŵ_n = 1 to N roundings; Minv·M = I to ≤ 32 u (see SrgbMatrices);
