@@ -71,6 +71,15 @@ SplitError split_rel(const std::vector<double>& a, const std::vector<double>& b,
   }
   return e;
 }
+// Every texture of a float32 bake within the float32 chain bound of another (reference) one.
+void expect_within_float32_chain(double et, double ee, const SplitError& es, const SplitError& em, double bound) {
+  EXPECT_LE(et, bound);
+  EXPECT_LE(ee, bound);
+  EXPECT_LE(es.rest, bound);
+  EXPECT_LE(em.rest, bound);
+  EXPECT_LE(es.horizon, bound);
+  EXPECT_LE(em.horizon, bound);
+}
 void expect_finite(const std::vector<double>& v, const char* what) {
   for (std::size_t i = 0; i < v.size(); ++i)
     ASSERT_TRUE(std::isfinite(v[i])) << what << "[" << i << "] = " << v[i];
@@ -120,12 +129,7 @@ TEST(AtmosphereDevice, FullSizeEarthMatchesReferenceTextures) {
   const SplitError es = split_rel(b.luts.scattering, S.data, sz, 1e-3), em = split_rel(b.luts.single_mie, M.data, sz, 1e-3);
   std::printf("full size vs reference: T %.3g  E %.3g  S %.3g (horizon rows %.3g)  M %.3g (horizon rows %.3g)\n",
               et, ee, es.rest, es.horizon, em.rest, em.horizon);
-  EXPECT_LE(et, kFloat32Chain);
-  EXPECT_LE(ee, kFloat32Chain);
-  EXPECT_LE(es.rest, kFloat32Chain);
-  EXPECT_LE(em.rest, kFloat32Chain);
-  EXPECT_LE(es.horizon, kFloat32Chain);
-  EXPECT_LE(em.horizon, kFloat32Chain);
+  expect_within_float32_chain(et, ee, es, em, kFloat32Chain);
   EXPECT_EQ(b.orders_used, 4);
 }
 
@@ -142,12 +146,7 @@ TEST(AtmosphereDevice, SmallSizesMatchDoubleReference) {
                    em = split_rel(dev.luts.single_mie, host.luts.single_mie, sz, 1e-3);
   std::printf("float32 vs double: T %.3g  E %.3g  S %.3g (horizon rows %.3g)  M %.3g (horizon rows %.3g)  "
               "self-check %.3g\n", et, ee, es.rest, es.horizon, em.rest, em.horizon, dev.self_check_worst);
-  EXPECT_LE(et, kFloat32Chain);
-  EXPECT_LE(ee, kFloat32Chain);
-  EXPECT_LE(es.rest, kFloat32Chain);
-  EXPECT_LE(em.rest, kFloat32Chain);
-  EXPECT_LE(es.horizon, kFloat32Chain);
-  EXPECT_LE(em.horizon, kFloat32Chain);
+  expect_within_float32_chain(et, ee, es, em, kFloat32Chain);
   EXPECT_LE(dev.self_check_worst, kSelfCheckTolerance);
   if (device().info().fp64) {
     AtmosphereSpec d = s;

@@ -80,6 +80,18 @@ Heightfield random_field() {
   return hf;
 }
 
+// An asymmetric smooth field of w × h samples (dx = 0.1 µm).
+Heightfield asymmetric_field(int w, int h) {
+  Heightfield hf;
+  hf.width = w;
+  hf.height = h;
+  hf.dx_um = 0.1;
+  for (int iy = 0; iy < h; ++iy)
+    for (int ix = 0; ix < w; ++ix)
+      hf.h_um.push_back(0.2 * std::sin(0.3 * ix + 0.1 * iy * iy / 7.0) + 0.05 * std::cos(0.7 * iy) + 0.01 * ix / 37.0);
+  return hf;
+}
+
 Bins full_bins(int w, int h) { return {-(w / 2), w - 1 - w / 2, -(h / 2), h - 1 - h / 2}; }
 
 // A plan with one plain Taylor band about κ_0 = 0 (Single's form), T terms, all bins.
@@ -295,14 +307,7 @@ TEST(DiffractionMaths, SignConventionMirroredResultFails) {
 
 TEST(DiffractionMaths, DeviceMatchesDoubleReferenceNonSquarePrimeSizes) {
   // 37 × 29 (primes: VkFFT's Bluestein path), an asymmetric smooth field.
-  Heightfield hf;
-  hf.width = 37;
-  hf.height = 29;
-  hf.dx_um = 0.1;
-  for (int iy = 0; iy < hf.height; ++iy)
-    for (int ix = 0; ix < hf.width; ++ix)
-      hf.h_um.push_back(0.2 * std::sin(0.3 * ix + 0.1 * iy * iy / 7.0) + 0.05 * std::cos(0.7 * iy) + 0.01 * ix / 37.0);
-  const Field f = centre_field(hf, Centre::mid_range);
+  const Field f = centre_field(asymmetric_field(37, 29), Centre::mid_range);
   for (Expansion e : {Expansion::taylor, Expansion::chebyshev}) {
     Plan p;
     p.kappa_hi = 33.0;
@@ -352,14 +357,7 @@ TEST(DiffractionMaths, FloatOnlyDeviceMeetsTheBounds) {
   cl_util::DeviceInfo info = cl_util::select_device("auto");
   info.fp64 = false;
   cl_util::Device float_only(info);
-  Heightfield hf;
-  hf.width = 40;
-  hf.height = 24;
-  hf.dx_um = 0.1;
-  for (int iy = 0; iy < hf.height; ++iy)
-    for (int ix = 0; ix < hf.width; ++ix)
-      hf.h_um.push_back(0.2 * std::sin(0.3 * ix + 0.1 * iy) + 0.05 * std::cos(0.7 * iy) + 0.004 * ix);
-  const Field f = centre_field(hf, Centre::mid_range);
+  const Field f = centre_field(asymmetric_field(40, 24), Centre::mid_range);
   DiffractionSpec spec;
   spec.tolerance = 1e-4;
   spec.crop = false;

@@ -290,8 +290,7 @@ Baked bake_luts_reference(const AtmosphereSpec& spec) {
 }
 
 int channels_per_pass(const AtmosphereSpec& spec) {
-  const Spectrum sp = spectrum_of(spec);
-  return sp.spectral ? pass_width_for(sp.lambda_nm.size()) : 3;
+  return spec.spectral ? pass_width_for(static_cast<std::size_t>(spec.count)) : 3;  // spectral: count wavelengths
 }
 
 json plan(const AtmosphereSpec& spec, JobContext&) { return parameters_json(spec); }
