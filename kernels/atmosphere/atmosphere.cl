@@ -64,19 +64,16 @@
  * Compile-time settings: NCH (channels), NU_MAX (largest NU the caller uses).
  */
 #include "common/real.h"
+#include "atmosphere/limits.h"
 
 #ifndef NCH
 #  error "NCH (channels per texel) must be defined before including atmosphere.cl"
 #endif
 #ifndef NU_MAX
-#  define NU_MAX 64 /* the config's largest nu size */
+#  define NU_MAX ATMOSPHERE_NU_LIMIT
 #endif
 
 #define ATM_PI R(3.14159265358979323846)
-#define TRANSMITTANCE_STEPS 500
-#define SCATTERING_STEPS 50
-#define DENSITY_SPHERE_STEPS 16
-#define IRRADIANCE_HEMISPHERE_STEPS 32
 
 /* Ray-sample table entry (see the header). */
 #define RAY_H 0      /* altitude of the sample, km */
@@ -87,7 +84,7 @@
 #define RAY_W 5      /* trapezoid weight × dx, km */
 #define RAY_RHO_R 6  /* Rayleigh density at h_i */
 #define RAY_RHO_M 7  /* Mie density at h_i */
-#define RAY_T 8      /* NCH values: transmittance between the texel's point and the sample */
+#define RAY_T RAY_FIXED /* NCH values: transmittance between the texel's point and the sample */
 #define RAY_STRIDE (RAY_T + NCH)
 
 /* Two-layer density profile; layer 0 applies at altitudes below width[0] (km). */
@@ -656,7 +653,6 @@ FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real
 /* ---- scattering density J_n (paper Eq. 7's integrand, 16 × 32 midpoint rule) ---------- */
 /* Entry of the density-incidence table: what the 32 φ of incident direction θ_l share at
  * (h, mu_s): the ν-slices of the incoming radiance, and the ground seen along θ_l. */
-#define INC_FIXED 6 /* ground flag, distance, n_z, 1/|n|, cos θ, sin θ */
 FN int incidence_stride(const AtmosphereParameters* a) { return 2 * a->nu_size * NCH + NCH + INC_FIXED; }
 #define INC_SOURCE(a) 0                                     /* NU × NCH: order − 1 (Rayleigh at order 2) */
 #define INC_MIE(a) ((a)->nu_size * NCH)                     /* NU × NCH: single Mie (order 2 only) */

@@ -2,12 +2,28 @@
  *
  *   xyz_to_lab   CIE 1976 L*a*b* from XYZ relative to a white (Xn, Yn, Zn), CIE 15:2004 §8.2.1
  *                (the linear segment below (6/29)^3 included). Units: XYZ in any common scale.
+ *   cmf_lerp     colour-matching functions x̄ȳz̄ at any λ from a 1 nm table: linear between rows,
+ *                0 outside the table (used by every kind that integrates spectra).
  *   ciede2000    CIE DE2000 colour difference, CIE 142-2001, with kL = kC = kH = 1, written
  *                after G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula:
  *                implementation notes, supplementary test data, and mathematical observations",
  *                Color Res. Appl. 30(1), 2005 (eqs. 2–22; hue angles in degrees, h = 0 when a' = b' = 0).
  */
+#ifndef SPECBAKE_COLOUR_CL
+#define SPECBAKE_COLOUR_CL
 #include "common/real.h"
+
+/* x̄ȳz̄ at lambda_nm (nm) from a table of `count` rows [x̄, ȳ, z̄] at 1 nm steps from first_nm. */
+FN void cmf_lerp(GLOBAL const real* table, int count, real first_nm, real lambda_nm, real* xyz) {
+  const real t = lambda_nm - first_nm;
+  xyz[0] = xyz[1] = xyz[2] = R(0.0);
+  if (!(t >= R(0.0)) || t > (real)(count - 1)) return;
+  int i = (int)floor(t);
+  if (i > count - 2) i = count - 2;
+  const real f = t - (real)i;
+  for (int c = 0; c < 3; ++c) xyz[c] = (R(1.0) - f) * table[3 * i + c] + f * table[3 * (i + 1) + c];
+}
+
 
 FN real lab_f(real t) {
   const real d = R(6.0) / R(29.0);
@@ -67,3 +83,5 @@ FN real ciede2000(real L1, real a1, real b1, real L2, real a2, real b2) {
   const real tL = dLp / SL, tC = dCp / SC, tH = dHp / SH;
   return sqrt(tL * tL + tC * tC + tH * tH + RT * tC * tH);
 }
+
+#endif

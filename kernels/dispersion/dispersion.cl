@@ -3,6 +3,7 @@
  *
  * For N sample wavelengths λ_n (nm) with quadrature weights w_n (nm):
  *   W_n  = CMF(λ_n)·w_n                      CMF linearly interpolated from a 1 nm table, 0 outside it
+ *                                            (cmf_lerp, common/colour.cl)
  *   Ŵ_n  = W_n / Σ_m W_m   (per component)   so Σ Ŵ_n = (1, 1, 1) — not normalised to D65
  *   K_n  = M_XYZ→sRGB · Diag(Ŵ_n) · M_sRGB→XYZ    so Σ K_n = I (white stays white)
  *   Offset(λ) = (1/λ² − 1/λ_ref²) / (1/λ_F² − 1/λ_C²)   (dimensionless; λ_ref, λ_F, λ_C are the
@@ -12,17 +13,7 @@
  * Matrices are 3×3 row-major: m[3*row + col].
  */
 #include "common/real.h"
-
-/* x̄ȳz̄ at lambda_nm from a table of `count` rows at 1 nm steps from first_nm. */
-FN void cmf_lerp(GLOBAL const real* table, int count, real first_nm, real lambda_nm, real* xyz) {
-  const real t = lambda_nm - first_nm;
-  xyz[0] = xyz[1] = xyz[2] = R(0.0);
-  if (!(t >= R(0.0)) || t > (real)(count - 1)) return;
-  int i = (int)floor(t);
-  if (i > count - 2) i = count - 2;
-  const real f = t - (real)i;
-  for (int c = 0; c < 3; ++c) xyz[c] = (R(1.0) - f) * table[3 * i + c] + f * table[3 * (i + 1) + c];
-}
+#include "common/colour.cl"
 
 FN real abbe_offset(real lambda_nm, real ref_nm, real F_nm, real C_nm) {
   const real inv2 = R(1.0) / (lambda_nm * lambda_nm);

@@ -13,7 +13,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "jobs/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/atmosphere_job.hpp"
 
 using namespace specbake;
 using namespace specbake::atmosphere;

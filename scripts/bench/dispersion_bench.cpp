@@ -4,7 +4,7 @@
 #include <benchmark/benchmark.h>
 
 #include "cl/device.hpp"
-#include "jobs/dispersion/dispersion_job.hpp"
+#include "kinds/dispersion/dispersion_job.hpp"
 
 using namespace specbake;
 

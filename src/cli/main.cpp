@@ -9,7 +9,7 @@
 
 #include "cl/device.hpp"
 #include "core/hash.hpp"
-#include "core/runner.hpp"
+#include "runner/runner.hpp"
 #include "core/version.hpp"
 #include "io/bundle.hpp"
 #include "io/bundle_diff.hpp"

@@ -3,6 +3,8 @@
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -15,27 +17,34 @@
 
 namespace specbake {
 
-const char* to_string(Sampling s) {
-  switch (s) {
-    case Sampling::uniform: return "uniform";
-    case Sampling::gauss_legendre: return "gauss-legendre";
-    case Sampling::visible_pdf: return "visible-pdf";
-    case Sampling::inverse_square: return "inverse-square";
+std::string closest_word(const std::string& word, const std::vector<std::string>& candidates) {
+  // Levenshtein distance, case-insensitive; a candidate qualifies within a third of the word.
+  auto lower = [](std::string t) {
+    for (auto& c : t) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return t;
+  };
+  const std::string w = lower(word);
+  std::string best;
+  std::size_t best_d = std::max<std::size_t>(1, w.size() / 3) + 1;
+  for (const auto& cand : candidates) {
+    const std::string c = lower(cand);
+    std::vector<std::size_t> row(c.size() + 1);
+    for (std::size_t j = 0; j <= c.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= w.size(); ++i) {
+      std::size_t diag = row[0];
+      row[0] = i;
+      for (std::size_t j = 1; j <= c.size(); ++j) {
+        const std::size_t up = row[j];
+        row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (w[i - 1] == c[j - 1] ? 0 : 1)});
+        diag = up;
+      }
+    }
+    if (row[c.size()] < best_d) best_d = row[c.size()], best = cand;
   }
-  return "?";
+  return best;
 }
-const char* to_string(CmfSet c) {
-  switch (c) {
-    case CmfSet::cie1931_2deg: return "cie1931-2deg";
-    case CmfSet::cie1964_10deg: return "cie1964-10deg";
-    case CmfSet::cie2006_2deg: return "cie2006-2deg";
-    case CmfSet::cie2006_10deg: return "cie2006-10deg";
-  }
-  return "?";
-}
-const char* to_string(AbbeLines l) { return l == AbbeLines::d ? "d" : "D"; }
 
-using config_detail::At;
+using yaml::At;
 
 namespace {
 constexpr std::size_t kMaxConfigBytes = 1 << 20;  // a config is a few kB; refuse huge documents
@@ -94,7 +103,7 @@ class NodeBudget : public YAML::EventHandler {
 };
 }  // namespace
 
-Config parse_config(const std::string& text, const fs::path& file) {
+Config parse_config(const std::string& text, const fs::path& file, const std::vector<KindSyntax>& kinds) {
   if (text.size() > kMaxConfigBytes)
     throw InputError({file, 0, 0, ""}, "config is " + std::to_string(text.size()) +
                                             " bytes; expected at most " + std::to_string(kMaxConfigBytes));
@@ -141,13 +150,19 @@ Config parse_config(const std::string& text, const fs::path& file) {
   const At jobs = top.child("jobs");
   if (!jobs.node.IsSequence() || jobs.node.size() == 0) jobs.fail("expected a non-empty list of jobs");
 
+  std::string kind_list;
+  std::vector<std::string> kind_names;
+  for (const auto& k : kinds) {
+    kind_list += (kind_list.empty() ? "" : " | ") + k.name;
+    kind_names.push_back(k.name);
+  }
   static const std::regex name_re("[a-z0-9][a-z0-9._-]*");
   std::map<std::string, Location> names;
   for (std::size_t i = 0; i < jobs.node.size(); ++i) {
     const At job = jobs.item(i);
     job.expect_map("a job");
     if (!job.has("name")) job.fail("expected a 'name'");
-    if (!job.has("kind")) job.fail("expected a 'kind' (dispersion | diffraction | atmosphere)");
+    if (!job.has("kind")) job.fail("expected a 'kind' (" + kind_list + ")");
     const At name_at = job.child("name");
     JobSpec js;
     js.name = name_at.string();
@@ -160,21 +175,19 @@ Config parse_config(const std::string& text, const fs::path& file) {
     js.where = job.loc();
     const At kind_at = job.child("kind");
     js.kind = kind_at.string();
-    if (js.kind == "dispersion") {
-      js.spec = config_detail::parse_dispersion(job, js.normalised, js.inputs);
-    } else if (js.kind == "diffraction") {
-      js.spec = config_detail::parse_diffraction(job, js.normalised, js.inputs);
-    } else if (js.kind == "atmosphere") {
-      js.spec = config_detail::parse_atmosphere(job, js.normalised, js.inputs);
-    } else {
-      kind_at.fail("expected kind dispersion | diffraction | atmosphere, got " + kind_at.shown());
+    const auto kind = std::find_if(kinds.begin(), kinds.end(), [&](const KindSyntax& k) { return k.name == js.kind; });
+    if (kind == kinds.end()) {
+      const std::string near = closest_word(js.kind, kind_names);
+      kind_at.fail("expected kind " + kind_list + ", got " + kind_at.shown() +
+                   (near.empty() ? "" : " (did you mean '" + near + "'?)"));
     }
+    js.spec = kind->parse(job, js.normalised, js.inputs);
     cfg.jobs.push_back(std::move(js));
   }
   return cfg;
 }
 
-Config load_config(const fs::path& file) {
+Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds) {
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) throw IoError("cannot read config " + file.string() + ": not a file");
   if (fs::file_size(file, ec) > kMaxConfigBytes)
@@ -183,7 +196,7 @@ Config load_config(const fs::path& file) {
   if (!in) throw IoError("cannot read config " + file.string());
   std::stringstream ss;
   ss << in.rdbuf();
-  return parse_config(ss.str(), file);
+  return parse_config(ss.str(), file, kinds);
 }
 
 }  // namespace specbake

@@ -1,5 +1,6 @@
 #include "core/spectral_data.hpp"
 
+#include <cmath>
 #include <map>
 #include <mutex>
 #include <sstream>
@@ -8,6 +9,56 @@
 #include "core/resources.hpp"
 
 namespace specbake {
+
+namespace cie {
+using real = double;
+using std::cbrt, std::cos, std::exp, std::fabs, std::floor, std::pow, std::sin, std::sqrt, std::atan2;
+#include "common/colour.cl"
+}  // namespace cie
+
+std::array<double, 3> CmfTable::at(double nm) const {
+  std::array<double, 3> v{};
+  cie::cmf_lerp(xyz.data(), count(), first_nm, nm, v.data());
+  return v;
+}
+
+double SpdTable::at_whole_nm(double nm) const {
+  const double i = nm - first_nm;
+  if (!(i >= 0.0) || i > static_cast<double>(values.size() - 1) || i != std::floor(i)) return 0.0;
+  return values[static_cast<std::size_t>(i)];
+}
+
+const SpdTable& d65_table() {
+  static const SpdTable t = [] {
+    SpdTable d;
+    d.resource = "data/cie/d65_1nm.csv";
+    std::istringstream in{std::string(resource(d.resource))};
+    std::string line;
+    std::getline(in, line);  // header
+    double expected = 0.0;
+    while (std::getline(in, line)) {
+      if (line.empty()) continue;
+      const auto comma = line.find(',');
+      const double nm = std::stod(line.substr(0, comma));
+      if (d.values.empty()) d.first_nm = expected = nm;
+      if (nm != expected) throw std::runtime_error("D65 table " + d.resource + " is not at 1 nm steps");
+      d.values.push_back(std::stod(line.substr(comma + 1)));
+      expected += 1.0;
+    }
+    return d;
+  }();
+  return t;
+}
+
+const char* to_string(CmfSet c) {
+  switch (c) {
+    case CmfSet::cie1931_2deg: return "cie1931-2deg";
+    case CmfSet::cie1964_10deg: return "cie1964-10deg";
+    case CmfSet::cie2006_2deg: return "cie2006-2deg";
+    case CmfSet::cie2006_10deg: return "cie2006-10deg";
+  }
+  return "?";
+}
 
 namespace {
 

@@ -1,12 +1,26 @@
 #pragma once
 // Tabulated inputs embedded from data/: CIE colour-matching functions and the glass
 // catalogue (see data/*/PROVENANCE.md).
+#include <array>
 #include <string>
 #include <vector>
 
-#include "core/config.hpp"
 
 namespace specbake {
+
+struct RangeNm {
+  double lo = 380.0;
+  double hi = 780.0;
+};
+
+enum class CmfSet { cie1931_2deg, cie1964_10deg, cie2006_2deg, cie2006_10deg };
+const char* to_string(CmfSet);
+
+// Sellmeier: n(λ)² = 1 + Σ B_i λ² / (λ² − C_i), λ in µm, C_i in µm².
+struct Sellmeier {
+  std::vector<double> B, C;
+};
+
 
 // A colour-matching function table at 1 nm steps starting at first_nm.
 struct CmfTable {
@@ -15,9 +29,22 @@ struct CmfTable {
   double last_nm = 0.0;
   std::vector<double> xyz;  // [count][3]: x̄, ȳ, z̄ at first_nm + i
   int count() const { return static_cast<int>(xyz.size() / 3); }
+  // x̄ȳz̄ at `nm`: linear between rows, 0 outside the table (cmf_lerp of kernels/common/colour.cl,
+  // the same function the kernels use).
+  std::array<double, 3> at(double nm) const;
 };
 
 const CmfTable& cmf_table(CmfSet set);
+
+// CIE standard illuminant D65, relative spectral power at 1 nm steps (data/cie/d65_1nm.csv).
+struct SpdTable {
+  std::string resource;
+  double first_nm = 0.0;
+  std::vector<double> values;
+  // The value at a whole nm inside the table; 0 elsewhere (no interpolation: callers step 1 nm).
+  double at_whole_nm(double nm) const;
+};
+const SpdTable& d65_table();
 
 struct GlassEntry {
   std::string id, description;

@@ -1,6 +1,7 @@
 #pragma once
-// Internal to the config loader: a YAML node together with the key path that reached it,
-// so that every error names file, line, column and key, and says what was expected.
+// A YAML node together with the key path that reached it, so that every error a config parser
+// raises names file, line, column and key, and says what was expected. Used by the config
+// loader and by each kind's parser.
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
@@ -9,9 +10,18 @@
 #include <string>
 #include <vector>
 
-#include "core/config.hpp"
+#include <filesystem>
 
-namespace specbake::config_detail {
+#include "core/errors.hpp"
+
+namespace specbake {
+
+// The closest of `candidates` to `word`, or "" (core/config.cpp).
+std::string closest_word(const std::string& word, const std::vector<std::string>& candidates);
+
+namespace yaml {
+
+namespace fs = std::filesystem;
 
 // A YAML node with the path used to reach it, so errors name file, line, column and key.
 struct At {
@@ -53,11 +63,17 @@ struct At {
       if (!seen.insert(k).second) key_at.fail("duplicate key '" + k + "'");
       bool ok = false;
       std::string list;
+      std::vector<std::string> names;
       for (const char* a : allowed) {
         ok = ok || k == a;
         list += std::string(list.empty() ? "" : ", ") + a;
+        names.emplace_back(a);
       }
-      if (!ok) key_at.fail("unknown key '" + k + "'; expected one of: " + list);
+      if (!ok) {
+        const std::string near = closest_word(k, names);
+        key_at.fail("unknown key '" + k + "'" + (near.empty() ? "" : " (did you mean '" + near + "'?)") +
+                    "; expected one of: " + list);
+      }
     }
   }
 
@@ -111,11 +127,14 @@ struct At {
   E choice(std::initializer_list<std::pair<const char*, E>> options) const {
     const std::string s = node.IsScalar() ? node.Scalar() : "";
     std::string list;
+    std::vector<std::string> names;
     for (auto& [name, value] : options) {
       if (s == name) return value;
       list += std::string(list.empty() ? "" : " | ") + name;
+      names.emplace_back(name);
     }
-    fail("expected one of " + list + ", got " + shown());
+    const std::string near = s.empty() ? "" : closest_word(s, names);
+    fail("expected one of " + list + ", got " + shown() + (near.empty() ? "" : " (did you mean '" + near + "'?)"));
   }
   std::vector<double> numbers(std::size_t min_len, std::size_t max_len) const {
     if (!node.IsSequence()) fail("expected a list of numbers, got " + shown());
@@ -131,11 +150,5 @@ struct At {
 };
 
 
-// Per-kind parsers (config_<kind>.cpp): fill `norm` with the canonical form of everything that
-// defines the result, and `inputs` with (label, sha256) of the data the job reads.
-using Inputs = std::vector<std::pair<std::string, std::string>>;
-DispersionSpec parse_dispersion(const At& job, nlohmann::json& norm, Inputs& inputs);
-DiffractionSpec parse_diffraction(const At& job, nlohmann::json& norm, Inputs& inputs);
-AtmosphereSpec parse_atmosphere(const At& job, nlohmann::json& norm, Inputs& inputs);
-
-}  // namespace specbake::config_detail
+}  // namespace yaml
+}  // namespace specbake

@@ -9,9 +9,19 @@
 #include <string>
 #include <utility>
 
-#include "core/config.hpp"
+#include <vector>
 
 namespace specbake {
+
+namespace fs = std::filesystem;
+
+// A heightfield in µm, row-major [iy][ix] (x = ix·dx along columns, y = iy·dx along rows).
+struct Heightfield {
+  int width = 0, height = 0;
+  double dx_um = 0.0;
+  std::vector<double> h_um;
+};
+
 
 enum class HeightfieldFormat { png, bmp, exr, raw };
 

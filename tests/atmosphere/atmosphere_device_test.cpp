@@ -7,8 +7,8 @@
 
 #include "atmosphere/npy.hpp"
 #include "io/exr.hpp"
-#include "jobs/atmosphere/atmosphere_job.hpp"
-#include "jobs/atmosphere/reference.hpp"
+#include "kinds/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/reference.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

@@ -6,8 +6,8 @@
 #include <cmath>
 
 #include "atmosphere/npy.hpp"
-#include "jobs/atmosphere/reference.hpp"
-#include "jobs/atmosphere/render.hpp"
+#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/render.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

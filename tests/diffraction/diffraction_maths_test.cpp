@@ -13,9 +13,9 @@
 
 #include "cl/device.hpp"
 #include "cl/fft.hpp"
-#include "jobs/diffraction/planning.hpp"
-#include "jobs/diffraction/reference.hpp"
-#include "jobs/diffraction/terms.hpp"
+#include "kinds/diffraction/planning.hpp"
+#include "kinds/diffraction/reference.hpp"
+#include "kinds/diffraction/terms.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

@@ -18,8 +18,8 @@
 #include "cl/buffers.hpp"
 #include "cl/device.hpp"
 #include "core/resources.hpp"
-#include "jobs/dispersion/dispersion_job.hpp"
-#include "jobs/dispersion/reference.hpp"
+#include "kinds/dispersion/dispersion_job.hpp"
+#include "kinds/dispersion/reference.hpp"
 
 namespace {
 

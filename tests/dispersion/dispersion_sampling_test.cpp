@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "jobs/dispersion/sampling.hpp"
+#include "kinds/dispersion/sampling.hpp"
 
 namespace {
 
@@ -149,7 +149,7 @@ TEST(Sampling, UniformMidpoints) {
     }
 }
 
-// The visible-wavelength pdf of pbrt-v4 / Mitsuba 3 as the issue gives it, unnormalised.
+// The visible-wavelength pdf of pbrt-v4 / Mitsuba 3 as pbrt-v4 writes it, unnormalised.
 double visible_pdf_raw(double l) {
   const double ch = std::cosh(0.0072 * (l - 538.0));
   return 0.0039398042 / (ch * ch);
@@ -173,7 +173,7 @@ double visible_pdf_norm(RangeNm r) {
 
 // visible-pdf: λ_n inverts the truncated CDF at u = (n+½)/N and w_n = 1/(N·p(λ_n)) with p the
 // pdf renormalised to the range. Then:
-//  - p(λ_n)·N·w_n = 1, with p from the issue's formula and a numerical normalisation
+//  - p(λ_n)·N·w_n = 1, with p from that formula and a numerical normalisation
 //    (relative ≤ 1e-12: Simpson error ≪ that, plus a few roundings);
 //  - Σ w_n approximates ∫_0^1 g(u) du = hi − lo with g(u) = dλ/du = 1/p(λ(u)), by the midpoint
 //    rule, whose error is at most max|g''|/(24 N²). With t = tanh(a(λ−538)) linear in u

@@ -15,8 +15,8 @@
 
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
-#include "jobs/dispersion/dispersion_job.hpp"
-#include "jobs/dispersion/sampling.hpp"
+#include "kinds/dispersion/dispersion_job.hpp"
+#include "kinds/dispersion/sampling.hpp"
 #include "support/testing.hpp"
 
 namespace specbake::testing::specgen {

@@ -1,0 +1,69 @@
+#include "job/kind.hpp"
+
+#include <cmath>
+
+#include "core/resources.hpp"
+
+namespace specbake {
+
+using nlohmann::json;
+
+const char* to_string(Stage s) {
+  switch (s) {
+    case Stage::plan: return "plan";
+    case Stage::compute: return "compute";
+    case Stage::check: return "check";
+    case Stage::files: return "files";
+  }
+  return "?";
+}
+
+Accuracy Accuracy::judged(std::string name, std::string metric, double value, std::optional<double> tolerance,
+                          std::string reference, json details) {
+  Accuracy a;
+  a.name = std::move(name);
+  a.metric = std::move(metric);
+  a.value = value;
+  a.tolerance = tolerance;
+  a.reference = std::move(reference);
+  a.passed = tolerance ? (value <= *tolerance) : !std::isnan(value);
+  a.details = std::move(details);
+  return a;
+}
+
+json to_json(const Accuracy& a) {
+  json j = {{"name", a.name},
+            {"metric", a.metric},
+            {"value", std::isfinite(a.value) ? json(a.value) : json(std::to_string(a.value))},
+            {"tolerance", a.tolerance ? json(*a.tolerance) : json(nullptr)},
+            {"reference", a.reference},
+            {"passed", a.passed}};
+  if (!a.details.empty()) j["details"] = a.details;
+  return j;
+}
+
+json accuracy_json(const std::vector<Accuracy>& records) {
+  json out = json::array();
+  for (const auto& a : records) out.push_back(to_json(a));
+  return out;
+}
+
+const json* find_accuracy(const json& list, std::string_view name) {
+  if (!list.is_array()) return nullptr;
+  for (const auto& a : list)
+    if (a.is_object() && a.value("name", "") == name) return &a;
+  return nullptr;
+}
+
+void check_device_memory(const JobSpec& job, const MemoryEstimate& need, const cl_util::DeviceInfo& di) {
+  if (need.total_bytes > di.global_mem_bytes || need.largest_buffer > di.max_alloc_bytes)
+    throw InputError(job.where, "job '" + job.name + "' needs about " + std::to_string(need.total_bytes >> 20) +
+                                    " MiB of device memory (largest buffer " + std::to_string(need.largest_buffer >> 20) +
+                                    " MiB) but " + di.name + " has " + std::to_string(di.global_mem_bytes >> 20) +
+                                    " MiB (largest buffer " + std::to_string(di.max_alloc_bytes >> 20) +
+                                    " MiB); expected smaller sizes");
+}
+
+std::string expanded_program(const std::string& path) { return kernel_source(path); }
+
+}  // namespace specbake

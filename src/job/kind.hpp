@@ -1,0 +1,109 @@
+#pragma once
+// The interface every job kind implements, and what the runner hands it. A kind is one folder
+// (src/kinds/<kind>/) that fills in a `Kind` — its name, config parser, plan, cost and memory
+// estimates, bake, and OpenCL programs — and is listed in the registry (src/registry/). Kinds
+// read typed specs (their own KindSpec), never YAML after parsing, and return files, never
+// write them.
+//
+// A bake runs in four steps, reported through `Stage`:
+//   plan     resolve `auto` parameters (what `specbake plan` shows)
+//   compute  the kernels on the device
+//   check    self-checks against the double reference and error measurements (accuracy records)
+//   files    encode the bundle's files and previews
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cl/device.hpp"
+#include "core/config.hpp"
+#include "io/bundle.hpp"
+
+namespace specbake {
+
+enum class Stage { plan, compute, check, files };
+const char* to_string(Stage s);
+
+// Progress inside a step: a short description ("order 3", "FFT terms", ...) and the fraction
+// in [0, 1] of the whole job done.
+using Progress = std::function<void(std::string_view what, double fraction)>;
+
+struct JobContext {
+  cl_util::Device& device;
+  Progress progress = [](std::string_view, double) {};
+  std::function<void(Stage)> on_stage = [](Stage) {};  // called as each step begins
+  Stage stage = Stage::plan;
+
+  void enter(Stage s) {
+    stage = s;
+    if (on_stage) on_stage(s);
+  }
+};
+
+// One measured accuracy figure, the same shape for every kind. The manifest's `accuracy` is the
+// list of these (the first is the job's headline figure); the run summary, `--report`, `diff`
+// and sweeps read them without knowing the kind.
+struct Accuracy {
+  std::string name;                 // e.g. "self_check", "sum_K_minus_I", "prism_de2000"
+  std::string metric;               // what `value` is, e.g. "max relative error"
+  double value = 0.0;
+  std::optional<double> tolerance;  // none: reported, not judged
+  std::string reference;            // what it is measured against
+  bool passed = true;               // value <= tolerance (true without a tolerance)
+  nlohmann::json details = nlohmann::json::object();  // the kind's own breakdown
+
+  // passed from value and tolerance (a NaN value fails).
+  static Accuracy judged(std::string name, std::string metric, double value, std::optional<double> tolerance,
+                         std::string reference, nlohmann::json details = nlohmann::json::object());
+};
+nlohmann::json to_json(const Accuracy& a);
+nlohmann::json accuracy_json(const std::vector<Accuracy>& records);
+// The record called `name` in a manifest's or report's accuracy list; nullptr if absent.
+const nlohmann::json* find_accuracy(const nlohmann::json& list, std::string_view name);
+
+struct BakeResult {
+  nlohmann::json parameters;  // resolved values (auto → number, ...)
+  std::vector<Accuracy> accuracy;
+  std::vector<std::string> warnings;
+  std::vector<OutputFile> files;
+  // Kind-specific top-level manifest blocks named in a kind's contract (e.g. "diffraction").
+  nlohmann::json manifest_blocks = nlohmann::json::object();
+};
+
+// Device memory a job will need, estimated from its spec before anything is allocated.
+struct MemoryEstimate {
+  std::uint64_t total_bytes = 0;     // all device buffers alive at once
+  std::uint64_t largest_buffer = 0;  // the biggest single allocation
+};
+
+// A job kind: everything the runner and the config loader need, in one table entry.
+struct Kind {
+  std::string name;     // the config's `kind:` value
+  std::string summary;  // one line for help texts
+  // Reads the job's entry (see KindSyntax).
+  std::function<std::shared_ptr<const KindSpec>(const yaml::At& job, nlohmann::json& norm, Inputs& inputs)> parse;
+  // Resolved parameters only (what `specbake plan` shows); may use the device.
+  std::function<nlohmann::json(const JobSpec& job, JobContext& ctx)> plan;
+  std::function<BakeResult(const JobSpec& job, JobContext& ctx)> bake;
+  // Relative cost (arbitrary units, comparable across kinds) for balancing shards, and an
+  // estimate of the job's wall time in seconds on a 2-core CPU device (for `plan`).
+  std::function<double(const JobSpec& job)> cost_s;
+  std::function<MemoryEstimate(const JobSpec& job)> memory;
+  // The OpenCL programs the kind builds (paths of embedded kernel files): their fully expanded
+  // sources enter the bundle hash, so a change to any file they include makes a new bundle.
+  std::vector<std::string> programs;
+};
+
+// Refuses (InputError at the job's config entry) a job whose estimate exceeds the device's
+// global memory or its largest allocation, before anything is allocated.
+void check_device_memory(const JobSpec& job, const MemoryEstimate& need, const cl_util::DeviceInfo& device);
+
+// The bytes every `Kind::programs` entry contributes to the hash: the program's source with
+// every include expanded (as the device compiles it).
+std::string expanded_program(const std::string& path);
+
+}  // namespace specbake

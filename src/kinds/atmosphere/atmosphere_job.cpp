@@ -1,0 +1,449 @@
+#include "kinds/atmosphere/atmosphere_job.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <map>
+
+#include "io/exr.hpp"
+
+namespace specbake::atmosphere {
+
+using nlohmann::json;
+
+namespace {
+
+// Self-check: float32 kernels against the double reference path on the same inputs, relative
+// to |reference| + 1e-3 × the channel's maximum. One stage is a quadrature of ≤ 1024 terms of
+// one sign (≤ 1024 · 2⁻²⁴ ≈ 6e-5 relative) of lookups whose coordinates come from the
+// altitude-based geometry of atmosphere.cl (no cancellation beyond ~10 ulps: ~1e-6 in a
+// coordinate, ≲ 1e-5 in a value); the transmittance's 500-term optical depth τ carries
+// ≤ 3e-5 relative, so T carries ≤ 3e-5 τ, and where T is above the floor (T ≥ 1e-3 T_max,
+// τ ≲ 7) that is ≤ 2e-4, below it ≤ max_τ e^{−τ} τ · 3e-5 / 1e-3 ≤ 2e-4 as well. 2e-3 bounds a
+// stage with a factor > 5 to spare; wrong layouts, orders or formulas give O(1) errors.
+constexpr double kCheckFloor = 1e-3;
+constexpr double kCheckTolerance = 2e-3;
+
+using MakeBackend = std::function<std::unique_ptr<PassBackend>(const Channels&, int width)>;
+
+struct OrderAccumulator {
+  bool single_pass = true;
+  std::size_t n_s = 0, n_e = 0;
+  std::map<int, std::vector<float>> s, e;  // several passes: per-order sums in R,G,B
+  std::map<int, std::array<std::vector<double>, 4>> stats;  // single pass: s max/mean, e max/mean
+  std::map<int, double> relative;
+
+  static std::array<std::vector<double>, 2> max_mean(const std::vector<double>& v) {
+    std::vector<double> mx(3, 0.0), mean(3, 0.0);
+    const std::size_t n = v.size() / 3;
+    for (std::size_t i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) {
+        mx[c] = std::max(mx[c], v[3 * i + c]);
+        mean[c] += v[3 * i + c];
+      }
+    for (double& m : mean) m /= std::max<std::size_t>(n, 1);
+    return {mx, mean};
+  }
+  void add(int order, bool irradiance, const std::vector<double>& rgb) {
+    if (single_pass) {
+      const auto mm = max_mean(rgb);
+      stats[order][irradiance ? 2 : 0] = mm[0];
+      stats[order][irradiance ? 3 : 1] = mm[1];
+      return;
+    }
+    auto& buf = (irradiance ? e : s)[order];
+    if (buf.empty()) buf.assign(rgb.size(), 0.0f);
+    for (std::size_t i = 0; i < rgb.size(); ++i) buf[i] += static_cast<float>(rgb[i]);
+  }
+  json to_json() {
+    if (!single_pass) {
+      for (auto& [o, b] : s) {
+        const auto mm = max_mean(std::vector<double>(b.begin(), b.end()));
+        stats[o][0] = mm[0];
+        stats[o][1] = mm[1];
+      }
+      for (auto& [o, b] : e) {
+        const auto mm = max_mean(std::vector<double>(b.begin(), b.end()));
+        stats[o][2] = mm[0];
+        stats[o][3] = mm[1];
+      }
+    }
+    json out = json::array();
+    for (auto& [o, st] : stats) {
+      json j = {{"order", o},
+                {"scattering", {{"max", st[0]}, {"mean", st[1]}}},
+                {"irradiance", st[2].empty() ? json(nullptr) : json{{"max", st[2]}, {"mean", st[3]}}},
+                {"relative_change", o == 1 ? json(nullptr) : json(relative[o])}};
+      out.push_back(j);
+    }
+    return out;
+  }
+};
+
+Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progress& progress, int check_texels) {
+  Baked out;
+  const Model m = model_of(spec);
+  const Spectrum sp = spectrum_of(spec);
+  const Channels all = channels_at(spec, sp.lambda_nm);
+  const Channels rgb = channels_at(spec, {kLambdaR, kLambdaG, kLambdaB});
+  out.spectrum = sp;
+  out.luts.model = m;
+  out.luts.rgb = rgb;
+  const PassPlan plan{spec.orders.value_or(kMaxAutoOrders), !spec.orders.has_value(), spec.tolerance};
+  const int n = static_cast<int>(all.size());
+  const int width = channels_per_pass(spec);
+  const int passes = (n + width - 1) / width;
+  const Sizes& s = m.sizes;
+  const std::size_t n_t = 1ULL * s.transmittance_w * s.transmittance_h, n_e = 1ULL * s.irradiance_w * s.irradiance_h,
+                    n_s = s.scattering_texels();
+  out.luts.irradiance.assign(3 * n_e, 0.0);
+  out.luts.scattering.assign(3 * n_s, 0.0);
+  out.luts.single_mie.assign(3 * n_s, 0.0);
+  OrderAccumulator acc;
+  acc.single_pass = passes == 1;
+  out.passes = json::array();
+  out.self_checks = json::array();
+  std::map<std::string, double> stage_total;
+  std::map<int, std::map<std::string, double>> per_order;
+
+  // pass channels → R,G,B: identity in rgb mode, the CIE weights in spectral mode
+  auto to_rgb = [&](int first, int count, const std::vector<double>& v, std::size_t texels) {
+    std::vector<double> o(3 * texels, 0.0);
+    for (std::size_t t = 0; t < texels; ++t)
+      for (int i = 0; i < count; ++i)
+        for (int c = 0; c < 3; ++c) {
+          const double k = sp.spectral ? sp.to_rgb[c * n + first + i] : (c == i ? 1.0 : 0.0);
+          o[3 * t + c] += k * v[t * width + i];
+        }
+    return o;
+  };
+  for (int p = 0; p < passes; ++p) {
+    const int first = p * width, count = std::min(width, n - first);
+    const Channels ch = all.slice(first, count);
+    auto backend = make(ch, width);
+    StageHook hook;
+    if (check_texels > 0)
+      hook = [&](PassStage stage, int order, PassBackend& b) {
+        const StageCheck c = check_stage(b, m, ch, stage, order, check_texels, kCheckFloor);
+        out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
+                                   {"max_relative_error", c.max_rel}});
+        out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
+      };
+    const OrderHook on_order = [&](int order, const std::vector<double>& s_add, const std::vector<double>& e_add) {
+      if (!s_add.empty()) acc.add(order, false, to_rgb(first, count, s_add, n_s));
+      if (!e_add.empty()) acc.add(order, true, to_rgb(first, count, e_add, n_e));
+    };
+    const double p0 = 0.9 * p / passes, p1 = 0.9 * (p + 1) / passes;
+    const PassResult r = run_pass(*backend, m, plan, progress, p0, p1, hook, on_order);
+    for (const StageTime& t : r.timings) {
+      stage_total[t.stage] += t.seconds;
+      per_order[t.order][t.stage] += t.seconds;
+    }
+    for (const auto& o : r.orders) acc.relative[o.order] = std::max(acc.relative[o.order], o.relative);
+    const auto add_into = [&](std::vector<double>& dst, const std::vector<double>& src, std::size_t texels) {
+      const auto v = to_rgb(first, count, src, texels);
+      for (std::size_t i = 0; i < v.size(); ++i) dst[i] += v[i];
+    };
+    add_into(out.luts.irradiance, r.irradiance, n_e);
+    add_into(out.luts.scattering, r.scattering, n_s);
+    add_into(out.luts.single_mie, r.single_mie, n_s);
+    if (!sp.spectral) out.luts.transmittance = r.transmittance;
+    out.orders_used = std::max(out.orders_used, r.orders_used);
+    out.converged = out.converged && r.converged;
+    out.passes.push_back({{"wavelengths_nm", ch.lambda_nm}, {"orders_used", r.orders_used}, {"converged", r.converged}});
+  }
+  if (sp.spectral) {
+    // The render-time transmittance is at 680/550/440 nm, as the GPU model's luminance mode.
+    const auto t0 = std::chrono::steady_clock::now();
+    auto b = make(rgb, 3);
+    b->transmittance();
+    out.luts.transmittance = b->read(Tex::transmittance);
+    stage_total["transmittance_rgb"] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  out.timings = {{"total", stage_total}, {"per_order", json::array()}};
+  for (const auto& [order, stages] : per_order) {
+    json o = stages;
+    o["order"] = order;
+    out.timings["per_order"].push_back(o);
+  }
+  if (out.luts.transmittance.size() != 3 * n_t) throw JobError("atmosphere: transmittance texture has the wrong size");
+  out.orders = acc.to_json();
+  return out;
+}
+
+json profile_json(const DensityLayer* p) {
+  return {{"layers", density_profile_json(p)},
+          {"meaning", "density(h) = clamp(exp_term*exp(exp_scale*h) + linear_term*h + constant_term, 0, 1), h = "
+                      "altitude in km; layer 0 below its width_km"}};
+}
+
+json parameters_json(const AtmosphereSpec& spec) {
+  const Model m = model_of(spec);
+  const Spectrum sp = spectrum_of(spec);
+  const Channels ch = channels_at(spec, sp.lambda_nm);
+  auto per_m = [](std::vector<double> v) {
+    for (double& x : v) x *= 1e-3;
+    return v;
+  };
+  json p;
+  p["atmosphere"] = {
+      {"bottom_radius_km", m.bottom_radius_km},
+      {"top_radius_km", m.top_radius_km},
+      {"sun_angular_radius_rad", m.sun_angular_radius_rad},
+      {"max_sun_zenith_deg", spec.max_sun_zenith_deg},
+      {"mu_s_min", m.mu_s_min},
+      {"ground_albedo", spec.ground_albedo},
+      {"solar_irradiance_scale", spec.solar_irradiance_scale},
+      {"rayleigh", spec.rayleigh ? json{{"scattering_per_m_at_1um", spec.rayleigh_scattering_per_m_at_1um},
+                                        {"law", "beta(l) = b * (l / 1 um)^-4, extinction = scattering"},
+                                        {"density", profile_json(m.rayleigh_density)}}
+                                 : json(false)},
+      {"mie", spec.mie ? json{{"extinction_per_m_at_1um", spec.mie_extinction_per_m},
+                              {"angstrom_alpha", spec.mie_angstrom_alpha},
+                              {"single_scattering_albedo", spec.mie_single_scattering_albedo},
+                              {"phase_g", spec.mie_phase_g},
+                              {"phase", "Cornette-Shanks"},
+                              {"density", profile_json(m.mie_density)}}
+                       : json(false)},
+      {"ozone", spec.ozone ? json{{"column_du", spec.ozone_column_du},
+                                  {"peak_number_density_per_m3", m.ozone_peak_number_density_per_m3},
+                                  {"density", profile_json(m.absorption_density)},
+                                  {"cross_section", "Bremen IUP 233 K, 10 nm bin means (see docs)"}}
+                           : json(false)}};
+  p["channels"] = {{"wavelengths_nm", ch.lambda_nm},
+                   {"solar_irradiance_W_m2_nm", ch.solar_irradiance},
+                   {"rayleigh_scattering_per_m", per_m(ch.rayleigh_scattering)},
+                   {"mie_scattering_per_m", per_m(ch.mie_scattering)},
+                   {"mie_extinction_per_m", per_m(ch.mie_extinction)},
+                   {"absorption_extinction_per_m", per_m(ch.absorption_extinction)},
+                   {"ground_albedo", ch.ground_albedo}};
+  p["wavelengths_nm"] = sp.lambda_nm;
+  json lum = {{"sky_spectral_radiance_to_luminance_lm_per_W", sp.sky_radiance_to_luminance},
+              {"sun_spectral_radiance_to_luminance_lm_per_W", sp.sun_radiance_to_luminance},
+              {"max_luminous_efficacy_lm_per_W", kMaxLuminousEfficacy},
+              {"cmf", "cie1931-2deg (1 nm table, linear interpolation)"},
+              {"xyz_to_srgb", "exact inverse of the BT.709/D65 primaries matrix"}};
+  if (sp.spectral) {
+    lum["mode"] = "precomputed luminance: scattering, single_mie and irradiance hold sum_i to_rgb[c][i] * value(l_i) "
+                  "= linear sRGB luminance / 683 (multiply by sky_spectral_radiance_to_luminance = 683 for cd/m2 "
+                  "and lux); transmittance is at 680/550/440 nm, and the sun's own light converts with "
+                  "sun_spectral_radiance_to_luminance";
+    lum["bin_nm"] = sp.bin_nm;
+    json rows = json::array();
+    const int n = static_cast<int>(sp.lambda_nm.size());
+    for (int c = 0; c < 3; ++c) rows.push_back(std::vector<double>(sp.to_rgb.begin() + c * n, sp.to_rgb.begin() + (c + 1) * n));
+    lum["to_rgb"] = rows;
+  } else {
+    lum["mode"] = "radiance at 680/550/440 nm (R, G, B); luminance at render time: sky * "
+                  "sky_spectral_radiance_to_luminance, sun * sun_spectral_radiance_to_luminance (Bruneton's "
+                  "non-luminance mode)";
+  }
+  p["luminance_conversion"] = lum;
+  const Sizes& s = m.sizes;
+  p["sizes"] = {{"transmittance", {{"mu", s.transmittance_w}, {"r", s.transmittance_h}}},
+                {"irradiance", {{"mu_s", s.irradiance_w}, {"r", s.irradiance_h}}},
+                {"scattering", {{"r", s.r}, {"mu", s.mu}, {"mu_s", s.mu_s}, {"nu", s.nu}}}};
+  json layouts = json::array();
+  if (spec.layout_3d) layouts.push_back("3d");
+  if (spec.layout_tiled2d) layouts.push_back("tiled2d");
+  p["layout"] = layouts;
+  p["orders_requested"] = spec.orders ? json(*spec.orders) : json("auto");
+  p["tolerance"] = spec.tolerance;
+  p["precision"] = spec.double_precision ? "float64" : "float32";
+  const int width = channels_per_pass(spec);
+  p["passes"] = (sp.lambda_nm.size() + width - 1) / width;
+  p["channels_per_pass"] = width;
+  p["length_unit"] = "km (texture values do not depend on it)";
+  p["quadrature"] = {{"transmittance", "trapezoid, 500 intervals"},
+                     {"single_and_multiple_scattering", "trapezoid, 50 intervals to the nearest boundary"},
+                     {"scattering_density", "midpoint 16 x 32 over the sphere"},
+                     {"indirect_irradiance", "midpoint 16 x 64 over the upper hemisphere"}};
+  return p;
+}
+
+std::string exr_of(int width, int height, const std::vector<double>& rgb,
+                   const std::map<std::string, std::string>& attributes) {
+  ExrImage img;
+  img.width = width;
+  img.height = height;
+  img.channels = {"R", "G", "B"};
+  img.pixels.assign(rgb.begin(), rgb.end());
+  img.attributes = attributes;
+  return exr_bytes(img);
+}
+
+}  // namespace
+
+Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, int self_check_texels) {
+  const Model m = model_of(spec);
+  return bake_impl(
+      spec, [&](const Channels& ch, int width) { return make_device_backend(dev, m, ch, width, spec.double_precision); },
+      progress, self_check_texels);
+}
+
+Baked bake_luts_reference(const AtmosphereSpec& spec) {
+  const Model m = model_of(spec);
+  return bake_impl(
+      spec, [&](const Channels& ch, int width) { return make_host_backend(m, ch, width); },
+      [](std::string_view, double) {}, 0);
+}
+
+int channels_per_pass(const AtmosphereSpec& spec) {
+  return spec.spectral ? pass_width_for(static_cast<std::size_t>(spec.count)) : 3;  // spectral: count wavelengths
+}
+
+double estimated_seconds(const AtmosphereSpec& spec) {
+  const double texels = double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s * spec.scattering_nu;
+  const int width = channels_per_pass(spec);
+  const int channels = spec.spectral ? spec.count : 3;
+  const int passes = (channels + width - 1) / width;
+  const int orders = spec.orders ? *spec.orders : 10;
+  return 1.0 + orders * passes * (texels / 1048576.0) * (6.4 + 0.12 * width);
+}
+
+json plan(const AtmosphereSpec& spec, JobContext&) { return parameters_json(spec); }
+
+namespace {
+
+void compute_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b) {
+  ctx.enter(Stage::compute);
+  b = bake_luts(spec, ctx.device, ctx.progress, 24);
+
+  r.parameters["orders"] = {{"requested", spec.orders ? json(*spec.orders) : json("auto")},
+                            {"used", b.orders_used},
+                            {"converged", b.converged},
+                            {"tolerance", spec.tolerance},
+                            {"per_order", b.orders},
+                            {"note", "order 1 = single scattering; 'scattering' is what the order adds to "
+                                     "scattering.bin (order 1: single Rayleigh; n >= 2: deltaS_n / P_R(nu)), "
+                                     "'irradiance' what its light adds to irradiance.bin (orders 1..used-1); "
+                                     "relative_change = max over texels above 1e-4 of their channel's maximum of "
+                                     "added / accumulated, over scattering (order n) and irradiance (order n-1)"}};
+  r.parameters["pass_details"] = b.passes;
+  if (!b.converged)
+    r.warnings.push_back("orders: auto stopped at the cap of " + std::to_string(kMaxAutoOrders) +
+                         " orders before an order added less than the tolerance " + std::to_string(spec.tolerance));
+
+}
+
+void check_step(const Baked& b, JobContext& ctx, BakeResult& r) {
+  ctx.enter(Stage::check);
+  r.accuracy.push_back(Accuracy::judged(
+      "self_check", "max relative error |device - reference| / (|reference| + 1e-3 * channel max)",
+      b.self_check_worst, kCheckTolerance,
+      "double reference path recomputing 24 texels of each stage from the device's own inputs",
+      {{"stages", b.self_checks}}));
+  if (!(b.self_check_worst <= kCheckTolerance))
+    throw JobError("self-check failed: the device kernels differ from the double reference by " +
+                   std::to_string(b.self_check_worst) + " (relative) > " + std::to_string(kCheckTolerance));
+
+}
+
+void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
+  ctx.enter(Stage::files);
+  const Luts& L = b.luts;
+  const Sizes& s = L.model.sizes;
+  const auto t_files = std::chrono::steady_clock::now();
+  ctx.progress("files", 0.92);
+  const std::string le = "little-endian float32, C order, channels R,G,B innermost";
+  const std::string units = b.spectrum.spectral ? "linear sRGB luminance / 683 (W m^-2 sr^-1 CIE-weighted)"
+                                                : "W m^-2 nm^-1 (radiance textures: per sr) at 680/550/440 nm";
+  const std::string param = "Bruneton 2017 (r, mu, mu_s, nu) parameterisation, texel centres";
+  const int wd = s.scattering_width();
+  auto attrs = [&](const std::string& layout, const std::string& content) {
+    return std::map<std::string, std::string>{{"specbake.layout", layout},
+                                              {"specbake.content", content},
+                                              {"specbake.parameterisation", param},
+                                              {"specbake.units", units}};
+  };
+  if (spec.out_transmittance) {
+    const std::string lay = "[r=" + std::to_string(s.transmittance_h) + "][mu=" + std::to_string(s.transmittance_w) +
+                            "][RGB]; u = mu coordinate, v = r coordinate";
+    r.files.push_back({"transmittance.bin", float32_le(L.transmittance, "transmittance"), "float32",
+                       {s.transmittance_h, s.transmittance_w, 3}, le + "; " + lay, "1",
+                       "transmittance to the top of the atmosphere at 680/550/440 nm"});
+    r.files.push_back({"transmittance.exr", exr_of(s.transmittance_w, s.transmittance_h, L.transmittance,
+                                                   attrs(lay, "transmittance to the top boundary")),
+                       "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32 ZIP, row j = r index", "1",
+                       "transmittance (EXR copy)"});
+  }
+  if (spec.out_irradiance) {
+    const std::string lay = "[r=" + std::to_string(s.irradiance_h) + "][mu_s=" + std::to_string(s.irradiance_w) +
+                            "][RGB]";
+    r.files.push_back({"irradiance.bin", float32_le(L.irradiance, "irradiance"), "float32",
+                       {s.irradiance_h, s.irradiance_w, 3}, le + "; " + lay, units,
+                       "sky (indirect) irradiance on a horizontal surface, orders 1..N-1, as the reference stores "
+                       "it: the direct sun is NOT included (add solar_irradiance * T_sun * cos)"});
+    r.files.push_back({"irradiance.exr", exr_of(s.irradiance_w, s.irradiance_h, L.irradiance,
+                                                attrs(lay, "indirect (sky) irradiance only")),
+                       "", {s.irradiance_h, s.irradiance_w, 3}, "EXR float32 ZIP, row j = r index", units,
+                       "irradiance (EXR copy)"});
+  }
+  struct Tex3 {
+    bool wanted;
+    const char* name;
+    const std::vector<double>* data;
+    const char* what;
+  };
+  for (const Tex3& t : {Tex3{spec.out_scattering, "scattering", &L.scattering,
+                             "single Rayleigh (no phase function) + sum over orders n >= 2 of deltaS_n / P_R(nu)"},
+                        Tex3{spec.out_single_mie, "single_mie_scattering", &L.single_mie,
+                             "single Mie scattering (no phase function)"}}) {
+    if (!t.wanted) continue;
+    const std::string name = t.name;
+    if (spec.layout_3d) {
+      const std::string lay = "[r=" + std::to_string(s.r) + "][mu=" + std::to_string(s.mu) + "][nu*mu_s=" +
+                              std::to_string(s.nu) + "*" + std::to_string(s.mu_s) + "][RGB]; x = nu_slice*MU_S + mu_s";
+      r.files.push_back({name + ".bin", float32_le(*t.data, name), "float32", {s.r, s.mu, wd, 3}, le + "; " + lay,
+                         units, t.what});
+      r.files.push_back({name + ".exr",
+                         exr_of(wd, s.mu * s.r, *t.data,
+                                attrs(lay + "; EXR rows = r*MU + mu (3D depth slices stacked)", t.what)),
+                         "", {s.r, s.mu, wd, 3}, "EXR float32 ZIP, row = r*MU + mu", units, t.what});
+    }
+    if (spec.layout_tiled2d) {
+      const auto tiled = to_tiled2d(*t.data, s);
+      const std::string lay = "[mu=" + std::to_string(s.mu) + "][r*nu*mu_s=" + std::to_string(s.r) + "*" +
+                              std::to_string(s.nu) + "*" + std::to_string(s.mu_s) +
+                              "][RGB]; column = r*NU*MU_S + nu_slice*MU_S + mu_s";
+      r.files.push_back({name + "_tiled2d.bin", float32_le(tiled, name), "float32", {s.mu, s.r * wd, 3},
+                         le + "; " + lay, units, std::string(t.what) + " (tiled 2D layout)"});
+      r.files.push_back({name + "_tiled2d.exr", exr_of(s.r * wd, s.mu, tiled, attrs(lay, t.what)), "",
+                         {s.mu, s.r * wd, 3}, "EXR float32 ZIP", units, std::string(t.what) + " (tiled 2D, EXR)"});
+    }
+  }
+  r.files.push_back({"sampling.glsl",
+                     sampling_glsl(L.model, L.rgb, spec.layout_3d, spec.layout_tiled2d, "Values: " + units + "."), "",
+                     {}, "", "", "GLSL lookup functions for the shipped layouts"});
+  const auto t_previews = std::chrono::steady_clock::now();
+  ctx.progress("previews", 0.95);
+  for (auto& f : preview_files(L, b.spectrum.sky_radiance_to_luminance, b.spectrum.sun_radiance_to_luminance))
+    r.files.push_back(std::move(f));
+  const auto t_done = std::chrono::steady_clock::now();
+  json timings = b.timings;
+  timings["total"]["files"] = std::chrono::duration<double>(t_previews - t_files).count();
+  timings["total"]["previews"] = std::chrono::duration<double>(t_done - t_previews).count();
+  timings["note"] = "wall seconds; 'self_check' = the double recomputation after each stage, 'host' = reads and "
+                    "sums between stages; per_order[0] = transmittance and direct irradiance, per_order[n] = "
+                    "the stages of order n (indirect_irradiance of order n is computed during order n + 1)";
+  r.manifest_blocks["atmosphere"] = {{"timings_s", timings}};
+  for (const auto& [stage, sec] : timings["total"].items()) spdlog::debug("atmosphere: {} total {:.3f} s", stage, sec.get<double>());
+}
+
+}  // namespace
+
+BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx) {
+  BakeResult r;
+  ctx.enter(Stage::plan);
+  ctx.progress("planning", 0.0);
+  r.parameters = parameters_json(spec);
+  Baked b;
+  compute_step(spec, ctx, r, b);
+  check_step(b, ctx, r);
+  files_step(spec, b, ctx, r);
+  ctx.progress("done", 1.0);
+  return r;
+}
+
+}  // namespace specbake::atmosphere

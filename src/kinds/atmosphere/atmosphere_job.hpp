@@ -1,0 +1,44 @@
+#pragma once
+#include "kinds/atmosphere/pass.hpp"
+#include "job/kind.hpp"
+#include "kinds/atmosphere/render.hpp"
+#include "kinds/atmosphere/spec.hpp"
+
+namespace specbake::atmosphere {
+
+nlohmann::json plan(const AtmosphereSpec& spec, JobContext& ctx);
+BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx);
+
+// Channels per pass: 3 (R, G, B) for rgb; for spectral bakes the smallest of kPassWidths that
+// holds every wavelength, else the widest (then ⌈n / 16⌉ passes). A pass's geometry (ray
+// tables, incidence directions, phase functions, texture coordinates) does not depend on its
+// channel count, so one wide pass costs much less than several narrow ones.
+int channels_per_pass(const AtmosphereSpec& spec);
+
+// Wall seconds of a bake on a 2-core CPU device (PoCL), from a cost model calibrated on the
+// bundled configs: per order and pass, a geometry part and a per-channel part, both
+// proportional to the scattering texels (default Earth rgb ~27 s, 48 wavelengths ~100 s,
+// 13 orders ~90 s). `orders: auto` is costed at 10 orders.
+double estimated_seconds(const AtmosphereSpec& spec);
+
+// The LUTs of a bake (final textures in R,G,B), with what the manifest reports about them.
+struct Baked {
+  Luts luts;
+  Spectrum spectrum;
+  int orders_used = 0;
+  bool converged = true;
+  nlohmann::json orders;       // per order: max/mean of what it adds to scattering and irradiance
+  nlohmann::json passes;       // wavelengths of each pass, orders used
+  nlohmann::json self_checks;  // device vs double reference, per stage
+  double self_check_worst = 0.0;
+  // Wall seconds per stage summed over passes ("total" by stage name, "per_order" by order).
+  nlohmann::json timings;
+};
+// Runs every pass on the device (self_check_texels > 0: recompute that many texels of each
+// stage in double from the device's own inputs).
+Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress,
+                int self_check_texels = 0);
+// The same bake on the host in double (small sizes: tests).
+Baked bake_luts_reference(const AtmosphereSpec& spec);
+
+}  // namespace specbake::atmosphere

@@ -1,0 +1,184 @@
+// Config of the atmosphere job kind: a preset (Bruneton's demo Earth) with overrides.
+#include <cmath>
+#include <regex>
+
+#include "core/hash.hpp"
+#include "core/resources.hpp"
+#include "core/spectral_data.hpp"
+#include "atmosphere/limits.h"
+#include "kinds/atmosphere/spec.hpp"
+
+namespace specbake::atmosphere {
+
+namespace {
+
+using nlohmann::json;
+using yaml::At;
+
+constexpr int kMaxAxis = 4096;
+constexpr long long kMaxScatteringTexels = 1LL << 26;
+constexpr int kMaxNu = ATMOSPHERE_NU_LIMIT;
+
+int size_at(const At& at) {
+  const long long v = at.integer();
+  if (v < 2 || v > kMaxAxis) at.fail("expected an integer in [2, " + std::to_string(kMaxAxis) + "], got " + at.shown());
+  return static_cast<int>(v);
+}
+
+void parse_sizes(const At& at, AtmosphereSpec& s) {
+  at.expect_map("texture sizes {transmittance: [mu, r], irradiance: [mu_s, r], scattering: {r, mu, mu_s, nu}}");
+  at.allow_keys({"transmittance", "irradiance", "scattering"});
+  auto pair = [&](const char* key, int& a, int& b) {
+    if (!at.has(key)) return;
+    const At p = at.child(key);
+    if (!p.node.IsSequence() || p.node.size() != 2) p.fail("expected a list of 2 integers [mu, r]");
+    a = size_at(p.item(0));
+    b = size_at(p.item(1));
+  };
+  pair("transmittance", s.transmittance_mu, s.transmittance_r);
+  pair("irradiance", s.irradiance_mu_s, s.irradiance_r);
+  if (at.has("scattering")) {
+    const At sc = at.child("scattering");
+    sc.expect_map("scattering sizes {r, mu, mu_s, nu}");
+    sc.allow_keys({"r", "mu", "mu_s", "nu"});
+    if (sc.has("r")) s.scattering_r = size_at(sc.child("r"));
+    if (sc.has("mu")) {
+      s.scattering_mu = size_at(sc.child("mu"));
+      if (s.scattering_mu % 2) sc.child("mu").fail("expected an even mu size (half for rays that hit the ground, half for the others)");
+    }
+    if (sc.has("mu_s")) s.scattering_mu_s = size_at(sc.child("mu_s"));
+    if (sc.has("nu")) {
+      s.scattering_nu = size_at(sc.child("nu"));
+      // the kernels keep one texel row of NU slices per channel in private arrays (NU_MAX)
+      if (s.scattering_nu > kMaxNu)
+        sc.child("nu").fail("expected a nu size of at most " + std::to_string(kMaxNu) + ", got " +
+                            std::to_string(s.scattering_nu));
+    }
+    const long long texels = 1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu;
+    if (texels > kMaxScatteringTexels)
+      sc.fail("expected at most " + std::to_string(kMaxScatteringTexels) + " scattering texels, got " +
+              std::to_string(texels));
+  }
+}
+
+template <class F>
+void parse_list(const At& at, const char* what, F&& on_item) {
+  if (!at.node.IsSequence() || at.node.size() == 0) at.fail(std::string("expected a non-empty list of ") + what);
+  for (std::size_t i = 0; i < at.node.size(); ++i) on_item(at.item(i));
+}
+
+}  // namespace
+
+AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
+  job.allow_keys({"name", "kind", "preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
+                  "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
+                  "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision"});
+  AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
+  if (job.has("preset")) job.child("preset").choice<int>({{"earth", 0}});
+  set_earth_profiles(s);
+
+  if (job.has("bottom_radius_km")) s.bottom_radius_km = job.child("bottom_radius_km").number_in(1.0, 1e6, "in [1, 1e6] km");
+  if (job.has("top_radius_km")) s.top_radius_km = job.child("top_radius_km").number_in(1.0, 1e6, "in [1, 1e6] km");
+  if (!(s.top_radius_km > s.bottom_radius_km))
+    (job.has("top_radius_km") ? job.child("top_radius_km") : job.child("bottom_radius_km"))
+        .fail("expected top_radius_km > bottom_radius_km (" + std::to_string(s.bottom_radius_km) + ")");
+  if (job.has("sun_angular_radius_rad"))
+    s.sun_angular_radius_rad = job.child("sun_angular_radius_rad").number_in(1e-6, 0.1, "in [1e-6, 0.1] rad");
+  if (job.has("max_sun_zenith_deg"))
+    s.max_sun_zenith_deg = job.child("max_sun_zenith_deg").number_in(90.5, 180.0, "in [90.5, 180] deg");
+  if (job.has("ground_albedo")) s.ground_albedo = job.child("ground_albedo").number_in(0.0, 1.0, "in [0, 1]");
+  if (job.has("solar_irradiance_scale"))
+    s.solar_irradiance_scale = job.child("solar_irradiance_scale").number_in(0.0, 1e3, "in [0, 1000]");
+  if (job.has("rayleigh")) parse_rayleigh(job.child("rayleigh"), s);
+  if (job.has("mie")) parse_mie(job.child("mie"), s);
+  if (job.has("ozone")) parse_ozone(job.child("ozone"), s);
+
+  if (job.has("spectrum")) {
+    const At sp = job.child("spectrum");
+    if (sp.node.IsScalar()) {
+      sp.choice<int>({{"rgb", 0}});
+    } else {
+      sp.expect_map("rgb or {min_nm, max_nm, count}");
+      sp.allow_keys({"min_nm", "max_nm", "count"});
+      s.spectral = true;
+      if (sp.has("min_nm")) s.min_nm = sp.child("min_nm").number_in(360.0, 830.0, "in [360, 830] nm");
+      if (sp.has("max_nm")) s.max_nm = sp.child("max_nm").number_in(360.0, 830.0, "in [360, 830] nm");
+      if (!(s.min_nm < s.max_nm)) sp.fail("expected min_nm < max_nm");
+      if (sp.has("count")) {
+        const long long n = sp.child("count").integer();
+        if (n < 3 || n > 256) sp.child("count").fail("expected an integer in [3, 256], got " + sp.child("count").shown());
+        s.count = static_cast<int>(n);
+      }
+    }
+  }
+  if (job.has("orders")) {
+    const At o = job.child("orders");
+    if (o.node.IsScalar() && o.node.Scalar() == "auto") {
+      s.orders.reset();
+    } else {
+      long long n = 0;
+      try {
+        n = o.node.IsScalar() ? o.node.as<long long>() : 0;
+      } catch (const YAML::Exception&) {
+        n = 0;
+      }
+      if (n < 1 || n > 64) o.fail("expected an integer in [1, 64] or 'auto', got " + o.shown());
+      s.orders = static_cast<int>(n);
+    }
+  }
+  if (job.has("tolerance")) s.tolerance = job.child("tolerance").number_in(1e-8, 0.5, "in [1e-8, 0.5]");
+  if (job.has("sizes")) parse_sizes(job.child("sizes"), s);
+  if (job.has("layout")) {
+    s.layout_3d = s.layout_tiled2d = false;
+    parse_list(job.child("layout"), "layouts (3d, tiled2d)", [&](const At& it) {
+      const int v = it.choice<int>({{"3d", 0}, {"tiled2d", 1}});
+      (v == 0 ? s.layout_3d : s.layout_tiled2d) = true;
+    });
+  }
+  if (job.has("outputs")) {
+    s.out_transmittance = s.out_irradiance = s.out_scattering = s.out_single_mie = false;
+    parse_list(job.child("outputs"), "outputs", [&](const At& it) {
+      switch (it.choice<int>({{"transmittance", 0}, {"irradiance", 1}, {"scattering", 2}, {"single_mie_scattering", 3}})) {
+        case 0: s.out_transmittance = true; break;
+        case 1: s.out_irradiance = true; break;
+        case 2: s.out_scattering = true; break;
+        default: s.out_single_mie = true; break;
+      }
+    });
+  }
+  if (job.has("precision"))
+    s.double_precision = job.child("precision").choice<int>({{"float", 0}, {"double", 1}}) == 1;
+
+  // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
+  const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
+  inputs.emplace_back(cmf.resource, sha256_hex(resource(cmf.resource)));
+  json layouts = json::array(), outputs = json::array();
+  if (s.layout_3d) layouts.push_back("3d");
+  if (s.layout_tiled2d) layouts.push_back("tiled2d");
+  if (s.out_transmittance) outputs.push_back("transmittance");
+  if (s.out_irradiance) outputs.push_back("irradiance");
+  if (s.out_scattering) outputs.push_back("scattering");
+  if (s.out_single_mie) outputs.push_back("single_mie_scattering");
+  norm = {{"kind", "atmosphere"},
+          {"bottom_radius_km", s.bottom_radius_km},
+          {"top_radius_km", s.top_radius_km},
+          {"sun_angular_radius_rad", s.sun_angular_radius_rad},
+          {"max_sun_zenith_deg", s.max_sun_zenith_deg},
+          {"ground_albedo", s.ground_albedo},
+          {"solar_irradiance_scale", s.solar_irradiance_scale},
+          {"spectrum", s.spectral ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}} : json("rgb")},
+          {"orders", s.orders ? json(*s.orders) : json("auto")},
+          {"tolerance", s.tolerance},
+          {"sizes", {{"transmittance", {s.transmittance_mu, s.transmittance_r}},
+                     {"irradiance", {s.irradiance_mu_s, s.irradiance_r}},
+                     {"scattering", {{"r", s.scattering_r}, {"mu", s.scattering_mu}, {"mu_s", s.scattering_mu_s},
+                                     {"nu", s.scattering_nu}}}}},
+          {"layout", layouts},
+          {"outputs", outputs},
+          {"precision", s.double_precision ? "double" : "float"}};
+  norm.update(media_json(s));
+  return s;
+}
+
+}  // namespace specbake::atmosphere
+

@@ -1,0 +1,462 @@
+#include "kinds/atmosphere/pass.hpp"
+
+#include <variant>
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "kinds/atmosphere/reference_widths.hpp"
+
+namespace specbake::atmosphere {
+
+using cl_util::Device;
+
+int pass_width_for(std::size_t channels) {
+  for (int w : kPassWidths)
+    if (static_cast<std::size_t>(w) >= channels) return w;
+  return kPassWidths[std::size(kPassWidths) - 1];
+}
+
+const char* to_string(Tex t) {
+  switch (t) {
+    case Tex::transmittance: return "transmittance";
+    case Tex::delta_irradiance: return "delta_irradiance";
+    case Tex::delta_rayleigh: return "delta_rayleigh";
+    case Tex::delta_mie: return "delta_mie";
+    case Tex::delta_multiple: return "delta_multiple";
+    case Tex::density: return "density";
+  }
+  return "?";
+}
+
+namespace {
+
+
+// Table shapes, from atmosphere.cl's macros (visible here through reference.hpp): ray samples
+// [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][DENSITY_SPHERE_STEPS][(2 NU + 1) NCH + INC_FIXED].
+constexpr int kScatteringSteps = SCATTERING_STEPS, kDensitySphereSteps = DENSITY_SPHERE_STEPS, kRayFixed = RAY_T,
+              kIncidenceFixed = INC_FIXED;
+
+// Parameter block, and the values the layout kernel must echo back.
+struct Block {
+  std::vector<unsigned char> bytes;
+  std::vector<double> echo_reals;  // solar[0], albedo[NCH-1], absorption constant[1], rb, g, reserved
+  std::vector<int> echo_ints;      // transmittance_w, nu_size, sizeof
+};
+
+Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
+  return with_width(width, [&](auto ref) {
+    using W = decltype(ref);
+    const auto a = W::parameters(m, ch);
+    Block b;
+    b.bytes = W::block(a, dbl);
+    b.echo_reals = {a.solar_irradiance[0], a.ground_albedo[W::channels - 1], a.absorption_density.constant_term[1],
+                    a.bottom_radius, a.mie_g, a.reserved};
+    b.echo_ints = {a.transmittance_w, a.nu_size, static_cast<int>(b.bytes.size())};
+    return b;
+  });
+}
+
+class DeviceBackend final : public PassBackend {
+ public:
+  DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
+      : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), block_(make_block(m, ch, width, dbl)) {
+    const std::string options = std::string("-DNCH=") + std::to_string(width) + " -DNU_MAX=" +
+                                std::to_string(m.sizes.nu) + (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
+    if (dbl && !dev.info().fp64) throw DeviceError("precision: double needs a device with cl_khr_fp64");
+    program_ = dev.build(kProgram, options);
+    n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
+    n_e_ = 1LL * sizes_.irradiance_w * sizes_.irradiance_h;
+    n_s_ = sizes_.scattering_texels();
+    n_ray_ = 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1) * (kRayFixed + width);
+    n_inc_ = 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps * (2 * sizes_.nu * width + width + kIncidenceFixed);
+    cl_util::checked("allocating atmosphere textures", [&] {
+      rays_ = alloc_reals(n_ray_);
+      incidence_ = alloc_reals(n_inc_);
+      T_ = alloc(n_t_);
+      dE_ = alloc(n_e_);
+      dR_ = alloc(n_s_);
+      dM_ = alloc(n_s_);
+      dS_ = alloc(n_s_);
+      J_ = alloc(n_s_);
+      return 0;
+    });
+    check_layout();
+  }
+  int channels() const override { return width_; }
+
+  void transmittance() override { launch("transmittance_texture", n_t_, {&T_}); }
+  void direct_irradiance() override { launch("direct_irradiance_texture", n_e_, {&T_, &dE_}); }
+  // The ray-sample table depends on T only: built here, reused by every multiple_scattering().
+  void single_scattering() override {
+    launch("ray_sample_table", 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1), {&T_, &rays_});
+    launch("single_scattering_texture", n_s_, {&T_, &rays_, &dR_, &dM_});
+  }
+  void scattering_density(int order) override {
+    launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps,
+           {&T_, &dR_, &dM_, &dS_, order, &incidence_});
+    launch("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s, {&incidence_, &dE_, order, &J_});
+  }
+  void indirect_irradiance(int order) override {
+    launch("indirect_irradiance_texture", n_e_, {&dR_, &dM_, &dS_, order, &dE_});
+  }
+  void multiple_scattering() override { launch("multiple_scattering_texture", n_s_, {&rays_, &J_, &dS_}); }
+
+  std::vector<double> read(Tex t) override {
+    const long long n = texels(t) * width_;
+    return cl_util::checked("reading an atmosphere texture", [&] {
+      std::vector<double> out(n);
+      if (dbl_) {
+        dev_.queue().enqueueReadBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), out.data());
+      } else {
+        std::vector<float> f(n);
+        dev_.queue().enqueueReadBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data());
+        std::copy(f.begin(), f.end(), out.begin());
+      }
+      return out;
+    });
+  }
+  void write(Tex t, std::vector<double> v) override {
+    const long long n = texels(t) * width_;
+    if (static_cast<long long>(v.size()) != n) throw JobError(std::string("wrong size for ") + to_string(t));
+    cl_util::checked("writing an atmosphere texture", [&] {
+      if (dbl_) {
+        dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), v.data());
+      } else {
+        std::vector<float> f(v.begin(), v.end());
+        dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data());
+      }
+      return 0;
+    });
+  }
+
+ private:
+  cl::Buffer alloc(long long texels) { return alloc_reals(texels * width_); }
+  cl::Buffer alloc_reals(long long n) {
+    return cl::Buffer(dev_.context(), CL_MEM_READ_WRITE,
+                      std::max<long long>(n, 1) * (dbl_ ? sizeof(double) : sizeof(float)));
+  }
+  long long texels(Tex t) const {
+    if (t == Tex::transmittance) return n_t_;
+    if (t == Tex::delta_irradiance) return n_e_;
+    return n_s_;
+  }
+  cl::Buffer& buffer(Tex t) {
+    switch (t) {
+      case Tex::transmittance: return T_;
+      case Tex::delta_irradiance: return dE_;
+      case Tex::delta_rayleigh: return dR_;
+      case Tex::delta_mie: return dM_;
+      case Tex::delta_multiple: return dS_;
+      case Tex::density: return J_;
+    }
+    return T_;
+  }
+  void enqueue(cl::Kernel& k, long long n) {
+    dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange);
+    dev_.queue().finish();
+  }
+  // Runs kernel `name` over n work items with the parameter block, then `args` in order
+  // (device buffers, or the scattering order as an int).
+  void launch(const char* name, long long n, std::initializer_list<std::variant<cl::Buffer*, int>> args) {
+    cl_util::checked(name, [&] {
+      cl::Kernel k(program_, name);
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      cl_uint i = 1;
+      for (const auto& a : args) {
+        if (const auto* b = std::get_if<cl::Buffer*>(&a)) k.setArg(i++, **b);
+        else k.setArg(i++, std::get<int>(a));
+      }
+      enqueue(k, n);
+      return 0;
+    });
+  }
+  // The device must read the parameter block exactly as the host wrote it.
+  void check_layout() {
+    cl_util::checked("atmosphere_layout", [&] {
+      cl::Buffer reals(dev_.context(), CL_MEM_READ_WRITE, 6 * (dbl_ ? sizeof(double) : sizeof(float)));
+      cl::Buffer ints(dev_.context(), CL_MEM_READ_WRITE, 3 * sizeof(int));
+      cl::Kernel k(program_, "atmosphere_layout");
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      k.setArg(1, reals);
+      k.setArg(2, ints);
+      enqueue(k, 1);
+      std::vector<double> r(6);
+      if (dbl_) {
+        dev_.queue().enqueueReadBuffer(reals, CL_TRUE, 0, 6 * sizeof(double), r.data());
+      } else {
+        std::vector<float> f(6);
+        dev_.queue().enqueueReadBuffer(reals, CL_TRUE, 0, 6 * sizeof(float), f.data());
+        std::copy(f.begin(), f.end(), r.begin());
+      }
+      std::vector<int> iv(3);
+      dev_.queue().enqueueReadBuffer(ints, CL_TRUE, 0, 3 * sizeof(int), iv.data());
+      for (int i = 0; i < 6; ++i) {
+        const double want = dbl_ ? block_.echo_reals[i] : static_cast<float>(block_.echo_reals[i]);
+        if (r[i] != want)
+          throw DeviceError("atmosphere parameter block: the device reads real #" + std::to_string(i) + " as " +
+                            std::to_string(r[i]) + ", the host wrote " + std::to_string(want));
+      }
+      if (iv != block_.echo_ints)
+        throw DeviceError("atmosphere parameter block: the device's layout (" + std::to_string(iv[2]) +
+                          " bytes) differs from the host's (" + std::to_string(block_.echo_ints[2]) + " bytes)");
+      return 0;
+    });
+  }
+
+  Device& dev_;
+  Sizes sizes_;
+  int width_;
+  bool dbl_;
+  Block block_;
+  cl::Program program_;
+  long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
+  cl::Buffer T_, dE_, dR_, dM_, dS_, J_, rays_, incidence_;
+};
+
+struct ChannelStats {
+  std::vector<double> max, mean;
+};
+ChannelStats stats_of(const std::vector<double>& v, int w) {
+  ChannelStats s{std::vector<double>(w, 0.0), std::vector<double>(w, 0.0)};
+  const std::size_t n = v.size() / w;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int c = 0; c < w; ++c) {
+      s.max[c] = std::max(s.max[c], v[i * w + c]);
+      s.mean[c] += v[i * w + c];
+    }
+  for (int c = 0; c < w; ++c) s.mean[c] /= std::max<std::size_t>(n, 1);
+  return s;
+}
+
+// max over texels of |add| / acc, where acc exceeds kAutoFloor × its channel's maximum.
+double relative_change(const std::vector<double>& add, const std::vector<double>& acc, int w) {
+  std::vector<double> floor(w, 0.0);
+  const std::size_t n = acc.size() / w;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int c = 0; c < w; ++c) floor[c] = std::max(floor[c], acc[i * w + c]);
+  for (double& f : floor) f *= kAutoFloor;
+  double rel = 0.0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int c = 0; c < w; ++c) {
+      const double a = acc[i * w + c];
+      if (a > floor[c] && a > 0.0) rel = std::max(rel, std::fabs(add[i * w + c]) / a);
+    }
+  return rel;
+}
+
+template <class HB>
+StageCheck check_with(PassBackend& b, const Model& m, const Channels& ch, PassStage stage, int order,
+                      int count, double floor) {
+  HB h(m, ch);
+  const int w = b.channels();
+  std::vector<Tex> inputs, outputs;
+  switch (stage) {
+    case PassStage::transmittance:
+      outputs = {Tex::transmittance};
+      break;
+    case PassStage::direct_irradiance:
+      inputs = {Tex::transmittance};
+      outputs = {Tex::delta_irradiance};
+      break;
+    case PassStage::single_scattering:
+      inputs = {Tex::transmittance};
+      outputs = {Tex::delta_rayleigh, Tex::delta_mie};
+      break;
+    case PassStage::scattering_density:
+      // order 2 reads single scattering, later orders the previous multiple order
+      inputs = {Tex::transmittance, Tex::delta_irradiance};
+      if (order == 2) inputs.insert(inputs.end(), {Tex::delta_rayleigh, Tex::delta_mie});
+      else inputs.push_back(Tex::delta_multiple);
+      outputs = {Tex::density};
+      break;
+    case PassStage::indirect_irradiance:
+      inputs = order == 1 ? std::vector<Tex>{Tex::delta_rayleigh, Tex::delta_mie} : std::vector<Tex>{Tex::delta_multiple};
+      outputs = {Tex::delta_irradiance};
+      break;
+    case PassStage::multiple_scattering:
+      inputs = {Tex::transmittance, Tex::density};
+      outputs = {Tex::delta_multiple};
+      break;
+  }
+  for (Tex t : inputs) h.write(t, b.read(t));
+  std::vector<std::vector<double>> dev;
+  for (Tex t : outputs) dev.push_back(b.read(t));
+  const long long n = static_cast<long long>(dev[0].size()) / w;
+  const int k_out = static_cast<int>(outputs.size());
+  std::vector<double> scale(k_out * w, 0.0);
+  for (int o = 0; o < k_out; ++o)
+    for (long long i = 0; i < n; ++i)
+      for (int c = 0; c < w; ++c) scale[o * w + c] = std::max(scale[o * w + c], std::fabs(dev[o][i * w + c]));
+  StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count, n)), 0.0};
+  std::vector<double> errs(r.texels, 0.0);
+  parallel_for(r.texels, [&](long long k) {
+    // spread over the texture: a fixed multiplicative stride (coprime with most sizes)
+    const long long id = (k * 2654435761LL + 12345) % n;
+    std::vector<double> want(2 * w);
+    h.texel(stage, order, id, want.data());
+    double e = 0.0;
+    for (int o = 0; o < k_out; ++o)
+      for (int c = 0; c < w; ++c) {
+        const double ref = want[o * w + c], got = dev[o][id * w + c];
+        e = std::max(e, std::fabs(got - ref) / (std::fabs(ref) + floor * scale[o * w + c] + 1e-300));
+      }
+    errs[k] = e;
+  });
+  for (double e : errs) r.max_rel = std::max(r.max_rel, e);
+  return r;
+}
+
+}  // namespace
+
+std::unique_ptr<PassBackend> make_device_backend(Device& dev, const Model& m, const Channels& ch, int width,
+                                                 bool double_precision) {
+  return std::make_unique<DeviceBackend>(dev, m, ch, width, double_precision);
+}
+
+std::unique_ptr<PassBackend> make_host_backend(const Model& m, const Channels& ch, int width) {
+  return with_width(width, [&](auto ref) -> std::unique_ptr<PassBackend> {
+    return std::make_unique<typename decltype(ref)::Backend>(m, ch);
+  });
+}
+
+StageCheck check_stage(PassBackend& b, const Model& m, const Channels& ch, PassStage stage, int order,
+                       int count, double floor) {
+  return with_width(b.channels(), [&](auto ref) {
+    return check_with<typename decltype(ref)::Backend>(b, m, ch, stage, order, count, floor);
+  });
+}
+
+std::vector<double> inverse_rayleigh_phase(const Model& m) {
+  const auto a = ref3::make_parameters(m, Channels{});
+  const Sizes& s = m.sizes;
+  const int wd = s.scattering_width();
+  std::vector<double> out(s.scattering_texels());
+  parallel_for(static_cast<long long>(out.size()), [&](long long id) {
+    double h, mu, mu_s, nu;
+    int ground;
+    ref3::scattering_params_from_texel(&a, static_cast<int>(id % wd), static_cast<int>((id / wd) % s.mu),
+                                       static_cast<int>(id / (1LL * wd * s.mu)), &h, &mu, &mu_s, &nu, &ground);
+    out[id] = 1.0 / ref3::rayleigh_phase(nu);
+  });
+  return out;
+}
+
+const char* to_string(PassStage s) {
+  switch (s) {
+    case PassStage::transmittance: return "transmittance";
+    case PassStage::direct_irradiance: return "direct_irradiance";
+    case PassStage::single_scattering: return "single_scattering";
+    case PassStage::scattering_density: return "scattering_density";
+    case PassStage::indirect_irradiance: return "indirect_irradiance";
+    case PassStage::multiple_scattering: return "multiple_scattering";
+  }
+  return "?";
+}
+
+PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
+                    double p0, double p1, const StageHook& on_stage, const OrderHook& on_order) {
+  const int w = b.channels();
+  const int cap = plan.auto_orders ? kMaxAutoOrders : plan.orders;
+  // rough relative cost of the stages, for progress only
+  const double total = 0.12 + 0.72 * std::max(0, (plan.auto_orders ? 6 : cap) - 1);
+  double done = 0.0;
+  auto step = [&](const char* stage, double cost) {
+    done += cost;
+    progress(stage, p0 + (p1 - p0) * std::min(1.0, done / total));
+  };
+  PassResult r;
+  r.width = w;
+  using Clock = std::chrono::steady_clock;
+  auto last = Clock::now();  // end of the last timed stage: the time in between is host work
+  auto record = [&](const std::string& stage, int order, Clock::time_point t0) {
+    const auto t1 = Clock::now();
+    const double host = std::chrono::duration<double>(t0 - last).count();
+    if (host > 0.0) r.timings.push_back({"host", order, host});
+    const double sec = std::chrono::duration<double>(t1 - t0).count();
+    r.timings.push_back({stage, order, sec});
+    spdlog::debug("atmosphere: {} (order {}) took {:.3f} s", stage, order, sec);
+    last = t1;
+  };
+  auto hook = [&](PassStage stage, int order) {
+    if (!on_stage) return;
+    const auto t0 = Clock::now();
+    on_stage(stage, order, b);
+    record("self_check", order, t0);
+  };
+  auto timed = [&](PassStage what, int order, auto&& f) {
+    const auto t0 = Clock::now();
+    f();
+    record(to_string(what), order, t0);
+  };
+
+  timed(PassStage::transmittance, 0, [&] { b.transmittance(); });
+  hook(PassStage::transmittance, 0);
+  timed(PassStage::direct_irradiance, 0, [&] { b.direct_irradiance(); });
+  hook(PassStage::direct_irradiance, 0);
+  r.transmittance = b.read(Tex::transmittance);
+  r.direct_irradiance = b.read(Tex::delta_irradiance);
+  step("transmittance", 0.02);
+  timed(PassStage::single_scattering, 1, [&] { b.single_scattering(); });
+  hook(PassStage::single_scattering, 1);
+  r.scattering = b.read(Tex::delta_rayleigh);
+  r.single_mie = b.read(Tex::delta_mie);
+  r.irradiance.assign(r.direct_irradiance.size(), 0.0);
+  step("single scattering", 0.1);
+  {
+    OrderStats o;
+    o.order = 1;
+    const auto s = stats_of(r.scattering, w);
+    o.scattering_max = s.max;
+    o.scattering_mean = s.mean;
+    o.relative = 1.0;
+    r.orders.push_back(o);
+    if (on_order) on_order(1, r.scattering, {});
+  }
+  r.orders_used = 1;
+  r.converged = !plan.auto_orders;
+  const std::vector<double> inv_phase = cap >= 2 ? inverse_rayleigh_phase(m) : std::vector<double>{};
+  for (int n = 2; n <= cap; ++n) {
+    timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
+    hook(PassStage::scattering_density, n);
+    step("scattering density", 0.55);
+    timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
+    hook(PassStage::indirect_irradiance, n - 1);
+    const std::vector<double> dE = b.read(Tex::delta_irradiance);
+    for (std::size_t i = 0; i < dE.size(); ++i) r.irradiance[i] += dE[i];
+    {
+      const auto s = stats_of(dE, w);
+      r.orders[n - 2].irradiance_max = s.max;
+      r.orders[n - 2].irradiance_mean = s.mean;
+      if (on_order) on_order(n - 1, {}, dE);
+    }
+    step("indirect irradiance", 0.02);
+    timed(PassStage::multiple_scattering, n, [&] { b.multiple_scattering(); });
+    hook(PassStage::multiple_scattering, n);
+    std::vector<double> add = b.read(Tex::delta_multiple);
+    for (std::size_t i = 0; i < add.size(); ++i) add[i] *= inv_phase[i / w];
+    for (std::size_t i = 0; i < add.size(); ++i) r.scattering[i] += add[i];
+    OrderStats o;
+    o.order = n;
+    const auto s = stats_of(add, w);
+    o.scattering_max = s.max;
+    o.scattering_mean = s.mean;
+    o.relative = std::max(relative_change(add, r.scattering, w), relative_change(dE, r.irradiance, w));
+    r.orders.push_back(o);
+    if (on_order) on_order(n, add, {});
+    r.orders_used = n;
+    step("multiple scattering", 0.15);
+    spdlog::debug("atmosphere: order {} adds at most {:.3e} (relative)", n, o.relative);
+    if (plan.auto_orders && o.relative < plan.tolerance) {
+      r.converged = true;
+      break;
+    }
+  }
+  const double tail = std::chrono::duration<double>(Clock::now() - last).count();
+  if (tail > 0.0) r.timings.push_back({"host", r.orders_used, tail});
+  return r;
+}
+
+}  // namespace specbake::atmosphere

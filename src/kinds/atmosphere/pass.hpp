@@ -1,0 +1,120 @@
+#pragma once
+// One precomputation pass (Bruneton's Algorithm 4.1) over up to a few channels
+// (wavelengths): transmittance, direct irradiance, single scattering, then per order n ≥ 2
+// the scattering density J_n, the indirect irradiance of order n − 1 and the multiple
+// scattering of order n, accumulated exactly as the reference does:
+//   irradiance += ΔE_{n−1} (indirect only; the direct sun is never added),
+//   scattering  = single Rayleigh + Σ_n ΔS_n / P_R(ν_texel)   (ν clamped to its valid range),
+//   single_mie  = single Mie.
+// The same driver runs the OpenCL kernels (DeviceBackend) or the double reference
+// (host backend, reference.hpp) through the PassBackend interface.
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cl/device.hpp"
+#include "kinds/atmosphere/model.hpp"
+#include "job/kind.hpp"
+
+namespace specbake::atmosphere {
+
+// Channel widths with a compiled reference path (and so a self-check).
+// The OpenCL program of the atmosphere kernels (embedded path).
+inline constexpr const char* kProgram = "kernels/atmosphere/kernels.cl";
+
+// The stages of a pass, in the order they first run (paper Algorithm 4.1).
+enum class PassStage {
+  transmittance,        // T
+  direct_irradiance,    // ΔE of the sun
+  single_scattering,    // ΔS_R, ΔS_M
+  scattering_density,   // ΔJ of order n
+  indirect_irradiance,  // ΔE of order n − 1
+  multiple_scattering,  // ΔS of order n
+};
+const char* to_string(PassStage s);
+
+inline constexpr int kPassWidths[] = {3, 4, 8, 16};
+int pass_width_for(std::size_t channels);  // smallest of kPassWidths ≥ channels, else the largest
+
+enum class Tex { transmittance, delta_irradiance, delta_rayleigh, delta_mie, delta_multiple, density };
+const char* to_string(Tex t);
+
+class PassBackend {
+ public:
+  virtual ~PassBackend() = default;
+  virtual int channels() const = 0;
+  virtual void transmittance() = 0;                   // T
+  virtual void direct_irradiance() = 0;               // ΔE ← direct
+  virtual void single_scattering() = 0;               // ΔR, ΔM
+  virtual void scattering_density(int order) = 0;     // J ← f(T, ΔR, ΔM, ΔS, ΔE)
+  virtual void indirect_irradiance(int order) = 0;    // ΔE ← indirect from scattering of `order`
+  virtual void multiple_scattering() = 0;             // ΔS ← f(T, J)
+  virtual std::vector<double> read(Tex t) = 0;        // [texels][channels()]
+  virtual void write(Tex t, std::vector<double> values) = 0;  // [texels][channels()]
+};
+
+// The OpenCL backend: kernels built with NCH = width and float (or double) arithmetic.
+std::unique_ptr<PassBackend> make_device_backend(cl_util::Device& dev, const Model& m, const Channels& ch, int width,
+                                                 bool double_precision);
+// The double-precision reference backend (threads over texels).
+std::unique_ptr<PassBackend> make_host_backend(const Model& m, const Channels& ch, int width);
+
+struct OrderStats {
+  int order = 0;
+  std::vector<double> scattering_max, scattering_mean;  // of what this order adds to `scattering`
+  std::vector<double> irradiance_max, irradiance_mean;  // of what this order's light adds to `irradiance`
+  double relative = 0.0;  // max over texels of (what this order adds)/(accumulated), see docs
+};
+
+struct StageTime {
+  std::string stage;  // "transmittance", ..., "self_check" (the hooks), "host" (reads and sums between stages)
+  int order = 0;
+  double seconds = 0.0;  // wall time
+};
+
+struct PassResult {
+  int width = 0;
+  std::vector<StageTime> timings;  // in the order they ran
+  std::vector<double> transmittance, direct_irradiance, irradiance, scattering, single_mie;
+  std::vector<OrderStats> orders;  // 1..orders_used (order 1: single scattering)
+  int orders_used = 0;
+  bool converged = true;  // auto: the tolerance was met before the order cap
+};
+
+struct PassPlan {
+  int orders = 4;           // fixed count, or the cap when auto
+  bool auto_orders = false;
+  double tolerance = 1e-3;
+};
+inline constexpr int kMaxAutoOrders = 40;
+// Texels whose accumulated value is below this fraction of their channel's maximum do not
+// enter the relative change of `orders: auto` (0/0 in the dark).
+inline constexpr double kAutoFloor = 1e-4;
+
+// Called after every stage with the backend (for self-checks) and the stage name.
+using StageHook = std::function<void(PassStage stage, int order, PassBackend& b)>;
+// Called with each order's additions (scattering [texels][w], irradiance [texels][w] or
+// empty for the last order), so that callers can convert and combine passes.
+using OrderHook = std::function<void(int order, const std::vector<double>& scattering_add,
+                                     const std::vector<double>& irradiance_add)>;
+
+PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
+                    double progress_from, double progress_to, const StageHook& on_stage = {},
+                    const OrderHook& on_order = {});
+
+// 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it).
+std::vector<double> inverse_rayleigh_phase(const Model& m);
+
+// Self-check: recomputes `count` texels of a stage's output in double from the backend's own
+// inputs and returns the largest |device − reference| / (|reference| + floor·max|reference|).
+struct StageCheck {
+  std::string stage;
+  int order = 0;
+  int texels = 0;
+  double max_rel = 0.0;
+};
+StageCheck check_stage(PassBackend& b, const Model& m, const Channels& ch, PassStage stage, int order,
+                       int count, double floor);
+
+}  // namespace specbake::atmosphere

@@ -1,0 +1,34 @@
+#pragma once
+// The typed spec of an atmosphere job (parsed in config.cpp; keys in docs/atmosphere.md).
+#include <optional>
+
+#include "core/config.hpp"
+#include "media/media.hpp"
+
+namespace specbake {
+
+// Geometry, sun, ground, the media (AtmosphereMedia) and what to bake.
+struct AtmosphereSpec : KindSpec, AtmosphereMedia {
+  double bottom_radius_km = 6360.0, top_radius_km = 6420.0;
+  double sun_angular_radius_rad = 0.004675;
+  double max_sun_zenith_deg = 102.0;
+  double ground_albedo = 0.1;
+  double solar_irradiance_scale = 1.0;  // multiplies the ASTM G-173 spectrum (other planets' distance)
+  bool spectral = false;                  // false: rgb (680, 550, 440 nm)
+  double min_nm = 360.0, max_nm = 830.0;  // spectral: midpoints of `count` equal bins
+  int count = 48;
+  std::optional<int> orders = 4;  // nullopt: auto
+  double tolerance = 1e-3;
+  int transmittance_mu = 256, transmittance_r = 64, irradiance_mu_s = 64, irradiance_r = 16;
+  int scattering_r = 32, scattering_mu = 128, scattering_mu_s = 32, scattering_nu = 8;
+  bool layout_3d = true, layout_tiled2d = false;
+  bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
+  bool double_precision = false;  // device arithmetic: float32 (default) or float64
+};
+
+namespace atmosphere {
+// Reads a `kind: atmosphere` job entry: Bruneton's demo Earth with the entry's overrides.
+AtmosphereSpec parse_spec(const yaml::At& job, nlohmann::json& norm, Inputs& inputs);
+}  // namespace atmosphere
+
+}  // namespace specbake

@@ -1,0 +1,39 @@
+// The diffraction kind's entry in the kind table.
+#include "kinds/diffraction/kind.hpp"
+
+#include "kinds/diffraction/diffraction_job.hpp"
+#include "kinds/diffraction/terms.hpp"
+
+namespace specbake::diffraction {
+
+Kind kind() {
+  Kind k;
+  k.name = "diffraction";
+  k.summary = "Taylor / Chebyshev FFT terms of a surface heightfield for a real-time diffraction BRDF";
+  k.parse = [](const yaml::At& job, nlohmann::json& norm, Inputs& inputs) -> std::shared_ptr<const KindSpec> {
+    return std::make_shared<DiffractionSpec>(parse_spec(job, norm, inputs));
+  };
+  k.plan = [](const JobSpec& j, JobContext& ctx) { return plan(j.as<DiffractionSpec>(), ctx); };
+  k.bake = [](const JobSpec& j, JobContext& ctx) { return bake(j.as<DiffractionSpec>(), ctx); };
+  // Measured on PoCL (2 cores): 0.3-1 s for the bundled 256²-1024² fields; grows with M² log M.
+  k.cost_s = [](const JobSpec& j) {
+    const auto& s = j.as<DiffractionSpec>();
+    const double w = s.procedural ? s.procedural->size : (s.field ? s.field->width : 0);
+    const double h = s.procedural ? s.procedural->size : (s.field ? s.field->height : 0);
+    return 0.3 + 2e-6 * w * h;
+  };
+  k.memory = [](const JobSpec& j) {
+    const auto& s = j.as<DiffractionSpec>();
+    const std::uint64_t w = s.procedural ? s.procedural->size : (s.field ? s.field->width : 0);
+    const std::uint64_t h = s.procedural ? s.procedural->size : (s.field ? s.field->height : 0);
+    // Complex float fields of the heightfield's size: the term input, the FFT buffer and the
+    // cropped terms (at most the full field per term, counted as two fields), plus a complex
+    // double field for the exact transforms of the self-check.
+    const std::uint64_t field = w * h * 8;
+    return MemoryEstimate{4 * field + 2 * field, 2 * field};
+  };
+  k.programs = {kProgram};
+  return k;
+}
+
+}  // namespace specbake::diffraction

@@ -1,0 +1,115 @@
+#pragma once
+// Computing the FFT terms F_n of a plan: on the device (term-input kernel, batched VkFFT in
+// float32, cropped while reading back) and, for checks, on the host in double precision with the same
+// term-input maths (reference.hpp) and direct DFTs. Also the exact P(k;κ) = DFT(e^{iκh}) in
+// double precision, and the reconstruction of P from stored terms.
+#include <chrono>
+#include <complex>
+#include <string>
+#include <thread>
+#include <algorithm>
+#include <vector>
+
+#include "cl/device.hpp"
+#include "kinds/diffraction/planning.hpp"
+#include "job/kind.hpp"
+
+namespace specbake::diffraction {
+
+// The OpenCL program of the diffraction kernels (embedded path).
+inline constexpr const char* kProgram = "kernels/diffraction/kernels.cl";
+
+using cplx = std::complex<double>;
+
+// Terms as the bundle stores them: float32 [T][kv][ku][re, im] over plan.bins.
+struct Terms {
+  Bins bins;
+  int count = 0;
+  std::vector<float> values;
+  std::size_t per_term() const { return static_cast<std::size_t>(bins.ku_count()) * bins.kv_count(); }
+  cplx at(int n, int ku, int kv) const {
+    const std::size_t i = n * per_term() + static_cast<std::size_t>(kv - bins.kv_min) * bins.ku_count() + (ku - bins.ku_min);
+    return {values[2 * i], values[2 * i + 1]};
+  }
+};
+
+// Runs fn(i) for i in [0, n) on the hardware threads (i interleaved over threads); fn must
+// write only its own i's results, so the outcome does not depend on the thread count.
+template <class Fn>
+void parallel_for(long long n, Fn&& fn) {
+  const long long threads = std::max(1u, std::min(16u, std::thread::hardware_concurrency()));
+  if (n < 2 || threads == 1) {
+    for (long long i = 0; i < n; ++i) fn(i);
+    return;
+  }
+  std::vector<std::thread> pool;
+  for (long long t = 0; t < std::min(threads, n); ++t)
+    pool.emplace_back([&, t] {
+      for (long long i = t; i < n; i += threads) fn(i);
+    });
+  for (auto& th : pool) th.join();
+}
+
+// Wall time per stage of a bake, in seconds, in the order stages first ran; each addition is
+// also logged at debug level.
+class Timings {
+ public:
+  void add(const std::string& stage, double seconds);
+  // Runs fn() and adds its wall time to `stage`.
+  template <class Fn>
+  decltype(auto) time(const std::string& stage, Fn&& fn) {
+    const auto t0 = std::chrono::steady_clock::now();
+    struct Done {
+      Timings* t;
+      const std::string* stage;
+      std::chrono::steady_clock::time_point t0;
+      ~Done() { t->add(*stage, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()); }
+    } done{this, &stage, t0};
+    return fn();
+  }
+  nlohmann::json json() const;
+
+ private:
+  std::vector<std::pair<std::string, double>> stages_;
+};
+
+// The device path: float32 FFTs with VkFFT. Adds its sub-stages ("terms: …") to `timings`.
+Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress,
+                   Timings* timings = nullptr);
+
+// Host double-precision term inputs q_n of every sample for the band's terms [n_first, n_first+count).
+std::vector<cplx> reference_inputs(const Field& f, const Band& band, int n_first, int count);
+// Host DFT (separable, O(W·H·(W+H))) of a W×H complex field at the bins, over W·H: [kv][ku].
+std::vector<cplx> host_dft(const std::vector<cplx>& field, int width, int height, const Bins& bins);
+// Host reference terms F_n over the bins, double precision: [T][kv][ku].
+std::vector<cplx> reference_terms(const Field& f, const std::vector<Band>& bands, const Bins& bins);
+// F_n of every term at a few bins by direct sums (O(W·H) per bin and term), in one pass over
+// the samples on the hardware threads: [T][bins.size()] with T = max(first_term + terms).
+std::vector<cplx> reference_terms_at(const Field& f, const std::vector<Band>& bands,
+                                     const std::vector<std::pair<int, int>>& bins);
+
+// Exact P(k;κ) = Σ e^{iκh}·e^{−2πi(...)} over the bins ([kv][ku], not divided by M²), in double
+// precision: VkFFT double on the device when it has fp64 (dev != nullptr), else the host DFT;
+// κ = 0 needs no transform (M² at the DC bin, 0 elsewhere).
+class ExactDft {
+ public:
+  ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins);
+  ~ExactDft();
+  std::vector<cplx> operator()(double kappa);
+  bool on_device() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// P(k;κ) = M²·e^{iκc}·Σ_n coef_n(κ)·F_n[k] over the bins from `terms` ([kv][ku]).
+std::vector<cplx> reconstruct(const Terms& terms, const Band& band, const Field& f, double kappa);
+// The same from double terms [T][kv][ku] (reference path).
+std::vector<cplx> reconstruct(const std::vector<cplx>& terms, const Bins& bins, const Band& band, const Field& f,
+                              double kappa);
+
+// The band whose range holds κ (the first one at a shared edge).
+const Band& band_for(const std::vector<Band>& bands, double kappa);
+
+}  // namespace specbake::diffraction
