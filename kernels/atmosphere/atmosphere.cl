@@ -236,6 +236,8 @@ FN real unit_from_coord(real u, int n) {
 }
 
 FN void transmittance_uv(const AtmosphereParameters* a, real h, real mu, real* u, real* v) {
+  REQUIRE(h >= R(0.0) && h <= thickness(a));
+  REQUIRE(mu >= R(-1.0) && mu <= R(1.0));
   const real H = horizon_top(a);
   const real rho = horizon_distance(a, h);
   const real d = distance_to_top(a, h, mu);
@@ -264,6 +266,8 @@ FN void transmittance_texel_params(const AtmosphereParameters* a, int id, real* 
 }
 
 FN void irradiance_uv(const AtmosphereParameters* a, real h, real mu_s, real* u, real* v) {
+  REQUIRE(h >= R(0.0) && h <= thickness(a));
+  REQUIRE(mu_s >= R(-1.0) && mu_s <= R(1.0));
   *u = coord_from_unit(mu_s * R(0.5) + R(0.5), a->irradiance_w);
   *v = coord_from_unit(h / thickness(a), a->irradiance_h);
 }
@@ -302,6 +306,7 @@ FN real scattering_u_mu(const AtmosphereParameters* a, real h, real mu, int hits
 }
 /* u_mu_s: 0 at mu_s_min, 1 at mu_s = 1, steep around the horizon. */
 FN real scattering_u_mu_s(const AtmosphereParameters* a, real mu_s) {
+  REQUIRE(mu_s >= R(-1.0) && mu_s <= R(1.0));
   const real d_min = thickness(a), d_max = horizon_top(a);
   const real d = distance_to_top(a, R(0.0), mu_s);
   const real a_s = (d - d_min) / (d_max - d_min);
@@ -480,8 +485,13 @@ FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T
 }
 
 /* ---- phase functions (sr⁻¹) ---------------------------------------------------------- */
-FN real rayleigh_phase(real nu) { return R(3.0) / (R(16.0) * ATM_PI) * (R(1.0) + nu * nu); }
+FN real rayleigh_phase(real nu) {
+  REQUIRE(nu >= R(-1.0) && nu <= R(1.0));
+  return R(3.0) / (R(16.0) * ATM_PI) * (R(1.0) + nu * nu);
+}
 FN real mie_phase(real g, real nu) {
+  REQUIRE(g > R(-1.0) && g < R(1.0));
+  REQUIRE(nu >= R(-1.0) && nu <= R(1.0));
   const real k = R(3.0) / (R(8.0) * ATM_PI) * (R(1.0) - g * g) / (R(2.0) + g * g);
   const real x = R(1.0) + g * g - R(2.0) * g * nu;
   return k * (R(1.0) + nu * nu) / (x * sqrt(x));
@@ -809,6 +819,22 @@ FN void combined_scattering(const AtmosphereParameters* a, GLOBAL const real* S,
   get_scattering(a, M, h, mu, mu_s, nu, hits_ground, single_mie);
 }
 
+/* A camera outside the atmosphere looking into it moves along `view` to where the ray enters
+ * the top; r = |camera| and rmu = camera·view after the move. Returns 0 for a camera outside
+ * the atmosphere whose ray misses it (camera left where it was). */
+FN int enter_atmosphere(const AtmosphereParameters* a, real* camera, const real* view, real* r, real* rmu) {
+  *r = sqrt(dot3(camera, camera));
+  *rmu = dot3(camera, view);
+  const real d_top = -*rmu - sqrt(*rmu * *rmu - *r * *r + a->top_radius * a->top_radius);
+  if (d_top > R(0.0)) {
+    for (int k = 0; k < 3; ++k) camera[k] += view[k] * d_top;
+    *r = a->top_radius;
+    *rmu += d_top;
+    return 1;
+  }
+  return *r <= a->top_radius;
+}
+
 /* Sky radiance seen from `camera` (km, planet centre at the origin) along the unit vector
  * `view`, sun along the unit vector `sun`; also the transmittance to the top (0 for rays
  * that hit the ground). Light shafts: `shadow_length` km of the ray nearest the camera
@@ -817,14 +843,8 @@ FN void sky_radiance(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL
                      const real* camera_in, const real* view, real shadow_length, const real* sun, real* radiance,
                      real* transmittance) {
   real camera[3] = {camera_in[0], camera_in[1], camera_in[2]};
-  real r = sqrt(dot3(camera, camera));
-  real rmu = dot3(camera, view);
-  const real d_top = -rmu - sqrt(rmu * rmu - r * r + a->top_radius * a->top_radius);
-  if (d_top > R(0.0)) {
-    for (int k = 0; k < 3; ++k) camera[k] += view[k] * d_top;
-    r = a->top_radius;
-    rmu += d_top;
-  } else if (r > a->top_radius) {
+  real r, rmu;
+  if (!enter_atmosphere(a, camera, view, &r, &rmu)) {
     for (int c = 0; c < NCH; ++c) {
       transmittance[c] = R(1.0);
       radiance[c] = R(0.0);
@@ -866,14 +886,8 @@ FN void sky_radiance_to_point(const AtmosphereParameters* a, GLOBAL const real* 
   real view[3] = {point[0] - camera[0], point[1] - camera[1], point[2] - camera[2]};
   const real len = sqrt(dot3(view, view));
   for (int k = 0; k < 3; ++k) view[k] /= len;
-  real r = sqrt(dot3(camera, camera));
-  real rmu = dot3(camera, view);
-  const real d_top = -rmu - sqrt(rmu * rmu - r * r + a->top_radius * a->top_radius);
-  if (d_top > R(0.0)) {
-    for (int k = 0; k < 3; ++k) camera[k] += view[k] * d_top;
-    r = a->top_radius;
-    rmu += d_top;
-  }
+  real r, rmu;
+  enter_atmosphere(a, camera, view, &r, &rmu);
   const real h = r - a->bottom_radius;
   const real mu = rmu / r, mu_s = dot3(camera, sun) / r, nu = dot3(view, sun);
   const real to_point[3] = {point[0] - camera[0], point[1] - camera[1], point[2] - camera[2]};
@@ -908,8 +922,9 @@ FN void sun_and_sky_irradiance(const AtmosphereParameters* a, GLOBAL const real*
                                const real* point, const real* normal, const real* sun, real* sun_irradiance,
                                real* sky_irradiance) {
   const real r = sqrt(dot3(point, point));
-  const real h = r - a->bottom_radius;
-  const real mu_s = dot3(point, sun) / r;
+  /* point is on the ground: its computed radius is off by rounding (either side) */
+  const real h = clamp_altitude(a, r - a->bottom_radius);
+  const real mu_s = clamp_cosine(dot3(point, sun) / r);
   get_irradiance(a, E, h, mu_s, sky_irradiance);
   const real tilt = (R(1.0) + dot3(normal, point) / r) * R(0.5);
   for (int c = 0; c < NCH; ++c) sky_irradiance[c] *= tilt;

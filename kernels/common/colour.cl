@@ -15,6 +15,7 @@
 
 /* x̄ȳz̄ at lambda_nm (nm) from a table of `count` rows [x̄, ȳ, z̄] at 1 nm steps from first_nm. */
 FN void cmf_lerp(GLOBAL const real* table, int count, real first_nm, real lambda_nm, real* xyz) {
+  REQUIRE(count >= 2);
   const real t = lambda_nm - first_nm;
   xyz[0] = xyz[1] = xyz[2] = R(0.0);
   if (!(t >= R(0.0)) || t > (real)(count - 1)) return;

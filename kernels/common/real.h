@@ -6,6 +6,11 @@
  *   - the C++ reference path #includes inside a namespace that defines real = double
  *     (see src/jobs/<kind>/reference.hpp).
  * Literals go through R(x) so that float builds stay in float.
+ *
+ * REQUIRE(condition) states a function's domain (as Bruneton's reference asserts each one):
+ * live in the C++ reference, where a violation throws std::domain_error naming the condition
+ * and the file (the including code must have <stdexcept>), and compiled out of the kernels.
+ * Write conditions so that NaN fails them (x >= lo && x <= hi, not !(x < lo)).
  */
 #ifndef SPECBAKE_REAL_H
 #define SPECBAKE_REAL_H
@@ -22,10 +27,13 @@ typedef float real;
 #  endif
 #  define GLOBAL __global
 #  define FN
+#  define REQUIRE(condition) ((void)0)
 #else
 /* C++: the including namespace has `using real = double;` and the <cmath> names in scope. */
 #  define GLOBAL
 #  define FN inline
+#  define REQUIRE(condition) \
+    ((condition) ? (void)0 : throw std::domain_error("domain check failed: " #condition " (" __FILE__ ")"))
 #endif
 
 #define R(x) ((real)(x))

@@ -177,6 +177,7 @@ FN real procedural_height(int type, int ix, int iy, real dx, real period, real a
 
 /* Index of signed frequency bin k in an unshifted DFT array of length m (k mod m). */
 FN int bin_index(int k, int m) {
+  REQUIRE(m > 0);
   const int r = k % m;
   return r < 0 ? r + m : r;
 }

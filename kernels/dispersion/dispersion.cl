@@ -26,6 +26,8 @@ FN real cauchy_abbe_ior(real n_ref, real v, real offset) { return n_ref + (n_ref
 
 /* B, C: `terms` coefficients (≤ 4) in private memory. */
 FN real sellmeier_ior(const real* B, const real* C, int terms, real lambda_nm) {
+  REQUIRE(lambda_nm > R(0.0));
+  REQUIRE(terms >= 0 && terms <= 4);
   const real l2 = (lambda_nm * R(1e-3)) * (lambda_nm * R(1e-3));
   real n2 = R(1.0);
   for (int i = 0; i < terms; ++i) n2 += B[i] * l2 / (l2 - C[i]);

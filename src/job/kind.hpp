@@ -96,6 +96,20 @@ struct Kind {
   // The OpenCL programs the kind builds (paths of embedded kernel files): their fully expanded
   // sources enter the bundle hash, so a change to any file they include makes a new bundle.
   std::vector<std::string> programs;
+
+  // A kind whose spec type is Spec: `parse` returns a Spec, `plan` and `bake` take one.
+  template <class Spec, class Parse, class Plan, class Bake>
+  static Kind of(std::string name, std::string summary, Parse parse, Plan plan, Bake bake) {
+    Kind k;
+    k.name = std::move(name);
+    k.summary = std::move(summary);
+    k.parse = [parse](const yaml::At& job, nlohmann::json& norm, Inputs& inputs) -> std::shared_ptr<const KindSpec> {
+      return std::make_shared<Spec>(parse(job, norm, inputs));
+    };
+    k.plan = [plan](const JobSpec& j, JobContext& ctx) { return plan(j.as<Spec>(), ctx); };
+    k.bake = [bake](const JobSpec& j, JobContext& ctx) { return bake(j.as<Spec>(), ctx); };
+    return k;
+  }
 };
 
 // Refuses (InputError at the job's config entry) a job whose estimate exceeds the device's

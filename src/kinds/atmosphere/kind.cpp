@@ -29,14 +29,7 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
 }  // namespace
 
 Kind kind() {
-  Kind k;
-  k.name = "atmosphere";
-  k.summary = "Bruneton 2017 precomputed atmospheric scattering LUTs, all orders";
-  k.parse = [](const yaml::At& job, nlohmann::json& norm, Inputs& inputs) -> std::shared_ptr<const KindSpec> {
-    return std::make_shared<AtmosphereSpec>(parse_spec(job, norm, inputs));
-  };
-  k.plan = [](const JobSpec& j, JobContext& ctx) { return plan(j.as<AtmosphereSpec>(), ctx); };
-  k.bake = [](const JobSpec& j, JobContext& ctx) { return bake(j.as<AtmosphereSpec>(), ctx); };
+  Kind k = Kind::of<AtmosphereSpec>("atmosphere", "Bruneton 2017 precomputed atmospheric scattering LUTs, all orders", parse_spec, plan, bake);
   k.cost_s = [](const JobSpec& j) { return estimated_seconds(j.as<AtmosphereSpec>()); };
   k.memory = [](const JobSpec& j) { return device_memory(j.as<AtmosphereSpec>()); };
   k.programs = {kProgram};

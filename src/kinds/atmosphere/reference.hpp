@@ -4,30 +4,17 @@
 // backend and helpers of host_pass.inc. The other pass widths are in reference_widths.hpp.
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <cstddef>
 #include <cstring>
 #include <thread>
 #include <vector>
 
+#include "core/parallel.hpp"
 #include "kinds/atmosphere/pass.hpp"
 
 namespace specbake::atmosphere {
 
-// Runs f(i) for i in [0, n) on the hardware threads.
-template <class F>
-void parallel_for(long long n, F&& f) {
-  const long long threads = std::max(1u, std::min(8u, std::thread::hardware_concurrency()));
-  if (n < 64 || threads == 1) {
-    for (long long i = 0; i < n; ++i) f(i);
-    return;
-  }
-  std::vector<std::thread> pool;
-  for (long long t = 0; t < threads; ++t)
-    pool.emplace_back([&, t] {
-      for (long long i = t; i < n; i += threads) f(i);
-    });
-  for (auto& th : pool) th.join();
-}
 
 #define SPECBAKE_ATMOSPHERE_REF_PROLOGUE                                                                    \
   using real = double;                                                                                    \

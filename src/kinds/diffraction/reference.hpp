@@ -2,6 +2,7 @@
 // The double-precision reference of the diffraction maths: the very functions the OpenCL
 // kernels run (kernels/diffraction/diffraction.cl), compiled as C++ with real = double.
 #include <cmath>
+#include <stdexcept>
 
 namespace specbake::diffraction::ref {
 using real = double;

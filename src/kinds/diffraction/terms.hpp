@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <vector>
 
+#include "core/parallel.hpp"
 #include "cl/device.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "job/kind.hpp"
@@ -33,22 +34,6 @@ struct Terms {
   }
 };
 
-// Runs fn(i) for i in [0, n) on the hardware threads (i interleaved over threads); fn must
-// write only its own i's results, so the outcome does not depend on the thread count.
-template <class Fn>
-void parallel_for(long long n, Fn&& fn) {
-  const long long threads = std::max(1u, std::min(16u, std::thread::hardware_concurrency()));
-  if (n < 2 || threads == 1) {
-    for (long long i = 0; i < n; ++i) fn(i);
-    return;
-  }
-  std::vector<std::thread> pool;
-  for (long long t = 0; t < std::min(threads, n); ++t)
-    pool.emplace_back([&, t] {
-      for (long long i = t; i < n; i += threads) fn(i);
-    });
-  for (auto& th : pool) th.join();
-}
 
 // Wall time per stage of a bake, in seconds, in the order stages first ran; each addition is
 // also logged at debug level.

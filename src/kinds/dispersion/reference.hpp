@@ -3,6 +3,7 @@
 // kernels run (kernels/dispersion/dispersion.cl, kernels/common/colour.cl), compiled as C++
 // with real = double.
 #include <cmath>
+#include <stdexcept>
 
 namespace specbake::dispersion::ref {
 using real = double;

@@ -1,0 +1,26 @@
+#pragma once
+// Host-side data parallelism for the double-precision reference paths and host sums.
+#include <algorithm>
+#include <thread>
+#include <vector>
+
+namespace specbake {
+
+// Runs fn(i) for i in [0, n) on up to 16 hardware threads (i interleaved over threads); fn must
+// write only its own i's results, so the outcome does not depend on the thread count.
+template <class Fn>
+void parallel_for(long long n, Fn&& fn) {
+  const long long threads = std::min<long long>({16, std::max(1u, std::thread::hardware_concurrency()), n});
+  if (threads <= 1) {
+    for (long long i = 0; i < n; ++i) fn(i);
+    return;
+  }
+  std::vector<std::thread> pool;
+  for (long long t = 0; t < threads; ++t)
+    pool.emplace_back([&, t] {
+      for (long long i = t; i < n; i += threads) fn(i);
+    });
+  for (auto& th : pool) th.join();
+}
+
+}  // namespace specbake
