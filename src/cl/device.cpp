@@ -211,8 +211,11 @@ cl::Program Device::build(const std::string& kernel_path, const std::string& opt
   } catch (const cl::Error&) {
   }
   if (status != CL_SUCCESS) {
-    spdlog::error("OpenCL build of {} failed ({}):\n{}", kernel_path, error_name(status), log);
-    throw DeviceError("building kernel " + kernel_path + " failed with " + error_name(status) + ":\n" + log);
+    // The log goes to the log once; the error carries its first line.
+    spdlog::error("OpenCL build of {} failed ({}); build log:\n{}", kernel_path, error_name(status), log);
+    const std::string first = log.substr(0, log.find('\n'));
+    throw DeviceError("building kernel " + kernel_path + " failed with " + error_name(status) +
+                      (first.empty() ? "" : ": " + first + (first.size() < log.size() ? " (build log above)" : "")));
   }
   if (!log.empty()) spdlog::debug("OpenCL build log for {}:\n{}", kernel_path, log);
   programs_.emplace(key, program);

@@ -1,59 +1,223 @@
-// specbake — command line. A thin layer over the library (core/runner.hpp): parse
-// arguments, set up logging, print results, map errors to the documented exit codes.
+// specbake — command line. A thin layer over the library (runner/runner.hpp): parse
+// arguments, set up logging and progress, print results, map errors to the documented exit codes.
 #include <CLI/CLI.hpp>
-#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/sinks/base_sink.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
+#include <csignal>
+#include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <mutex>
 
 #include "cl/device.hpp"
 #include "core/hash.hpp"
-#include "runner/runner.hpp"
 #include "core/version.hpp"
 #include "io/bundle.hpp"
 #include "io/bundle_diff.hpp"
+#include "runner/runner.hpp"
 
 using namespace specbake;
 using nlohmann::json;
 
 namespace {
 
-std::vector<std::string> split_commas(const std::vector<std::string>& in) {
-  std::vector<std::string> out;
-  for (const auto& s : in) {
-    std::size_t start = 0;
-    while (start <= s.size()) {
-      const auto comma = s.find(',', start);
-      const auto part = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-      if (!part.empty()) out.push_back(part);
-      if (comma == std::string::npos) break;
-      start = comma + 1;
+// ---- progress and logging on the terminal ---------------------------------------------------
+
+// A live status line on a terminal (redrawn in place, cleared around log lines), or plain
+// progress lines when stderr is not a terminal (at step changes and every few seconds).
+class ProgressLine {
+ public:
+  explicit ProgressLine(bool tty) : tty_(tty) {}
+
+  void show(const ProgressEvent& e) {
+    std::lock_guard lock(m_);
+    char eta[32] = "";
+    if (e.eta_s >= 0.0) std::snprintf(eta, sizeof eta, ", ETA %s", duration(e.eta_s).c_str());
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "[%d/%d] %s: %s, %s %3.0f %%%s", e.index, e.count, e.job.c_str(), to_string(e.stage),
+                  e.what.c_str(), 100.0 * e.fraction, eta);
+    if (tty_) {
+      line_ = buf;
+      draw();
+      return;
+    }
+    // Plain lines: a job's step changes once it has run a couple of seconds, and every 10 s.
+    const auto now = std::chrono::steady_clock::now();
+    if (e.job != job_) job_ = e.job, job_start_ = now, last_key_.clear();
+    const std::string key = to_string(e.stage);
+    if ((key != last_key_ && now - job_start_ > std::chrono::seconds(2)) || now - last_ > std::chrono::seconds(10)) {
+      std::fprintf(stderr, "%s\n", buf);
+      last_key_ = key;
+      last_ = now;
     }
   }
-  return out;
+  void done() {
+    std::lock_guard lock(m_);
+    clear();
+    line_.clear();
+  }
+  // Around other output to stderr.
+  void clear() {
+    if (tty_ && !line_.empty()) std::fputs("\r\033[K", stderr);
+  }
+  void draw() {
+    if (tty_ && !line_.empty()) {
+      std::fprintf(stderr, "\r\033[K%s", line_.c_str());
+      std::fflush(stderr);
+    }
+  }
+  std::mutex& mutex() { return m_; }
+
+  static std::string duration(double s) {
+    char b[32];
+    if (s < 10) std::snprintf(b, sizeof b, "%.1f s", s);
+    else if (s < 60) std::snprintf(b, sizeof b, "%.0f s", s);
+    else std::snprintf(b, sizeof b, "%d min %02d s", static_cast<int>(s) / 60, static_cast<int>(s) % 60);
+    return b;
+  }
+
+ private:
+  bool tty_;
+  std::mutex m_;
+  std::string line_, last_key_, job_;
+  std::chrono::steady_clock::time_point last_{}, job_start_{};
+};
+
+// spdlog sink writing "[level] message" to stderr without tearing the progress line.
+class StderrSink : public spdlog::sinks::base_sink<spdlog::details::null_mutex> {
+ public:
+  explicit StderrSink(ProgressLine& p) : progress_(p) {}
+
+ protected:
+  void sink_it_(const spdlog::details::log_msg& msg) override {
+    spdlog::memory_buf_t out;
+    formatter_->format(msg, out);
+    std::lock_guard lock(progress_.mutex());
+    progress_.clear();
+    std::fwrite(out.data(), 1, out.size(), stderr);
+    progress_.draw();
+  }
+  void flush_() override { std::fflush(stderr); }
+
+ private:
+  ProgressLine& progress_;
+};
+
+// ---- signals ---------------------------------------------------------------------------------
+
+extern "C" void on_stop_signal(int sig) {
+  request_stop(sig);
+  std::signal(sig, SIG_DFL);  // a second Ctrl-C ends the process at once
 }
 
-void print_reports(const std::vector<JobReport>& reports, bool plan) {
-  for (const auto& r : reports) {
-    std::cout << r.name << " (" << r.kind << ", " << r.config << ")\n"
-              << "  status:  " << r.status << (r.reason.empty() ? "" : " — " + r.reason) << "\n"
-              << "  hash:    " << r.hash.substr(0, 12) << "\n"
-              << "  bundle:  " << r.bundle.string() << "\n";
-    if (!r.parameters.is_null()) {
-      json shown = r.parameters;
-      if (!plan) shown.erase("quadrature_weights_nm");
-      std::cout << "  parameters: " << shown.dump() << "\n";
+// ---- printing ---------------------------------------------------------------------------------
+
+std::string fmt_number(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3g", v);
+  return b;
+}
+
+// "self_check 5.6e-06 <= 0.002" from the first accuracy record.
+std::string headline(const json& accuracy) {
+  if (!accuracy.is_array() || accuracy.empty()) return "-";
+  const json& a = accuracy[0];
+  std::string s = a.value("name", "?") + " ";
+  s += a["value"].is_number() ? fmt_number(a["value"].get<double>()) : a["value"].dump();
+  if (a.contains("tolerance") && a["tolerance"].is_number())
+    s += (a.value("passed", false) ? " <= " : " > ") + fmt_number(a["tolerance"].get<double>());
+  return s;
+}
+
+std::string describe(const JobReport& r) {
+  if (r.parameters.is_null() || r.parameters.empty()) return "";
+  for (const auto& k : kinds())
+    if (k.name == r.kind && k.describe) return k.describe(r.parameters);
+  return "";
+}
+
+std::string pad(std::string s, std::size_t w) {
+  if (s.size() < w) s.append(w - s.size(), ' ');
+  return s;
+}
+
+void print_table(const std::vector<std::vector<std::string>>& rows) {
+  std::vector<std::size_t> w;
+  for (const auto& r : rows)
+    for (std::size_t i = 0; i < r.size(); ++i) {
+      if (w.size() <= i) w.push_back(0);
+      w[i] = std::max(w[i], r[i].size());
     }
-    if (!r.accuracy.is_null()) std::cout << "  accuracy: " << r.accuracy.dump() << "\n";
+  for (const auto& r : rows) {
+    std::string line;
+    for (std::size_t i = 0; i < r.size(); ++i) line += i + 1 < r.size() ? pad(r[i], w[i] + 2) : r[i];
+    while (!line.empty() && line.back() == ' ') line.pop_back();
+    std::cout << line << "\n";
   }
-  int built = 0, current = 0, failed = 0;
+}
+
+std::string summary_line(const std::vector<JobReport>& reports, bool plan) {
+  std::map<std::string, int> n;
+  int warnings = 0;
   for (const auto& r : reports) {
-    built += r.status == "built";
-    current += r.status == "up-to-date";
-    failed += r.status == "failed";
+    ++n[r.status];
+    warnings += static_cast<int>(r.warnings.size());
   }
-  if (!plan) std::cout << built << " built, " << current << " up to date, " << failed << " failed\n";
+  std::string s;
+  if (plan) {
+    s = std::to_string(reports.size() - n["failed"]) + " planned, " + std::to_string(n["failed"]) + " failed";
+  } else {
+    s = std::to_string(n["built"]) + " built, " + std::to_string(n["up-to-date"]) + " up to date, " +
+        std::to_string(n["failed"]) + " failed";
+    if (n["interrupted"]) s += ", " + std::to_string(n["interrupted"]) + " interrupted";
+    if (n["not-run"]) s += ", " + std::to_string(n["not-run"]) + " not run";
+  }
+  if (n["invalid"]) s += ", " + std::to_string(n["invalid"]) + " invalid";
+  s += ", " + std::to_string(warnings) + " warning" + (warnings == 1 ? "" : "s");
+  return s;
+}
+
+void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose) {
+  std::vector<std::vector<std::string>> rows;
+  if (plan) {
+    rows.push_back({"job", "kind", "status", "est. time", "device mem", "host mem", "settings"});
+  } else {
+    rows.push_back({"job", "kind", "status", "time", "accuracy (headline)", "warnings", "settings"});
+  }
+  for (const auto& r : reports) {
+    if (plan) {
+      std::string est = "-", dmem = "-", hmem = "-";
+      if (r.estimate.is_object()) {
+        est = "~" + ProgressLine::duration(r.estimate.value("seconds_2core_cpu", 0.0));
+        dmem = std::to_string(r.estimate.value("device_bytes", std::uint64_t{0}) >> 20) + " MiB";
+        hmem = std::to_string(r.estimate.value("host_bytes", std::uint64_t{0}) >> 20) + " MiB";
+      }
+      rows.push_back({r.name, r.kind, r.status == "planned" ? r.reason : r.status, est, dmem, hmem, describe(r)});
+    } else {
+      const double t = r.timings.is_object() ? r.timings.value("total_s", 0.0) : 0.0;
+      rows.push_back({r.name, r.kind.empty() ? "-" : r.kind, r.status,
+                      r.status == "built" ? ProgressLine::duration(t) : "-", headline(r.accuracy),
+                      std::to_string(r.warnings.size()), describe(r)});
+    }
+  }
+  print_table(rows);
+  for (const auto& r : reports) {
+    const bool bad = r.code != ExitCode::ok;
+    if (bad) std::cout << r.name << (r.name.empty() ? "" : ": ") << r.status << ": " << r.reason << "\n";
+    for (const auto& w : r.warnings) std::cout << "warning: " << r.name << ": " << w << "\n";
+    if (verbose > 0) {
+      std::cout << r.name << " (" << r.kind << ", " << r.config << ")\n";
+      if (!r.hash.empty()) std::cout << "  hash:       " << r.hash.substr(0, 12) << "\n";
+      if (!r.bundle.empty()) std::cout << "  bundle:     " << r.bundle.string() << "\n";
+      if (!r.reason.empty() && !bad) std::cout << "  status:     " << r.status << " — " << r.reason << "\n";
+      if (!r.parameters.is_null()) std::cout << "  parameters: " << r.parameters.dump() << "\n";
+      if (!r.accuracy.is_null()) std::cout << "  accuracy:   " << r.accuracy.dump() << "\n";
+      if (!r.timings.is_null()) std::cout << "  timings:    " << r.timings.dump() << "\n";
+    }
+  }
+  std::cout << summary_line(reports, plan) << "\n";
 }
 
 int cmd_devices() {
@@ -92,10 +256,8 @@ int cmd_inspect(const fs::path& dir) {
             << "tool:     specbake " << m["tool"].value("version", "?") << ", created " << m.value("created_utc", "?")
             << "\n"
             << "device:   " << m["device"].value("name", "?") << " (" << m["device"].value("platform", "?") << ")\n";
-  json params = m.value("parameters", json::object());
-  params.erase("quadrature_weights_nm");
-  std::cout << "parameters: " << params.dump() << "\n"
-            << "accuracy:   " << m.value("accuracy", json::object()).dump() << "\n";
+  std::cout << "accuracy:\n";
+  for (const auto& a : m.value("accuracy", json::array())) std::cout << "  " << headline(json::array({a})) << "\n";
   for (const auto& w : m.value("warnings", json::array())) std::cout << "warning:  " << w.get<std::string>() << "\n";
   int bad = 0;
   std::cout << "files:\n";
@@ -109,7 +271,7 @@ int cmd_inspect(const fs::path& dir) {
     }
     bad += status != "ok";
     std::cout << "  " << status << "  " << path << "  " << f.value("bytes", 0);
-    if (f.contains("shape")) std::cout << "  " << f["dtype"].get<std::string>() << f["shape"].dump();
+    if (f.contains("shape")) std::cout << "  " << f.value("dtype", "") << f["shape"].dump();
     std::cout << "\n";
   }
   if (bad) {
@@ -120,18 +282,42 @@ int cmd_inspect(const fs::path& dir) {
   return 0;
 }
 
-void write_report(const fs::path& path, const std::vector<JobReport>& reports) {
-  // Written beside its final name and renamed, so readers never see half a report.
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream o(tmp);
-    o << report_json(reports).dump(2) << "\n";
-    if (!o.flush()) throw IoError("cannot write report " + tmp.string());
+// --report: checked when the run starts (a folder, or a path that cannot be written, stops the
+// run before any work), written atomically at the end — also when the run stops early.
+class ReportFile {
+ public:
+  explicit ReportFile(std::string path) : path_(std::move(path)) {
+    if (path_.empty()) return;
+    std::error_code ec;
+    if (fs::is_directory(path_, ec)) throw UsageError("--report " + path_ + " is a folder; expected a file path");
+    const fs::path parent = fs::absolute(path_).parent_path();
+    if (!fs::is_directory(parent, ec)) throw IoError("cannot write report " + path_ + ": no folder " + parent.string());
+    if (::access(parent.c_str(), W_OK) != 0 || (fs::exists(path_, ec) && ::access(path_.c_str(), W_OK) != 0))
+      throw IoError("cannot write report " + path_ + ": permission denied");
   }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) throw IoError("cannot write report " + path.string() + ": " + ec.message());
-}
+  void write(const std::vector<JobReport>& reports, const std::string& error = "") const {
+    if (path_.empty()) return;
+    const fs::path tmp = path_ + ".tmp";
+    {
+      std::ofstream o(tmp);
+      o << report_json(reports, error).dump(2) << "\n";
+      if (!o.flush()) {
+        std::error_code ec;
+        fs::remove(tmp, ec);
+        throw IoError("cannot write report " + tmp.string());
+      }
+    }
+    std::error_code ec;
+    fs::rename(tmp, path_, ec);
+    if (ec) {
+      fs::remove(tmp, ec);
+      throw IoError("cannot write report " + path_ + ": " + ec.message());
+    }
+  }
+
+ private:
+  std::string path_;
+};
 
 std::string index_text(const std::vector<std::int64_t>& idx) {
   std::string s = "[";
@@ -159,10 +345,29 @@ int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_
   return ok ? 0 : static_cast<int>(ExitCode::job_failed);
 }
 
+// "a,b" and repeated options → names; an empty name is a usage error.
+std::vector<std::string> split_names(const std::vector<std::string>& in, const char* option) {
+  std::vector<std::string> out;
+  for (const auto& s : in) {
+    std::size_t start = 0;
+    for (;;) {
+      const auto comma = s.find(',', start);
+      const auto part = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      if (part.empty()) throw UsageError(std::string(option) + " expects job names (a,b,...), got '" + s + "'");
+      out.push_back(part);
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  auto logger = spdlog::stderr_color_mt("specbake");
+  const bool tty = ::isatty(STDERR_FILENO);
+  ProgressLine progress_line(tty);
+  auto logger = std::make_shared<spdlog::logger>("specbake", std::make_shared<StderrSink>(progress_line));
   spdlog::set_default_logger(logger);
   spdlog::set_pattern("[%l] %v");
 
@@ -173,28 +378,37 @@ int main(int argc, char** argv) {
   app.option_defaults()->always_capture_default();
   int verbose = 0;
   bool quiet = false;
-  app.add_flag("-v,--verbose", verbose, "more log output: -v debug (kernel build logs, auto searches), -vv trace");
-  app.add_flag("-q,--quiet", quiet, "only errors");
+  app.add_flag("-v,--verbose", verbose,
+               "more output: -v full parameters/accuracy per job and debug logs (kernel build logs, auto searches), "
+               "-vv trace logs");
+  app.add_flag("-q,--quiet", quiet, "only errors (no progress, no summary)");
 
   std::vector<std::string> configs, only;
   std::string out, device, inspect_dir, report, shard, gc_dir, diff_old, diff_new;
-  bool force = false;
+  bool force = false, keep_going = false;
   int keep = 3;
   double fail_abs = 0.0, fail_rel = 0.0;
 
   // `run` and `plan` select jobs the same way.
   auto add_selection = [&](CLI::App* sub) {
     sub->add_option("configs", configs, "config files (YAML) or folders of them")->required();
-    sub->add_option("--out", out, "output folder for every job (default: each config's `output`, else ./assets)");
-    sub->add_option("--device", device, "OpenCL device: auto | cpu | gpu | part of a device name (default: config's, else auto)");
-    sub->add_option("--only", only, "only these jobs (comma-separated names)");
+    sub->add_option("--out", out, "output folder for every job (default: each config's `output`, else ./assets)")
+        ->allow_extra_args(false);
+    sub->add_option("--device", device, "OpenCL device: auto | cpu | gpu | part of a device name (default: config's, else auto)")
+        ->allow_extra_args(false);
+    sub->add_option("--only", only, "only these jobs (comma-separated names; repeatable)")->allow_extra_args(false);
     sub->add_flag("--force", force, "rebuild bundles that are up to date");
-    sub->add_option("--shard", shard, "only shard I of N (I/N, 0-based): a deterministic, balanced split of the jobs");
+    sub->add_option("--shard", shard, "only shard I of N (I/N, 0-based): a deterministic, balanced split of the jobs")
+        ->allow_extra_args(false);
+    sub->add_flag("--keep-going", keep_going,
+                  "report invalid configs and jobs, run every valid job, exit 3 if any was invalid");
+    sub->add_option("--report", report,
+                    "write a JSON summary of every job (status, reason, parameters, accuracy, timings, bundle)")
+        ->allow_extra_args(false);
   };
   auto* run = app.add_subcommand("run", "bake every job of the configs into versioned bundles");
   add_selection(run);
-  run->add_option("--report", report, "write a JSON summary of every job (status, reason, parameters, accuracy, timings, bundle)");
-  add_selection(app.add_subcommand("plan", "show what `run` would do and the resolved parameters; writes nothing"));
+  add_selection(app.add_subcommand("plan", "show what `run` would do, resolved settings and estimates; writes no bundle"));
 
   app.add_subcommand("devices", "list OpenCL platforms and devices, and which one `auto` picks");
 
@@ -214,6 +428,15 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
+    // An unknown sub-command: suggest the nearest one.
+    if (argc > 1 && app.get_subcommands().empty() && argv[1][0] != '-') {
+      std::vector<std::string> names;
+      for (const auto* s : app.get_subcommands([](const CLI::App*) { return true; })) names.push_back(s->get_name());
+      const std::string near = closest_word(argv[1], names);
+      std::cerr << "specbake: unknown command '" << argv[1] << "'"
+                << (near.empty() ? "" : " (did you mean '" + near + "'?)") << "; run specbake --help\n";
+      return static_cast<int>(ExitCode::usage);
+    }
     const int rc = app.exit(e);
     return rc == 0 ? 0 : static_cast<int>(ExitCode::usage);
   }
@@ -222,6 +445,8 @@ int main(int argc, char** argv) {
                     : verbose == 1 ? spdlog::level::debug
                                    : spdlog::level::info);
 
+  std::unique_ptr<ReportFile> report_file;
+  std::vector<JobReport> reports;
   try {
     if (app.got_subcommand("devices")) return cmd_devices();
     if (app.got_subcommand("inspect")) return cmd_inspect(inspect_dir);
@@ -232,23 +457,62 @@ int main(int argc, char** argv) {
     }
     if (app.got_subcommand("diff")) return cmd_diff(diff_old, diff_new, fail_abs, fail_rel);
 
+    const bool is_plan = app.got_subcommand("plan");
+    const CLI::App* sub = app.get_subcommands().front();
+    auto given_empty = [&](const char* name, const std::string& value) {
+      if (sub->count(name) && value.empty()) throw UsageError(std::string(name) + " expects a value, got ''");
+    };
+    given_empty("--out", out);
+    given_empty("--device", device);
+    given_empty("--shard", shard);
+    given_empty("--report", report);
+    report_file = std::make_unique<ReportFile>(report);
+
     RunOptions opts;
     if (!out.empty()) opts.out = fs::path(out);
     if (!device.empty()) opts.device = device;
-    opts.only = split_commas(only);
+    opts.only = split_names(only, "--only");
     opts.force = force;
     if (!shard.empty()) std::tie(opts.shard_index, opts.shard_count) = parse_shard(shard);
     std::vector<fs::path> paths(configs.begin(), configs.end());
-    Runner runner(load_configs(paths), opts);
-    const bool is_plan = app.got_subcommand("plan");
-    const auto reports = is_plan ? runner.plan() : runner.run();
-    print_reports(reports, is_plan);
-    if (!report.empty()) write_report(report, reports);
+    std::vector<JobReport> invalid;
+    auto loaded = load_configs(paths, keep_going ? &invalid : nullptr);
+    for (const auto& r : invalid) spdlog::error("{}", r.reason);
+
+    std::signal(SIGINT, on_stop_signal);
+    std::signal(SIGTERM, on_stop_signal);
+    RunProgress on_progress;
+    if (!quiet) on_progress = [&](const ProgressEvent& e) { progress_line.show(e); };
+    Runner runner(std::move(loaded), opts, on_progress, [&](const JobReport&) { progress_line.done(); });
+    reports = is_plan ? runner.plan() : runner.run();
+    progress_line.done();
+    reports.insert(reports.end(), invalid.begin(), invalid.end());
+    if (!quiet) print_reports(reports, is_plan, verbose);
+    for (const auto& r : reports)
+      if (quiet && r.code != ExitCode::ok) std::cerr << r.name << ": " << r.status << ": " << r.reason << "\n";
+    std::string stopped;
+    if (const int sig = stop_requested()) {
+      stopped = sig == SIGTERM ? "stopped by SIGTERM" : "stopped by SIGINT";
+      spdlog::error("{}: the run ended at a safe point; finished jobs are published, nothing half-written",
+                    stopped);
+    }
+    report_file->write(reports, stopped);
+    // An interrupted run says so (130/143); else invalid configs (--keep-going) come first.
+    if (!stop_requested() && !invalid.empty()) return static_cast<int>(ExitCode::invalid_input);
     return static_cast<int>(exit_code(reports));
   } catch (const Error& e) {
+    progress_line.done();
     spdlog::error("{}", e.what());
+    if (report_file) {
+      try {
+        report_file->write(reports, e.what());
+      } catch (const Error& w) {
+        spdlog::error("{}", w.what());
+      }
+    }
     return static_cast<int>(e.exit_code());
   } catch (const std::exception& e) {
+    progress_line.done();
     spdlog::error("internal error: {}", e.what());
     return static_cast<int>(ExitCode::job_failed);
   }

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -101,9 +102,64 @@ class NodeBudget : public YAML::EventHandler {
     if (!stack_.empty()) stack_.back().size += o.size;
   }
 };
+// A YAML syntax error, located where the broken construct begins when that can be told: a tab
+// in the indentation, or a '[' / '{' that is never closed (the parser notices those only
+// lines later, where it gives up).
+InputError syntax_error(const std::string& text, const fs::path& file, const YAML::ParserException& e) {
+  const int err_line = e.mark.line + 1;
+  // Tabs in leading whitespace up to the error line.
+  int line = 1;
+  for (std::size_t i = 0, start = 0; i <= text.size() && line <= err_line; ++i) {
+    if (i == text.size() || text[i] == '\n') {
+      for (std::size_t k = start; k < i && (text[k] == ' ' || text[k] == '\t'); ++k)
+        if (text[k] == '\t')
+          return InputError({file, line, static_cast<int>(k - start) + 1, ""},
+                            "a tab in the indentation; YAML indents with spaces only (the parser says: " + e.msg + ")");
+      start = i + 1;
+      ++line;
+    }
+  }
+  // Flow collections never closed: scan brackets outside quotes and comments.
+  struct Open {
+    char c;
+    int line, column;
+  };
+  std::vector<Open> open;
+  line = 1;
+  int column = 0;
+  char quote = 0;
+  bool comment = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    ++column;
+    if (c == '\n') {
+      ++line;
+      column = 0;
+      comment = false;
+      continue;
+    }
+    if (comment) continue;
+    if (quote) {
+      if (c == quote) quote = 0;
+      continue;
+    }
+    if (c == '#' && (i == 0 || text[i - 1] == ' ' || text[i - 1] == '\t')) comment = true;
+    else if (c == '"' || c == '\'') quote = c;
+    else if (c == '[' || c == '{') open.push_back({c, line, column});
+    else if ((c == ']' || c == '}') && !open.empty() && open.back().c == (c == ']' ? '[' : '{')) open.pop_back();
+  }
+  if (!open.empty() && open.front().line <= err_line)
+    return InputError({file, open.front().line, open.front().column, ""},
+                      std::string("'") + open.front().c + "' is never closed (expected '" +
+                          (open.front().c == '[' ? "]" : "}") + "'; the parser gave up at line " +
+                          std::to_string(err_line) + ": " + e.msg + ")");
+  return InputError({file, err_line, e.mark.column + 1, ""}, "malformed YAML: " + e.msg);
+}
+
 }  // namespace
 
-Config parse_config(const std::string& text, const fs::path& file, const std::vector<KindSyntax>& kinds) {
+Config parse_config(const std::string& text, const fs::path& file, const std::vector<KindSyntax>& kinds,
+                    std::vector<InputError>* job_errors) {
   if (text.size() > kMaxConfigBytes)
     throw InputError({file, 0, 0, ""}, "config is " + std::to_string(text.size()) +
                                             " bytes; expected at most " + std::to_string(kMaxConfigBytes));
@@ -122,7 +178,7 @@ Config parse_config(const std::string& text, const fs::path& file, const std::ve
       throw InputError({file, 0, 0, ""}, "expected one YAML document, found " + std::to_string(budget.documents));
     root = YAML::Load(text);
   } catch (const YAML::ParserException& e) {
-    throw InputError({file, e.mark.line + 1, e.mark.column + 1, ""}, "malformed YAML: " + e.msg);
+    throw syntax_error(text, file, e);
   }
   const At top{root, "", &file};
   if (!root.IsMap()) top.fail("expected a mapping with keys specbake, output, device, jobs");
@@ -135,8 +191,15 @@ Config parse_config(const std::string& text, const fs::path& file, const std::ve
   if (ver.integer() != kSchemaVersion)
     ver.fail("unsupported schema version " + ver.shown() + "; this specbake reads version 1");
   if (top.has("output")) {
-    const std::string out = top.child("output").string();
+    std::string out = top.child("output").string();
     if (out.empty()) top.child("output").fail("expected a folder path");
+    if (out == "~" || out.rfind("~/", 0) == 0) {  // the home folder, as a shell would expand it
+      const char* home = std::getenv("HOME");
+      if (!home || !*home) top.child("output").fail("expected a folder path; '~' needs HOME to be set");
+      out = std::string(home) + out.substr(1);
+    } else if (out[0] == '~') {
+      top.child("output").fail("expected a folder path; '~user' is not expanded, write the full path");
+    }
     cfg.output = file.parent_path() / out;
     cfg.output_given = true;
   } else {
@@ -158,7 +221,7 @@ Config parse_config(const std::string& text, const fs::path& file, const std::ve
   }
   static const std::regex name_re("[a-z0-9][a-z0-9._-]*");
   std::map<std::string, Location> names;
-  for (std::size_t i = 0; i < jobs.node.size(); ++i) {
+  for (std::size_t i = 0; i < jobs.node.size(); ++i) try {
     const At job = jobs.item(i);
     job.expect_map("a job");
     if (!job.has("name")) job.fail("expected a 'name'");
@@ -183,11 +246,14 @@ Config parse_config(const std::string& text, const fs::path& file, const std::ve
     }
     js.spec = kind->parse(job, js.normalised, js.inputs);
     cfg.jobs.push_back(std::move(js));
+  } catch (const InputError& e) {
+    if (!job_errors) throw;
+    job_errors->push_back(e);
   }
   return cfg;
 }
 
-Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds) {
+Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds, std::vector<InputError>* job_errors) {
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) throw IoError("cannot read config " + file.string() + ": not a file");
   if (fs::file_size(file, ec) > kMaxConfigBytes)
@@ -196,7 +262,7 @@ Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds) {
   if (!in) throw IoError("cannot read config " + file.string());
   std::stringstream ss;
   ss << in.rdbuf();
-  return parse_config(ss.str(), file, kinds);
+  return parse_config(ss.str(), file, kinds, job_errors);
 }
 
 }  // namespace specbake

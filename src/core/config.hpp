@@ -63,8 +63,12 @@ struct KindSyntax {
 
 inline constexpr int kSchemaVersion = 1;
 
-// Parses and validates; throws InputError (file:line:col + key path) or IoError.
-Config parse_config(const std::string& text, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds);
-Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds);
+// Parses and validates; throws InputError (file:line:col + key path) or IoError. With
+// `job_errors` set, an invalid job entry is recorded there and left out instead (errors in the
+// file's top level still throw).
+Config parse_config(const std::string& text, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds,
+                    std::vector<InputError>* job_errors = nullptr);
+Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds,
+                   std::vector<InputError>* job_errors = nullptr);
 
 }  // namespace specbake

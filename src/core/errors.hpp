@@ -13,6 +13,8 @@ enum class ExitCode : int {
   invalid_input = 3,   // invalid config or input file (heightfield, ...)
   device = 4,          // OpenCL platform/device/kernel failure
   io = 5,              // cannot read or write files/folders
+  interrupted = 130,   // stopped by SIGINT (128 + 2)
+  terminated = 143,    // stopped by SIGTERM (128 + 15)
 };
 
 // Where in an input a problem is: file plus 1-based line/column, and/or a key path.
@@ -63,6 +65,17 @@ class JobError : public Error {
  public:
   using Error::Error;
   ExitCode exit_code() const override { return ExitCode::job_failed; }
+};
+
+// A run stopped by a signal at a safe point (no half-written bundle).
+class Interrupted : public Error {
+ public:
+  explicit Interrupted(int signal)
+      : Error(signal == 15 ? "stopped by SIGTERM" : "stopped by SIGINT (Ctrl-C)"), signal_(signal) {}
+  ExitCode exit_code() const override { return signal_ == 15 ? ExitCode::terminated : ExitCode::interrupted; }
+  int signal() const { return signal_; }
+ private:
+  int signal_;
 };
 
 }  // namespace specbake

@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <signal.h>
 #include <stdio.h>
 #include <unistd.h>
@@ -128,17 +129,36 @@ void BundleStore::set_latest(const std::string& job, const std::string& hash12) 
 JobLock::JobLock(const fs::path& job_dir, const std::string& job) {
   make_dirs(job_dir);
   const fs::path p = job_dir / ".lock";
-  fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (fd_ < 0) io_fail("cannot open lock", p);
-  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
-    spdlog::info("{}: another run holds {}; waiting for it", job, p.string());
-    while (::flock(fd_, LOCK_EX) != 0)
-      if (errno != EINTR) io_fail("cannot lock", p);
+  path_ = p;
+  bool waited = false;
+  for (;;) {
+    fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd_ < 0) io_fail("cannot open lock", p);
+    if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+      if (!waited) spdlog::info("{}: another run holds {}; waiting for it", job, p.string());
+      waited = true;
+      while (::flock(fd_, LOCK_EX) != 0)
+        if (errno != EINTR) io_fail("cannot lock", p);
+    }
+    // The holder removes the file when it lets go: a lock taken on a file that is no longer
+    // at the path guards nothing, so take the one that is there now.
+    struct stat held {}, now {};
+    if (::fstat(fd_, &held) == 0 && ::stat(p.c_str(), &now) == 0 && held.st_ino == now.st_ino &&
+        held.st_dev == now.st_dev)
+      break;
+    ::close(fd_);
+    fd_ = -1;
+  }
+  const std::string pid = std::to_string(::getpid()) + "\n";
+  if (::ftruncate(fd_, 0) == 0 && ::write(fd_, pid.data(), pid.size()) < 0) {
+    // the pid is for people looking at the file; the lock does not need it
   }
 }
 
 JobLock::~JobLock() {
-  if (fd_ >= 0) ::close(fd_);  // releases the lock
+  if (fd_ < 0) return;
+  ::unlink(path_.c_str());  // while still holding it: no one can take the removed file after us
+  ::close(fd_);             // releases the lock
 }
 
 void BundleStore::clean_stale(const std::string& job) const {

@@ -42,6 +42,7 @@ class JobLock {
 
  private:
   int fd_ = -1;
+  fs::path path_;
 };
 
 class BundleStore {

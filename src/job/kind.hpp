@@ -78,6 +78,7 @@ struct BakeResult {
 struct MemoryEstimate {
   std::uint64_t total_bytes = 0;     // all device buffers alive at once
   std::uint64_t largest_buffer = 0;  // the biggest single allocation
+  std::uint64_t host_bytes = 0;      // host memory at the peak (tables, reference paths, files)
 };
 
 // A job kind: everything the runner and the config loader need, in one table entry.
@@ -96,6 +97,9 @@ struct Kind {
   // The OpenCL programs the kind builds (paths of embedded kernel files): their fully expanded
   // sources enter the bundle hash, so a change to any file they include makes a new bundle.
   std::vector<std::string> programs;
+  // One line naming the resolved settings that decide the result and its cost (for the run
+  // summary and `plan`), from the parameters `plan` or `bake` returned.
+  std::function<std::string(const nlohmann::json& parameters)> describe;
 
   // A kind whose spec type is Spec: `parse` returns a Spec, `plan` and `bake` take one.
   template <class Spec, class Parse, class Plan, class Bake>

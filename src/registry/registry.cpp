@@ -38,17 +38,22 @@ void register_kind(Kind kind) {
   table().push_back(std::move(kind));
 }
 
-Config load_config(const fs::path& file) { return load_config(file, syntax()); }
-Config parse_config(const std::string& text, const fs::path& file) { return parse_config(text, file, syntax()); }
+Config load_config(const fs::path& file, std::vector<InputError>* job_errors) {
+  return load_config(file, syntax(), job_errors);
+}
+Config parse_config(const std::string& text, const fs::path& file, std::vector<InputError>* job_errors) {
+  return parse_config(text, file, syntax(), job_errors);
+}
 
 void check_device_memory(const JobSpec& job, const cl_util::DeviceInfo& device) {
   check_device_memory(job, kind_named(job.kind).memory(job), device);
 }
 
-std::string job_hash(const JobSpec& job) {
+std::string job_hash(const JobSpec& job, const nlohmann::json& device) {
   Sha256 h;
   nlohmann::json identity = {{"tool", "specbake"}, {"version", kVersion}, {"config", job.normalised}};
   for (const auto& [label, sha] : job.inputs) identity["inputs"][label] = sha;
+  identity["device"] = device;
   h.update(identity.dump());
   for (const auto& program : kind_named(job.kind).programs) {
     h.update(program);

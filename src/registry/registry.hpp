@@ -19,14 +19,17 @@ const Kind& kind_named(const std::string& name);
 void register_kind(Kind kind);
 
 // Config loading with the kinds' parsers (core/config.hpp).
-Config load_config(const fs::path& file);
-Config parse_config(const std::string& text, const fs::path& file_for_messages);
+Config load_config(const fs::path& file, std::vector<InputError>* job_errors = nullptr);
+Config parse_config(const std::string& text, const fs::path& file_for_messages,
+                    std::vector<InputError>* job_errors = nullptr);
 
 // check_device_memory (job/kind.hpp) with the job kind's own estimate.
 void check_device_memory(const JobSpec& job, const cl_util::DeviceInfo& device);
 
-// sha256 over the tool version, the job's normalised config, its input data and the fully
-// expanded sources of its kind's programs. Same hash → same bundle folder → the job is skipped.
-std::string job_hash(const JobSpec& job);
+// sha256 over the tool version, the job's normalised config, its input data, the fully
+// expanded sources of its kind's programs and the device that bakes it (`device`: name,
+// platform, OpenCL version — floating-point results differ between devices and drivers).
+// Same hash → same bundle folder → the job is skipped.
+std::string job_hash(const JobSpec& job, const nlohmann::json& device);
 
 }  // namespace specbake

@@ -1,25 +1,26 @@
 #include "runner/runner.hpp"
 
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
+#include <csignal>
 #include <ctime>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <numeric>
 #include <set>
 
-#include "cl/device.hpp"
 #include "core/hash.hpp"
-#include "core/resources.hpp"
 #include "core/version.hpp"
 #include "io/bundle.hpp"
-#include "job/kind.hpp"
-#include "registry/registry.hpp"
 
 namespace specbake {
 
 using nlohmann::json;
+using Clock = std::chrono::steady_clock;
 
 namespace {
 std::string utc_now() {
@@ -30,10 +31,47 @@ std::string utc_now() {
   std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
   return buf;
 }
+
+std::atomic<int> g_stop{0};
+
+void throw_if_stopped() {
+  if (const int sig = g_stop.load()) throw Interrupted(sig);
+}
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Physical memory the kernel reports as available to new allocations (bytes; 0 if unknown).
+std::uint64_t available_host_memory() {
+  std::ifstream in("/proc/meminfo");
+  std::string key;
+  std::uint64_t kb = 0;
+  std::string unit;
+  while (in >> key >> kb >> unit)
+    if (key == "MemAvailable:") return kb * 1024;
+  return 0;
+}
 }  // namespace
 
-std::vector<Config> load_configs(const std::vector<fs::path>& paths) {
+void request_stop(int signal) { g_stop.store(signal); }
+int stop_requested() { return g_stop.load(); }
+void clear_stop_request() { g_stop.store(0); }
+
+json device_identity(const cl_util::DeviceInfo& d) {
+  return {{"name", d.name}, {"platform", d.platform}, {"version", d.version}};
+}
+
+std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector<JobReport>* invalid) {
   std::vector<fs::path> files;
+  std::set<fs::path> seen_files;
+  auto add_file = [&](const fs::path& f) {
+    std::error_code ec;
+    const fs::path key = fs::weakly_canonical(f, ec);
+    if (!seen_files.insert(ec ? f : key).second) {
+      spdlog::info("{}: given more than once; read once", f.string());
+      return;
+    }
+    files.push_back(f);
+  };
   for (const auto& p : paths) {
     std::error_code ec;
     if (fs::is_directory(p, ec)) {
@@ -45,22 +83,47 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths) {
       if (ec) throw IoError("cannot list " + p.string() + ": " + ec.message());
       if (found.empty()) throw InputError({p, 0, 0, ""}, "folder holds no *.yaml config");
       std::sort(found.begin(), found.end());
-      files.insert(files.end(), found.begin(), found.end());
+      for (const auto& f : found) add_file(f);
     } else {
-      files.push_back(p);
+      add_file(p);
     }
   }
+  auto invalid_report = [](const fs::path& file, const std::string& name, const Error& e) {
+    JobReport r;
+    r.config = file.string();
+    r.name = name;
+    r.status = "invalid";
+    r.code = e.exit_code();
+    r.reason = e.what();
+    return r;
+  };
   std::vector<Config> configs;
   std::map<std::pair<std::string, std::string>, Location> seen;  // (output, name)
   for (const auto& f : files) {
-    Config c = load_config(f);
-    for (const auto& j : c.jobs) {
-      const auto key = std::make_pair(fs::weakly_canonical(c.output).string(), j.name);
-      if (auto it = seen.find(key); it != seen.end())
-        throw InputError(j.where, "job name '" + j.name + "' is also used by " + it->second.str() +
-                                      " with the same output folder");
-      seen.emplace(key, j.where);
+    Config c;
+    std::vector<InputError> job_errors;
+    try {
+      c = load_config(f, invalid ? &job_errors : nullptr);
+    } catch (const Error& e) {
+      if (!invalid || e.exit_code() == ExitCode::usage) throw;
+      invalid->push_back(invalid_report(f, "", e));
+      continue;
     }
+    for (const auto& e : job_errors) invalid->push_back(invalid_report(f, e.where().key, e));
+    std::vector<JobSpec> kept;
+    for (auto& j : c.jobs) {
+      const auto key = std::make_pair(fs::weakly_canonical(c.output).string(), j.name);
+      if (auto it = seen.find(key); it != seen.end()) {
+        const InputError e(j.where, "job name '" + j.name + "' is also used by " + it->second.str() +
+                                        " with the same output folder; expected names unique per output folder");
+        if (!invalid) throw e;
+        invalid->push_back(invalid_report(f, j.name, e));
+        continue;
+      }
+      seen.emplace(key, j.where);
+      kept.push_back(std::move(j));
+    }
+    c.jobs = std::move(kept);
     configs.push_back(std::move(c));
   }
   return configs;
@@ -96,32 +159,46 @@ std::vector<int> assign_shards(const std::vector<std::pair<std::string, double>>
   return shard;
 }
 
-nlohmann::json report_json(const std::vector<JobReport>& reports) {
+json report_json(const std::vector<JobReport>& reports, const std::string& error) {
   json jobs = json::array();
-  int built = 0, current = 0, failed = 0;
+  std::map<std::string, int> counts;
+  int warnings = 0;
   for (const auto& r : reports) {
-    built += r.status == "built";
-    current += r.status == "up-to-date";
-    failed += r.status == "failed";
-    json j = {{"name", r.name},          {"kind", r.kind},
-              {"config", r.config},      {"status", r.status},
-              {"reason", r.reason},      {"hash", r.hash},
-              {"bundle", r.bundle.string()}, {"parameters", r.parameters},
-              {"accuracy", r.accuracy},  {"timings", r.timings},
+    ++counts[r.status];
+    warnings += static_cast<int>(r.warnings.size());
+    json j = {{"name", r.name},         {"kind", r.kind},
+              {"config", r.config},     {"status", r.status},
+              {"reason", r.reason},     {"hash", r.hash},
+              {"bundle", r.bundle.empty() ? json(nullptr) : json(r.bundle.string())},
+              {"device", r.device},     {"parameters", r.parameters},
+              {"accuracy", r.accuracy}, {"timings", r.timings},
               {"warnings", r.warnings}};
-    if (r.status == "failed") j["exit_code"] = static_cast<int>(r.code);
+    if (!r.estimate.is_null()) j["estimate"] = r.estimate;
+    if (r.code != ExitCode::ok) j["exit_code"] = static_cast<int>(r.code);
     jobs.push_back(j);
   }
-  return {{"schema", "specbake.report/1"},
-          {"tool", {{"name", "specbake"}, {"version", kVersion}}},
-          {"created_utc", utc_now()},
-          {"summary", {{"built", built}, {"up_to_date", current}, {"failed", failed}}},
-          {"jobs", jobs}};
+  json out = {{"schema", "specbake.report/1"},
+              {"tool", {{"name", "specbake"}, {"version", kVersion}}},
+              {"created_utc", utc_now()},
+              {"summary",
+               {{"built", counts["built"]},
+                {"up_to_date", counts["up-to-date"]},
+                {"failed", counts["failed"]},
+                {"invalid", counts["invalid"]},
+                {"interrupted", counts["interrupted"]},
+                {"not_run", counts["not-run"]},
+                {"planned", counts["planned"]},
+                {"warnings", warnings}}},
+              {"jobs", jobs}};
+  if (!error.empty()) out["error"] = error;
+  return out;
 }
 
 ExitCode exit_code(const std::vector<JobReport>& reports) {
   for (const auto& r : reports)
-    if (r.status == "failed") return r.code;
+    if (r.status == "interrupted") return r.code;
+  for (const auto& r : reports)
+    if (r.code != ExitCode::ok) return r.code;
   return ExitCode::ok;
 }
 
@@ -134,8 +211,7 @@ json device_json(const cl_util::DeviceInfo& d) {
 // Opens each selected device once per run.
 class Devices {
  public:
-  cl_util::Device& get(const std::string& selector) {
-    const cl_util::DeviceInfo info = cl_util::select_device(selector);
+  cl_util::Device& get(const cl_util::DeviceInfo& info) {
     const auto key = std::make_pair(info.platform_index, info.device_index);
     auto it = open_.find(key);
     if (it == open_.end()) {
@@ -149,24 +225,70 @@ class Devices {
   std::map<std::pair<int, int>, std::unique_ptr<cl_util::Device>> open_;
 };
 
+// The device a selector picks, looked up once per selector.
+class Selections {
+ public:
+  const cl_util::DeviceInfo& get(const std::string& selector) {
+    auto it = picked_.find(selector);
+    if (it == picked_.end()) it = picked_.emplace(selector, cl_util::select_device(selector)).first;
+    return it->second;
+  }
+
+ private:
+  std::map<std::string, cl_util::DeviceInfo> picked_;
+};
+
+json estimate_json(const Kind& kind, const JobSpec& job) {
+  const MemoryEstimate m = kind.memory(job);
+  return {{"seconds_2core_cpu", kind.cost_s(job)}, {"device_bytes", m.total_bytes}, {"host_bytes", m.host_bytes}};
+}
+
+// Refuses a job whose host-memory estimate exceeds what the machine has available.
+void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
+  const std::uint64_t avail = available_host_memory();
+  if (avail > 0 && need.host_bytes > avail)
+    throw InputError(job.where, "job '" + job.name + "' needs about " + std::to_string(need.host_bytes >> 20) +
+                                    " MiB of host memory but " + std::to_string(avail >> 20) +
+                                    " MiB are available; expected smaller sizes");
+}
+
+// Warnings and accuracy of an existing bundle (an up-to-date job reports them again).
+void read_bundle_summary(const fs::path& bundle, JobReport& r) {
+  std::ifstream in(bundle / "manifest.json");
+  try {
+    const json m = json::parse(in);
+    r.accuracy = m.value("accuracy", json::array());
+    r.parameters = m.value("parameters", json::object());
+    for (const auto& w : m.value("warnings", json::array()))
+      if (w.is_string()) r.warnings.push_back(w.get<std::string>());
+  } catch (const json::exception& e) {
+    spdlog::warn("{}: cannot read {}: {}", r.name, (bundle / "manifest.json").string(), e.what());
+  }
+}
+
 }  // namespace
 
-Runner::Runner(std::vector<Config> configs, RunOptions options, RunProgress progress)
-    : configs_(std::move(configs)), options_(std::move(options)), progress_(std::move(progress)) {}
+Runner::Runner(std::vector<Config> configs, RunOptions options, RunProgress progress, JobDone done)
+    : configs_(std::move(configs)), options_(std::move(options)), progress_(std::move(progress)), done_(std::move(done)) {}
 
 std::vector<Runner::Item> Runner::select() const {
   std::set<std::string> known;
+  std::vector<std::string> names;
   for (const auto& c : configs_)
-    for (const auto& j : c.jobs) known.insert(j.name);
+    for (const auto& j : c.jobs)
+      if (known.insert(j.name).second) names.push_back(j.name);
   for (const auto& o : options_.only)
-    if (!known.count(o)) throw UsageError("--only names job '" + o + "', which no given config defines");
+    if (!known.count(o)) {
+      const std::string near = closest_word(o, names);
+      throw UsageError("--only names job '" + o + "', which no given config defines" +
+                       (near.empty() ? "" : " (did you mean '" + near + "'?)"));
+    }
   std::vector<Item> items;
   for (const auto& c : configs_)
     for (const auto& j : c.jobs) {
       if (!options_.only.empty() && std::find(options_.only.begin(), options_.only.end(), j.name) == options_.only.end())
         continue;
-      items.push_back({&c, &j, options_.out ? *options_.out : c.output, options_.device ? *options_.device : c.device,
-                       job_hash(j)});
+      items.push_back({&c, &j, options_.out ? *options_.out : c.output, options_.device ? *options_.device : c.device});
     }
   // load_configs rejects a job name used twice for one output folder; --out puts every
   // config's jobs into one folder, so the same check is needed again here.
@@ -179,7 +301,8 @@ std::vector<Runner::Item> Runner::select() const {
   }
   if (options_.shard_count > 1) {
     std::vector<std::pair<std::string, double>> name_cost;
-    for (const auto& it : items) name_cost.emplace_back(it.config->file.string() + "\n" + it.job->name, kind_named(it.job->kind).cost_s(*it.job));
+    for (const auto& it : items)
+      name_cost.emplace_back(it.config->file.string() + "\n" + it.job->name, kind_named(it.job->kind).cost_s(*it.job));
     const auto shard = assign_shards(name_cost, options_.shard_count);
     std::vector<Item> mine;
     for (std::size_t i = 0; i < items.size(); ++i)
@@ -193,26 +316,36 @@ std::vector<Runner::Item> Runner::select() const {
 std::vector<JobReport> Runner::plan() {
   std::vector<JobReport> reports;
   Devices devices;
+  Selections selections;
   for (const auto& it : select()) {
     JobReport r;
     r.config = it.config->file.string();
     r.name = it.job->name;
     r.kind = it.job->kind;
     r.status = "planned";
-    r.hash = it.hash;
-    BundleStore store(it.output);
-    r.bundle = store.bundle_dir(it.job->name, it.hash.substr(0, 12));
-    const bool current = store.is_complete(it.job->name, it.hash.substr(0, 12));
-    r.reason = current ? (options_.force ? "up to date; --force rebuilds it" : "up to date; would be skipped")
-                       : "would be built";
+    const Kind& kind = kind_named(it.job->kind);
+    r.estimate = estimate_json(kind, *it.job);
     try {
-      JobContext ctx{devices.get(it.device)};
-      r.parameters = kind_named(it.job->kind).plan(*it.job, ctx);
+      const cl_util::DeviceInfo& info = selections.get(it.device);
+      r.device = device_json(info);
+      r.hash = job_hash(*it.job, device_identity(info));
+      BundleStore store(it.output);
+      const std::string hash12 = r.hash.substr(0, 12);
+      const bool current = store.is_complete(it.job->name, hash12);
+      r.bundle = store.bundle_dir(it.job->name, hash12);
+      r.reason = current ? (options_.force ? "up to date; --force rebuilds it" : "up to date; would be skipped")
+                         : "would be built";
+      JobContext ctx{devices.get(info)};
+      r.parameters = kind.plan(*it.job, ctx);
+      const MemoryEstimate need = kind.memory(*it.job);
+      check_device_memory(*it.job, need, info);
+      check_host_memory(*it.job, need);
     } catch (const Error& e) {
       r.status = "failed";
       r.code = e.exit_code();
       r.reason = e.what();
     }
+    if (done_) done_(r);
     reports.push_back(std::move(r));
   }
   return reports;
@@ -227,75 +360,119 @@ std::vector<JobReport> Runner::run() {
 
   std::vector<JobReport> reports;
   Devices devices;
-  for (const auto& it : items) {
+  Selections selections;
+  bool stopped = false;
+  for (std::size_t index = 0; index < items.size(); ++index) {
+    const Item& it = items[index];
     const std::string& name = it.job->name;
-    const std::string hash12 = it.hash.substr(0, 12);
     JobReport r;
     r.config = it.config->file.string();
     r.name = name;
     r.kind = it.job->kind;
-    r.hash = it.hash;
+    if (stopped) {
+      r.status = "not-run";
+      r.reason = "the run was stopped before this job";
+      reports.push_back(std::move(r));
+      continue;
+    }
+    const Kind& kind = kind_named(it.job->kind);
     BundleStore store(it.output);
-    r.bundle = store.bundle_dir(name, hash12);
-    const auto t0 = std::chrono::steady_clock::now();
+    const auto t0 = Clock::now();
+    json stage_s = json::object();
     try {
-      JobLock lock(store.job_dir(name), name);
-      store.clean_stale(name);
-      if (!options_.force && store.is_complete(name, hash12)) {
-        store.set_latest(name, hash12);
-        r.status = "up-to-date";
-        r.reason = "a complete bundle with this hash exists";
-        spdlog::info("{}: up to date ({})", name, r.bundle.string());
-        reports.push_back(std::move(r));
-        continue;
-      }
-      spdlog::info("{}: baking ({} job)", name, it.job->kind);
-      cl_util::Device& dev = devices.get(it.device);
-      const Kind& kind = kind_named(it.job->kind);
-      check_device_memory(*it.job, dev.info());
-      auto last_log = std::chrono::steady_clock::now() - std::chrono::seconds(10);
-      JobContext ctx{dev, [&](std::string_view stage, double f) {
-                       if (progress_) progress_(name, stage, f);
-                       const auto now = std::chrono::steady_clock::now();
-                       if (now - last_log > std::chrono::seconds(2) || f >= 1.0) {
-                         spdlog::info("{}: {} ({:.0f} %)", name, stage, 100.0 * f);
-                         last_log = now;
-                       }
-                     }};
-      const auto tb = std::chrono::steady_clock::now();
-      BakeResult result = kind.bake(*it.job, ctx);
-      const double bake_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tb).count();
-      for (const auto& w : result.warnings) spdlog::warn("{}: {}", name, w);
+      throw_if_stopped();
+      const cl_util::DeviceInfo& info = selections.get(it.device);
+      r.device = device_json(info);
+      r.hash = job_hash(*it.job, device_identity(info));
+      const std::string hash12 = r.hash.substr(0, 12);
+      {
+        JobLock lock(store.job_dir(name), name);
+        store.clean_stale(name);
+        if (!options_.force && store.is_complete(name, hash12)) {
+          store.set_latest(name, hash12);
+          r.status = "up-to-date";
+          r.reason = "a complete bundle with this hash exists";
+          r.bundle = store.bundle_dir(name, hash12);
+          read_bundle_summary(r.bundle, r);
+          spdlog::info("{}: up to date ({})", name, r.bundle.string());
+        } else {
+          spdlog::info("{}: baking ({} job)", name, it.job->kind);
+          const MemoryEstimate need = kind.memory(*it.job);
+          check_device_memory(*it.job, need, info);
+          check_host_memory(*it.job, need);
+          cl_util::Device& dev = devices.get(info);
+          const double estimate_s = kind.cost_s(*it.job);
+          const auto tb = Clock::now();
+          auto stage_start = tb;
+          JobContext ctx{dev};
+          ProgressEvent ev;
+          ev.index = static_cast<int>(index) + 1;
+          ev.count = static_cast<int>(items.size());
+          ev.job = name;
+          ctx.on_stage = [&](Stage s) {
+            const auto now = Clock::now();
+            stage_s[to_string(ev.stage)] =
+                stage_s.value(to_string(ev.stage), 0.0) + std::chrono::duration<double>(now - stage_start).count();
+            stage_start = now;
+            ev.stage = s;
+            throw_if_stopped();
+          };
+          ctx.progress = [&](std::string_view what, double f) {
+            throw_if_stopped();
+            ev.what = std::string(what);
+            ev.fraction = std::clamp(f, 0.0, 1.0);
+            const double elapsed = seconds_since(tb);
+            // ETA: from the measured rate once a few percent are done, else from the cost model
+            // (calibrated on a 2-core CPU; other devices differ).
+            ev.eta_s = ev.fraction >= 0.05 ? elapsed * (1.0 - ev.fraction) / ev.fraction
+                                           : std::max(0.0, estimate_s - elapsed);
+            if (progress_) progress_(ev);
+          };
+          BakeResult result = kind.bake(*it.job, ctx);
+          ctx.on_stage(ev.stage);  // closes the last step's time
+          const double bake_s = seconds_since(tb);
+          for (const auto& w : result.warnings) spdlog::warn("{}: {}", name, w);
+          throw_if_stopped();
 
-      json manifest = {
-          {"schema", "specbake.bundle/1"},
-          {"tool", {{"name", "specbake"}, {"version", kVersion}}},
-          {"job", {{"name", name}, {"kind", it.job->kind}, {"hash", it.hash}, {"config_file", fs::absolute(it.config->file).string()}}},
-          {"config", it.job->normalised},
-          {"inputs", json::object()},
-          {"kernels", json::object()},
-          {"device", device_json(dev.info())},
-          {"parameters", result.parameters},
-          {"accuracy", accuracy_json(result.accuracy)},
-          {"warnings", result.warnings},
-          {"created_utc", utc_now()},
-      };
-      for (auto b = result.manifest_blocks.begin(); b != result.manifest_blocks.end(); ++b) {
-        if (manifest.contains(b.key())) throw JobError("manifest block '" + b.key() + "' clashes with a standard key");
-        manifest[b.key()] = b.value();
+          json manifest = {
+              {"schema", "specbake.bundle/1"},
+              {"tool", {{"name", "specbake"}, {"version", kVersion}}},
+              {"job",
+               {{"name", name},
+                {"kind", it.job->kind},
+                {"hash", r.hash},
+                {"config_file", fs::absolute(it.config->file).string()}}},
+              {"config", it.job->normalised},
+              {"inputs", json::object()},
+              {"kernels", json::object()},
+              {"device", r.device},
+              {"parameters", result.parameters},
+              {"accuracy", accuracy_json(result.accuracy)},
+              {"warnings", result.warnings},
+              {"created_utc", utc_now()},
+          };
+          for (auto b = result.manifest_blocks.begin(); b != result.manifest_blocks.end(); ++b) {
+            if (manifest.contains(b.key())) throw JobError("manifest block '" + b.key() + "' clashes with a standard key");
+            manifest[b.key()] = b.value();
+          }
+          for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
+          for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
+          manifest["timings_s"] = {{"bake", bake_s}, {"steps", stage_s}};
+          const auto tw = Clock::now();
+          r.bundle = store.publish(name, hash12, manifest, result.files);
+          r.status = "built";
+          r.parameters = result.parameters;
+          r.accuracy = accuracy_json(result.accuracy);
+          r.warnings = result.warnings;
+          r.timings = {{"bake_s", bake_s}, {"write_s", seconds_since(tw)}, {"steps_s", stage_s}};
+          spdlog::info("{}: wrote {}", name, r.bundle.string());
+        }
       }
-      for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
-      for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
-      const auto tw = std::chrono::steady_clock::now();
-      manifest["timings_s"] = {{"bake", bake_s}};
-      r.bundle = store.publish(name, hash12, manifest, result.files);
-      const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tw).count();
-      r.status = "built";
-      r.parameters = result.parameters;
-      r.accuracy = accuracy_json(result.accuracy);
-      r.warnings = result.warnings;
-      r.timings = {{"bake_s", bake_s}, {"write_s", write_s}};
-      spdlog::info("{}: wrote {}", name, r.bundle.string());
+    } catch (const Interrupted& e) {
+      r.status = "interrupted";
+      r.code = e.exit_code();
+      r.reason = std::string(e.what()) + "; nothing of this job was published";
+      stopped = true;
     } catch (const Error& e) {
       r.status = "failed";
       r.code = e.exit_code();
@@ -307,7 +484,13 @@ std::vector<JobReport> Runner::run() {
       r.reason = e.what();
       spdlog::error("{}: {}", name, e.what());
     }
-    r.timings["total_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (r.status != "built" && r.status != "up-to-date") {
+      r.bundle.clear();
+      std::error_code ec;
+      fs::remove(store.job_dir(name), ec);  // only when empty: a job that never produced a bundle
+    }
+    r.timings["total_s"] = seconds_since(t0);
+    if (done_) done_(r);
     reports.push_back(std::move(r));
   }
   return reports;

@@ -1,18 +1,23 @@
 #pragma once
 // The job runner: configs in, bundles out. The CLI is a thin layer over this.
-//   load → (all configs validated before anything runs) → per job: hash, skip if up to
-//   date, open device, bake, write bundle. One failing job does not stop the others.
+//   load → (configs validated before anything runs; with keep_going, invalid configs and jobs
+//   are reported and the rest run) → per job: resolve the device, hash, skip if up to date,
+//   bake, publish. One failing job does not stop the others. A stop request (SIGINT/SIGTERM)
+//   ends the run at the next safe point: between jobs, or between the steps of a bake.
 #include <chrono>
 #include <filesystem>
 #include <functional>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "cl/device.hpp"
 #include "core/config.hpp"
 #include "core/errors.hpp"
+#include "job/kind.hpp"
 #include "registry/registry.hpp"
 
 namespace specbake {
@@ -33,38 +38,63 @@ std::pair<int, int> parse_shard(const std::string& text);
 // Returns the shard of each job, in the order given.
 std::vector<int> assign_shards(const std::vector<std::pair<std::string, double>>& name_cost, int count);
 
-
 struct JobReport {
   std::string config;
   std::string name;
   std::string kind;
-  std::string status;  // built | up-to-date | failed | planned
+  std::string status;  // built | up-to-date | failed | invalid | interrupted | planned
   std::string reason;  // why it failed, or why it is (not) up to date
   ExitCode code = ExitCode::ok;
   std::string hash;
-  fs::path bundle;
-  nlohmann::json parameters, accuracy, timings;
+  fs::path bundle;     // the bundle folder; empty when there is none (failed, invalid, interrupted)
+  nlohmann::json device;                        // name, platform, version, type, fp64
+  nlohmann::json parameters, accuracy, timings;  // accuracy: the manifest's list of records
   std::vector<std::string> warnings;
+  // plan: estimated wall seconds (2-core CPU scale), device and host memory in bytes
+  nlohmann::json estimate;
 };
 
-// JSON summary of a run (what --report writes).
-nlohmann::json report_json(const std::vector<JobReport>& reports);
+// JSON summary of a run (what --report writes). `error`: a problem that stopped the whole run
+// before or between jobs (config, usage, output folder, signal), if any.
+nlohmann::json report_json(const std::vector<JobReport>& reports, const std::string& error = "");
 
-// (job name, stage, fraction of that job done)
-using RunProgress = std::function<void(const std::string& job, std::string_view stage, double fraction)>;
+// Live progress of a run: the job (1-based index of `count`), its step and what it is doing,
+// the fraction of the job done, and the estimated seconds left of this job (< 0: unknown).
+struct ProgressEvent {
+  int index = 0, count = 0;
+  std::string job;
+  Stage stage = Stage::plan;
+  std::string what;
+  double fraction = 0.0;
+  double eta_s = -1.0;
+};
+using RunProgress = std::function<void(const ProgressEvent&)>;
+// Called once per job as it ends (built, up to date, failed, ...).
+using JobDone = std::function<void(const JobReport&)>;
 
-// Loads configs from files and folders (every *.yaml / *.yml inside, sorted). Throws on the
-// first invalid config, and on job names that would share a bundle folder.
-std::vector<Config> load_configs(const std::vector<fs::path>& paths);
+// Loads configs from files and folders (every *.yaml / *.yml inside, sorted; a file given twice
+// is read once). Throws on the first invalid config, and on job names that would share a bundle
+// folder. With `invalid` set, invalid configs and jobs are reported there (status "invalid",
+// exit code 3, the reason naming file:line:col) and left out instead.
+std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector<JobReport>* invalid = nullptr);
 
+// Stop requests, e.g. from a signal handler (async-signal-safe): the run stops at the next
+// safe point and throws Interrupted there.
+void request_stop(int signal);
+int stop_requested();  // the signal number, 0 if none
+void clear_stop_request();
+
+// The device a job's hash and manifest name: what `selector` picks here.
+nlohmann::json device_identity(const cl_util::DeviceInfo& d);
 
 class Runner {
  public:
-  Runner(std::vector<Config> configs, RunOptions options, RunProgress progress = {});
+  Runner(std::vector<Config> configs, RunOptions options, RunProgress progress = {}, JobDone done = {});
   // Validates --only and output folders, then bakes. Throws Error for problems that stop
-  // everything (usage, unwritable output); job failures are in the reports.
+  // everything (usage, unwritable output); job failures are in the reports. On a stop request
+  // the reports so far are returned with the current job marked "interrupted".
   std::vector<JobReport> run();
-  // What run() would do, with resolved parameters; writes nothing.
+  // What run() would do, with resolved parameters and estimates; writes nothing.
   std::vector<JobReport> plan();
 
  private:
@@ -73,15 +103,16 @@ class Runner {
     const JobSpec* job;
     fs::path output;
     std::string device;
-    std::string hash;
   };
   std::vector<Item> select() const;
   std::vector<Config> configs_;
   RunOptions options_;
   RunProgress progress_;
+  JobDone done_;
 };
 
-// Exit code for a set of reports: ok, or the code of the first failed job.
+// Exit code for a set of reports: ok, or the code of the first failed job (an interrupted run:
+// 130 / 143).
 ExitCode exit_code(const std::vector<JobReport>& reports);
 
 }  // namespace specbake

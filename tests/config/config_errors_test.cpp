@@ -49,8 +49,8 @@ const std::string kMat = "    material: {n_d: 1.5168, v_d: 64.17}\n";
 
 std::vector<BadConfig> bad_configs() {
   return {
-      {"malformed YAML (unclosed flow sequence)", job("    range_nm: [380, 780\n" + kMat), 3, "", 0, "lines 6-7", "",
-       {"malformed YAML"}},
+      {"malformed YAML (unclosed flow sequence)", job("    range_nm: [380, 780\n" + kMat), 3, "[", 1, "", "",
+       {"'[' is never closed"}},
       {"malformed YAML (bad indentation)", "specbake: 1\njobs:\n  - name: j\n   kind: dispersion\n", 3, "", 0, "lines 4-5", "",
        {"malformed YAML"}},
       {"unknown top-level key", "specbake: 1\noutptu: fresh\n" + job(kMat).substr(12), 3, "outptu", 1, "", "outptu",

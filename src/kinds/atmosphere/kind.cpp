@@ -23,7 +23,15 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
   const std::uint64_t rays = std::uint64_t(s.scattering_r) * s.scattering_mu * (SCATTERING_STEPS + 1) * (RAY_FIXED + w) * real;
   const std::uint64_t incidence = std::uint64_t(s.scattering_r) * s.scattering_mu_s * DENSITY_SPHERE_STEPS *
                                   ((2 * s.scattering_nu + 1) * w + INC_FIXED) * real;
-  return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24), std::max({texture, rays, incidence})};
+  // Host: the final textures and a pass's read-backs in double (scattering and single Mie,
+  // 3 channels; a pass's accumulations and reads, w channels), the 2D textures likewise, and
+  // the encoded files (float32 + EXR) of the 4D textures.
+  const std::uint64_t t2d = std::uint64_t(s.transmittance_mu) * s.transmittance_r +
+                            std::uint64_t(s.irradiance_mu_s) * s.irradiance_r;
+  const std::uint64_t host = texels * 8 * (2 * 3 + 5 * w) + t2d * 8 * (3 * 3 + 4 * w) + texels * 3 * 4 * 4 +
+                             (std::uint64_t{1} << 26);
+  return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24), std::max({texture, rays, incidence}),
+                        host};
 }
 
 }  // namespace
@@ -33,6 +41,22 @@ Kind kind() {
   k.cost_s = [](const JobSpec& j) { return estimated_seconds(j.as<AtmosphereSpec>()); };
   k.memory = [](const JobSpec& j) { return device_memory(j.as<AtmosphereSpec>()); };
   k.programs = {kProgram};
+  k.describe = [](const nlohmann::json& p) {
+    std::string s;
+    const auto& w = p.value("wavelengths_nm", nlohmann::json::array());
+    s += w.size() == 3 ? "rgb" : std::to_string(w.size()) + " wavelengths";
+    const nlohmann::json orders = p.contains("orders") ? p["orders"].value("used", nlohmann::json()) : nlohmann::json();
+    const nlohmann::json requested = p.value("orders_requested", nlohmann::json("?"));
+    s += ", orders " + (orders.is_number() ? orders.dump()
+                                           : requested.is_string() ? requested.get<std::string>() : requested.dump());
+    if (p.contains("sizes") && p["sizes"].contains("scattering")) {
+      const auto& sc = p["sizes"]["scattering"];
+      s += ", scattering " + std::to_string(sc.value("r", 0)) + "x" + std::to_string(sc.value("mu", 0)) + "x" +
+           std::to_string(sc.value("mu_s", 0)) + "x" + std::to_string(sc.value("nu", 0));
+    }
+    s += ", " + p.value("precision", "float32");
+    return s;
+  };
   return k;
 }
 

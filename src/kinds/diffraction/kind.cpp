@@ -23,9 +23,19 @@ Kind kind() {
     // cropped terms (at most the full field per term, counted as two fields), plus a complex
     // double field for the exact transforms of the self-check.
     const std::uint64_t field = w * h * 8;
-    return MemoryEstimate{4 * field + 2 * field, 2 * field};
+    // Host: the heightfield and exact-DFT fields in double (complex), the float terms read back
+    // (at most a few fields' worth when cropped) and their file encodings.
+    return MemoryEstimate{4 * field + 2 * field, 2 * field, w * h * (8 + 2 * 16) + 6 * field + (std::uint64_t{1} << 26)};
   };
   k.programs = {kProgram};
+  k.describe = [](const nlohmann::json& p) {
+    std::string s = std::to_string(p.value("terms", 0)) + " " + p.value("expansion", "?") + " terms";
+    if (p.contains("field"))
+      s += ", field " + std::to_string(p["field"].value("width", 0)) + "x" + std::to_string(p["field"].value("height", 0));
+    if (p.contains("bins") && p["bins"].contains("ku"))
+      s += ", bins " + p["bins"]["ku"].dump() + " x " + p["bins"]["kv"].dump();
+    return s;
+  };
   return k;
 }
 
