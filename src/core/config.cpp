@@ -19,7 +19,8 @@
 namespace specbake {
 
 std::string closest_word(const std::string& word, const std::vector<std::string>& candidates) {
-  // Levenshtein distance, case-insensitive; a candidate qualifies within a third of the word.
+  // Edit distance with adjacent transpositions (optimal string alignment), case-insensitive; a
+  // candidate qualifies within a third of the word's length (at least 1).
   auto lower = [](std::string t) {
     for (auto& c : t) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
     return t;
@@ -29,18 +30,15 @@ std::string closest_word(const std::string& word, const std::vector<std::string>
   std::size_t best_d = std::max<std::size_t>(1, w.size() / 3) + 1;
   for (const auto& cand : candidates) {
     const std::string c = lower(cand);
-    std::vector<std::size_t> row(c.size() + 1);
-    for (std::size_t j = 0; j <= c.size(); ++j) row[j] = j;
-    for (std::size_t i = 1; i <= w.size(); ++i) {
-      std::size_t diag = row[0];
-      row[0] = i;
+    std::vector<std::vector<std::size_t>> d(w.size() + 1, std::vector<std::size_t>(c.size() + 1));
+    for (std::size_t i = 0; i <= w.size(); ++i) d[i][0] = i;
+    for (std::size_t j = 0; j <= c.size(); ++j) d[0][j] = j;
+    for (std::size_t i = 1; i <= w.size(); ++i)
       for (std::size_t j = 1; j <= c.size(); ++j) {
-        const std::size_t up = row[j];
-        row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (w[i - 1] == c[j - 1] ? 0 : 1)});
-        diag = up;
+        d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (w[i - 1] == c[j - 1] ? 0 : 1)});
+        if (i > 1 && j > 1 && w[i - 1] == c[j - 2] && w[i - 2] == c[j - 1]) d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
       }
-    }
-    if (row[c.size()] < best_d) best_d = row[c.size()], best = cand;
+    if (d[w.size()][c.size()] < best_d) best_d = d[w.size()][c.size()], best = cand;
   }
   return best;
 }

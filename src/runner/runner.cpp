@@ -384,6 +384,8 @@ std::vector<JobReport> Runner::run() {
       const cl_util::DeviceInfo& info = selections.get(it.device);
       r.device = device_json(info);
       r.hash = job_hash(*it.job, device_identity(info));
+      spdlog::trace("{}: hash {} (config, {} inputs, {} programs, device {})", name, r.hash, it.job->inputs.size(),
+                    kind.programs.size(), info.name);
       const std::string hash12 = r.hash.substr(0, 12);
       {
         JobLock lock(store.job_dir(name), name);
@@ -426,6 +428,7 @@ std::vector<JobReport> Runner::run() {
             // (calibrated on a 2-core CPU; other devices differ).
             ev.eta_s = ev.fraction >= 0.05 ? elapsed * (1.0 - ev.fraction) / ev.fraction
                                            : std::max(0.0, estimate_s - elapsed);
+            spdlog::trace("{}: {} {}: {:.1f} %", name, to_string(ev.stage), ev.what, 100.0 * ev.fraction);
             if (progress_) progress_(ev);
           };
           BakeResult result = kind.bake(*it.job, ctx);

@@ -40,7 +40,7 @@ struct CliResult {
   std::string err;  // stderr
 };
 // Runs the specbake binary with args (no shell), capturing its output. env: extra
-// "NAME=value" entries on top of this process's environment.
+// "NAME=value" entries on top of this process's environment (replacing variables of that name).
 CliResult run_cli(const std::vector<std::string>& args, const fs::path& cwd = {},
                   const std::vector<std::string>& env = {});
 // Starts the specbake binary without waiting; stdout/stderr go to the given files.

@@ -334,10 +334,15 @@ void check_step(const Baked& b, JobContext& ctx, BakeResult& r) {
       b.self_check_worst, kCheckTolerance,
       "double reference path recomputing 24 texels of each stage from the device's own inputs",
       {{"stages", b.self_checks}}));
-  if (!(b.self_check_worst <= kCheckTolerance))
-    throw JobError("self-check failed: the device kernels differ from the double reference by " +
-                   std::to_string(b.self_check_worst) + " (relative) > " + std::to_string(kCheckTolerance));
-
+  if (!(b.self_check_worst <= kCheckTolerance)) {
+    std::string stage = "?";
+    for (const auto& c : b.self_checks)
+      if (!(c.value("max_relative_error", 0.0) < b.self_check_worst)) stage = c.value("stage", "?");
+    throw JobError("self-check failed in " + stage + ": the float32 kernels differ from the double reference by " +
+                   std::to_string(b.self_check_worst) + " (relative) > " + std::to_string(kCheckTolerance) +
+                   ". Check the atmosphere's inputs first (optical depths far beyond any planet's make the float "
+                   "sums lose their digits); `precision: double` computes in float64 on devices that have it");
+  }
 }
 
 void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {

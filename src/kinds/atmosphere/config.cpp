@@ -142,9 +142,16 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
         case 0: s.out_transmittance = true; break;
         case 1: s.out_irradiance = true; break;
         case 2: s.out_scattering = true; break;
-        default: s.out_single_mie = true; break;
+        default:
+          if (!s.mie)
+            it.fail("expected no single_mie_scattering output when mie is false (it would be all zeros); remove it "
+                    "from outputs or give mie parameters");
+          s.out_single_mie = true;
+          break;
       }
     });
+  } else if (!s.mie) {
+    s.out_single_mie = false;  // nothing to store: the default outputs leave it out
   }
   if (job.has("precision"))
     s.double_precision = job.child("precision").choice<int>({{"float", 0}, {"double", 1}}) == 1;

@@ -2,6 +2,8 @@
 // wavelength range and w_max, the expansion, its term count and tolerance, centring, crop and
 // EXR storage. Heightfield files are read and checked here, so a bad file stops the run
 // before any job bakes; their sha256 enters the bundle hash.
+#include <cerrno>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
@@ -29,12 +31,16 @@ const char* to_string(ProceduralField::Type t) {
   return "?";
 }
 
-std::string read_bytes(const fs::path& p) {
+// The file's bytes; an InputError at the config's `file` key saying why it cannot be read.
+std::string read_bytes(const fs::path& p, const At& file_at) {
+  std::error_code ec;
+  if (fs::is_directory(p, ec)) file_at.fail("heightfield " + p.string() + " is a folder; expected a file");
+  errno = 0;
   std::ifstream in(p, std::ios::binary);
-  if (!in) throw IoError("cannot read heightfield " + p.string());
+  if (!in) file_at.fail("cannot read heightfield " + p.string() + ": " + std::strerror(errno ? errno : EIO));
   std::ostringstream s;
   s << in.rdbuf();
-  if (!in && !in.eof()) throw IoError("cannot read heightfield " + p.string());
+  if (!in && !in.eof()) file_at.fail("cannot read heightfield " + p.string() + ": read error");
   return s.str();
 }
 
@@ -108,7 +114,7 @@ std::shared_ptr<const Heightfield> parse_file_field(const At& at, nlohmann::json
   }
   std::error_code ec;
   if (!fs::exists(path, ec)) file_at.fail("heightfield file not found: " + path.string());
-  const std::string bytes = read_bytes(path);
+  const std::string bytes = read_bytes(path, file_at);
   inputs.emplace_back("heightfield:" + given, sha256_hex(bytes));
   source = given;
   return std::make_shared<const Heightfield>(decode_heightfield(bytes, how));

@@ -1,0 +1,283 @@
+// The command line as people use it: mistakes, interrupted and failed runs, nightly runs over
+// many configs, and the output people read. Each test pins down a behaviour a user relies on.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <regex>
+#include <string>
+#include <thread>
+
+#include "support/testing.hpp"
+
+namespace {
+
+namespace t = specbake::testing;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const std::string kPrism =
+    "  - name: prism\n    kind: dispersion\n    samples: 6\n    material: {glass: N-BK7}\n";
+const std::string kSky =
+    "  - name: sky\n    kind: atmosphere\n    orders: 3\n"
+    "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n";
+
+std::string config(const std::string& jobs, const std::string& output = "out") {
+  return "specbake: 1\noutput: " + output + "\njobs:\n" + jobs;
+}
+
+int count(const std::string& text, const std::string& needle) {
+  int n = 0;
+  for (auto p = text.find(needle); p != std::string::npos; p = text.find(needle, p + 1)) ++n;
+  return n;
+}
+
+class CliUser : public ::testing::Test {
+ protected:
+  fs::path cfg(const std::string& text, const std::string& name = "c.yaml") {
+    t::write_file(tmp_ / name, text);
+    return tmp_ / name;
+  }
+  t::CliResult run(std::vector<std::string> args, const std::vector<std::string>& env = {}) {
+    return t::run_cli(args, tmp_.path(), env);
+  }
+  t::TempDir tmp_;
+};
+
+// A failed job leaves no lock and no empty job folder, and names no bundle that does not exist.
+TEST_F(CliUser, FailedJobLeavesNoDebris) {
+  const fs::path c = cfg(config(kPrism));
+  const fs::path report = tmp_ / "report.json";
+  const auto r = t::run_cli({"run", c.string(), "--report", report.string()}, tmp_.path(),
+                            {"SPECBAKE_INJECT_BUILD_FAILURE=kernels/dispersion/kernels.cl"});
+  EXPECT_EQ(r.exit_code, 4) << r.out << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism")) << "the failed job left its folder (or its .lock)";
+  EXPECT_EQ(r.out.find("bundle:"), std::string::npos) << r.out;
+  const json rep = t::read_json(report);
+  EXPECT_TRUE(rep["jobs"][0]["bundle"].is_null());
+  EXPECT_EQ(rep["jobs"][0]["exit_code"], 4);
+  // The kernel build log is printed once.
+  EXPECT_EQ(count(r.err, "build log:"), 1) << r.err;
+  // A successful job keeps no lock file either.
+  const auto ok = run({"run", c.string()});
+  EXPECT_EQ(ok.exit_code, 0) << ok.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism" / ".lock"));
+}
+
+// --report is checked before any work: a folder is a usage error (2), an unwritable path an I/O
+// error (5); neither bakes anything nor leaves a stray file.
+TEST_F(CliUser, ReportPathIsCheckedFirst) {
+  const fs::path c = cfg(config(kPrism));
+  fs::create_directories(tmp_ / "a-folder");
+  auto r = run({"run", c.string(), "--report", (tmp_ / "a-folder").string()});
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out"));
+  EXPECT_FALSE(fs::exists(tmp_ / "a-folder.tmp"));
+  t::write_file(tmp_ / "file", "x");
+  r = run({"run", c.string(), "--report", (tmp_ / "file" / "report.json").string()});  // below a regular file
+  EXPECT_EQ(r.exit_code, 5) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out"));
+  // A config error still writes the report, saying what stopped the run.
+  const fs::path bad = cfg("specbake: 1\njobs: [\n", "bad.yaml");
+  r = run({"run", bad.string(), "--report", (tmp_ / "r.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  const json rep = t::read_json(tmp_ / "r.json");
+  EXPECT_NE(rep.value("error", "").find("bad.yaml"), std::string::npos) << rep.dump();
+}
+
+// --keep-going: one config whose heightfield is missing does not stop the others; the invalid
+// one is reported with its location and the run exits 3. Without it, today's strict behaviour.
+TEST_F(CliUser, KeepGoingRunsEveryValidJob) {
+  cfg(config(kPrism), "a.yaml");
+  cfg(config("  - name: grating\n    kind: diffraction\n    heightfield: {file: missing.png, dx_um: 0.1, height_um: 0.2}\n"),
+      "b.yaml");
+  cfg(config("  - name: second\n    kind: dispersion\n    samples: 3\n    material: {n_d: 1.6, v_d: 40}\n"), "c.yaml");
+  fs::rename(tmp_ / "c.yaml", tmp_ / "cfgs-c.yaml");
+  fs::create_directories(tmp_ / "cfgs");
+  for (const char* f : {"a.yaml", "b.yaml", "cfgs-c.yaml"}) fs::rename(tmp_ / f, tmp_ / "cfgs" / f);
+  auto r = run({"run", (tmp_ / "cfgs").string(), "--out", (tmp_ / "strict").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "strict" / "prism"));
+  r = run({"run", (tmp_ / "cfgs").string(), "--out", (tmp_ / "out").string(), "--keep-going", "--report",
+           (tmp_ / "rep.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.out << r.err;
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "prism" / "latest"));
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "second" / "latest"));
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("2 built.*1 invalid"))) << r.out;
+  const json rep = t::read_json(tmp_ / "rep.json");
+  bool found = false;
+  for (const auto& j : rep["jobs"])
+    if (j["status"] == "invalid") {
+      found = true;
+      EXPECT_EQ(j["exit_code"], 3);
+      EXPECT_TRUE(std::regex_search(j["reason"].get<std::string>(), std::regex("b\\.yaml:[0-9]+:[0-9]+")))
+          << j["reason"];
+      EXPECT_NE(j["reason"].get<std::string>().find("missing.png"), std::string::npos) << j["reason"];
+    }
+  EXPECT_TRUE(found) << rep.dump(1);
+}
+
+// Ctrl-C (or SIGTERM) ends the run at a safe point: no temporary folder, no lock, the report
+// and the summary say what finished, exit 130 (143 for SIGTERM).
+TEST_F(CliUser, InterruptStopsAtASafePoint) {
+  for (int sig : {SIGINT, SIGTERM}) {
+    SCOPED_TRACE(sig == SIGINT ? "SIGINT" : "SIGTERM");
+    const fs::path out = tmp_ / ("out" + std::to_string(sig));
+    // prism first (finishes quickly), then a sky bake long enough to be interrupted.
+    const fs::path c = cfg(config(kPrism + kSky.substr(0, kSky.find("    sizes")) +
+                                      "    sizes: {scattering: {r: 16, mu: 64, mu_s: 16, nu: 8}}\n",
+                                  out.string()),
+                           "int.yaml");
+    const fs::path report = tmp_ / ("rep" + std::to_string(sig) + ".json");
+    const pid_t pid = t::spawn_cli({"run", c.string(), "--report", report.string()}, tmp_.path(), tmp_ / "int.out",
+                                   tmp_ / "int.err");
+    // Wait until the sky job is baking (its job folder and lock exist), then signal.
+    const auto t0 = std::chrono::steady_clock::now();
+    while (!fs::exists(out / "sky" / ".lock") && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60))
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    ASSERT_TRUE(fs::exists(out / "sky" / ".lock")) << "the sky job never started";
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    ::kill(pid, sig);
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    ASSERT_TRUE(WIFEXITED(status)) << "killed by the signal instead of stopping";
+    EXPECT_EQ(WEXITSTATUS(status), sig == SIGINT ? 130 : 143);
+    EXPECT_TRUE(fs::exists(out / "prism" / "latest"));
+    EXPECT_FALSE(fs::exists(out / "sky")) << "the interrupted job left its folder (temporary or lock)";
+    const json rep = t::read_json(report);
+    EXPECT_EQ(rep["jobs"][0]["status"], "built");
+    EXPECT_EQ(rep["jobs"][1]["status"], "interrupted");
+    EXPECT_NE(rep.value("error", "").find("stopped"), std::string::npos);
+    std::ifstream o(tmp_ / "int.out");
+    const std::string text((std::istreambuf_iterator<char>(o)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("1 built"), std::string::npos) << text;
+    EXPECT_NE(text.find("1 interrupted"), std::string::npos) << text;
+  }
+}
+
+// -q prints nothing but errors; -v adds the full JSON; -vv is more than -v.
+TEST_F(CliUser, QuietVerboseAndWarnings) {
+  const fs::path c = cfg(config("  - name: flint\n    kind: dispersion\n    samples: 8\n    range_nm: [390, 780]\n"
+                                "    material: {glass: N-SF11}\n"));
+  auto r = run({"run", c.string(), "-q"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out, "");
+  EXPECT_EQ(r.err, "");
+  // Up to date: the bundle's warnings are repeated and counted.
+  r = run({"run", c.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("warning: flint: the Cauchy/Abbe model"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 built, 1 up to date, 0 failed, 1 warning"), std::string::npos) << r.out;
+  EXPECT_LT(r.out.size(), 2000u) << "the default output is a summary, not a dump";
+  const auto v = run({"run", c.string(), "-v"});
+  EXPECT_NE(v.out.find("\"quadrature_weights_nm\""), std::string::npos);
+  const auto vv = run({"run", c.string(), "-vv"});
+  EXPECT_NE(vv.err.find("[trace]"), std::string::npos) << vv.err;
+  EXPECT_EQ(v.err.find("[trace]"), std::string::npos) << v.err;
+}
+
+// Options given an empty value, and an option followed by a config path.
+TEST_F(CliUser, EmptyValuesAndOptionArity) {
+  const fs::path c = cfg(config(kPrism));
+  for (const char* opt : {"--out", "--shard", "--only", "--device", "--report"}) {
+    const auto r = run({"plan", c.string(), opt, ""});
+    EXPECT_EQ(r.exit_code, 2) << opt << ": " << r.err;
+  }
+  // `--only prism t5`: t5 is a config path, not a second job name.
+  const auto r = run({"plan", "--only", "prism", c.string(), "t5.yaml"});
+  EXPECT_EQ(r.exit_code, 5) << r.err;  // t5.yaml cannot be read
+  EXPECT_NE(r.err.find("t5.yaml"), std::string::npos) << r.err;
+}
+
+TEST_F(CliUser, SuggestionsForTypos) {
+  auto r = run({"rnu", "x.yaml"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("did you mean 'run'"), std::string::npos) << r.err;
+  const fs::path c = cfg(config("  - name: prism\n    kind: dispresion\n    samples: 6\n"));
+  r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("did you mean 'dispersion'"), std::string::npos) << r.err;
+  const fs::path k = cfg(config("  - name: prism\n    kind: dispersion\n    sampels: 6\n"), "k.yaml");
+  r = run({"plan", k.string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("did you mean 'samples'"), std::string::npos) << r.err;
+  r = run({"plan", c.string(), "--only", "prizm"});
+}
+
+// YAML mistakes are reported where they begin.
+TEST_F(CliUser, YamlMistakesPointAtTheirStart) {
+  const fs::path c = cfg("specbake: 1\njobs:\n  - name: prism\n    kind: dispersion\n\tsamples: 6\n");
+  auto r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("c.yaml:5:1"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("tab"), std::string::npos) << r.err;
+  const fs::path d = cfg("specbake: 1\njobs:\n  - name: prism\n    kind: dispersion\n    range_nm: [390, 780\n"
+                         "    samples: 6\n",
+                         "d.yaml");
+  r = run({"plan", d.string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("d.yaml:5:15"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("never closed"), std::string::npos) << r.err;
+}
+
+// A config given twice (directly and through its folder) is read once, not reported as its own
+// duplicate; `output: ~/x` means the home folder.
+TEST_F(CliUser, SameConfigTwiceAndHomeFolder) {
+  const fs::path c = cfg(config(kPrism, "~/baked"));
+  const auto r = run({"run", c.string(), tmp_.path().string(), (tmp_ / "." / "c.yaml").string()},
+                     {"HOME=" + (tmp_ / "home").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(tmp_ / "home" / "baked" / "prism" / "latest"));
+  EXPECT_FALSE(fs::exists(tmp_ / "~"));
+  EXPECT_NE(r.out.find("1 built"), std::string::npos) << r.out;
+}
+
+// An unreadable heightfield says why.
+TEST_F(CliUser, UnreadableHeightfieldSaysWhy) {
+  fs::create_directories(tmp_ / "field.png");  // a folder where a file is expected
+  const fs::path c = cfg(config(
+      "  - name: g\n    kind: diffraction\n    heightfield: {file: field.png, dx_um: 0.1, height_um: 0.2}\n"));
+  const auto r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("field.png"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("a folder"), std::string::npos) << r.err;
+}
+
+// `mie: false` with a single-Mie output asked for is a config error (it would be all zeros);
+// without outputs given, the single-Mie texture is left out.
+TEST_F(CliUser, NoMieMeansNoSingleMieTexture) {
+  const std::string sizes =
+      "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n";
+  const fs::path c = cfg(config("  - name: sky\n    kind: atmosphere\n    mie: false\n    orders: 2\n" + sizes +
+                                "    outputs: [scattering, single_mie_scattering]\n"));
+  auto r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("c.yaml:9:"), std::string::npos) << r.err;  // the outputs item
+  EXPECT_NE(r.err.find("mie is false"), std::string::npos) << r.err;
+  const fs::path d = cfg(config("  - name: sky\n    kind: atmosphere\n    mie: false\n    orders: 2\n" + sizes), "d.yaml");
+  r = run({"run", d.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "sky" / "latest" / "single_mie_scattering.bin"));
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "sky" / "latest" / "scattering.bin"));
+}
+
+// plan shows what a job will cost before anything runs.
+TEST_F(CliUser, PlanShowsEstimates) {
+  const fs::path c = cfg(config(kSky));
+  const fs::path report = tmp_ / "plan.json";
+  const auto r = run({"plan", c.string(), "--report", report.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("sky +atmosphere +would be built +~[0-9.]+ s +[0-9]+ MiB +[0-9]+ MiB")))
+      << r.out;
+  const json rep = t::read_json(report);
+  const json& e = rep["jobs"][0]["estimate"];
+  EXPECT_GT(e["seconds_2core_cpu"].get<double>(), 0.0);
+  EXPECT_GT(e["device_bytes"].get<double>(), 0.0);
+  EXPECT_GT(e["host_bytes"].get<double>(), 0.0);
+  EXPECT_FALSE(fs::exists(tmp_ / "out"));
+}
+
+}  // namespace
