@@ -16,6 +16,7 @@
 #include "core/version.hpp"
 #include "io/bundle.hpp"
 #include "io/bundle_diff.hpp"
+#include "io/inspect.hpp"
 #include "runner/runner.hpp"
 
 using namespace specbake;
@@ -241,44 +242,41 @@ int cmd_devices() {
   return 0;
 }
 
-int cmd_inspect(const fs::path& dir) {
-  std::ifstream in(dir / "manifest.json");
-  if (!in) throw IoError("cannot read " + (dir / "manifest.json").string());
-  json m;
-  try {
-    m = json::parse(in);
-  } catch (const json::exception& e) {
-    throw InputError({dir / "manifest.json", 0, 0, ""}, std::string("expected a JSON manifest: ") + e.what());
+int cmd_inspect(const fs::path& path, bool as_json) {
+  const Inspection in = inspect_bundle(path);
+  const int rc = in.bad ? static_cast<int>(ExitCode::job_failed) : 0;
+  if (as_json) {
+    std::cout << in.to_json().dump(2) << "\n";
+    return rc;
   }
-  std::cout << "bundle:   " << fs::weakly_canonical(dir).string() << "\n"
-            << "job:      " << m["job"].value("name", "?") << " (" << m["job"].value("kind", "?") << ")\n"
-            << "hash:     " << m["job"].value("hash", "?") << "\n"
-            << "tool:     specbake " << m["tool"].value("version", "?") << ", created " << m.value("created_utc", "?")
-            << "\n"
-            << "device:   " << m["device"].value("name", "?") << " (" << m["device"].value("platform", "?") << ")\n";
+  const json& m = in.manifest;
+  auto field = [&](const char* block, const char* key) {
+    return m.contains(block) && m[block].is_object() && m[block].contains(key) ? m[block][key].dump() : "?";
+  };
+  auto text = [&](const char* block, const char* key) {
+    const std::string s = field(block, key);
+    return s.size() >= 2 && s.front() == '"' ? s.substr(1, s.size() - 2) : s;
+  };
+  std::cout << "bundle:   " << fs::weakly_canonical(in.bundle).string() << "\n"
+            << "job:      " << text("job", "name") << " (" << text("job", "kind") << ")\n"
+            << "hash:     " << text("job", "hash") << "\n"
+            << "tool:     specbake " << text("tool", "version") << ", created " << m.value("created_utc", "?") << "\n"
+            << "device:   " << text("device", "name") << " (" << text("device", "platform") << ")\n";
   std::cout << "accuracy:\n";
   for (const auto& a : m.value("accuracy", json::array())) std::cout << "  " << headline(json::array({a})) << "\n";
-  for (const auto& w : m.value("warnings", json::array())) std::cout << "warning:  " << w.get<std::string>() << "\n";
-  int bad = 0;
+  for (const auto& w : m.value("warnings", json::array())) std::cout << "warning:  " << w.dump() << "\n";
   std::cout << "files:\n";
-  for (const auto& f : m.at("files")) {
-    const std::string path = f.at("path");
-    std::string status = "ok";
-    try {
-      if (sha256_file(dir / path) != f.at("sha256").get<std::string>()) status = "SHA256 MISMATCH";
-    } catch (const IoError&) {
-      status = "MISSING";
-    }
-    bad += status != "ok";
-    std::cout << "  " << status << "  " << path << "  " << f.value("bytes", 0);
-    if (f.contains("shape")) std::cout << "  " << f.value("dtype", "") << f["shape"].dump();
+  for (const auto& f : in.files) {
+    const std::string status = f.status == "ok" ? "ok" : f.status == "missing" ? "MISSING" : "SHA256 MISMATCH";
+    std::cout << "  " << status << "  " << f.path << "  " << f.bytes;
+    if (!f.shape.is_null()) std::cout << "  " << f.dtype << f.shape.dump();
     std::cout << "\n";
   }
-  if (bad) {
-    std::cout << bad << " file(s) failed their check\n";
-    return static_cast<int>(ExitCode::job_failed);
+  if (in.bad) {
+    std::cout << in.bad << " file(s) failed their check\n";
+    return rc;
   }
-  std::cout << "all " << m.at("files").size() << " files match their sha256\n";
+  std::cout << "all " << in.files.size() << " files match their sha256\n";
   return 0;
 }
 
@@ -329,9 +327,17 @@ int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_
   const BundleDiff d = diff_bundles(a, b, fail_abs, fail_rel);
   for (const auto& f : d.files) {
     std::cout << "  " << f.status << "  " << f.path;
-    if (f.numeric && f.status == "differs")
-      std::cout << "  max abs " << f.max_abs << " at " << index_text(f.at_abs) << ", max rel " << f.max_rel << " at "
-                << index_text(f.at_rel) << ", " << f.exceeding << " beyond thresholds";
+    if (f.numeric && f.status == "differs") {
+      auto where = [&](const std::vector<std::int64_t>& at) {
+        std::string s = index_text(at);
+        if (!f.channels.empty() && !at.empty() && at.back() < static_cast<std::int64_t>(f.channels.size()))
+          s += " (channel " + f.channels[at.back()] + ")";
+        return s;
+      };
+      std::cout << "  max abs " << f.max_abs << " at " << where(f.at_abs) << ", max rel " << f.max_rel << " at "
+                << where(f.at_rel) << ", " << f.exceeding << " beyond thresholds";
+      if (f.nan_mismatches) std::cout << " (" << f.nan_mismatches << " NaN in one bundle only)";
+    }
     std::cout << "\n";
   }
   if (!d.changed.empty()) {
@@ -385,7 +391,7 @@ int main(int argc, char** argv) {
 
   std::vector<std::string> configs, only;
   std::string out, device, inspect_dir, report, shard, gc_dir, diff_old, diff_new;
-  bool force = false, keep_going = false;
+  bool force = false, keep_going = false, inspect_json = false, gc_dry_run = false;
   int keep = 3;
   double fail_abs = 0.0, fail_rel = 0.0;
 
@@ -415,6 +421,7 @@ int main(int argc, char** argv) {
   auto* gc = app.add_subcommand("gc", "prune old bundles in an output folder, never the one `latest` points at");
   gc->add_option("output", gc_dir, "output folder (holding <job>/<hash12>/ bundles)")->required();
   gc->add_option("--keep", keep, "bundles to keep per job (newest first)")->check(CLI::Range(1, 1000000));
+  gc->add_flag("--dry-run", gc_dry_run, "list what would be removed; change nothing");
 
   auto* diff = app.add_subcommand("diff", "compare two bundles file by file; non-zero exit past the thresholds");
   diff->add_option("old", diff_old, "old bundle folder")->required();
@@ -423,7 +430,9 @@ int main(int argc, char** argv) {
   diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(CLI::NonNegativeNumber);
 
   auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
-  inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest)")->required();
+  inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")
+      ->required();
+  inspect->add_flag("--json", inspect_json, "print the summary and per-file checks as JSON");
 
   try {
     app.parse(argc, argv);
@@ -449,10 +458,15 @@ int main(int argc, char** argv) {
   std::vector<JobReport> reports;
   try {
     if (app.got_subcommand("devices")) return cmd_devices();
-    if (app.got_subcommand("inspect")) return cmd_inspect(inspect_dir);
+    if (app.got_subcommand("inspect")) return cmd_inspect(inspect_dir, inspect_json);
     if (app.got_subcommand("gc")) {
-      const auto removed = BundleStore(gc_dir).gc(keep);
-      std::cout << "removed " << removed.size() << " bundle(s)\n";
+      const GcResult g = BundleStore(gc_dir).gc(keep, gc_dry_run);
+      const char* verb = gc_dry_run ? "would remove" : "removed";
+      for (const auto& p : g.bundles) std::cout << verb << " bundle " << p.string() << "\n";
+      for (const auto& p : g.temporaries) std::cout << verb << " leftover " << p.string() << "\n";
+      for (const auto& p : g.busy) std::cout << "skipped " << p.string() << " (a running bake holds it)\n";
+      std::cout << verb << " " << g.bundles.size() << " bundle(s) and " << g.temporaries.size()
+                << " leftover(s) of interrupted runs\n";
       return 0;
     }
     if (app.got_subcommand("diff")) return cmd_diff(diff_old, diff_new, fail_abs, fail_rel);

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <limits>
 
 #include <spdlog/spdlog.h>
@@ -126,7 +127,15 @@ void BundleStore::set_latest(const std::string& job, const std::string& hash12) 
   sync_dir(dir);
 }
 
-JobLock::JobLock(const fs::path& job_dir, const std::string& job) {
+bool JobLock::held_by_live_process(const fs::path& job_dir) {
+  const int fd = ::open((job_dir / ".lock").c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  const bool held = ::flock(fd, LOCK_SH | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  ::close(fd);
+  return held;
+}
+
+JobLock::JobLock(const fs::path& job_dir, const std::string& job, bool wait) {
   make_dirs(job_dir);
   const fs::path p = job_dir / ".lock";
   path_ = p;
@@ -135,6 +144,11 @@ JobLock::JobLock(const fs::path& job_dir, const std::string& job) {
     fd_ = ::open(p.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd_ < 0) io_fail("cannot open lock", p);
     if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+      if (!wait) {
+        ::close(fd_);
+        fd_ = -1;
+        return;
+      }
       if (!waited) spdlog::info("{}: another run holds {}; waiting for it", job, p.string());
       waited = true;
       while (::flock(fd_, LOCK_EX) != 0)
@@ -173,19 +187,44 @@ void BundleStore::clean_stale(const std::string& job) const {
   }
 }
 
-std::vector<fs::path> BundleStore::gc(int keep) const {
-  std::vector<fs::path> removed;
+GcResult BundleStore::gc(int keep, bool dry_run) const {
+  GcResult out;
   std::error_code ec;
   if (!fs::is_directory(root_, ec)) throw IoError("no output folder " + root_.string());
-  for (const auto& job : fs::directory_iterator(root_, ec)) {
-    if (!job.is_directory() || job.path().filename().string().front() == '.') continue;
-    const std::string name = job.path().filename().string();
-    JobLock lock(job.path(), name);
+  std::vector<fs::path> jobs;
+  for (const auto& job : fs::directory_iterator(root_, ec))
+    if (job.is_directory() && !job.is_symlink() && job.path().filename().string().front() != '.') jobs.push_back(job.path());
+  std::sort(jobs.begin(), jobs.end());
+  for (const auto& job : jobs) {
+    const std::string name = job.filename().string();
+    // A job a live run holds is left alone (not waited for); a lock whose holder died is free.
+    std::optional<JobLock> lock;
+    if (!dry_run) {
+      if (fs::exists(job / ".lock", ec) && !JobLock::held_by_live_process(job))
+        out.temporaries.push_back(job / ".lock");  // its holder died; released (removed) below
+      lock.emplace(job, name, false);
+      if (!lock->held()) {
+        out.busy.push_back(job);
+        continue;
+      }
+    } else if (JobLock::held_by_live_process(job)) {
+      out.busy.push_back(job);
+      continue;
+    }
     fs::path latest;
-    if (fs::is_symlink(job.path() / "latest", ec)) latest = fs::read_symlink(job.path() / "latest", ec);
+    if (fs::is_symlink(job / "latest", ec)) latest = fs::read_symlink(job / "latest", ec);
     std::vector<std::pair<std::string, fs::path>> bundles;  // (created, dir)
-    for (const auto& b : fs::directory_iterator(job.path(), ec)) {
-      if (!b.is_directory() || b.is_symlink() || b.path().filename().string().front() == '.') continue;
+    for (const auto& b : fs::directory_iterator(job, ec)) {
+      const std::string entry = b.path().filename().string();
+      if (entry.rfind(".tmp-", 0) == 0 || entry.rfind(".latest-", 0) == 0) {
+        out.temporaries.push_back(b.path());  // left by an interrupted run: no live run holds the job
+        continue;
+      }
+      if (entry == ".lock" && dry_run) {
+        out.temporaries.push_back(b.path());  // a lock file no live process holds
+        continue;
+      }
+      if (!b.is_directory() || b.is_symlink() || entry.front() == '.') continue;
       std::string created;
       try {
         std::ifstream in(b.path() / "manifest.json");
@@ -195,21 +234,29 @@ std::vector<fs::path> BundleStore::gc(int keep) const {
       }
       bundles.emplace_back(created, b.path());
     }
+    // The `keep` newest (ties by name) and `latest`, wherever it is in that order.
     std::sort(bundles.begin(), bundles.end(), [](const auto& a, const auto& b) { return a > b; });
     int kept = 0;
     for (const auto& [created, dir] : bundles) {
-      const bool is_latest = dir.filename() == latest.filename();
-      if (is_latest || kept < keep) {
+      if (dir.filename() == latest.filename() || kept < keep) {
         ++kept;
         continue;
       }
-      spdlog::info("gc: removing {}", dir.string());
-      fs::remove_all(dir, ec);
-      if (ec) throw IoError("cannot remove " + dir.string() + ": " + ec.message());
-      removed.push_back(dir);
+      out.bundles.push_back(dir);
     }
+    if (dry_run) continue;
+    for (const auto& p : out.temporaries)
+      if (p.parent_path() == job && p.filename() != ".lock") fs::remove_all(p, ec);
+    for (const auto& dir : out.bundles)
+      if (dir.parent_path() == job) {
+        spdlog::info("gc: removing {}", dir.string());
+        fs::remove_all(dir, ec);
+        if (ec) throw IoError("cannot remove " + dir.string() + ": " + ec.message());
+      }
+    lock.reset();         // removes the lock file
+    fs::remove(job, ec);  // a job folder nothing is left in
   }
-  return removed;
+  return out;
 }
 
 fs::path BundleStore::publish(const std::string& job, const std::string& hash12, nlohmann::json manifest,

@@ -35,7 +35,11 @@ std::string float32_le(const std::vector<float>& values, const std::string& what
 // bakes and publishes that job; a second run on the same output waits for it.
 class JobLock {
  public:
-  JobLock(const fs::path& job_dir, const std::string& job);
+  // wait = false: returns at once; held() says whether the lock was taken.
+  JobLock(const fs::path& job_dir, const std::string& job, bool wait = true);
+  bool held() const { return fd_ >= 0; }
+  // Whether a live process holds the job's lock (a lock file left by a dead one is free).
+  static bool held_by_live_process(const fs::path& job_dir);
   ~JobLock();
   JobLock(const JobLock&) = delete;
   JobLock& operator=(const JobLock&) = delete;
@@ -43,6 +47,12 @@ class JobLock {
  private:
   int fd_ = -1;
   fs::path path_;
+};
+
+struct GcResult {
+  std::vector<fs::path> bundles;      // old bundles removed (or that would be)
+  std::vector<fs::path> temporaries;  // .tmp-*/.latest-* of interrupted runs, stale .lock files
+  std::vector<fs::path> busy;         // job folders a live run holds: left alone
 };
 
 class BundleStore {
@@ -60,8 +70,10 @@ class BundleStore {
   // lock held: no live run can then be writing them.
   void clean_stale(const std::string& job) const;
   // Prunes bundles of every job under the root, keeping the `keep` newest (by manifest
-  // creation time) and always the one `latest` points at. Returns the removed folders.
-  std::vector<fs::path> gc(int keep) const;
+  // creation time) and always the one `latest` points at, and removes what interrupted runs
+  // left (temporary folders, lock files of dead processes). Jobs a live run holds are skipped.
+  // dry_run: changes nothing, returns what would be removed.
+  GcResult gc(int keep, bool dry_run = false) const;
   // Writes files and manifest (the manifest's "files" list is filled in here) and
   // publishes the bundle atomically, then updates `latest`. Returns the bundle path.
   fs::path publish(const std::string& job, const std::string& hash12, nlohmann::json manifest,

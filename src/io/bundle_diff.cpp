@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "core/errors.hpp"
+#include "io/exr.hpp"
 
 namespace specbake {
 
@@ -102,26 +103,57 @@ BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double
       continue;
     }
     fd.status = "differs";
-    if (numeric) {
-      const auto va = as_floats(ba), vb = as_floats(bb);
-      const auto shape = fa_entry.value("shape", std::vector<std::int64_t>{});
+    const bool exr = fs::path(path).extension() == ".exr";
+    if (numeric || exr) {
+      // EXR files are decoded (half or float) and compared pixel by pixel, [row][column][channel].
+      std::vector<float> va, vb;
+      std::vector<std::int64_t> dims;
+      if (exr) {
+        try {
+          const auto channels = exr_channels(ba);
+          const ExrImage ia = exr_read(ba, channels), ib = exr_read(bb, exr_channels(bb));
+          if (ib.channels != ia.channels || ib.width != ia.width || ib.height != ia.height) {
+            fd.status = "shape-changed";
+            d.files.push_back(fd);
+            continue;
+          }
+          va = ia.pixels;
+          vb = ib.pixels;
+          dims = {ia.height, ia.width, static_cast<std::int64_t>(channels.size())};
+          fd.channels = channels;
+        } catch (const InputError& e) {
+          throw InputError({path, 0, 0, ""}, std::string("cannot compare ") + path + ": " + e.what());
+        }
+      } else {
+        va = as_floats(ba);
+        vb = as_floats(bb);
+        const auto shape = fa_entry.value("shape", std::vector<std::int64_t>{});
+        dims = shape.empty() ? std::vector<std::int64_t>{static_cast<std::int64_t>(va.size())} : shape;
+      }
+      fd.numeric = true;
       if (va.size() != vb.size()) {
         fd.status = "shape-changed";
       } else {
         std::size_t ia = 0, ir = 0;
         for (std::size_t i = 0; i < va.size(); ++i) {
           const double x = va[i], y = vb[i];
+          if (std::isnan(x) || std::isnan(y)) {
+            if (std::isnan(x) && std::isnan(y)) continue;  // NaN in both: not a change
+            ++fd.nan_mismatches;
+            ++fd.exceeding;
+            continue;
+          }
+          if (x == y) continue;  // equal values (inf included)
           const double ab = std::fabs(x - y);
           const double den = std::max(std::fabs(x), std::fabs(y));
           const double rel = den > 0.0 ? ab / den : 0.0;
-          if (!(ab <= fd.max_abs)) fd.max_abs = ab, ia = i;  // NaN counts as the largest
+          if (!(ab <= fd.max_abs)) fd.max_abs = ab, ia = i;
           if (!(rel <= fd.max_rel)) fd.max_rel = rel, ir = i;
           if (!(ab <= fail_abs + fail_rel * den)) ++fd.exceeding;
         }
-        const std::vector<std::int64_t> dims =
-            shape.empty() ? std::vector<std::int64_t>{static_cast<std::int64_t>(va.size())} : shape;
         fd.at_abs = unravel(ia, dims);
         fd.at_rel = unravel(ir, dims);
+        if (fd.max_abs == 0.0 && fd.nan_mismatches == 0) fd.status = "same-values";  // bytes differ, values do not
       }
     }
     d.files.push_back(fd);
@@ -138,7 +170,7 @@ BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double
 
 bool diff_passes(const BundleDiff& d) {
   for (const auto& f : d.files) {
-    if (f.status == "same") continue;
+    if (f.status == "same" || f.status == "same-values") continue;
     if (f.status != "differs") return false;
     if (f.exceeding > 0) return false;
   }

@@ -14,11 +14,13 @@ namespace fs = std::filesystem;
 
 struct FileDiff {
   std::string path;
-  std::string status;  // same | differs | added | removed | shape-changed
-  bool numeric = false;  // float32 data compared element by element
+  std::string status;  // same | same-values (bytes differ, values do not) | differs | added | removed | shape-changed
+  bool numeric = false;  // float32 .bin data, or EXR pixels (decoded), compared element by element
+  std::vector<std::string> channels;  // EXR: the channel names, the last index of at_abs/at_rel
   double max_abs = 0.0, max_rel = 0.0;
   std::vector<std::int64_t> at_abs, at_rel;  // multi-index (manifest shape) of each maximum
-  std::size_t exceeding = 0;  // elements with |a − b| > fail_abs + fail_rel·max(|a|, |b|)
+  std::size_t exceeding = 0;  // elements with |a − b| > fail_abs + fail_rel·max(|a|, |b|), or NaN in one only
+  std::size_t nan_mismatches = 0;  // NaN in one bundle, a number in the other (NaN in both is no change)
 };
 
 struct BundleDiff {
@@ -32,9 +34,9 @@ struct BundleDiff {
 // thresholds when |a − b| > fail_abs + fail_rel·max(|a|, |b|) (numpy.allclose's rule, symmetric).
 BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double fail_abs, double fail_rel);
 
-// True if no float32 element exceeds the thresholds and no file was added, removed or
-// reshaped. Non-numeric files (JSON/GLSL copies, EXR, previews) render the numeric data
-// and are reported but do not decide.
+// True if no float32 or EXR element exceeds the thresholds and no file was added, removed or
+// reshaped. Other files (JSON/GLSL copies, PNG previews) render the numeric data and are
+// reported but do not decide.
 bool diff_passes(const BundleDiff& d);
 
 }  // namespace specbake

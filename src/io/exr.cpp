@@ -47,6 +47,20 @@ std::string exr_bytes(const ExrImage& img) {
   }
 }
 
+std::vector<std::string> exr_channels(const std::string& bytes) {
+  try {
+    Imf::StdISStream in;
+    in.str(bytes);
+    Imf::InputFile file(in);
+    std::vector<std::string> names;
+    for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it)
+      names.emplace_back(it.name());
+    return names;
+  } catch (const std::exception& e) {
+    throw InputError({"", 0, 0, ""}, std::string("expected an OpenEXR image: ") + e.what());
+  }
+}
+
 ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels) {
   try {
     Imf::StdISStream in;

@@ -21,5 +21,7 @@ inline constexpr int kMaxExrSide = 16384;
 
 // Decodes an EXR (any pixel type) into float, channels in the given order (tests, readers).
 ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels);
+// The channel names an EXR holds, in the header's order (alphabetical: B, G, R).
+std::vector<std::string> exr_channels(const std::string& bytes);
 
 }  // namespace specbake

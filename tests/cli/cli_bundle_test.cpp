@@ -17,6 +17,7 @@
 #include "core/hash.hpp"
 #include "core/version.hpp"
 #include "io/bundle.hpp"
+#include "kinds/dispersion/dispersion_job.hpp"
 #include "job/kind.hpp"
 #include "support/testing.hpp"
 
@@ -167,9 +168,9 @@ TEST_F(Cli, InspectChecksEveryFile) {
   r = run({"inspect", b.string()});
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("MISSING  ior.bin"), std::string::npos) << r.out;
-  // Not a bundle: an I/O error naming the manifest.
+  // Neither a bundle nor a job folder: an input error naming what is expected.
   r = run({"inspect", tmp_.path().string()});
-  EXPECT_EQ(r.exit_code, 5) << r.err;
+  EXPECT_EQ(r.exit_code, 3) << r.err;
   EXPECT_NE(r.err.find("manifest.json"), std::string::npos) << r.err;
 }
 
@@ -439,13 +440,27 @@ TEST(BundleWriter, RefusesNonFiniteValues) {
 // Non-finite values in an output fail the job (exit 1) and nothing is published: a
 // Sellmeier material with a pole (λ² = C) inside the range gives n² < 0 at some samples.
 TEST_F(Cli, NonFiniteOutputFailsTheJob) {
+  // Such a glass is refused when the config is read (n² < 0 at the d line)...
   const fs::path c = cfg(
       "specbake: 1\noutput: out\njobs:\n  - name: pole\n    kind: dispersion\n    samples: 4\n"
       "    material: {sellmeier: {B: [5.0], C: [1.0]}}\n");  // n² < 0 below 1 µm: NaN index
-  const auto r = run({"run", c.string()});
-  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
-  EXPECT_NE(r.err.find("non-finite"), std::string::npos) << r.err;
-  EXPECT_NE(r.out.find("0 built, 0 up to date, 1 failed"), std::string::npos) << r.out;
+  auto r = run({"run", c.string()});
+  EXPECT_EQ(r.exit_code, 3) << r.out << r.err;
+  EXPECT_NE(r.err.find("transparent glass"), std::string::npos) << r.err;
+  // ... and a spec that reaches the job anyway (built in code, not from a config) fails it
+  // before anything is published.
+  specbake::DispersionSpec spec;
+  spec.samples = 4;
+  spec.material.kind = specbake::Material::Kind::sellmeier;
+  spec.material.sellmeier = specbake::Sellmeier{{5.0}, {1.0}};
+  specbake::cl_util::Device dev(specbake::cl_util::select_device("auto"));
+  specbake::JobContext ctx{dev};
+  try {
+    specbake::dispersion::bake(spec, ctx);
+    ADD_FAILURE() << "a NaN index reached the files";
+  } catch (const specbake::JobError& e) {
+    EXPECT_NE(std::string(e.what()).find("non-finite"), std::string::npos) << e.what();
+  }
   EXPECT_FALSE(fs::exists(tmp_ / "out" / "pole" / "latest"));
   if (fs::exists(tmp_ / "out" / "pole"))
     for (const auto& e : fs::directory_iterator(tmp_ / "out" / "pole"))

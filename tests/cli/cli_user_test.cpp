@@ -281,3 +281,58 @@ TEST_F(CliUser, PlanShowsEstimates) {
 }
 
 }  // namespace
+
+namespace {
+
+// inspect works on a bundle of each kind, through the job folder too, and as JSON.
+TEST_F(CliUser, InspectEveryKind) {
+  const fs::path c = cfg(config(kPrism + kSky +
+                                "  - name: grating\n    kind: diffraction\n"
+                                "    procedural: {type: sine-grating, size: 64, dx_um: 0.25, period_um: 4.0, amplitude_um: 0.1}\n"));
+  ASSERT_EQ(run({"run", c.string()}).exit_code, 0);
+  for (const char* job : {"prism", "sky", "grating"}) {
+    SCOPED_TRACE(job);
+    auto r = run({"inspect", (tmp_ / "out" / job / "latest").string()});
+    EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+    EXPECT_NE(r.out.find("files match their sha256"), std::string::npos) << r.out;
+    r = run({"inspect", (tmp_ / "out" / job).string(), "--json"});  // the job folder: its latest bundle
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const json j = json::parse(r.out);
+    EXPECT_EQ(j["job"]["name"], job);
+    EXPECT_TRUE(j["ok"].get<bool>());
+    EXPECT_GT(j["files"].size(), 3u);
+    EXPECT_TRUE(j["accuracy"].is_array());
+  }
+  auto r = run({"inspect", (tmp_ / "out").string()});
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("expected a bundle folder"), std::string::npos) << r.err;
+}
+
+// gc: --dry-run changes nothing; a run removes old bundles, temporary folders of interrupted
+// runs and lock files of dead processes, and leaves jobs a live run holds alone.
+TEST_F(CliUser, GcDryRunAndLeftovers) {
+  for (int n : {4, 5, 6}) {
+    const std::string jobs = "  - name: prism\n    kind: dispersion\n    samples: " + std::to_string(n) +
+                             "\n    material: {glass: N-BK7}\n";
+    ASSERT_EQ(run({"run", cfg(config(jobs)).string()}).exit_code, 0);
+  }
+  fs::create_directories(tmp_ / "out" / "prism" / ".tmp-0123456789ab-999999");
+  t::write_file(tmp_ / "out" / "prism" / ".lock", "999999\n");  // no process holds it
+  const auto before = t::snapshot(tmp_ / "out");
+  // Three bundles created within a second: keep 1 keeps latest and one newest (2 when they
+  // differ by name order); the dry run and the real run agree on the list.
+  auto r = run({"gc", (tmp_ / "out").string(), "--keep", "1", "--dry-run"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.out, m, std::regex("would remove ([12]) bundle\\(s\\) and 2 leftover\\(s\\)"))) << r.out;
+  const std::string n = m[1];
+  EXPECT_TRUE(t::snapshot(tmp_ / "out") == before);
+  r = run({"gc", (tmp_ / "out").string(), "--keep", "1"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("removed " + n + " bundle(s) and 2 leftover(s)"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism" / ".tmp-0123456789ab-999999"));
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism" / ".lock"));
+  EXPECT_TRUE(fs::exists(tmp_ / "out" / "prism" / "latest" / "manifest.json"));
+}
+
+}  // namespace

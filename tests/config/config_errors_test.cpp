@@ -84,6 +84,13 @@ std::vector<BadConfig> bad_configs() {
        {"expected an integer in [1, 4096]", "'5000'"}},
       {"unknown glass", job("    material: {glass: N-BK8}\n"), 3, "N-BK8", 1, "", "jobs[0].material.glass",
        {"unknown glass 'N-BK8'", "N-BK7"}},
+      {"Sellmeier C in nm² instead of µm²",
+       job("    material: {sellmeier: {B: [1.03961212, 0.231792344, 1.01046945], C: [6000.69867, 20017.9144, "
+           "103560653.0]}}\n"),
+       3, "{B: [1.03961212", 1, "", "jobs[0].material.sellmeier", {"transparent glass", "nm²", "divide by 10^6"}},
+      // n rises with λ (n_F 1.486 < n_C 1.607), its pole at √0.8 µm = 894 nm outside the range.
+      {"Sellmeier with anomalous dispersion", job("    material: {sellmeier: {B: [1.0, -0.5], C: [0.0, 0.8]}}\n"), 3,
+       "{B: [1.0, -0.5]", 1, "", "jobs[0].material.sellmeier", {"normal dispersion"}},
       {"Sellmeier pole inside the range", job("    material: {sellmeier: {B: [1.0, 0.2], C: [0.006, 0.25]}}\n"), 3,
        "0.25", 1, "", "jobs[0].material.sellmeier.C[1]", {"pole", "500.0"}},
       {"unknown sampling", job("    sampling: random\n" + kMat), 3, "random", 1, "", "jobs[0].sampling",

@@ -4,6 +4,7 @@
 #include "core/hash.hpp"
 #include "core/resources.hpp"
 #include "core/spectral_data.hpp"
+#include "kinds/dispersion/reference.hpp"
 #include "kinds/dispersion/spec.hpp"
 
 namespace specbake {
@@ -33,6 +34,25 @@ RangeNm parse_range_nm(const At& at, double table_lo, double table_hi) {
   if (v[0] < table_lo || v[1] > table_hi)
     at.fail("expected a range inside the colour-matching table's " + domain.str() + " nm");
   return {v[0], v[1]};
+}
+
+// A transparent glass: n > 1 at the d line and normal dispersion (n_F > n_C) in the visible.
+// C in nm² instead of µm² (10^6 too large) gives n ≈ 1 and a negative Abbe number.
+void check_glass(const At& at, const Sellmeier& sm) {
+  auto n_at = [&](double nm) {
+    return ref::sellmeier_ior(sm.B.data(), sm.C.data(), static_cast<int>(sm.B.size()), nm);
+  };
+  const double n_d = n_at(587.5618), n_F = n_at(486.1327), n_C = n_at(656.2725);
+  const double abbe = (n_d - 1.0) / (n_F - n_C);
+  double c_min = sm.C[0];
+  for (double c : sm.C) c_min = std::min(c_min, c);
+  const std::string hint = c_min > 1000.0 ? "; C looks like nm² (every C > 1000): expected µm² (divide by 10^6)" : "";
+  if (!(std::isfinite(n_d) && n_d > 1.01 && n_d < 5.0))
+    at.fail("expected Sellmeier coefficients of a transparent glass, but they give n = " + std::to_string(n_d) +
+            " at 587.56 nm" + hint);
+  if (!(std::isfinite(abbe) && abbe > 0.0 && abbe < 200.0))
+    at.fail("expected normal dispersion in the visible (Abbe number in (0, 200)), but these coefficients give " +
+            std::to_string(abbe) + hint);
 }
 
 Material parse_material(const At& at, nlohmann::json& norm, Inputs& inputs) {
@@ -117,6 +137,7 @@ DispersionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
         c.item(i).fail("expected C_i (µm²) with its pole √C_i outside range_nm; C_i = " +
                        std::to_string(d.material.sellmeier->C[i]) + " puts it at " + std::to_string(pole_nm) + " nm");
     }
+    check_glass(job.child("material").child("sellmeier"), *d.material.sellmeier);
   }
 
   norm = {{"kind", "dispersion"},
