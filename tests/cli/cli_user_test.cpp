@@ -336,3 +336,23 @@ TEST_F(CliUser, GcDryRunAndLeftovers) {
 }
 
 }  // namespace
+
+namespace {
+
+// On a terminal the progress is one line redrawn in place (carriage return, erase line), with
+// the step, what is running, the percentage and an ETA. `script` gives the run a terminal.
+TEST_F(CliUser, LiveProgressOnATerminal) {
+  if (std::system("command -v script > /dev/null 2>&1") != 0) GTEST_SKIP() << "no `script` to provide a terminal";
+  const fs::path c = cfg(config(kSky));
+  const fs::path log = tmp_ / "tty.txt";
+  const std::string cmd = "script -qec '" + std::string(SPECBAKE_EXE) + " run " + c.string() + " --out " +
+                          (tmp_ / "out").string() + "' /dev/null > " + log.string() + " 2>&1";
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  std::ifstream in(log);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("\r\033[K[1/1] sky: compute, order 2: scattering density"), std::string::npos) << text;
+  EXPECT_TRUE(std::regex_search(text, std::regex("[0-9]+ %, ETA [0-9.]+ s"))) << text;
+  EXPECT_NE(text.find("1 built"), std::string::npos) << text;
+}
+
+}  // namespace

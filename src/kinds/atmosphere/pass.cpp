@@ -363,7 +363,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   // rough relative cost of the stages, for progress only
   const double total = 0.12 + 0.72 * std::max(0, (plan.auto_orders ? 6 : cap) - 1);
   double done = 0.0;
-  auto step = [&](const char* stage, double cost) {
+  auto step = [&](const std::string& stage, double cost) {
     done += cost;
     progress(stage, p0 + (p1 - p0) * std::min(1.0, done / total));
   };
@@ -421,7 +421,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   for (int n = 2; n <= cap; ++n) {
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
     hook(PassStage::scattering_density, n);
-    step("scattering density", 0.55);
+    step("order " + std::to_string(n) + ": scattering density", 0.55);
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
     hook(PassStage::indirect_irradiance, n - 1);
     const std::vector<double> dE = b.read(Tex::delta_irradiance);
@@ -432,7 +432,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
       r.orders[n - 2].irradiance_mean = s.mean;
       if (on_order) on_order(n - 1, {}, dE);
     }
-    step("indirect irradiance", 0.02);
+    step("order " + std::to_string(n) + ": indirect irradiance", 0.02);
     timed(PassStage::multiple_scattering, n, [&] { b.multiple_scattering(); });
     hook(PassStage::multiple_scattering, n);
     std::vector<double> add = b.read(Tex::delta_multiple);
@@ -447,7 +447,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     r.orders.push_back(o);
     if (on_order) on_order(n, add, {});
     r.orders_used = n;
-    step("multiple scattering", 0.15);
+    step("order " + std::to_string(n) + ": multiple scattering", 0.15);
     spdlog::debug("atmosphere: order {} adds at most {:.3e} (relative)", n, o.relative);
     if (plan.auto_orders && o.relative < plan.tolerance) {
       r.converged = true;
