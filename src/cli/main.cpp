@@ -387,7 +387,7 @@ int main(int argc, char** argv) {
   app.add_flag("-v,--verbose", verbose,
                "more output: -v full parameters/accuracy per job and debug logs (kernel build logs, auto searches), "
                "-vv trace logs");
-  app.add_flag("-q,--quiet", quiet, "only errors (no progress, no summary)");
+  app.add_flag("-q,--quiet", quiet, "only warnings and errors (no progress, no summary)");
 
   std::vector<std::string> configs, only;
   std::string out, device, inspect_dir, report, shard, gc_dir, diff_old, diff_new;
@@ -449,7 +449,7 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : static_cast<int>(ExitCode::usage);
   }
-  spdlog::set_level(quiet ? spdlog::level::err
+  spdlog::set_level(quiet ? spdlog::level::warn
                     : verbose >= 2 ? spdlog::level::trace
                     : verbose == 1 ? spdlog::level::debug
                                    : spdlog::level::info);
@@ -502,8 +502,12 @@ int main(int argc, char** argv) {
     progress_line.done();
     reports.insert(reports.end(), invalid.begin(), invalid.end());
     if (!quiet) print_reports(reports, is_plan, verbose);
-    for (const auto& r : reports)
-      if (quiet && r.code != ExitCode::ok) std::cerr << r.name << ": " << r.status << ": " << r.reason << "\n";
+    for (const auto& r : reports) {
+      if (!quiet) break;
+      if (r.code != ExitCode::ok) std::cerr << r.name << ": " << r.status << ": " << r.reason << "\n";
+      if (r.status == "up-to-date")  // a fresh bake logged its warnings as it went
+        for (const auto& w : r.warnings) std::cerr << "[warning] " << r.name << ": " << w << "\n";
+    }
     std::string stopped;
     if (const int sig = stop_requested()) {
       stopped = sig == SIGTERM ? "stopped by SIGTERM" : "stopped by SIGINT";

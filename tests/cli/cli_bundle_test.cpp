@@ -500,7 +500,7 @@ TEST_F(Cli, PlanResolvesAuto) {
   EXPECT_FALSE(fs::exists(tmp_ / "out"));
 }
 
-// -q: errors only; -vv: debug output (samples: auto logs every N it tries at debug level).
+// -q: warnings and errors only; -vv: debug output (samples: auto logs every N it tries at debug level).
 TEST_F(Cli, QuietAndVerbose) {
   const fs::path c = cfg(config(4));
   auto r = run({"-q", "run", c.string()});

@@ -158,14 +158,18 @@ TEST_F(CliUser, InterruptStopsAtASafePoint) {
   }
 }
 
-// -q prints nothing but errors; -v adds the full JSON; -vv is more than -v.
+// -q prints nothing but warnings and errors; -v adds the full JSON; -vv is more than -v.
 TEST_F(CliUser, QuietVerboseAndWarnings) {
   const fs::path c = cfg(config("  - name: flint\n    kind: dispersion\n    samples: 8\n    range_nm: [390, 780]\n"
                                 "    material: {glass: N-SF11}\n"));
   auto r = run({"run", c.string(), "-q"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_EQ(r.out, "");
-  EXPECT_EQ(r.err, "");
+  EXPECT_EQ(count(r.err, "\n"), 1) << r.err;  // the glass's one warning, nothing else
+  EXPECT_NE(r.err.find("[warning] flint: the Cauchy/Abbe model"), std::string::npos) << r.err;
+  r = run({"run", c.string(), "-q"});  // up to date: its warning again
+  EXPECT_EQ(r.out, "");
+  EXPECT_NE(r.err.find("[warning] flint: the Cauchy/Abbe model"), std::string::npos) << r.err;
   // Up to date: the bundle's warnings are repeated and counted.
   r = run({"run", c.string()});
   EXPECT_EQ(r.exit_code, 0) << r.err;
