@@ -38,11 +38,11 @@ cmake --build "$root/build" -j "$(nproc)"
 # its checks are written against) and zstandard, on Debian's Python (numpy from python3-numpy,
 # from PyPI if that Python lacks it); made only when missing. Built beside and moved into place
 # when complete: a failed install leaves no venv, and the test that needs it reports itself
-# skipped.
+# skipped. Only for a build with tests (build/tests exists).
 pyenv="$root/build/pyenv"
 py=/usr/bin/python3
 [ -x "$py" ] || py=python3
-if ! "$pyenv/bin/python" -c "import pyktx2, zstandard, numpy" 2>/dev/null; then
+if [ -d "$root/build/tests" ] && ! "$pyenv/bin/python" -c "import pyktx2, zstandard, numpy" 2>/dev/null; then
   rm -rf "$pyenv" "$pyenv.tmp"
   pip_extra=()
   "$py" -c "import numpy" 2>/dev/null || pip_extra=(numpy)

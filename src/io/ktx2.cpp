@@ -281,6 +281,9 @@ Ktx2File read_ktx2(std::string_view b, const std::string& name) {
     at += 4 + ((n + 3) / 4) * 4;
   }
 
+  // At most 2^36 bytes (64 GiB) of texels; keeps the products below from overflowing.
+  const long double claimed = static_cast<long double>(k.width) * k.height * std::max<std::uint32_t>(k.depth, 1) * tb;
+  if (claimed > 68719476736.0L) bad_file(name, "texture size past 64 GiB");
   const std::uint64_t texels = std::uint64_t{k.width} * k.height * std::max<std::uint32_t>(k.depth, 1);
   const std::uint64_t want = texels * tb;
   if (k.level_uncompressed_length != want)
@@ -291,6 +294,9 @@ Ktx2File read_ktx2(std::string_view b, const std::string& name) {
     if (k.level_length != want) bad_file(name, "byteLength differs from the texel data size");
     k.level.assign(raw);
   } else {
+    // The frame must declare the size the header claims before anything that large is allocated.
+    if (ZSTD_getFrameContentSize(raw.data(), raw.size()) != want)
+      bad_file(name, "the Zstandard frame does not declare uncompressedByteLength");
     k.level.assign(want, '\0');
     const std::size_t n = ZSTD_decompress(k.level.data(), k.level.size(), raw.data(), raw.size());
     if (ZSTD_isError(n)) bad_file(name, std::string("Zstandard level data: ") + ZSTD_getErrorName(n));
