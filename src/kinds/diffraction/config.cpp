@@ -120,11 +120,59 @@ std::shared_ptr<const Heightfield> parse_file_field(const At& at, nlohmann::json
   return std::make_shared<const Heightfield>(decode_heightfield(bytes, how));
 }
 
+// `table: none | {size, mapping, power, f_max_per_um, tolerance}`, `coherence: {length_um} |
+// {source_angular_diameter_deg}` (with a table only) and `max_bundle_mb`.
+void parse_table_keys(const At& job, DiffractionSpec& d) {
+  d.budget_at = job.loc();
+  if (job.has("max_bundle_mb")) {
+    d.max_bundle_mb = job.child("max_bundle_mb").number_in(1e-3, 1e7, "in [0.001, 1e7] (MB)");
+    d.budget_at = job.child("max_bundle_mb").loc();
+  }
+  if (job.has("table")) {
+    const At t = job.child("table");
+    if (t.node.IsScalar() && t.node.Scalar() == "none") {
+      // today's full-bin output
+    } else {
+      t.expect_map("'none' or a table {size, mapping, power, f_max_per_um, tolerance}");
+      t.allow_keys({"size", "mapping", "power", "f_max_per_um", "tolerance"});
+      TableSpec ts;
+      if (t.has("size")) {
+        ts.size = t.child("size").count_or_auto(kMinTableSize, kMaxTableSize);
+        if (ts.size && *ts.size % 2) t.child("size").fail("expected an even size (the centre falls between texels), got " +
+                                                          t.child("size").shown());
+      }
+      if (t.has("mapping")) ts.power_mapping = t.child("mapping").choice<bool>({{"linear", false}, {"power", true}});
+      if (t.has("power")) {
+        if (!ts.power_mapping) t.child("power").fail("'power' applies to mapping: power only");
+        ts.power = t.child("power").number_in(1.0, 8.0, "in [1, 8]");
+      } else if (ts.power_mapping) {
+        ts.power = 3.0;
+      }
+      if (t.has("f_max_per_um")) ts.f_max_per_um = t.child("f_max_per_um").positive();
+      if (t.has("tolerance")) ts.tolerance = t.child("tolerance").number_in(1e-9, 1.0, "in [1e-9, 1]");
+      d.table = ts;
+      if (!job.has("max_bundle_mb")) d.budget_at = t.loc();
+    }
+  }
+  if (job.has("coherence")) {
+    const At c = job.child("coherence");
+    if (!d.table) c.fail("'coherence' applies with a table (table: {size, ...}); table: none keeps the unwindowed field");
+    c.expect_map("{length_um: L} or {source_angular_diameter_deg: theta}");
+    c.allow_keys({"length_um", "source_angular_diameter_deg"});
+    if (c.has("length_um") == c.has("source_angular_diameter_deg"))
+      c.fail("expected exactly one of 'length_um' or 'source_angular_diameter_deg'");
+    if (c.has("length_um")) d.coherence.length_um = c.child("length_um").positive();
+    else
+      d.coherence.source_angular_diameter_deg =
+          c.child("source_angular_diameter_deg").number_in(1e-6, 90.0, "in (0, 90] (degrees)");
+  }
+}
+
 }  // namespace
 
 DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   job.allow_keys({"name", "kind", "heightfield", "procedural", "range_nm", "w_max", "expansion", "terms", "tolerance",
-                  "center", "crop", "storage"});
+                  "center", "crop", "storage", "coherence", "table", "max_bundle_mb"});
   DiffractionSpec d;
   nlohmann::json field_norm;
   if (job.has("heightfield") == job.has("procedural"))
@@ -162,6 +210,8 @@ DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) 
   if (job.has("storage"))
     d.storage = job.child("storage").choice<Storage>({{"float32", Storage::float32}, {"half", Storage::half}});
 
+  parse_table_keys(job, d);
+
   norm = {{"kind", "diffraction"},
           {"field", field_norm},
           {"range_nm", {d.range_nm.lo, d.range_nm.hi}},
@@ -174,6 +224,19 @@ DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) 
           {"storage", d.storage == Storage::float32 ? "float32" : "half"},
           {"cmf", "cie1931-2deg"},
           {"illuminant", "D65"}};
+  // Table keys enter the normalised config (and so the bundle hash) only when set, so the
+  // hashes of jobs without them stay what they were.
+  if (d.table) {
+    norm["table"] = {{"size", d.table->size ? nlohmann::json(*d.table->size) : nlohmann::json("auto")},
+                     {"mapping", d.table->power_mapping ? "power" : "linear"},
+                     {"power", d.table->power},
+                     {"f_max_per_um", d.table->f_max_per_um ? nlohmann::json(*d.table->f_max_per_um) : nlohmann::json("auto")},
+                     {"tolerance", d.table->tolerance}};
+    norm["coherence"] = d.coherence.length_um
+                            ? nlohmann::json{{"length_um", *d.coherence.length_um}}
+                            : nlohmann::json{{"source_angular_diameter_deg", d.coherence.source_angular_diameter_deg}};
+  }
+  if (job.has("max_bundle_mb")) norm["max_bundle_mb"] = d.max_bundle_mb;
   return d;
 }
 

@@ -41,6 +41,8 @@ std::string num(double v) {
   return b;
 }
 
+}  // namespace
+
 // Spectrum rows (λ nm, D65·x̄, D65·ȳ, D65·z̄) at 1 nm steps over range_nm, normalised so that
 // Σ D65·ȳ·1 nm = 1 (a perfect mirror under D65 has Y = 1).
 std::vector<double> spectrum_rows(const RangeNm& r, double& y_norm) {
@@ -74,6 +76,8 @@ std::vector<double> measurement_kappas(const Plan& p) {
   k.erase(std::unique(k.begin(), k.end()), k.end());
   return k;
 }
+
+namespace {
 
 struct Measured {
   double max_over_m2 = 0.0, at_kappa = 0.0;
@@ -250,7 +254,11 @@ json plan_json(const DiffractionSpec& spec, const Field& f, const Plan& p) {
 
 json plan(const DiffractionSpec& spec, JobContext&) {
   const Field f = make_field(spec);
-  return plan_json(spec, f, make_plan(spec, f, spec.tolerance));
+  const Plan p = make_plan(spec, f, spec.tolerance);
+  json j = plan_json(spec, f, p);
+  j["planned_bundle_mb"] = check_bundle_budget(spec, f, p);
+  if (spec.table) j["table"] = table_plan_json(spec, f, p);
+  return j;
 }
 
 namespace {
@@ -271,6 +279,7 @@ void plan_step(const DiffractionSpec& spec, JobContext& ctx, Work& w) {
   ctx.enter(Stage::plan);
   ctx.progress("field", 0.0);
   w.f = w.tm.time("field", [&] { return make_field(spec); });
+  check_bundle_budget(spec, w.f, make_plan(spec, w.f, spec.tolerance));
   w.exact = w.tm.time("exact DFT plan", [&] {
     return std::make_unique<ExactDft>(&ctx.device, w.f, crop_bins(spec, w.f.width, w.f.height, w.f.dx_um));
   });
@@ -465,6 +474,7 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
 }  // namespace
 
 BakeResult bake(const DiffractionSpec& spec, JobContext& ctx) {
+  if (spec.table) return bake_table(spec, ctx);
   BakeResult r;
   Work w;
   plan_step(spec, ctx, w);

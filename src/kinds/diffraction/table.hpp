@@ -1,0 +1,92 @@
+#pragma once
+// Diffraction tables a shader can afford (docs/diffraction.md, "Coherence and tables").
+//
+// Coherence window. The field is weighted by the amplitude window
+//   w(x, y) = exp(−(x² + y²)/(2σ²)),   σ = L/√2,
+// x, y measured from the patch centre. Its autocorrelation is exp(−|Δr|²/(2L²)): the Gaussian
+// degree of coherence of rms width L that the window stands for. A uniform disc source of
+// angular diameter θ gives, by van Cittert–Zernike, γ(d) = 2J₁(x)/x with x = πθd/λ; the Gaussian
+// of the same curvature at d = 0 (1 − x²/8 = 1 − d²/(2L²)) has L = 2λ/(πθ): 39.9 µm for the sun
+// (θ = 0.53°) at λ = 580 nm.
+//
+// Table. N×N texels; texel centre s_i = 2(i + 0.5)/N − 1 per axis maps to the spatial frequency
+// f = sign(s)·|s|^p·f_max (cycles/µm), p = 1 for the linear mapping. The terms at a texel are
+//   F_n(f_u, f_v) = Σ_j w_j·q_n(h_j)·e^{−2πi(f_u x_j + f_v y_j)} / (W·H),
+// x_j = (ix − (W − 1)/2)·dx, y_j = (iy − (H − 1)/2)·dx (centred, so F_n varies smoothly between
+// texels), evaluated directly as a separable non-uniform DFT in double precision (no FFT, no
+// interpolation: the stored values carry only the expansion's truncation and float32 rounding).
+// The reconstruction is the one of the full-bin terms: P(f;κ) = W·H·e^{iκc}·Σ_n coef_n(κ)·F_n(f).
+#include <complex>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "kinds/diffraction/planning.hpp"
+
+namespace specbake::diffraction {
+
+using cplx = std::complex<double>;
+
+// Coherence length (µm) of a uniform disc source of angular diameter `theta_rad` at `lambda_um`.
+double disc_coherence_length_um(double theta_rad, double lambda_um);
+// The job's coherence length: `length_um`, else the disc's at the middle of range_nm.
+double coherence_length_um(const DiffractionSpec& spec);
+// The wavelength (µm) a disc source's length is derived at: the middle of range_nm.
+double coherence_reference_lambda_um(const DiffractionSpec& spec);
+
+// The table's texel → frequency map.
+struct TableGeometry {
+  int size = 0;
+  double power = 1.0;  // p
+  double f_max = 0.0;  // cycles/µm
+  double s(double i) const { return 2.0 * (i + 0.5) / size - 1.0; }
+  double freq_at_s(double s) const;  // sign(s)·|s|^p·f_max
+  double freq(int i) const { return freq_at_s(s(i)); }
+  // df/ds at texel i times the texel's width in s (2/N): the texel's width in cycles/µm.
+  double width(int i) const;
+  // The continuous texel coordinate (i + 0.5 at a texel's centre... as i) of frequency f:
+  // the inverse map, i = (s + 1)·N/2 − 0.5 with s = sign(f)·(|f|/f_max)^{1/p}.
+  double texel_of(double f) const;
+};
+TableGeometry table_geometry(const DiffractionSpec& spec, int size);
+
+// The separable amplitude window over the samples (σ in µm; wx[ix]·wy[iy]).
+struct Window {
+  double sigma_um = 0.0;
+  std::vector<double> wx, wy;
+  double sum = 0.0;     // Σ_j w_j (P's value at f = 0, κ = 0)
+  double sum_sq = 0.0;  // Σ_j w_j² (Parseval: ∫∫|P|² df over one period = Σ w²/dx²)
+};
+Window make_window(const Field& f, double sigma_um);
+
+// F_n of every band's terms at every texel, over W·H: [T][iv][iu] (iv: f_v rows, iu: f_u columns).
+std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g);
+
+// The windowed field a_j = w_j·e^{iκh_j} ([iy][ix]) and its transform at one frequency by the
+// direct 2D sum (the ground truth: no expansion, no separable pass shared with table_terms).
+std::vector<cplx> windowed_field(const Field& f, const Window& w, double kappa);
+cplx direct_transform(const std::vector<cplx>& a, const Field& f, double fu, double fv);
+
+// P from stored table terms (float32 [T][N][N][2]) at texel (iu, iv) for κ in `band`.
+cplx table_value(const std::vector<float>& terms, const TableGeometry& g, const Field& f, const Band& band,
+                 double kappa, int iu, int iv);
+// Bilinear interpolation in texel coordinates (a shader's filtered fetch, clamped at the edges).
+cplx table_bilinear(const std::vector<float>& terms, const TableGeometry& g, const Field& f, const Band& band,
+                    double kappa, double tu, double tv);
+
+// The measured error of a table (see docs): at texel centres and between texels, over Σw,
+// against direct_transform, at `kappas`; and Parseval's energy ratio per κ.
+struct TableError {
+  double texel_max = 0.0, texel_p99 = 0.0, texel_at_kappa = 0.0;
+  double between_max = 0.0, between_p99 = 0.0, between_at_kappa = 0.0;
+  int texel_points = 0, between_points = 0;
+  std::vector<double> kappas, texel_per_kappa, between_per_kappa, energy_ratio;
+  nlohmann::json json() const;
+};
+TableError measure_table(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g,
+                         const std::vector<float>& terms, const std::vector<double>& kappas);
+
+// The ladder `size: auto` climbs.
+inline constexpr int kTableLadder[] = {64, 96, 128, 192, 256, 384, 512, 768, 1024};
+
+}  // namespace specbake::diffraction

@@ -1,0 +1,261 @@
+// The diffraction job with a table (`table: {size, mapping, power, f_max_per_um, tolerance}`):
+// the band/expansion plan of the full-bin job, the field weighted by the coherence window, the
+// terms F_n evaluated directly at the N×N table texels, their error measured at texels and
+// between them against direct sums, Parseval's energy ratio per κ, and the bundle size budget
+// every diffraction job obeys (table.hpp and docs/diffraction.md, "Coherence and tables").
+#include <Imath/half.h>
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "io/exr.hpp"
+#include "kinds/diffraction/diffraction_job.hpp"
+#include "kinds/diffraction/planning.hpp"
+#include "kinds/diffraction/table.hpp"
+#include "kinds/diffraction/terms.hpp"
+
+namespace specbake::diffraction {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr int kAutoRefinements = 3;
+constexpr double kMB = 1e6;
+
+std::string num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
+// Bytes of the data files: the float32 terms (.bin) and their EXR copies (float32 or half).
+double term_bytes(const DiffractionSpec& spec, double terms, double texels) {
+  return terms * texels * (8.0 + (spec.storage == Storage::half ? 4.0 : 8.0));
+}
+
+// The table sizes a bake may use: the fixed size, or the ladder's sizes within the budget.
+std::vector<int> candidate_sizes(const DiffractionSpec& spec, int terms) {
+  if (spec.table->size) return {*spec.table->size};
+  std::vector<int> out;
+  for (int n : kTableLadder)
+    if (term_bytes(spec, terms, static_cast<double>(n) * n) <= spec.max_bundle_mb * kMB) out.push_back(n);
+  return out;
+}
+
+json window_json(const DiffractionSpec& spec, const Window& w, double length_um) {
+  json j = {{"type", "gaussian amplitude"},
+            {"formula", "w(x,y) = exp(-(x^2 + y^2) / (2 sigma_um^2)), x, y from the patch centre; sigma = L/sqrt(2)"},
+            {"sigma_um", w.sigma_um},
+            {"coherence_length_um", length_um},
+            {"sum", w.sum},
+            {"sum_of_squares", w.sum_sq}};
+  if (!spec.coherence.length_um) {
+    j["source_angular_diameter_deg"] = spec.coherence.source_angular_diameter_deg;
+    j["reference_wavelength_um"] = coherence_reference_lambda_um(spec);
+    j["length_from"] = "van Cittert-Zernike, uniform disc: L = 2 lambda / (pi theta)";
+  }
+  return j;
+}
+
+json table_block(const DiffractionSpec& spec, const TableGeometry& g, const Window& w, double length_um) {
+  return {{"size", g.size},
+          {"mapping", spec.table->power_mapping ? "power" : "linear"},
+          {"power", g.power},
+          {"f_max_per_um", g.f_max},
+          {"coherence_length_um", length_um},
+          {"window", window_json(spec, w, length_um)},
+          {"texel_to_frequency",
+           "s = 2*(i + 0.5)/size - 1 per axis (i: column for f_u, row for f_v); f = sign(s)*|s|^power*f_max_per_um "
+           "cycles/um; the shader looks up f = (u, v)/lambda_um"},
+          {"origin", "x, y measured from the patch centre ((W-1)/2, (H-1)/2 samples): F_n differs from terms.bin's "
+                     "corner-origin bins by a phase only"}};
+}
+
+}  // namespace
+
+double check_bundle_budget(const DiffractionSpec& spec, const Field& f, const Plan& p) {
+  const double terms = p.total_terms;
+  const double budget = spec.max_bundle_mb * kMB;
+  if (!spec.table) {
+    const double bytes = term_bytes(spec, terms, static_cast<double>(p.bins.ku_count()) * p.bins.kv_count());
+    if (bytes > budget)
+      throw InputError(spec.budget_at,
+                       "the planned bundle is " + num(bytes / kMB) + " MB, above max_bundle_mb = " +
+                           num(spec.max_bundle_mb) + ": " + std::to_string(p.total_terms) + " terms (tolerance " +
+                           num(spec.tolerance) + ", y_max " + num(p.y_max) + ") x " +
+                           std::to_string(p.bins.ku_count()) + " x " + std::to_string(p.bins.kv_count()) +
+                           " bins (field " + std::to_string(f.width) + " x " + std::to_string(f.height) + ", dx_um " +
+                           num(f.dx_um) + ", range_nm lower end " + num(spec.range_nm.lo) +
+                           ") x 16 bytes; use a table (table: {size: 256}) or raise max_bundle_mb");
+    return bytes / kMB;
+  }
+  const int n = spec.table->size ? *spec.table->size : kTableLadder[0];
+  const double bytes = term_bytes(spec, terms, static_cast<double>(n) * n);
+  if (bytes > budget)
+    throw InputError(spec.budget_at,
+                     "the planned bundle is " + num(bytes / kMB) + " MB, above max_bundle_mb = " +
+                         num(spec.max_bundle_mb) + ": " + std::to_string(p.total_terms) + " terms (tolerance " +
+                         num(spec.tolerance) + ", y_max " + num(p.y_max) + ") x table " + std::to_string(n) + " x " +
+                         std::to_string(n) + (spec.table->size ? "" : " (the smallest of size: auto)") +
+                         " x 16 bytes; lower table.size, loosen tolerance or raise max_bundle_mb");
+  return bytes / kMB;
+}
+
+json table_plan_json(const DiffractionSpec& spec, const Field& f, const Plan& p) {
+  const double length = coherence_length_um(spec);
+  const Window w = make_window(f, length / std::sqrt(2.0));
+  const auto sizes = candidate_sizes(spec, p.total_terms);
+  const TableGeometry g = table_geometry(spec, sizes.empty() ? 0 : sizes.front());
+  json j = table_block(spec, g, w, length);
+  j["size"] = spec.table->size ? json(*spec.table->size) : json("auto");
+  j["candidate_sizes"] = sizes;
+  return j;
+}
+
+BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
+  BakeResult r;
+  Timings tm;
+  ctx.enter(Stage::plan);
+  ctx.progress("field", 0.0);
+  const Field f = tm.time("field", [&] { return make_field(spec); });
+  check_bundle_budget(spec, f, make_plan(spec, f, spec.tolerance));
+  const double length = coherence_length_um(spec);
+  const Window win = make_window(f, length / std::sqrt(2.0));
+
+  ctx.enter(Stage::compute);
+  Plan p;
+  TableGeometry g;
+  std::vector<float> values;
+  TableError err;
+  json attempts = json::array();
+  double target = spec.tolerance;
+  for (int refinement = 0;; ++refinement) {
+    p = tm.time("plan", [&] { return make_plan(spec, f, target); });
+    const auto sizes = candidate_sizes(spec, p.total_terms);
+    if (sizes.empty())
+      throw JobError("table: auto: " + std::to_string(p.total_terms) + " terms leave no table size of the ladder within " +
+                     "max_bundle_mb = " + num(spec.max_bundle_mb));
+    const auto kappas = measurement_kappas(p);
+    for (std::size_t k = 0; k < sizes.size(); ++k) {
+      g = table_geometry(spec, sizes[k]);
+      ctx.progress("table terms", 0.1 + 0.6 * k / sizes.size());
+      const auto terms = tm.time("table terms", [&] { return table_terms(f, win, p.bands, g); });
+      values.resize(2 * terms.size());
+      for (std::size_t i = 0; i < terms.size(); ++i) {
+        values[2 * i] = static_cast<float>(terms[i].real());
+        values[2 * i + 1] = static_cast<float>(terms[i].imag());
+      }
+      err = tm.time("error measurement", [&] { return measure_table(f, win, p.bands, g, values, kappas); });
+      attempts.push_back({{"target", target}, {"terms", p.total_terms}, {"size", g.size},
+                          {"at_texels_max", err.texel_max}, {"between_texels_max", err.between_max}});
+      spdlog::debug("table {}: {} terms, error at texels {:.3g}, between texels {:.3g}", g.size, p.total_terms,
+                    err.texel_max, err.between_max);
+      if (err.between_max <= spec.table->tolerance) break;
+    }
+    if (spec.terms || err.texel_max <= spec.tolerance || refinement == kAutoRefinements) break;
+    spdlog::info("table: measured {:.3g} at texels > tolerance {:.3g} with {} terms; tightening the target",
+                 err.texel_max, spec.tolerance, p.total_terms);
+    target *= 0.25;
+  }
+  if (!spec.table->size && err.between_max > spec.table->tolerance)
+    throw JobError("table: size: auto: no size of the ladder up to " + std::to_string(g.size) +
+                   " meets table.tolerance " + num(spec.table->tolerance) + " between texels (largest: " +
+                   num(err.between_max) + " x the window's sum at kappa = " + num(err.between_at_kappa) +
+                   "); use mapping: power, a shorter coherence length, or a looser table.tolerance");
+  if (err.texel_max > spec.tolerance)
+    r.warnings.push_back("THE TABLE'S TEXELS DO NOT MEET THE TOLERANCE: measured " + num(err.texel_max) +
+                         " x the window's sum at kappa = " + num(err.texel_at_kappa) + " rad/um, tolerance " +
+                         num(spec.tolerance));
+  if (spec.table->size && err.between_max > spec.table->tolerance)
+    r.warnings.push_back("the fixed table size " + std::to_string(g.size) + " gives " + num(err.between_max) +
+                         " x the window's sum between texels, above table.tolerance " + num(spec.table->tolerance));
+  double min_energy = 1e300;
+  for (double e : err.energy_ratio) min_energy = std::min(min_energy, e);
+
+  ctx.enter(Stage::check);
+  json error = err.json();
+  error["tolerance_at_texels"] = spec.tolerance;
+  error["tolerance_between_texels"] = spec.table->tolerance;
+  error["normalisation"] = "|P - P_exact| / sum_j w_j (the window's sum: |P| at f = 0, kappa = 0)";
+  error["attempts"] = attempts;
+  r.accuracy.push_back(Accuracy::judged(
+      "table_vs_exact_transform", "max |P - P_exact| / sum(w) at table texels over the kappas checked", err.texel_max,
+      spec.tolerance, "direct double-precision sum of w * exp(i kappa h) (non-uniform DFT)", error));
+  r.accuracy.push_back(Accuracy::judged(
+      "table_between_texels", "max |P_bilinear - P_exact| / sum(w) between texels over the kappas checked",
+      err.between_max, spec.table->tolerance, "direct double-precision sum of w * exp(i kappa h) (non-uniform DFT)",
+      {{"p99", err.between_p99}, {"at_kappa", err.between_at_kappa}}));
+  r.accuracy.push_back(Accuracy::judged(
+      "table_energy", "min over kappa of sum |P|^2 * texel area / (sum w^2 / dx^2) (Parseval; 1 = all energy kept)",
+      min_energy, std::nullopt, "the window's energy",
+      {{"kappas", err.kappas}, {"energy_ratio", err.energy_ratio}}));
+
+  ctx.enter(Stage::files);
+  ctx.progress("files", 0.9);
+  json block = {{"size", f.width == f.height ? json(f.width) : json({f.width, f.height})},
+                {"dx_um", f.dx_um},
+                {"center_um", f.c},
+                {"scale_um", f.s},
+                {"bands", bands_json(p.bands)},
+                {"terms", p.total_terms},
+                {"expansion", spec.expansion == Expansion::taylor ? "taylor" : "chebyshev"},
+                {"kappa_range", {p.kappa_lo, p.kappa_hi}},
+                {"y_max", p.y_max},
+                {"formula",
+                 "P(f;kappa) = M^2 * exp(i*kappa*center_um) * sum_{n<terms} coef_n * F[first_term+n][iv][iu] over the "
+                 "band holding kappa; taylor: coef_n = ((kappa-kappa_expansion)*scale_um)^n/n!; chebyshev: coef_n = "
+                 "T_n((kappa-kappa_expansion)/delta). kappa = 2*pi*w/lambda_um. M^2 = width*height."},
+                {"dft_sign", "F(fu,fv) = sum w f[iy][ix] exp(-2 pi i (fu x + fv y)) / (W H), x = (ix-(W-1)/2) dx_um, "
+                             "y = (iy-(H-1)/2) dx_um; fu pairs with x"},
+                {"table", table_block(spec, g, win, length)},
+                {"error", error}};
+  r.parameters = {{"source", spec.source},
+                  {"expansion", spec.expansion == Expansion::taylor ? "taylor" : "chebyshev"},
+                  {"terms", p.total_terms},
+                  {"kappa_range", {p.kappa_lo, p.kappa_hi}},
+                  {"y_max", p.y_max},
+                  {"bands", bands_json(p.bands)},
+                  {"table_size", g.size},
+                  {"coherence_length_um", length},
+                  {"tolerance", spec.tolerance}};
+  const int n = g.size;
+  const std::string le = "little-endian float32, C order";
+  r.files.push_back({"table_terms.bin", float32_le(values, "table terms"), "float32", {p.total_terms, n, n, 2},
+                     le + "; [n][iv][iu][re,im], texel centres s = 2(i+0.5)/N - 1 mapped as the manifest's table block",
+                     "1", "F_n of every band's terms at the table texels (see the manifest's diffraction block)"});
+  double y_norm = 0.0;
+  const auto spectrum = spectrum_rows(spec.range_nm, y_norm);
+  r.files.push_back({"spectrum.bin", float32_le(spectrum, "spectrum"), "float32",
+                     {static_cast<std::int64_t>(spectrum.size() / 4), 4}, le + "; [l][lambda_nm, X, Y, Z]", "nm, 1/nm",
+                     "lambda and D65 * CIE 1931 xbar, ybar, zbar at 1 nm steps, normalised so sum(Y) * 1 nm = 1"});
+  r.parameters["spectrum_normalisation"] = y_norm;
+  const std::size_t per = static_cast<std::size_t>(n) * n;
+  for (const auto& band : p.bands)
+    for (int t = 0; t < band.terms; ++t) {
+      const int term = band.first_term + t;
+      ExrImage img;
+      img.width = n;
+      img.height = n;
+      img.channels = {"R", "G"};
+      img.half = spec.storage == Storage::half;
+      img.zip = img.half;
+      img.pixels.assign(values.begin() + 2 * term * per, values.begin() + 2 * (term + 1) * per);
+      img.attributes = {{"specbake.term", std::to_string(term)},
+                        {"specbake.expansion", band.expansion == Expansion::taylor ? "taylor" : "chebyshev"},
+                        {"specbake.band_order", std::to_string(t)},
+                        {"specbake.kappa_expansion", num(band.kappa0)},
+                        {"specbake.channels", "R = Re F_n, G = Im F_n; rows iv (f_v), columns iu (f_u), table texels"}};
+      char path[64];
+      std::snprintf(path, sizeof path, "table/F_%03d.exr", term);
+      r.files.push_back({path, tm.time("EXR", [&] { return exr_bytes(img); }), img.half ? "half" : "float32",
+                         {n, n, 2}, "EXR, R = Re, G = Im", "1", "term " + std::to_string(term) + " of table_terms.bin"});
+    }
+  block["timings_s"] = tm.json();
+  r.manifest_blocks["diffraction"] = block;
+  ctx.progress("done", 1.0);
+  return r;
+}
+
+}  // namespace specbake::diffraction

@@ -1,0 +1,203 @@
+// Diffraction tables: the texel map, the coherence length of a disc source, table terms against
+// direct double-precision sums of the windowed field (symmetric, asymmetric and tall fields),
+// Parseval's energy over the table, and the table keys, bundle and size budget through the CLI.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <complex>
+
+#include "job/kind.hpp"
+#include "kinds/diffraction/diffraction_job.hpp"
+#include "kinds/diffraction/planning.hpp"
+#include "kinds/diffraction/table.hpp"
+#include "kinds/diffraction/terms.hpp"
+#include "support/testing.hpp"
+
+using namespace specbake;
+using namespace specbake::diffraction;
+namespace tst = specbake::testing;
+
+namespace {
+
+constexpr double kPi = 3.141592653589793238462643;
+
+DiffractionSpec grating(ProceduralField::Type type, int size, double dx, double period, double height, int table,
+                        double power, double length_um) {
+  DiffractionSpec s;
+  ProceduralField p;
+  p.type = type;
+  p.size = size;
+  p.dx_um = dx;
+  p.period_um = period;
+  p.amplitude_um = height;
+  s.procedural = p;
+  TableSpec t;
+  t.size = table;
+  t.power = power;
+  t.power_mapping = power != 1.0;
+  s.table = t;
+  s.coherence.length_um = length_um;
+  return s;
+}
+
+struct Baked {
+  Field f;
+  Plan p;
+  Window w;
+  TableGeometry g;
+  std::vector<float> values;
+};
+
+Baked bake_table_terms(const DiffractionSpec& spec) {
+  Baked b;
+  b.f = make_field(spec);
+  b.p = make_plan(spec, b.f, spec.tolerance);
+  b.w = make_window(b.f, coherence_length_um(spec) / std::sqrt(2.0));
+  b.g = table_geometry(spec, *spec.table->size);
+  const auto t = table_terms(b.f, b.w, b.p.bands, b.g);
+  for (const cplx& v : t) {
+    b.values.push_back(static_cast<float>(v.real()));
+    b.values.push_back(static_cast<float>(v.imag()));
+  }
+  return b;
+}
+
+// Every texel at κ against the direct sum. The bound over M²: the band's truncation bound
+// (rigorous: a per-sample remainder weighted by w_j ≤ 1) plus its roundoff estimate, which here
+// covers float32 storage of double-precision values (u·|coef_n|·|F_n| per term, |F_n| ≤ rms|q_n|)
+// 4× over; the double sums add ~1e-16·M².
+double worst_over_bound(const Baked& b, double kappa, bool mirror) {
+  const Band& band = band_for(b.p.bands, kappa);
+  const double bound = (band.bound_truncation + band.bound_roundoff) * b.f.count();
+  const auto a = windowed_field(b.f, b.w, kappa);
+  double worst = 0.0;
+  for (int iv = 0; iv < b.g.size; ++iv)
+    for (int iu = 0; iu < b.g.size; ++iu) {
+      const double fu = b.g.freq(iu) * (mirror ? -1.0 : 1.0), fv = b.g.freq(iv);
+      const cplx ex = direct_transform(a, b.f, fu, fv);
+      worst = std::max(worst, std::abs(table_value(b.values, b.g, b.f, band, kappa, iu, iv) - ex) / bound);
+    }
+  return worst;
+}
+
+}  // namespace
+
+TEST(DiffractionTable, TexelMapAndItsInverse) {
+  TableGeometry g{64, 3.0, 5.0};
+  for (int i = 0; i < 64; ++i) {
+    EXPECT_NEAR(g.texel_of(g.freq(i)), i, 1e-9) << i;  // round trip, exact up to pow's rounding
+    EXPECT_DOUBLE_EQ(g.freq(i), -g.freq(63 - i));       // odd map, centre between texels 31 and 32
+  }
+  EXPECT_NEAR(g.freq(63), 5.0 * std::pow(63.0 / 64.0, 3.0), 1e-12);
+  // Linear: the texel widths tile [−f_max, f_max] exactly.
+  TableGeometry lin{100, 1.0, 2.5};
+  double sum = 0;
+  for (int i = 0; i < 100; ++i) sum += lin.width(i);
+  EXPECT_NEAR(sum, 5.0, 1e-12);
+}
+
+TEST(DiffractionTable, DiscCoherenceLengthMatchesVanCittertZernikeCurvature) {
+  const double theta = 0.53 * kPi / 180.0, lambda = 0.58;
+  const double L = disc_coherence_length_um(theta, lambda);
+  EXPECT_NEAR(L, 39.9, 0.05);  // the figure the docs quote for the sun
+  // 1 − 2J1(x)/x against 1 − exp(−d²/2L²) at small d: equal to O(d²) relative (x⁴/192 next term).
+  for (double d : {0.01 * L, 0.03 * L}) {
+    const double x = kPi * theta * d / lambda;
+    const double disc = 1.0 - 2.0 * std::cyl_bessel_j(1.0, x) / x, gauss = 1.0 - std::exp(-d * d / (2 * L * L));
+    // Relative difference ≈ d²/L²·(1/4 − 1/6)... bounded by d²/L² for d ≤ 0.03 L.
+    EXPECT_NEAR(disc / gauss, 1.0, (d / L) * (d / L)) << d;
+  }
+}
+
+TEST(DiffractionTable, SymmetricAndAsymmetricFieldsMatchDirectSums) {
+  // Sine grating (its pattern is symmetric under f → −f) and blazed grating (a sawtooth: its
+  // orders are not, so a flipped sign of f is visible), 24² samples, window L = 2 µm over a 3 µm patch.
+  for (auto type : {ProceduralField::Type::sine_grating, ProceduralField::Type::blazed_grating}) {
+    const auto spec = grating(type, 24, 0.125, 0.75, 0.2, 16, 2.0, 2.0);
+    const Baked b = bake_table_terms(spec);
+    for (double kappa : {0.0, 0.5 * b.p.kappa_hi, b.p.kappa_hi})
+      EXPECT_LE(worst_over_bound(b, kappa, false), 1.0) << static_cast<int>(type) << " kappa " << kappa;
+    if (type == ProceduralField::Type::blazed_grating)
+      EXPECT_GT(worst_over_bound(b, b.p.kappa_hi, true), 100.0) << "a mirrored f_u must be detected";
+  }
+}
+
+TEST(DiffractionTable, TallFieldAcrossBands) {
+  // y_max = κ_hi·s ≈ 40: amplitude 1.21 µm, κ_hi = 2π·2/0.38 µm.
+  const auto spec = grating(ProceduralField::Type::sine_grating, 20, 0.1, 0.4, 1.21, 12, 1.0, 1.5);
+  const Baked b = bake_table_terms(spec);
+  ASSERT_NEAR(b.p.y_max, 40.0, 0.1);
+  ASSERT_GT(b.p.bands.size(), 1u);
+  for (double kappa : measurement_kappas(b.p))
+    EXPECT_LE(worst_over_bound(b, kappa, false), 1.0) << "kappa " << kappa;
+}
+
+TEST(DiffractionTable, ParsevalOverOnePeriodAndACoarseTableBreaksIt) {
+  // 16² samples at dx = 0.25 µm; f_max = 2 = 1/(2dx) spans one period of P(f). |P|² is a
+  // trigonometric polynomial of degree ≤ 15 in f·dx, so the midpoint rule over N ≥ 16 uniform
+  // texels of the period integrates it exactly: the ratio is 1 up to the stored values' error
+  // (relative r = bound·M²/rms|P|: |ratio − 1| ≤ 2r + r²). N = 8 does not integrate it.
+  auto spec = grating(ProceduralField::Type::eggcrate, 16, 0.25, 1.0, 0.3, 32, 1.0, 1e6);
+  spec.table->f_max_per_um = 2.0;
+  for (int n : {32, 8}) {
+    spec.table->size = n;
+    const Baked b = bake_table_terms(spec);
+    const auto e = measure_table(b.f, b.w, b.p.bands, b.g, b.values, {0.0, 0.5 * b.p.kappa_hi, b.p.kappa_hi});
+    for (std::size_t k = 0; k < e.kappas.size(); ++k) {
+      const double kappa = e.kappas[k];
+      const Band& band = band_for(b.p.bands, kappa);
+      double ms = 0;
+      for (int iv = 0; iv < n; ++iv)
+        for (int iu = 0; iu < n; ++iu) ms += std::norm(table_value(b.values, b.g, b.f, band, kappa, iu, iv));
+      const double r = (band.bound_truncation + band.bound_roundoff) * b.f.count() / std::sqrt(ms / (n * n));
+      if (n == 32)
+        EXPECT_NEAR(e.energy_ratio[k], 1.0, 2 * r + r * r) << "kappa " << kappa;
+      else if (kappa > 0)
+        EXPECT_GT(std::fabs(e.energy_ratio[k] - 1.0), 1e-2) << "kappa " << kappa;
+    }
+  }
+}
+
+TEST(DiffractionTable, CliBundleBudgetAndBadKeys) {
+  tst::TempDir dir;
+  const std::string head = "specbake: 1\noutput: out\ndevice: auto\njobs:\n  - name: d\n    kind: diffraction\n";
+  const std::string field = "    procedural: {type: blazed-grating, size: 32, dx_um: 0.125, period_um: 1.0, depth_um: 0.2}\n";
+  tst::write_file(dir / "c.yaml", head + field + "    table: {size: 32, mapping: power, power: 2}\n    coherence: {length_um: 3}\n");
+  auto r = tst::run_cli({"run", (dir / "c.yaml").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const fs::path b = dir / "out/d/latest";
+  const auto m = tst::read_json(b / "manifest.json");
+  const auto& t = m["diffraction"]["table"];
+  EXPECT_EQ(t["size"], 32);
+  EXPECT_EQ(t["mapping"], "power");
+  EXPECT_DOUBLE_EQ(t["coherence_length_um"].get<double>(), 3.0);
+  EXPECT_NEAR(t["window"]["sigma_um"].get<double>(), 3.0 / std::sqrt(2.0), 1e-12);
+  const int T = m["diffraction"]["terms"].get<int>();
+  EXPECT_EQ(tst::read_f32(b / "table_terms.bin").size(), static_cast<std::size_t>(T) * 32 * 32 * 2);
+  EXPECT_FALSE(fs::exists(b / "terms.bin"));
+  EXPECT_TRUE(fs::exists(b / "table/F_000.exr"));
+  EXPECT_TRUE(find_accuracy(m["accuracy"], "table_vs_exact_transform"));
+
+  struct Case {
+    std::string body, expect;
+  };
+  const std::vector<Case> cases = {
+      // A 1024² field's full bins: 16 bytes × T × ~1100² bins, far above 1 MB.
+      {"    procedural: {type: sine-grating, size: 1024, dx_um: 0.05, period_um: 1.0, amplitude_um: 0.2}\n"
+       "    max_bundle_mb: 1\n", "max_bundle_mb"},
+      {field + "    table: {size: 1024}\n    max_bundle_mb: 2\n", "table 1024 x 1024"},
+      {field + "    coherence: {length_um: 3}\n", "coherence"},
+      {field + "    table: {size: 33}\n", "table.size"},
+      {field + "    table: {size: 32, power: 2}\n", "table.power"},
+      {field + "    table: {size: 32}\n    coherence: {length_um: 3, source_angular_diameter_deg: 0.5}\n", "coherence"},
+      {field + "    table: {size: 32, mapping: cubic}\n", "table.mapping"},
+  };
+  for (const auto& c : cases) {
+    fs::remove_all(dir / "out");
+    tst::write_file(dir / "c.yaml", head + c.body);
+    r = tst::run_cli({"run", (dir / "c.yaml").string()});
+    EXPECT_EQ(r.exit_code, 3) << c.body << r.err;
+    EXPECT_NE((r.out + r.err).find(c.expect), std::string::npos) << c.expect << " not named in:\n" << r.err;
+    EXPECT_FALSE(fs::exists(dir / "out/d/latest")) << "a bundle was written for " << c.body;
+  }
+}
