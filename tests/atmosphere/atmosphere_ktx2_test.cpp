@@ -1,0 +1,95 @@
+// Atmosphere bundles with `formats: [bin, exr, ktx2]`: the KTX2 textures hold the same texels
+// as the .bin files (float32: bit for bit; half: within the recorded, measured rounding), with
+// the geometry an engine needs to sample them.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+
+#include "io/ktx2.hpp"
+#include "job/kind.hpp"
+#include "support/testing.hpp"
+
+namespace {
+
+namespace t = specbake::testing;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+std::string read(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+std::vector<float> bin_floats(const fs::path& p) {
+  const std::string b = read(p);
+  std::vector<float> v(b.size() / 4);
+  std::memcpy(v.data(), b.data(), b.size());
+  return v;
+}
+
+fs::path bake(const t::TempDir& tmp, const std::string& ktx2) {
+  t::write_file(tmp / "sky.yaml",
+                "specbake: 1\noutput: out\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 2\n"
+                "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+                "    formats: [bin, exr, ktx2]\n    ktx2: " + ktx2 + "\n");
+  const auto r = t::run_cli({"run", (tmp / "sky.yaml").string()}, tmp.path());
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  return fs::canonical(tmp / "out" / "sky" / "latest");
+}
+
+TEST(AtmosphereKtx2, HalfTexturesCarryTheirMeasuredRounding) {
+  t::TempDir tmp;
+  const fs::path b = bake(tmp, "{format: rgba16f}");
+  const json m = t::read_json(b / "manifest.json");
+  for (const char* name : {"transmittance", "irradiance", "scattering", "single_mie_scattering"}) {
+    SCOPED_TRACE(name);
+    const auto k = specbake::read_ktx2(read(b / (std::string(name) + ".ktx2")), name);
+    EXPECT_EQ(k.vk_format, specbake::kVkFormatR16G16B16A16Sfloat);
+    const bool is3d = std::string(name).find("scattering") != std::string::npos;
+    EXPECT_EQ(k.depth, is3d ? 4u : 0u);  // r = 4 slices for the 3D textures, 0 for 2D
+    EXPECT_EQ(k.width, is3d ? 3u * 6u : (std::string(name) == "transmittance" ? 32u : 16u));
+    ASSERT_NE(k.value("specbake.layout"), nullptr);
+    const auto f = bin_floats(b / (std::string(name) + ".bin"));  // [..][3]
+    ASSERT_EQ(k.rgba.size() / 4, f.size() / 3);
+    std::vector<float> widened(f.size());
+    for (std::size_t i = 0; i < f.size() / 3; ++i) {
+      for (int c = 0; c < 3; ++c) widened[3 * i + c] = k.rgba[4 * i + c];
+      EXPECT_EQ(k.rgba[4 * i + 3], 1.0f);
+    }
+    const specbake::HalfPrecision h = specbake::measure_half(f, widened);
+    // A half file that holds the float data unrounded is not half (its values are not all
+    // binary16 numbers, so the widened data cannot be bit-identical).
+    EXPECT_FALSE(h.identical_to_float);
+    // Round to nearest even: relative error <= 2^-11 for normal halfs.
+    EXPECT_LE(h.max_rel_error, std::ldexp(1.0, -11));
+    const json* rec = specbake::find_accuracy(m["accuracy"], std::string("half:") + name + ".ktx2");
+    ASSERT_NE(rec, nullptr);
+    EXPECT_EQ(rec->at("value").get<double>(), h.max_rel_error);  // the manifest records what the file holds
+    EXPECT_TRUE(rec->at("passed").get<bool>());
+  }
+}
+
+TEST(AtmosphereKtx2, FloatTexturesAreTheBinValuesBitForBit) {
+  t::TempDir tmp;
+  const fs::path b = bake(tmp, "{format: rgba32f, zstd: true}");
+  const auto k = specbake::read_ktx2(read(b / "scattering.ktx2"), "scattering.ktx2");
+  EXPECT_EQ(k.vk_format, specbake::kVkFormatR32G32B32A32Sfloat);
+  EXPECT_EQ(k.supercompression, specbake::kKtx2SupercompressionZstd);
+  const auto f = bin_floats(b / "scattering.bin");
+  ASSERT_EQ(k.rgba.size() / 4, f.size() / 3);
+  for (std::size_t i = 0; i < f.size() / 3; ++i)
+    for (int c = 0; c < 3; ++c) ASSERT_EQ(k.rgba[4 * i + c], f[3 * i + c]) << i;
+}
+
+TEST(AtmosphereKtx2, SettingsWithoutTheFormatAreRefused) {
+  t::TempDir tmp;
+  t::write_file(tmp / "bad.yaml",
+                "specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n    ktx2: {format: rgba16f}\n");
+  const auto r = t::run_cli({"plan", (tmp / "bad.yaml").string()}, tmp.path());
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_NE(r.err.find("bad.yaml:5:"), std::string::npos) << r.err;
+}
+
+}  // namespace
