@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <string>
 
+#include "core/errors.hpp"
 #include "io/heightfield.hpp"
 
 inline int fuzz_heightfield(const std::uint8_t* data, std::size_t size, specbake::HeightfieldFormat format,
