@@ -467,6 +467,7 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
 BakeResult bake(const DiffractionSpec& spec, JobContext& ctx) {
   BakeResult r;
   Work w;
+  w.tm.use(&ctx.device.profiler());
   plan_step(spec, ctx, w);
   compute_step(spec, ctx, w, r);
   check_step(spec, ctx, w, r);
