@@ -25,13 +25,20 @@ cl::Buffer device_real(Device& dev, std::size_t count) {
 
 std::vector<double> download_real(Device& dev, const cl::Buffer& buf, std::size_t count) {
   return checked("reading a device buffer", [&] {
+    // A blocking read: the call waits for the device (and for every command before it).
+    auto read = [&](std::size_t bytes, void* to) {
+      if (!count) return;
+      cl::Event ev;
+      dev.profiler().wait([&] { dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, bytes, to, nullptr, &ev); });
+      dev.profiler().record(ev);
+    };
     if (dev.info().fp64) {
       std::vector<double> v(count);
-      if (count) dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, count * sizeof(double), v.data());
+      read(count * sizeof(double), v.data());
       return v;
     }
     std::vector<float> f(count);
-    if (count) dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, count * sizeof(float), f.data());
+    read(count * sizeof(float), f.data());
     return std::vector<double>(f.begin(), f.end());
   });
 }
@@ -46,8 +53,10 @@ void set_real_arg(Device& dev, cl::Kernel& k, cl_uint index, double value) {
 
 void run_1d(Device& dev, cl::Kernel& k, std::size_t count) {
   checked("running a kernel", [&] {
-    dev.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(count), cl::NullRange);
-    dev.queue().finish();
+    cl::Event ev;
+    dev.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(count), cl::NullRange, nullptr, &ev);
+    dev.profiler().record(ev);
+    dev.profiler().wait([&] { dev.queue().finish(); });
     return 0;
   });
 }

@@ -13,6 +13,7 @@ cl::Buffer upload_real(Device& dev, const std::vector<double>& values);
 cl::Buffer device_real(Device& dev, std::size_t count);  // uninitialised, read-write
 std::vector<double> download_real(Device& dev, const cl::Buffer& buf, std::size_t count);
 void set_real_arg(Device& dev, cl::Kernel& k, cl_uint index, double value);
-void run_1d(Device& dev, cl::Kernel& k, std::size_t count);  // enqueue + finish
+// Enqueue + finish; the command and the wait are recorded in dev.profiler(), as are the reads.
+void run_1d(Device& dev, cl::Kernel& k, std::size_t count);
 
 }  // namespace specbake::cl_util

@@ -179,7 +179,7 @@ Device::Device(const DeviceInfo& info) : info_(info) {
   checked("creating the OpenCL context", [&] {
     device_ = device_at(info.platform_index, info.device_index);
     context_ = cl::Context(device_);
-    queue_ = cl::CommandQueue(context_, device_);
+    queue_ = cl::CommandQueue(context_, device_, CL_QUEUE_PROFILING_ENABLE);
     return 0;
   });
 }

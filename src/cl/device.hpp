@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "cl/timing.hpp"
 #include "core/errors.hpp"
 
 namespace specbake::cl_util {
@@ -40,7 +41,10 @@ class Device {
   explicit Device(const DeviceInfo& info);
   const DeviceInfo& info() const { return info_; }
   cl::Context& context() { return context_; }
-  cl::CommandQueue& queue() { return queue_; }
+  cl::CommandQueue& queue() { return queue_; }  // in order, with CL_QUEUE_PROFILING_ENABLE
+  // Device and host seconds of the stages that callers open (cl/timing.hpp); every command
+  // enqueued through the helpers of this layer is recorded here.
+  Profiler& profiler() { return profiler_; }
   // Builds the embedded kernel file (includes resolved), once per (path, options); the
   // build log goes to spdlog, and a failed build throws DeviceError carrying the log.
   cl::Program build(const std::string& kernel_path, const std::string& options = "");
@@ -64,6 +68,7 @@ class Device {
   cl::Context context_;
   cl::CommandQueue queue_;
   std::map<std::string, cl::Program> programs_;
+  Profiler profiler_;
   std::map<std::string, std::shared_ptr<void>> reusable_;  // declared last: released before the context
 };
 

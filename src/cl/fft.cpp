@@ -70,10 +70,15 @@ void Fft2d::forward(cl::Buffer& buffer, std::size_t first_array) {
   launch.commandQueue = &impl_->queue;
   launch.buffer = &mem;
   launch.bufferOffset = first_array * (bytes() / batch_);
+  // VkFFT enqueues its kernels without events: they are timed as the span between two markers.
+  cl::Event before, after;
+  checked("VkFFT forward transform: marker", [&] { return dev_.queue().enqueueMarkerWithWaitList(nullptr, &before); });
   const VkFFTResult r = VkFFTAppend(&impl_->app, -1, &launch);
   if (r != VKFFT_SUCCESS)
     throw DeviceError("VkFFT forward transform failed (VkFFTResult " + std::to_string(static_cast<int>(r)) + ")");
-  const cl_int err = clFinish(impl_->queue);
+  checked("VkFFT forward transform: marker", [&] { return dev_.queue().enqueueMarkerWithWaitList(nullptr, &after); });
+  dev_.profiler().record_span(before, after);
+  const cl_int err = dev_.profiler().wait([&] { return clFinish(impl_->queue); });
   if (err != CL_SUCCESS) throw DeviceError(std::string("VkFFT forward transform: clFinish returned ") + error_name(err));
 }
 

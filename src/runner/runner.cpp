@@ -11,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <set>
 
 #include "core/hash.hpp"
@@ -405,18 +406,19 @@ std::vector<JobReport> Runner::run() {
           cl_util::Device& dev = devices.get(info);
           const double estimate_s = kind.cost_s(*it.job);
           const auto tb = Clock::now();
-          auto stage_start = tb;
           JobContext ctx{dev};
           ProgressEvent ev;
           ev.index = static_cast<int>(index) + 1;
           ev.count = static_cast<int>(items.size());
           ev.job = name;
+          // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
+          std::vector<cl_util::Profiler::Record> steps;
+          std::optional<cl_util::Profiler::Stage> step(std::in_place, dev.profiler(), to_string(ev.stage));
           ctx.on_stage = [&](Stage s) {
-            const auto now = Clock::now();
-            stage_s[to_string(ev.stage)] =
-                stage_s.value(to_string(ev.stage), 0.0) + std::chrono::duration<double>(now - stage_start).count();
-            stage_start = now;
+            steps.push_back(step->close());
+            step.reset();
             ev.stage = s;
+            step.emplace(dev.profiler(), to_string(s));
             throw_if_stopped();
           };
           ctx.progress = [&](std::string_view what, double f) {
@@ -432,8 +434,17 @@ std::vector<JobReport> Runner::run() {
             if (progress_) progress_(ev);
           };
           BakeResult result = kind.bake(*it.job, ctx);
-          ctx.on_stage(ev.stage);  // closes the last step's time
+          steps.push_back(step->close());  // the last step
+          step.reset();
+          dev.profiler().settle();
           const double bake_s = seconds_since(tb);
+          std::map<std::string, cl_util::StageSeconds> step_total;
+          for (const auto& rec : steps) cl_util::accumulate(step_total[rec->stage], *rec);
+          for (const auto& [step_name, sec] : step_total) {
+            stage_s[step_name] = cl_util::seconds_json(sec);
+            spdlog::debug("{}: step {}: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", name, step_name, sec.device_s,
+                          sec.host_s(), sec.wall_s);
+          }
           for (const auto& w : result.warnings) spdlog::warn("{}: {}", name, w);
           throw_if_stopped();
 

@@ -106,8 +106,8 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   acc.single_pass = passes == 1;
   out.passes = json::array();
   out.self_checks = json::array();
-  std::map<std::string, double> stage_total;
-  std::map<int, std::map<std::string, double>> per_order;
+  std::map<std::string, cl_util::StageSeconds> stage_total;
+  std::map<int, std::map<std::string, cl_util::StageSeconds>> per_order;
 
   // pass channels → R,G,B: identity in rgb mode, the CIE weights in spectral mode
   auto to_rgb = [&](int first, int count, const std::vector<double>& v, std::size_t texels) {
@@ -139,8 +139,8 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     const double p0 = 0.9 * p / passes, p1 = 0.9 * (p + 1) / passes;
     const PassResult r = run_pass(*backend, m, plan, progress, p0, p1, hook, on_order);
     for (const StageTime& t : r.timings) {
-      stage_total[t.stage] += t.seconds;
-      per_order[t.order][t.stage] += t.seconds;
+      cl_util::accumulate(stage_total[t.stage], t.seconds);
+      cl_util::accumulate(per_order[t.order][t.stage], t.seconds);
     }
     for (const auto& o : r.orders) acc.relative[o.order] = std::max(acc.relative[o.order], o.relative);
     const auto add_into = [&](std::vector<double>& dst, const std::vector<double>& src, std::size_t texels) {
@@ -158,14 +158,24 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   if (sp.spectral) {
     // The render-time transmittance is at 680/550/440 nm, as the GPU model's luminance mode.
     const auto t0 = std::chrono::steady_clock::now();
-    auto b = make(rgb, 3);
+    auto b = make(rgb, 3);  // builds the 3-channel program: host time of this stage
+    const double make_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    cl_util::Profiler own;
+    cl_util::Profiler& prof = b->profiler() ? *b->profiler() : own;
+    cl_util::Profiler::Stage st(prof, "transmittance_rgb");
     b->transmittance();
     out.luts.transmittance = b->read(Tex::transmittance);
-    stage_total["transmittance_rgb"] += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    st.close();
+    prof.settle();
+    cl_util::StageSeconds sec = *st.record();
+    sec.wall_s += make_s;
+    cl_util::accumulate(stage_total["transmittance_rgb"], sec);
   }
-  out.timings = {{"total", stage_total}, {"per_order", json::array()}};
+  out.timings = {{"total", json::object()}, {"per_order", json::array()}};
+  for (const auto& [stage, sec] : stage_total) out.timings["total"][stage] = cl_util::seconds_json(sec);
   for (const auto& [order, stages] : per_order) {
-    json o = stages;
+    json o = json::object();
+    for (const auto& [stage, sec] : stages) o[stage] = cl_util::seconds_json(sec);
     o["order"] = order;
     out.timings["per_order"].push_back(o);
   }
@@ -492,13 +502,18 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     r.files.push_back(std::move(f));
   const auto t_done = std::chrono::steady_clock::now();
   json timings = b.timings;
-  timings["total"]["files"] = std::chrono::duration<double>(t_previews - t_files).count();
-  timings["total"]["previews"] = std::chrono::duration<double>(t_done - t_previews).count();
-  timings["note"] = "wall seconds; 'self_check' = the double recomputation after each stage, 'host' = reads and "
-                    "sums between stages; per_order[0] = transmittance and direct irradiance, per_order[n] = "
-                    "the stages of order n (indirect_irradiance of order n is computed during order n + 1)";
+  const auto host_only = [](double s) { return json{{"device_s", 0.0}, {"host_s", s}, {"wall_s", s}}; };
+  timings["total"]["files"] = host_only(std::chrono::duration<double>(t_previews - t_files).count());
+  timings["total"]["previews"] = host_only(std::chrono::duration<double>(t_done - t_previews).count());
+  timings["note"] = "per stage: device_s = sum of the OpenCL profiling times (end - start) of its commands, "
+                    "host_s = wall_s minus the time the host waited for the device, wall_s = elapsed; "
+                    "'self_check' = the double recomputation after each stage, 'host' = reads and sums between "
+                    "stages; per_order[0] = transmittance and direct irradiance, per_order[n] = the stages of "
+                    "order n (indirect_irradiance of order n is computed during order n + 1)";
   r.manifest_blocks["atmosphere"] = {{"timings_s", timings}};
-  for (const auto& [stage, sec] : timings["total"].items()) spdlog::debug("atmosphere: {} total {:.3f} s", stage, sec.get<double>());
+  for (const auto& [stage, sec] : timings["total"].items())
+    spdlog::debug("atmosphere: {} total: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", stage,
+                  sec["device_s"].get<double>(), sec["host_s"].get<double>(), sec["wall_s"].get<double>());
 }
 
 }  // namespace

@@ -31,7 +31,8 @@ struct Baked {
   nlohmann::json passes;       // wavelengths of each pass, orders used
   nlohmann::json self_checks;  // device vs double reference, per stage
   double self_check_worst = 0.0;
-  // Wall seconds per stage summed over passes ("total" by stage name, "per_order" by order).
+  // Seconds per stage summed over passes ("total" by stage name, "per_order" by order), each
+  // {"device_s", "host_s", "wall_s"} as cl_util::StageSeconds defines them.
   nlohmann::json timings;
 };
 // Runs every pass on the device (self_check_texels > 0: recompute that many texels of each

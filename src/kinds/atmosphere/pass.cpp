@@ -4,8 +4,8 @@
 
 #include <spdlog/spdlog.h>
 
-#include <chrono>
 #include <cmath>
+#include <optional>
 
 #include "kinds/atmosphere/reference_widths.hpp"
 
@@ -109,10 +109,10 @@ class DeviceBackend final : public PassBackend {
     return cl_util::checked("reading an atmosphere texture", [&] {
       std::vector<double> out(n);
       if (dbl_) {
-        dev_.queue().enqueueReadBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), out.data());
+        read_buffer(buffer(t), n * sizeof(double), out.data());
       } else {
         std::vector<float> f(n);
-        dev_.queue().enqueueReadBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data());
+        read_buffer(buffer(t), n * sizeof(float), f.data());
         std::copy(f.begin(), f.end(), out.begin());
       }
       return out;
@@ -122,15 +122,20 @@ class DeviceBackend final : public PassBackend {
     const long long n = texels(t) * width_;
     if (static_cast<long long>(v.size()) != n) throw JobError(std::string("wrong size for ") + to_string(t));
     cl_util::checked("writing an atmosphere texture", [&] {
+      cl::Event ev;
       if (dbl_) {
-        dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), v.data());
+        dev_.profiler().wait(
+            [&] { dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), v.data(), nullptr, &ev); });
       } else {
         std::vector<float> f(v.begin(), v.end());
-        dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data());
+        dev_.profiler().wait(
+            [&] { dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data(), nullptr, &ev); });
       }
+      dev_.profiler().record(ev);
       return 0;
     });
   }
+  cl_util::Profiler* profiler() override { return &dev_.profiler(); }
 
  private:
   cl::Buffer alloc(long long texels) { return alloc_reals(texels * width_); }
@@ -155,8 +160,17 @@ class DeviceBackend final : public PassBackend {
     return T_;
   }
   void enqueue(cl::Kernel& k, long long n) {
-    dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange);
-    dev_.queue().finish();
+    cl::Event ev;
+    dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange,
+                                      nullptr, &ev);
+    dev_.profiler().record(ev);
+    dev_.profiler().wait([&] { dev_.queue().finish(); });
+  }
+  // A blocking read, recorded with its wait.
+  void read_buffer(const cl::Buffer& b, std::size_t bytes, void* to) {
+    cl::Event ev;
+    dev_.profiler().wait([&] { dev_.queue().enqueueReadBuffer(b, CL_TRUE, 0, bytes, to, nullptr, &ev); });
+    dev_.profiler().record(ev);
   }
   // Runs kernel `name` over n work items with the parameter block, then `args` in order
   // (device buffers, or the scattering order as an int).
@@ -185,14 +199,14 @@ class DeviceBackend final : public PassBackend {
       enqueue(k, 1);
       std::vector<double> r(6);
       if (dbl_) {
-        dev_.queue().enqueueReadBuffer(reals, CL_TRUE, 0, 6 * sizeof(double), r.data());
+        read_buffer(reals, 6 * sizeof(double), r.data());
       } else {
         std::vector<float> f(6);
-        dev_.queue().enqueueReadBuffer(reals, CL_TRUE, 0, 6 * sizeof(float), f.data());
+        read_buffer(reals, 6 * sizeof(float), f.data());
         std::copy(f.begin(), f.end(), r.begin());
       }
       std::vector<int> iv(3);
-      dev_.queue().enqueueReadBuffer(ints, CL_TRUE, 0, 3 * sizeof(int), iv.data());
+      read_buffer(ints, 3 * sizeof(int), iv.data());
       for (int i = 0; i < 6; ++i) {
         const double want = dbl_ ? block_.echo_reals[i] : static_cast<float>(block_.echo_reals[i]);
         if (r[i] != want)
@@ -369,28 +383,35 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   };
   PassResult r;
   r.width = w;
-  using Clock = std::chrono::steady_clock;
-  auto last = Clock::now();  // end of the last timed stage: the time in between is host work
-  auto record = [&](const std::string& stage, int order, Clock::time_point t0) {
-    const auto t1 = Clock::now();
-    const double host = std::chrono::duration<double>(t0 - last).count();
-    if (host > 0.0) r.timings.push_back({"host", order, host});
-    const double sec = std::chrono::duration<double>(t1 - t0).count();
-    r.timings.push_back({stage, order, sec});
-    spdlog::debug("atmosphere: {} (order {}) took {:.3f} s", stage, order, sec);
-    last = t1;
+  // Every moment of the pass belongs to one stage: a timed stage, a hook ("self_check") or
+  // the host work in between ("host": reads and sums, with the order of the stage after it).
+  cl_util::Profiler own;  // the host backend enqueues nothing: device_s stays 0
+  cl_util::Profiler& prof = b.profiler() ? *b.profiler() : own;
+  std::vector<cl_util::Profiler::Record> records;
+  std::vector<bool> logged;
+  auto log = [&](const cl_util::StageSeconds& s) {
+    spdlog::debug("atmosphere: {} (order {}): device {:.3f} s, host {:.3f} s (wall {:.3f} s)", s.stage, s.order,
+                  s.device_s, s.host_s(), s.wall_s);
+  };
+  std::optional<cl_util::Profiler::Stage> gap(std::in_place, prof, "host", 0);
+  auto run_stage = [&](const std::string& stage, int order, auto&& f) {
+    gap->record()->order = order;
+    records.push_back(gap->close());
+    logged.push_back(true);
+    gap.reset();
+    {
+      cl_util::Profiler::Stage st(prof, stage, order);
+      f();
+      records.push_back(st.close());
+    }
+    logged.push_back(records.back()->pending == 0);  // the stage's commands are done: log now
+    if (logged.back()) log(*records.back());
+    gap.emplace(prof, "host", order);
   };
   auto hook = [&](PassStage stage, int order) {
-    if (!on_stage) return;
-    const auto t0 = Clock::now();
-    on_stage(stage, order, b);
-    record("self_check", order, t0);
+    if (on_stage) run_stage("self_check", order, [&] { on_stage(stage, order, b); });
   };
-  auto timed = [&](PassStage what, int order, auto&& f) {
-    const auto t0 = Clock::now();
-    f();
-    record(to_string(what), order, t0);
-  };
+  auto timed = [&](PassStage what, int order, auto&& f) { run_stage(to_string(what), order, f); };
 
   timed(PassStage::transmittance, 0, [&] { b.transmittance(); });
   hook(PassStage::transmittance, 0);
@@ -454,8 +475,16 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
       break;
     }
   }
-  const double tail = std::chrono::duration<double>(Clock::now() - last).count();
-  if (tail > 0.0) r.timings.push_back({"host", r.orders_used, tail});
+  gap->record()->order = r.orders_used;
+  records.push_back(gap->close());
+  logged.push_back(true);
+  prof.settle();  // times of commands still running when their stage closed
+  for (std::size_t i = 0; i < records.size(); ++i) {
+    const cl_util::StageSeconds& s = *records[i];
+    if (!logged[i]) log(s);
+    if (s.stage == "host" && s.wall_s == 0.0 && s.commands == 0) continue;
+    r.timings.push_back({s.stage, s.order, s});
+  }
   return r;
 }
 

@@ -52,6 +52,8 @@ class PassBackend {
   virtual void multiple_scattering() = 0;             // ΔS ← f(T, J)
   virtual std::vector<double> read(Tex t) = 0;        // [texels][channels()]
   virtual void write(Tex t, std::vector<double> values) = 0;  // [texels][channels()]
+  // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
+  virtual cl_util::Profiler* profiler() { return nullptr; }
 };
 
 // The OpenCL backend: kernels built with NCH = width and float (or double) arithmetic.
@@ -67,10 +69,12 @@ struct OrderStats {
   double relative = 0.0;  // max over texels of (what this order adds)/(accumulated), see docs
 };
 
+// Seconds of one stage as cl_util::StageSeconds defines them: device_s from the profiling
+// events of its commands, host_s = wall_s minus the time the host waited for the device.
 struct StageTime {
   std::string stage;  // "transmittance", ..., "self_check" (the hooks), "host" (reads and sums between stages)
   int order = 0;
-  double seconds = 0.0;  // wall time
+  cl_util::StageSeconds seconds;
 };
 
 struct PassResult {

@@ -477,6 +477,7 @@ BakeResult bake(const DiffractionSpec& spec, JobContext& ctx) {
   if (spec.table) return bake_table(spec, ctx);
   BakeResult r;
   Work w;
+  w.tm.use(&ctx.device.profiler());
   plan_step(spec, ctx, w);
   compute_step(spec, ctx, w, r);
   check_step(spec, ctx, w, r);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "cl/buffers.hpp"
 #include "cl/fft.hpp"
@@ -51,25 +52,35 @@ const Band& band_for(const std::vector<Band>& bands, double kappa) {
   return bands.back();
 }
 
-void Timings::add(const std::string& stage, double seconds) {
-  spdlog::debug("diffraction: {} {:.3f} s", stage, seconds);
-  for (auto& [name, total] : stages_)
-    if (name == stage) {
-      total += seconds;
-      return;
-    }
-  stages_.emplace_back(stage, seconds);
+namespace {
+void log_run(const cl_util::StageSeconds& s) {
+  spdlog::debug("diffraction: {}: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", s.stage, s.device_s, s.host_s(),
+                s.wall_s);
+}
+}  // namespace
+
+void Timings::add(const cl_util::Profiler::Record& r) {
+  if (r->pending == 0) log_run(*r);
+  runs_.push_back(r);
 }
 
-nlohmann::json Timings::json() const {
+nlohmann::json Timings::json() {
+  if (prof_->pending()) {
+    prof_->settle();
+    for (const auto& r : runs_)
+      if (r->commands && r->pending == 0) log_run(*r);  // (again, now complete)
+  }
+  std::map<std::string, cl_util::StageSeconds> total;
+  for (const auto& r : runs_) cl_util::accumulate(total[r->stage], *r);
   nlohmann::json j = nlohmann::json::object();
-  for (const auto& [name, total] : stages_) j[name] = total;
+  for (const auto& [name, sec] : total) j[name] = cl_util::seconds_json(sec);
   return j;
 }
 
 Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress,
                    Timings* timings) {
   Timings local;
+  local.use(&dev.profiler());
   Timings& tm = timings ? *timings : local;
   const std::size_t count = static_cast<std::size_t>(f.count());
   int max_terms = 0;
@@ -125,9 +136,11 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
           inputs.setArg(10, work);
         }
         tm.time("terms: inputs", [&] {
+          cl::Event ev;
           dev.queue().enqueueNDRangeKernel(band.expansion == Expansion::taylor ? taylor : inputs, cl::NullRange,
-                                           cl::NDRange(count), cl::NullRange);
-          dev.queue().finish();
+                                           cl::NDRange(count), cl::NullRange, nullptr, &ev);
+          dev.profiler().record(ev);
+          dev.profiler().wait([&] { dev.queue().finish(); });
         });
         tm.time("terms: FFT", [&] {
           for (int j = 0; j < n; ++j) fft.forward(work, j);
@@ -142,11 +155,13 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
                 const cl::array<cl::size_type, 3> to{c.first_offset * pair, static_cast<cl::size_type>(r.first_offset),
                                                      static_cast<cl::size_type>(band.first_term + n0 + j)};
                 const cl::array<cl::size_type, 3> region{c.count * pair, static_cast<cl::size_type>(r.count), 1};
+                cl::Event ev;
                 dev.queue().enqueueReadBufferRect(work, CL_FALSE, from, to, region, f.width * pair,
                                                   f.width * pair * f.height, t.bins.ku_count() * pair,
-                                                  t.per_term() * pair, t.values.data());
+                                                  t.per_term() * pair, t.values.data(), nullptr, &ev);
+                dev.profiler().record(ev);
               }
-          dev.queue().finish();
+          dev.profiler().wait([&] { dev.queue().finish(); });
         });
         done += n;
         progress("FFT terms", 0.1 + 0.6 * done / std::max(1, t.count));
@@ -300,11 +315,15 @@ std::vector<cplx> ExactDft::operator()(double kappa) {
     const std::size_t nu = bins.ku_count(), nv = bins.kv_count(), pair = sizeof(cplx);
     std::vector<cplx> out(nu * nv);
     for (const auto& r : bin_runs(bins.kv_min, bins.kv_max, f.height))
-      for (const auto& c : bin_runs(bins.ku_min, bins.ku_max, f.width))
+      for (const auto& c : bin_runs(bins.ku_min, bins.ku_max, f.width)) {
+        cl::Event ev;
         dev.queue().enqueueReadBufferRect(
             buf, CL_FALSE, {c.first_index * pair, r.first_index, 0}, {c.first_offset * pair, r.first_offset, 0},
-            {c.count * pair, r.count, 1}, f.width * pair, m * pair, nu * pair, nu * nv * pair, out.data());
-    dev.queue().finish();
+            {c.count * pair, r.count, 1}, f.width * pair, m * pair, nu * pair, nu * nv * pair, out.data(), nullptr,
+            &ev);
+        dev.profiler().record(ev);
+      }
+    dev.profiler().wait([&] { dev.queue().finish(); });
     return out;
   });
 }

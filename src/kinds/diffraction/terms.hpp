@@ -3,7 +3,6 @@
 // float32, cropped while reading back) and, for checks, on the host in double precision with the same
 // term-input maths (reference.hpp) and direct DFTs. Also the exact P(k;κ) = DFT(e^{iκh}) in
 // double precision, and the reconstruction of P from stored terms.
-#include <chrono>
 #include <complex>
 #include <string>
 #include <thread>
@@ -35,27 +34,34 @@ struct Terms {
 };
 
 
-// Wall time per stage of a bake, in seconds, in the order stages first ran; each addition is
-// also logged at debug level.
+// Seconds per stage of a bake, summed over repeats of a stage, as cl_util::StageSeconds
+// defines them: device_s from the profiling events of the commands enqueued inside the stage
+// (recorded in the device's profiler), host_s = wall_s minus the time spent waiting for the
+// device. Each stage run is logged at debug level.
 class Timings {
  public:
-  void add(const std::string& stage, double seconds);
-  // Runs fn() and adds its wall time to `stage`.
+  // Commands are recorded in `p` (the device's profiler); until then (or with null) in a
+  // profiler of its own that sees no commands: device_s 0.
+  void use(cl_util::Profiler* p) { prof_ = p ? p : &own_; }
+  // Runs fn() as stage `stage`.
   template <class Fn>
   decltype(auto) time(const std::string& stage, Fn&& fn) {
-    const auto t0 = std::chrono::steady_clock::now();
+    cl_util::Profiler::Stage st(*prof_, stage);
     struct Done {
       Timings* t;
-      const std::string* stage;
-      std::chrono::steady_clock::time_point t0;
-      ~Done() { t->add(*stage, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()); }
-    } done{this, &stage, t0};
+      cl_util::Profiler::Stage* st;
+      ~Done() { t->add(st->close()); }
+    } done{this, &st};
     return fn();
   }
-  nlohmann::json json() const;
+  // {"<stage>": {"device_s", "host_s", "wall_s"}, …}; reads the times of unfinished commands first.
+  nlohmann::json json();
 
  private:
-  std::vector<std::pair<std::string, double>> stages_;
+  void add(const cl_util::Profiler::Record& r);
+  cl_util::Profiler own_;
+  cl_util::Profiler* prof_ = &own_;
+  std::vector<cl_util::Profiler::Record> runs_;
 };
 
 // The device path: float32 FFTs with VkFFT. Adds its sub-stages ("terms: …") to `timings`.
