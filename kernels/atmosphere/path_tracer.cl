@@ -360,12 +360,13 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
 }
 
 /* ---- one work item: a batch of walks of one point, every channel ------------------------- */
-/* Point p and batch b (walks b·paths_per_batch ... (b + 1)·paths_per_batch − 1); channel c of
- * this group is channel channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item. Table layouts:
+/* Point p (point point_base + p of the request, for the random streams) and batch b (walks
+ * b·paths_per_batch ... (b + 1)·paths_per_batch − 1); channel c of this group is channel
+ * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item. Table layouts:
  * node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], majorant [TRUTH_SHELLS][NCH]. */
 FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
                          GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
-                         int nodes, int p, int b, int paths_per_batch, int max_orders,
+                         int nodes, int p, int point_base, int b, int paths_per_batch, int max_orders,
                          philox_u32 seed_lo, philox_u32 seed_hi, int channel_base, int channels,
                          GLOBAL real* out_item) {
   GLOBAL const real* pt = points + p * TRUTH_POINT_STRIDE;
@@ -375,7 +376,8 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
     if (c < channels) {
       for (int i = 0; i < paths_per_batch; ++i) {
         PhiloxStream rng;
-        philox_stream_init(&rng, seed_lo, seed_hi, (philox_u32)b * (philox_u32)paths_per_batch + (philox_u32)i, (philox_u32)p,
+        philox_stream_init(&rng, seed_lo, seed_hi, (philox_u32)b * (philox_u32)paths_per_batch + (philox_u32)i,
+                           (philox_u32)(point_base + p),
                            (philox_u32)(channel_base + c));
         const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
                                   node_cdf + (p * NCH + c) * nodes, majorant, max_orders, &rng, &events, &truncated,

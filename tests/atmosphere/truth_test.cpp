@@ -275,6 +275,9 @@ TEST(Truth, DeviceMatchesHostReference) {
   const TruthResult d = trace_truth(earth(), device(), points, o);
   const TruthResult h = trace_truth_reference(earth(), points, o);
   ASSERT_EQ(d.radiance.size(), h.radiance.size());
+  double worst = 0.0;
+  for (std::size_t i = 0; i < d.radiance.size(); ++i) worst = std::max(worst, std::fabs(d.radiance[i] / h.radiance[i] - 1));
+  std::printf("device (%s) against the C++ double walks: worst relative difference %.3g\n", d.precision.c_str(), worst);
   for (std::size_t i = 0; i < d.radiance.size(); ++i) {
     ASSERT_GT(h.radiance[i], 0.0);
     if (d.precision == "float64") {
@@ -286,6 +289,28 @@ TEST(Truth, DeviceMatchesHostReference) {
   }
   EXPECT_EQ(d.truncated, 0);
   EXPECT_EQ(h.paths, d.paths);
+}
+
+// A device without cl_khr_fp64 (PoCL with the capability masked) traces in float32: single
+// scattering against the quadrature as above, within 4 se + 1e-4 L. float32 costs ≤ 2e-6 in
+// T (the τ table, ≤ 30, at 6e-8 relative), ≤ 1e-5 in the view vertex's probabilities (24-bit
+// uniforms against the segment table), ~1e-7 in altitudes: 1e-4 bounds them with room.
+TEST(Truth, FloatOnlyDeviceTracesInFloat32) {
+  cl_util::DeviceInfo info = cl_util::select_device("auto");
+  info.fp64 = false;
+  cl_util::Device float_only(info);
+  const AtmosphereSpec s = earth();
+  const Medium M(s);
+  const std::vector<TruthPoint> points = {{0, 60, 45, 90}, {0.2, 89.5, 35, 40}, {100, 100, 30, 20}};
+  TruthOptions o;
+  o.paths = 16384;
+  o.orders = 1;
+  const TruthResult r = trace_truth(s, float_only, points, o);
+  EXPECT_EQ(r.precision, "float32");
+  for (std::size_t p = 0; p < points.size(); ++p) {
+    const auto q = single_scattering_quadrature(M, points[p], 2000, 400);
+    for (int c = 0; c < 3; ++c) EXPECT_LE(std::fabs(r.L(p, c) - q[c]), 4 * r.se(p, c) + 1e-4 * q[c]) << p << " " << c;
+  }
 }
 
 // ---- single scattering against an independent quadrature -------------------------------------
@@ -629,6 +654,29 @@ TEST(Truth, DeterministicForASeed) {
   const TruthResult d = trace_truth(s, device(), points, o);
   const double tol = a.precision == "float64" ? 1e-12 : 1e-5;
   for (std::size_t i = 0; i < a.radiance.size(); ++i) EXPECT_NEAR(a.radiance[i], d.radiance[i], tol * a.radiance[i]);
+}
+
+// More points than one chunk of view-ray tables holds (4153 for rgb): every row is traced, and
+// 4200 copies of one point (each with its own streams, 64 walks each) average to a separate
+// 65536-walk trace of it, within 4 combined se.
+TEST(Truth, ManyPointsAreTracedInChunks) {
+  const TruthPoint q{1, 50, 40, 30};
+  const std::vector<TruthPoint> points(4200, q);
+  TruthOptions o;
+  o.paths = 64;
+  o.orders = 1;
+  const TruthResult r = trace_truth(earth(), device(), points, o);
+  o.paths = 65536;
+  const TruthResult one = trace_truth(earth(), device(), {q}, o);
+  for (int c = 0; c < 3; ++c) {
+    double mean = 0.0, var = 0.0;
+    for (std::size_t p = 0; p < points.size(); ++p) {
+      ASSERT_GT(r.L(p, c), 0.0) << p;
+      mean += r.L(p, c) / points.size();
+      var += r.se(p, c) * r.se(p, c) / (double(points.size()) * points.size());
+    }
+    EXPECT_NEAR(mean, one.L(0, c), 4 * std::sqrt(var + one.se(0, c) * one.se(0, c)));
+  }
 }
 
 // The precision target: every channel of every point ends at or below it (the last top-up

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 
 #include "cl/buffers.hpp"
 #include "jobs/atmosphere/model.hpp"
@@ -52,8 +53,8 @@ void check_options(const std::vector<TruthPoint>& points, const TruthOptions& o)
     throw InputError(Location{{}, 0, 0, "target_relative_se"}, "a fraction >= 0 (0: off)");
   if (o.max_paths < o.paths || o.max_paths > (1LL << 32))
     throw InputError(Location{{}, 0, 0, "max_paths"}, "paths <= max_paths <= 2^32");
-  // the kernel indexes [point][batch of a launch][stride] and [point][channel][node] with int
-  if (points.size() > 100000) throw InputError(Location{{}, 0, 0, "points"}, "at most 100000 points per call");
+  // the random streams count points in 32 bits; the kernels index [point][node] with int
+  if (points.size() > (1u << 24)) throw InputError(Location{{}, 0, 0, "points"}, "at most 2^24 points per call");
   for (std::size_t i = 0; i < points.size(); ++i) {
     const TruthPoint& p = points[i];
     const std::string at = "points[" + std::to_string(i) + "].";
@@ -116,6 +117,7 @@ std::vector<double> kink_altitudes(const AtmosphereParameters& a) {
 struct Prepared {
   Model model;
   Channels channels;
+  std::size_t point_base = 0;  // index of the first point in the request (random streams)
   std::size_t n_points = 0, n_channels = 0;
   std::vector<double> points;    // [P][TRUTH_POINT_STRIDE]
   std::vector<double> node_t;    // [P][kNodes]
@@ -191,31 +193,34 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   row[PT_NODES] = n;
   for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
 
-  // per segment: optical lengths of the three profiles, and the sub-nodes for the masses
+  // per segment: optical lengths of the three profiles, and per sub-segment its Rayleigh and
+  // Mie lengths (for the masses)
   struct Sub {
-    double t, w, rho_r, rho_m;
+    double t_mid, l_r, l_m;
   };
   std::vector<std::array<double, 3>> lengths(n - 1);
-  std::vector<std::vector<Sub>> subs(n - 1);
+  std::vector<std::array<Sub, kSubSegments>> subs(n - 1);
   for (int k = 0; k + 1 < n; ++k) {
     std::array<double, 3> l{0.0, 0.0, 0.0};
     const double dt = (t[k + 1] - t[k]) / kSubSegments;
     for (int j = 0; j < kSubSegments; ++j) {
       const double mid = t[k] + (j + 0.5) * dt, half = 0.5 * dt;
+      Sub sub{mid, 0.0, 0.0};
       for (int i = 0; i < 4; ++i)
         for (int side = 0; side < 2; ++side) {
           const double s = side == 0 ? mid - half * kGaussX[i] : mid + half * kGaussX[i];
           double h_s, mu_s;
           ref3::point_along(&a, h, mu, s, ground, &h_s, &mu_s);
-          const double rr = ref3::profile_density(&a.rayleigh_density, h_s);
-          const double rm = ref3::profile_density(&a.mie_density, h_s);
-          const double ra = ref3::profile_density(&a.absorption_density, h_s);
           const double w = kGaussW[i] * half;
-          l[0] += w * rr;
-          l[1] += w * rm;
-          l[2] += w * ra;
-          subs[k].push_back({s, w, rr, rm});
+          const double rr = w * ref3::profile_density(&a.rayleigh_density, h_s);
+          const double rm = w * ref3::profile_density(&a.mie_density, h_s);
+          l[0] += rr;
+          l[1] += rm;
+          l[2] += w * ref3::profile_density(&a.absorption_density, h_s);
+          sub.l_r += rr;
+          sub.l_m += rm;
         }
+      subs[k][j] = sub;
     }
     lengths[k] = l;
   }
@@ -226,14 +231,15 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
     for (int k = 0; k + 1 < n; ++k)
       tau[k + 1] = tau[k] + ch.rayleigh_scattering[c] * lengths[k][0] + ch.mie_extinction[c] * lengths[k][1] +
                    ch.absorption_extinction[c] * lengths[k][2];
-    // segment masses ≈ ∫ β_s ρ T dt (τ linear inside the segment: only the pdf depends on it)
+    // segment masses ≈ ∫ β_s ρ T dt, T at each sub-segment's middle with τ linear between the
+    // nodes: only the pdf depends on them
     std::vector<double> mass(n - 1, 0.0);
     double total = 0.0;
     for (int k = 0; k + 1 < n; ++k) {
       const double dt = t[k + 1] - t[k];
-      for (const Sub& s : subs[k]) {
-        const double tau_s = tau[k] + (tau[k + 1] - tau[k]) * (s.t - t[k]) / dt;
-        mass[k] += s.w * (ch.rayleigh_scattering[c] * s.rho_r + ch.mie_scattering[c] * s.rho_m) * std::exp(-tau_s);
+      for (const Sub& sub : subs[k]) {
+        const double tau_s = tau[k] + (tau[k + 1] - tau[k]) * (sub.t_mid - t[k]) / dt;
+        mass[k] += (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * std::exp(-tau_s);
       }
       total += mass[k];
     }
@@ -253,8 +259,9 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   }
 }
 
-Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points) {
+Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base) {
   Prepared P;
+  P.point_base = point_base;
   P.model = model_of(spec);
   const Spectrum sp = spectrum_of(spec);
   P.channels = channels_at(spec, sp.lambda_nm);
@@ -362,7 +369,7 @@ class HostEngine final : public Engine {
       const int p = static_cast<int>(id / stride), j = static_cast<int>(id % stride);
       if (j >= count[p]) return;
       ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.majorant.data(),
-                             kNodes, p, base[p] + j, o_.paths_per_batch, o_.orders,
+                             kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
                              static_cast<philox_u32>(o_.seed & 0xffffffffu), static_cast<philox_u32>(o_.seed >> 32),
                              static_cast<int>(g.first), static_cast<int>(g.count), &out[id * kStride]);
     });
@@ -411,6 +418,7 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, b.cdf);
       k.setArg(i++, b.majorant);
       k.setArg(i++, static_cast<cl_int>(P_.n_points));
+      k.setArg(i++, static_cast<cl_int>(P_.point_base));
       k.setArg(i++, static_cast<cl_int>(kNodes));
       k.setArg(i++, base_buf);
       k.setArg(i++, count_buf);
@@ -444,32 +452,25 @@ class DeviceEngine final : public Engine {
 constexpr int kMaxRounds = 4;           // the first `paths`, then up to 3 top-ups towards the target
 constexpr double kTopUpMargin = 1.1;    // a top-up asks for 10 % more walks than the estimate
 constexpr long long kLaunchWalks = 1LL << 16;  // walks per point and launch (progress, short launches)
+constexpr long long kLaunchItems = 1LL << 20;  // work items (batches) per launch: bounds the output buffer
+constexpr double kChunkTableBytes = 64e6;      // view-ray tables of one chunk of points (all channels)
 
-TruthResult trace(Engine& engine, const AtmosphereSpec& spec, const Prepared& P, const TruthOptions& o,
-                  const Progress& progress) {
-  TruthResult r;
-  r.lambda_nm = P.channels.lambda_nm;
-  for (double l : r.lambda_nm) {
-    if (!spec.spectral) {
-      r.channel_names.push_back(l == kLambdaR ? "R" : (l == kLambdaG ? "G" : "B"));
-    } else {
-      char b[32];
-      std::snprintf(b, sizeof b, "%g", l);
-      r.channel_names.push_back(b);
-    }
-  }
-  r.points = P.n_points;
-  r.channels = P.n_channels;
-  r.orders = o.orders;
-  r.seed = o.seed;
+// What the walks of all chunks add up to.
+struct Totals {
+  double events = 0.0;
+  long long walks = 0, truncated = 0, violations = 0;
+};
+
+// Traces one chunk of points into r (rows point_base ... of radiance, se, paths).
+void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, TruthResult& r, Totals& totals,
+                 const std::function<void(double)>& progress) {
   const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
   const long long ppb = o.paths_per_batch;
   const long long max_batches = std::max<long long>(1, std::min<long long>(o.max_paths, 1LL << 32) / ppb);
   std::vector<long long> done(P.n_points, 0), want(P.n_points, std::min(max_batches, (o.paths + ppb - 1) / ppb));
   std::vector<Stat> stats(P.n_points * P.n_channels);
-  double events = 0.0;
-  long long truncated = 0, violations = 0;
-  const long long launch_batches = std::max<long long>(1, kLaunchWalks / ppb);
+  const long long launch_batches =
+      std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
   for (int round = 0; round < kMaxRounds; ++round) {
     for (;;) {
       std::vector<int> base(P.n_points), count(P.n_points);
@@ -488,9 +489,9 @@ TruthResult trace(Engine& engine, const AtmosphereSpec& spec, const Prepared& P,
             const double* item = &out[(p * stride + j) * kStride];
             for (std::size_t c = 0; c < n_ch; ++c)
               stats[p * P.n_channels + first + c].merge(static_cast<double>(ppb), item[2 * c], item[2 * c + 1]);
-            events += item[2 * kGroup];
-            truncated += static_cast<long long>(item[2 * kGroup + 1]);
-            violations += static_cast<long long>(item[2 * kGroup + 2]);
+            totals.events += item[2 * kGroup];
+            totals.truncated += static_cast<long long>(item[2 * kGroup + 1]);
+            totals.violations += static_cast<long long>(item[2 * kGroup + 2]);
           }
       }
       long long total_done = 0, total_want = 0;
@@ -499,7 +500,7 @@ TruthResult trace(Engine& engine, const AtmosphereSpec& spec, const Prepared& P,
         total_done += done[p];
         total_want += want[p];
       }
-      if (progress) progress("tracing", static_cast<double>(total_done) / static_cast<double>(total_want));
+      if (progress) progress(static_cast<double>(total_done) / static_cast<double>(total_want));
     }
     if (!(o.target_relative_se > 0.0)) break;
     bool more = false;
@@ -521,25 +522,62 @@ TruthResult trace(Engine& engine, const AtmosphereSpec& spec, const Prepared& P,
     }
     if (!more) break;
   }
-  r.radiance.resize(P.n_points * P.n_channels);
-  r.standard_error.resize(P.n_points * P.n_channels);
-  long long walks = 0;
   for (std::size_t p = 0; p < P.n_points; ++p) {
-    r.paths.push_back(done[p] * ppb);
-    walks += done[p] * ppb * static_cast<long long>(P.n_channels);
+    const std::size_t row = P.point_base + p;
+    r.paths[row] = done[p] * ppb;
+    totals.walks += done[p] * ppb * static_cast<long long>(P.n_channels);
     for (std::size_t c = 0; c < P.n_channels; ++c) {
-      r.radiance[p * P.n_channels + c] = stats[p * P.n_channels + c].mean;
-      r.standard_error[p * P.n_channels + c] = stats[p * P.n_channels + c].se();
+      r.radiance[row * P.n_channels + c] = stats[p * P.n_channels + c].mean;
+      r.standard_error[row * P.n_channels + c] = stats[p * P.n_channels + c].se();
     }
   }
-  r.mean_events = walks > 0 ? events / static_cast<double>(walks) : 0.0;
-  r.truncated = truncated;
-  if (violations > 0)
-    throw JobError("truth: a density exceeded its majorant " + std::to_string(violations) +
+}
+
+using MakeEngine = std::function<std::unique_ptr<Engine>(const Prepared&)>;
+
+// Every point, in chunks whose view-ray tables stay within kChunkTableBytes.
+TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, const TruthOptions& o,
+                      const Progress& progress, const MakeEngine& make_engine) {
+  const Spectrum sp = spectrum_of(spec);
+  TruthResult r;
+  r.lambda_nm = sp.lambda_nm;
+  for (double l : r.lambda_nm) {
+    if (!spec.spectral) {
+      r.channel_names.push_back(l == kLambdaR ? "R" : (l == kLambdaG ? "G" : "B"));
+    } else {
+      char b[32];
+      std::snprintf(b, sizeof b, "%g", l);
+      r.channel_names.push_back(b);
+    }
+  }
+  r.points = points.size();
+  r.channels = r.lambda_nm.size();
+  r.orders = o.orders;
+  r.seed = o.seed;
+  r.radiance.assign(r.points * r.channels, 0.0);
+  r.standard_error.assign(r.points * r.channels, 0.0);
+  r.paths.assign(r.points, 0);
+  const std::size_t chunk = std::max<std::size_t>(
+      1, static_cast<std::size_t>(kChunkTableBytes / (static_cast<double>(r.channels) * kNodes * 2 * sizeof(double))));
+  const std::size_t n_chunks = (points.size() + chunk - 1) / chunk;
+  Totals totals;
+  for (std::size_t k = 0; k < n_chunks; ++k) {
+    const std::size_t first = k * chunk, n = std::min(chunk, points.size() - first);
+    const std::vector<TruthPoint> part(points.begin() + first, points.begin() + first + n);
+    const Prepared P = prepare(spec, part, first);
+    const auto engine = make_engine(P);
+    trace_chunk(*engine, P, o, r, totals, [&](double f) {
+      if (progress) progress("tracing", (static_cast<double>(k) + f) / static_cast<double>(n_chunks));
+    });
+  }
+  r.mean_events = totals.walks > 0 ? totals.events / static_cast<double>(totals.walks) : 0.0;
+  r.truncated = totals.truncated;
+  if (totals.violations > 0)
+    throw JobError("truth: a density exceeded its majorant " + std::to_string(totals.violations) +
                    " times; the estimate would be biased");
-  if (truncated > 0)
-    spdlog::warn("truth: {} walks stopped after {} events (all orders): their later orders are missing", truncated,
-                 TRUTH_MAX_EVENTS);
+  if (totals.truncated > 0)
+    spdlog::warn("truth: {} walks stopped after {} events (all orders): their later orders are missing",
+                 totals.truncated, TRUTH_MAX_EVENTS);
   for (std::size_t i = 0; i < r.radiance.size(); ++i)
     if (!std::isfinite(r.radiance[i]) || !std::isfinite(r.standard_error[i]))
       throw JobError("truth: non-finite radiance at point " + std::to_string(i / r.channels));
@@ -576,9 +614,8 @@ TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const 
                         const TruthOptions& o, const Progress& progress) {
   check_options(points, o);
   const auto t0 = std::chrono::steady_clock::now();
-  const Prepared P = prepare(spec, points);
-  DeviceEngine engine(dev, P, o);
-  TruthResult r = trace(engine, spec, P, o, progress);
+  TruthResult r = trace_all(spec, points, o, progress,
+                            [&](const Prepared& P) { return std::make_unique<DeviceEngine>(dev, P, o); });
   r.precision = dev.info().fp64 ? "float64" : "float32";
   r.device = dev.description();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -591,9 +628,8 @@ TruthResult trace_truth_reference(const AtmosphereSpec& spec, const std::vector<
                                   const TruthOptions& o) {
   check_options(points, o);
   const auto t0 = std::chrono::steady_clock::now();
-  const Prepared P = prepare(spec, points);
-  HostEngine engine(P, o);
-  TruthResult r = trace(engine, spec, P, o, {});
+  TruthResult r =
+      trace_all(spec, points, o, {}, [&](const Prepared& P) { return std::make_unique<HostEngine>(P, o); });
   r.precision = "float64";
   r.device = "host (C++ double)";
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
