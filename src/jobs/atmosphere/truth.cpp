@@ -51,8 +51,9 @@ void check_options(const std::vector<TruthPoint>& points, const TruthOptions& o)
     throw InputError(Location{{}, 0, 0, "orders"}, "0 (all) or 1..1000, got " + std::to_string(o.orders));
   if (!(o.target_relative_se >= 0.0 && std::isfinite(o.target_relative_se)))
     throw InputError(Location{{}, 0, 0, "target_relative_se"}, "a fraction >= 0 (0: off)");
-  if (o.max_paths < o.paths || o.max_paths > (1LL << 32))
-    throw InputError(Location{{}, 0, 0, "max_paths"}, "paths <= max_paths <= 2^32");
+  if (o.paths > (1LL << 32) || (o.paths + o.paths_per_batch - 1) / o.paths_per_batch > std::numeric_limits<int>::max())
+    throw InputError(Location{{}, 0, 0, "paths"}, "at most 2^32 walks per point, and 2^31 batches");
+  if (o.max_paths < 1) throw InputError(Location{{}, 0, 0, "max_paths"}, "max_paths >= 1");
   // the random streams count points in 32 bits; the kernels index [point][node] with int
   if (points.size() > (1u << 24)) throw InputError(Location{{}, 0, 0, "points"}, "at most 2^24 points per call");
   for (std::size_t i = 0; i < points.size(); ++i) {
@@ -466,7 +467,8 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
                  const std::function<void(double)>& progress) {
   const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
   const long long ppb = o.paths_per_batch;
-  const long long max_batches = std::max<long long>(1, std::min<long long>(o.max_paths, 1LL << 32) / ppb);
+  const long long max_walks = std::min<long long>(std::max(o.max_paths, o.paths), 1LL << 32);
+  const long long max_batches = std::min<long long>((max_walks + ppb - 1) / ppb, std::numeric_limits<int>::max());
   std::vector<long long> done(P.n_points, 0), want(P.n_points, std::min(max_batches, (o.paths + ppb - 1) / ppb));
   std::vector<Stat> stats(P.n_points * P.n_channels);
   const long long launch_batches =

@@ -53,7 +53,7 @@ struct TruthOptions {
   int paths_per_batch = 64;         // walks per work item (and per Welford batch); >= 1
   // > 0: after the first `paths` walks, trace more for each point (continuing its random
   // streams) until every channel's standard error is at most this fraction of its radiance,
-  // or the point has max_paths walks. 0: exactly `paths` walks.
+  // or the point has max(paths, max_paths) walks. 0: exactly `paths` walks.
   double target_relative_se = 0.0;
   long long max_paths = 1LL << 22;
 };
