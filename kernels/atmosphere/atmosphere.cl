@@ -472,14 +472,18 @@ FN void transmittance_along(const AtmosphereParameters* a, GLOBAL const real* T,
   transmittance_fixed_end(a, T, h, mu, hits_ground, fixed);
   transmittance_along_from(a, T, h, mu, d, hits_ground, fixed, out);
 }
-/* T to the sun times the visible fraction of the sun disc above the horizon (smoothstep);
- * the horizon's cosine −sqrt(1 − (rb/r)²) is written −ρ/r. */
-FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu_s, real* out) {
+/* The visible fraction of the sun disc above the horizon at altitude h (smoothstep over the
+ * disc's angular radius); the horizon's cosine −sqrt(1 − (rb/r)²) is written −ρ/r. */
+FN real sun_visible_fraction(const AtmosphereParameters* a, real h, real mu_s) {
   const real r = radius_of(a, h);
   const real sin_h = a->bottom_radius / r;
   const real cos_h = -horizon_distance(a, h) / r;
   const real alpha = a->sun_angular_radius;
-  const real visible = smooth_step(-sin_h * alpha, sin_h * alpha, mu_s - cos_h);
+  return smooth_step(-sin_h * alpha, sin_h * alpha, mu_s - cos_h);
+}
+/* T to the sun times the visible fraction of the sun disc above the horizon. */
+FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu_s, real* out) {
+  const real visible = sun_visible_fraction(a, h, mu_s);
   transmittance_to_top(a, T, h, mu_s, out);
   for (int c = 0; c < NCH; ++c) out[c] *= visible;
 }
@@ -772,12 +776,16 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
 }
 
 /* ---- ground irradiance ---------------------------------------------------------------- */
+/* The mean cosine of the sun on a horizontal surface over the visible part of its disc
+ * (the reference's approximation near the horizon). */
+FN real sun_horizontal_cosine(const AtmosphereParameters* a, real mu_s) {
+  const real alpha = a->sun_angular_radius;
+  return mu_s < -alpha ? R(0.0) : (mu_s > alpha ? mu_s : (mu_s + alpha) * (mu_s + alpha) / (R(4.0) * alpha));
+}
 /* Direct sun on a horizontal surface: E_sun T(h, mu_s) × the mean cosine over the visible
  * part of the sun disc. */
 FN void direct_irradiance(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu_s, real* out) {
-  const real alpha = a->sun_angular_radius;
-  const real cos_factor = mu_s < -alpha ? R(0.0)
-                          : (mu_s > alpha ? mu_s : (mu_s + alpha) * (mu_s + alpha) / (R(4.0) * alpha));
+  const real cos_factor = sun_horizontal_cosine(a, mu_s);
   transmittance_to_top(a, T, h, mu_s, out);
   for (int c = 0; c < NCH; ++c) out[c] *= a->solar_irradiance[c] * cos_factor;
 }

@@ -17,6 +17,7 @@
 #include "io/bundle.hpp"
 #include "io/bundle_diff.hpp"
 #include "io/inspect.hpp"
+#include "kinds/atmosphere/truth.hpp"
 #include "runner/runner.hpp"
 
 using namespace specbake;
@@ -351,6 +352,55 @@ int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_
   return ok ? 0 : static_cast<int>(ExitCode::job_failed);
 }
 
+// specbake truth: path-traced sky radiance of an atmosphere job at given views (the ground truth
+// the bundle's textures are judged by), optionally with the bundle's own GetSkyRadiance.
+struct TruthArgs {
+  std::string config, job, points, out, orders = "all", bundle, device;
+  long long paths = 4096;
+  std::uint64_t seed = 1;
+};
+
+int cmd_truth(const TruthArgs& a) {
+  const Config cfg = load_config(a.config);
+  std::vector<std::string> names;
+  const JobSpec* job = nullptr;
+  for (const auto& j : cfg.jobs) {
+    names.push_back(j.name);
+    if (j.name == a.job) job = &j;
+  }
+  if (!job) {
+    const std::string near = closest_word(a.job, names);
+    throw UsageError("--job names '" + a.job + "', which " + a.config + " does not define" +
+                     (near.empty() ? "" : " (did you mean '" + near + "'?)"));
+  }
+  if (job->kind != "atmosphere")
+    throw UsageError("job '" + a.job + "' is a " + job->kind + " job; truth traces atmosphere jobs");
+  const auto& spec = job->as<AtmosphereSpec>();
+  atmosphere::TruthOptions o;
+  o.paths = a.paths;
+  o.seed = a.seed;
+  if (a.orders != "all") {
+    try {
+      std::size_t used = 0;
+      o.orders = std::stoi(a.orders, &used);
+      if (used != a.orders.size() || o.orders < 1) throw std::invalid_argument("orders");
+    } catch (const std::exception&) {
+      throw UsageError("--orders expects a positive integer or 'all', got '" + a.orders + "'");
+    }
+  }
+  if (a.paths < 1) throw UsageError("--paths expects a positive integer");
+  const auto points = atmosphere::read_truth_points(a.points);
+  cl_util::Device dev(cl_util::select_device(a.device.empty() ? cfg.device : a.device));
+  spdlog::info("truth: {} points, {} paths each, orders {}, seed {} on {}", points.size(), o.paths, a.orders, o.seed,
+               dev.info().name);
+  const auto result = atmosphere::trace_truth(spec, dev, points, o);
+  std::vector<atmosphere::Vec3> lut;
+  if (!a.bundle.empty()) lut = atmosphere::lut_sky_radiance(atmosphere::load_bundle_luts(a.bundle), points);
+  atmosphere::write_text_file(a.out, atmosphere::truth_result_csv(spec, points, result, a.bundle.empty() ? nullptr : &lut));
+  spdlog::info("truth: wrote {} ({:.1f} s)", a.out, result.seconds);
+  return 0;
+}
+
 // "a,b" and repeated options → names; an empty name is a usage error.
 std::vector<std::string> split_names(const std::vector<std::string>& in, const char* option) {
   std::vector<std::string> out;
@@ -429,6 +479,19 @@ int main(int argc, char** argv) {
   diff->add_option("--fail-abs", fail_abs, "allowed absolute difference per float32 element (element fails if |a-b| > abs + rel*max(|a|,|b|))")->check(CLI::NonNegativeNumber);
   diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(CLI::NonNegativeNumber);
 
+  TruthArgs truth_args;
+  auto* truth = app.add_subcommand("truth", "path-traced sky radiance of an atmosphere job at given views (CSV in, CSV out)");
+  truth->add_option("config", truth_args.config, "config file (YAML)")->required();
+  truth->add_option("--job", truth_args.job, "the atmosphere job to trace")->required();
+  truth->add_option("--points", truth_args.points,
+                    "POINTS.csv: altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg")->required();
+  truth->add_option("--out", truth_args.out, "RESULT.csv: the four columns, then L_<c>,se_<c> per channel")->required();
+  truth->add_option("--paths", truth_args.paths, "random walks per point and channel");
+  truth->add_option("--orders", truth_args.orders, "scattering orders traced: N (1..N) or all");
+  truth->add_option("--seed", truth_args.seed, "seed of the counter-based random streams (same seed: same bytes)");
+  truth->add_option("--bundle", truth_args.bundle, "also lut_<c>: that bundle's GetSkyRadiance at the points");
+  truth->add_option("--device", truth_args.device, "OpenCL device (default: the config's, else auto)");
+
   auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
   inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")
       ->required();
@@ -470,6 +533,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (app.got_subcommand("diff")) return cmd_diff(diff_old, diff_new, fail_abs, fail_rel);
+    if (app.got_subcommand("truth")) return cmd_truth(truth_args);
 
     const bool is_plan = app.got_subcommand("plan");
     const CLI::App* sub = app.get_subcommands().front();

@@ -61,58 +61,6 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
   }
 }
 
-// `scene: {camera_altitude_km: [lo, hi], sun_elevation_deg: [lo, hi], views: sky | ground | all,
-// points: N, paths: N, tolerance_de2000: x | tolerance_relative: x}` or `scene: none`.
-void parse_scene(const At& at, AtmosphereSpec& s) {
-  SceneSpec& sc = s.scene;
-  if (at.node.IsScalar() && at.node.Scalar() == "none") {
-    sc.enabled = false;
-    return;
-  }
-  at.expect_map("a scene {camera_altitude_km, sun_elevation_deg, views, points, paths, tolerance_de2000 | "
-                "tolerance_relative} or none");
-  at.allow_keys({"camera_altitude_km", "sun_elevation_deg", "views", "points", "paths", "tolerance_de2000",
-                 "tolerance_relative"});
-  const double thickness = s.top_radius_km - s.bottom_radius_km;
-  if (at.has("camera_altitude_km")) {
-    const At a = at.child("camera_altitude_km");
-    const auto v = a.numbers(2, 2);
-    if (!(v[0] >= 0.0 && v[0] <= v[1] && v[1] <= 10.0 * thickness))
-      a.fail("expected [lo, hi] km with 0 <= lo <= hi <= 10 x the atmosphere's thickness (" +
-             std::to_string(10.0 * thickness) + " km)");
-    sc.altitude_min_km = v[0];
-    sc.altitude_max_km = v[1];
-  }
-  if (at.has("sun_elevation_deg")) {
-    const At e = at.child("sun_elevation_deg");
-    const auto v = e.numbers(2, 2);
-    const double lowest = 90.0 - s.max_sun_zenith_deg;
-    if (!(v[0] >= lowest && v[0] <= v[1] && v[1] <= 90.0))
-      e.fail("expected [lo, hi] degrees with " + std::to_string(lowest) +
-             " (90 - max_sun_zenith_deg: the textures hold no lower sun) <= lo <= hi <= 90");
-    sc.sun_elevation_min_deg = v[0];
-    sc.sun_elevation_max_deg = v[1];
-  }
-  if (at.has("views"))
-    sc.views = at.child("views").choice<SceneSpec::Views>(
-        {{"sky", SceneSpec::Views::sky}, {"ground", SceneSpec::Views::ground}, {"all", SceneSpec::Views::all}});
-  if (at.has("points")) {
-    const long long n = at.child("points").integer();
-    if (n < 1 || n > 65536) at.child("points").fail("expected an integer in [1, 65536], got " + at.child("points").shown());
-    sc.points = static_cast<int>(n);
-  }
-  if (at.has("paths")) {
-    const long long n = at.child("paths").integer();
-    if (n < 16 || n > (1LL << 24)) at.child("paths").fail("expected an integer in [16, 16777216], got " + at.child("paths").shown());
-    sc.paths = static_cast<int>(n);
-  }
-  if (at.has("tolerance_de2000") && at.has("tolerance_relative"))
-    at.fail("expected tolerance_de2000 or tolerance_relative, not both");
-  if (at.has("tolerance_de2000")) sc.tolerance_de2000 = at.child("tolerance_de2000").number_in(1e-3, 100.0, "in [0.001, 100]");
-  if (at.has("tolerance_relative"))
-    sc.tolerance_relative = at.child("tolerance_relative").number_in(1e-4, 10.0, "in [0.0001, 10]");
-}
-
 template <class F>
 void parse_list(const At& at, const char* what, F&& on_item) {
   if (!at.node.IsSequence() || at.node.size() == 0) at.fail(std::string("expected a non-empty list of ") + what);
@@ -124,7 +72,7 @@ void parse_list(const At& at, const char* what, F&& on_item) {
 AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   job.allow_keys({"name", "kind", "preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
                   "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
-                  "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "scene", "formats",
+                  "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
                   "ktx2"});
   AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
   if (job.has("preset")) job.child("preset").choice<int>({{"earth", 0}});
@@ -208,7 +156,6 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   }
   if (job.has("precision"))
     s.double_precision = job.child("precision").choice<int>({{"float", 0}, {"double", 1}}) == 1;
-  if (job.has("scene")) parse_scene(job.child("scene"), s);
   if (job.has("formats")) {
     bool bin = false, exr = false;
     parse_list(job.child("formats"), "formats (bin, exr, ktx2)", [&](const At& it) {
@@ -260,19 +207,6 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   if (s.format_ktx2) {
     norm["formats"] = {"bin", "exr", "ktx2"};
     norm["ktx2"] = {{"format", s.ktx2_half ? "rgba16f" : "rgba32f"}, {"zstd", s.ktx2_zstd}};
-  }
-  if (!s.scene.enabled) {
-    norm["scene"] = "none";
-  } else {
-    const SceneSpec& sc = s.scene;
-    const char* views = sc.views == SceneSpec::Views::sky ? "sky" : sc.views == SceneSpec::Views::ground ? "ground" : "all";
-    norm["scene"] = {{"camera_altitude_km", {sc.altitude_min_km, sc.altitude_max_km}},
-                     {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
-                     {"views", views},
-                     {"points", sc.points},
-                     {"paths", sc.paths}};
-    if (sc.tolerance_de2000) norm["scene"]["tolerance_de2000"] = *sc.tolerance_de2000;
-    if (sc.tolerance_relative) norm["scene"]["tolerance_relative"] = *sc.tolerance_relative;
   }
   norm.update(media_json(s));
   return s;

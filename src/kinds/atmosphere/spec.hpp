@@ -7,22 +7,6 @@
 
 namespace specbake {
 
-// The views a scene needs, where the bake is checked against path-traced truth: cameras at
-// altitudes in [altitude_min_km, altitude_max_km], the sun at elevations in
-// [sun_elevation_min_deg, sun_elevation_max_deg], looking at the sky, the ground or both;
-// `points` deterministic low-discrepancy views, each traced with `paths` walks per channel.
-struct SceneSpec {
-  enum class Views { sky, ground, all };
-  bool enabled = true;  // `scene: none` turns the check off
-  double altitude_min_km = 0.0, altitude_max_km = 2.0;
-  double sun_elevation_min_deg = -6.0, sun_elevation_max_deg = 90.0;
-  Views views = Views::sky;
-  int points = 64;
-  int paths = 1024;
-  std::optional<double> tolerance_de2000;    // the bake fails past it (displayed colour)
-  std::optional<double> tolerance_relative;  // the bake fails past it (radiance, relative)
-};
-
 // Geometry, sun, ground, the media (AtmosphereMedia) and what to bake.
 struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   double bottom_radius_km = 6360.0, top_radius_km = 6420.0;
@@ -44,7 +28,6 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool ktx2_half = true;   // rgba16f (measured half error in the manifest) or rgba32f
   bool ktx2_zstd = false;  // Zstandard supercompression
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
-  SceneSpec scene;
 };
 
 namespace atmosphere {

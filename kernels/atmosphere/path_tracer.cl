@@ -1,0 +1,422 @@
+/* path_tracer.cl — a Monte Carlo path tracer of the atmosphere model of atmosphere.cl: the
+ * ground truth the precomputed LUTs are judged by. Shared by the OpenCL kernel
+ * (kernels/atmosphere/truth_kernels.cl, real = double where the device has cl_khr_fp64, else
+ * float) and the C++ double reference (src/jobs/atmosphere/truth_reference.hpp). Include it
+ * after atmosphere.cl, whose parameter block, density profiles, phase functions, distances and
+ * sun terms it uses: the tracer and the LUT kernels cannot disagree on the model.
+ *
+ * What is traced: what Bruneton's GetSkyRadiance(camera, view, shadow_length = 0, sun) returns,
+ * i.e. the light scattered towards a camera at altitude h along the view ray (h, mu) between the
+ * camera and the ground or the top of the atmosphere, all scattering orders (or orders 1..N):
+ *   L(x, v) = ∫_0^D T(x, x_t) J(x_t, v) dt,
+ *   J(y, v) = Σ_i β_i,s ρ_i(y) [ P_i(ν) E_sun T_sun(y) V(y) + ∫_4π P_i(v·ω) L(y, ω) dω ],
+ * where L(y, ω) includes the Lambertian ground at the end of ω, radiance (a/π) E_ground, E_ground
+ * being the direct sun E_sun T_sun cosine factor plus the sky. Not traced: the sun disc itself,
+ * and the ground's own radiance at the end of a view ray that hits it (both are added by the
+ * renderer, not stored in the scattering textures). i: Rayleigh (phase P_R), Mie (Cornette–Shanks
+ * P_M with g), the ozone layer absorbs. T(x, y) = exp(−∫ σ_t), σ_t = β_R ρ_R + β_M,e ρ_M + β_A ρ_A.
+ *
+ * Orders as Bruneton counts them: every scattering event and every ground reflection is one
+ * order; the event on the view ray is order 1 (single scattering), so sun → ground → scattering
+ * → camera is order 2.
+ *
+ * The sun is a direction weighted by the visible fraction of its disc, as the bake does:
+ * at a scattering point E_sun T_sun V with V = sun_visible_fraction() (smoothstep over the disc
+ * at the horizon), T_sun the transmittance of the ray to the top towards the disc centre, or,
+ * when the centre is below the horizon but part of the disc is not, of the ray grazing the
+ * horizon (what the transmittance texture's clamp to its edge gives); on the ground E_sun T_sun
+ * times sun_horizontal_cosine() (the mean cosine over the visible part of the disc).
+ *
+ * Estimator (per wavelength: each channel is an independent scalar random walk):
+ *  - the view ray's vertex is sampled with a pdf proportional to (an approximation of)
+ *    β_s ρ(t) T(x, x_t): the host tabulates the ray's optical depth τ at nodes (converged
+ *    quadrature, nodes at every kink of the profiles) and the segment probabilities; a segment
+ *    is drawn from that table and t uniformly inside it. The weight uses the exact T: τ at the
+ *    segment start plus a 4-point Gauss–Legendre integral of σ_t over [t_k, t] (no kink inside);
+ *  - every other free path by delta tracking against a majorant (collision pdf σ_t T, weight
+ *    1/σ_t), reaching the ground with probability T;
+ *  - next-event estimation of the sun at every scattering event and every ground hit, with T_sun
+ *    by ratio tracking (unbiased);
+ *  - new directions: the mixture of Rayleigh (exact inversion) and Henyey–Greenstein with the
+ *    same g, weighted by (β_R P_R + β_M P_M)/(β_R P_R + β_M P_HG) ∈ [0.57, 1.14] for g = 0.8;
+ *    cosine-weighted after the ground (weight a);
+ *  - Russian roulette on the relative throughput (all orders), or a stop after order N.
+ * Majorant: σ̄ = max of σ_t over altitudes ≥ h_min (a table of TRUTH_SHELLS altitude shells
+ * built by the host from the exact maxima of the profiles), h_min the lowest altitude left on
+ * the remaining ray; a density above it is counted and fails the run. Ratio tracking uses
+ * TRUTH_RATIO_BOOST × σ̄: its relative variance for an optical depth τ is about e^{τ/boost} − 1.
+ *
+ * Random numbers: Philox4x32-10 (common/philox.h), one stream per (seed, path, point,
+ * channel), so a path's value depends on nothing else (batching, launch split, device count).
+ *
+ * Units: km, km⁻¹, radiance in the unit of solar_irradiance per sr (W m⁻² sr⁻¹ nm⁻¹).
+ * Geometry: the state is the altitude h (as atmosphere.cl: never r) plus unit vectors for the
+ * local zenith, the direction and the sun; positions move by ẑ' = (r ẑ + s ω)/|…|, altitudes
+ * and the ray's own distances come from the altitude-based functions of atmosphere.cl.
+ */
+#include "common/philox.h"
+
+#ifndef ATM_PI
+#  error "include atmosphere/atmosphere.cl before path_tracer.cl"
+#endif
+
+#define TRUTH_SHELLS 256        /* majorant table: shells of thickness (rt − rb)/TRUTH_SHELLS */
+#define TRUTH_MAX_EVENTS 1000   /* all-orders walks stop here (counted as truncated) */
+#define TRUTH_RATIO_BOOST R(2.0)
+
+/* One view point (host-built), TRUTH_POINT_STRIDE reals. */
+#define PT_H 0       /* camera altitude, km (moved to the top boundary for cameras above it) */
+#define PT_MU 1      /* cos view zenith there */
+#define PT_MU_S 2    /* cos sun zenith there */
+#define PT_NU 3      /* cos view–sun angle */
+#define PT_D 4       /* length of the view ray to the ground or the top, km */
+#define PT_GROUND 5  /* 1 if the view ray ends on the ground */
+#define PT_Z 6       /* 3: unit local zenith */
+#define PT_V 9       /* 3: unit view direction */
+#define PT_S 12      /* 3: unit sun direction */
+#define PT_NODES 15  /* node count of the view ray's table (0: nothing to trace) */
+#define TRUTH_POINT_STRIDE 16
+
+/* Output per (point, batch): per channel the batch mean and the sum of squared deviations
+ * (Welford), then events, truncated walks, majorant violations, walks. */
+#define TRUTH_OUT_STRIDE (2 * NCH + 4)
+
+/* ---- random numbers ------------------------------------------------------------------- */
+/* A 32-bit word to (0, 1), never 0 or 1 (float builds keep the top 24 bits). */
+FN real philox_uniform(PhiloxStream* s) {
+  const philox_u32 x = philox_next(s);
+#if defined(__OPENCL_C_VERSION__) && !defined(SPECBAKE_REAL_DOUBLE)
+  return ((real)(x >> 8) + R(0.5)) * R(5.9604644775390625e-8);
+#else
+  return ((real)x + R(0.5)) * R(2.3283064365386963e-10);
+#endif
+}
+
+/* ---- small vector helpers --------------------------------------------------------------- */
+FN void v3_normalize(real* v) {
+  const real n = sqrt(dot3(v, v));
+  v[0] /= n;
+  v[1] /= n;
+  v[2] /= n;
+}
+/* The zenith at distance s along direction w from a point at altitude h with zenith z. */
+FN void truth_move_zenith(const AtmosphereParameters* a, real h, const real* z, const real* w, real s, real* out) {
+  const real r = radius_of(a, h);
+  for (int k = 0; k < 3; ++k) out[k] = r * z[k] + s * w[k];
+  v3_normalize(out);
+}
+/* The unit vector at angle acos(cos_t) from n, azimuth phi (frame of Duff et al. 2017). */
+FN void truth_rotate(const real* n, real cos_t, real phi, real* out) {
+  const real sgn = n[2] >= R(0.0) ? R(1.0) : R(-1.0);
+  const real aa = R(-1.0) / (sgn + n[2]);
+  const real b = n[0] * n[1] * aa;
+  const real b1[3] = {R(1.0) + sgn * n[0] * n[0] * aa, sgn * b, -sgn * n[0]};
+  const real b2[3] = {b, sgn + n[1] * n[1] * aa, -n[1]};
+  const real sin_t = sqrt(fmax(R(1.0) - cos_t * cos_t, R(0.0)));
+  const real cp = cos(phi), sp = sin(phi);
+  for (int k = 0; k < 3; ++k) out[k] = sin_t * (cp * b1[k] + sp * b2[k]) + cos_t * n[k];
+  v3_normalize(out);
+}
+
+/* ---- the medium ------------------------------------------------------------------------- */
+/* Scattering (Rayleigh, Mie) and extinction coefficients of channel c at altitude h, km⁻¹. */
+FN void truth_coefficients(const AtmosphereParameters* a, int c, real h, real* s_r, real* s_m, real* s_t) {
+  const real rho_r = profile_density(&a->rayleigh_density, h);
+  const real rho_m = profile_density(&a->mie_density, h);
+  const real rho_a = profile_density(&a->absorption_density, h);
+  *s_r = a->rayleigh_scattering[c] * rho_r;
+  *s_m = a->mie_scattering[c] * rho_m;
+  *s_t = *s_r + a->mie_extinction[c] * rho_m + a->absorption_extinction[c] * rho_a;
+}
+FN real truth_extinction(const AtmosphereParameters* a, int c, real h) {
+  real s_r, s_m, s_t;
+  truth_coefficients(a, c, h, &s_r, &s_m, &s_t);
+  return s_t;
+}
+/* The majorant of channel c for a ray whose lowest remaining altitude is h_min. */
+FN real truth_majorant(const AtmosphereParameters* a, GLOBAL const real* majorant, int c, real h_min) {
+  const real width = thickness(a) / (real)TRUTH_SHELLS;
+  const int shell = clamp_int((int)floor(h_min / width), 0, TRUTH_SHELLS - 1);
+  return majorant[shell * NCH + c];
+}
+/* The lowest altitude of the ray (h, mu) that does not hit the ground: its start if it rises,
+ * else its tangent point, at r √(1 − μ²) from the centre: ρ_t² = ρ² − (rμ)². */
+FN real truth_tangent_altitude(const AtmosphereParameters* a, real h, real mu) {
+  if (mu >= R(0.0)) return h;
+  const real r_mu = radius_of(a, h) * mu;
+  return fmax(altitude_of_rho2(a, horizon_distance2(a, h) - r_mu * r_mu), R(0.0));
+}
+
+/* ∫ σ_t dt over [t0, t1] along (h, mu, hits_ground), 4-point Gauss–Legendre. The segment
+ * holds no kink of the profiles and is at most 1/256 of the view ray, so the integrand is a
+ * smooth exponential of scale L ≳ the segment; the rule's relative error is
+ * 5.6e-10 (Δ/L)^8 ≤ 6e-7 for Δ/L ≤ 3 (Earth: Δ/L < 0.5). */
+FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real mu, int hits_ground, real t0,
+                            real t1) {
+  const real x[2] = {R(0.3399810435848563), R(0.8611363115940526)};
+  const real w[2] = {R(0.6521451548625461), R(0.3478548451374538)};
+  const real mid = R(0.5) * (t0 + t1), half_len = R(0.5) * (t1 - t0);
+  real sum = R(0.0);
+  for (int i = 0; i < 2; ++i)
+    for (int side = 0; side < 2; ++side) {
+      const real t = side == 0 ? mid - half_len * x[i] : mid + half_len * x[i];
+      real h_t, mu_t;
+      point_along(a, h, mu, t, hits_ground, &h_t, &mu_t);
+      sum += w[i] * truth_extinction(a, c, h_t);
+    }
+  return sum * half_len;
+}
+
+/* ---- shadow rays: ratio tracking ---------------------------------------------------------- */
+/* Unbiased estimate of T_sun from altitude h with sun cosine mu_s (visible fraction not
+ * included): along mu_s, or along the horizon when the disc centre is below it. */
+FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu_s,
+                                PhiloxStream* rng, int* violations) {
+  const real r = radius_of(a, h);
+  const real mu = fmax(mu_s, -horizon_distance(a, h) / r);
+  const real d = distance_to_top(a, h, mu);
+  const real s_tan = mu < R(0.0) ? -r * mu : R(-1.0);
+  real h_min = truth_tangent_altitude(a, h, mu);
+  real s = R(0.0), t = R(1.0);
+  for (;;) {
+    const real majorant_s = TRUTH_RATIO_BOOST * truth_majorant(a, majorant, c, h_min);
+    if (!(majorant_s > R(0.0))) break;
+    s += -log(philox_uniform(rng)) / majorant_s;
+    if (s >= d) break;
+    real h_s, mu_s_;
+    point_along(a, h, mu, s, 0, &h_s, &mu_s_);
+    const real sigma = truth_extinction(a, c, h_s);
+    if (sigma * TRUTH_RATIO_BOOST > majorant_s) *violations += 1;
+    t *= R(1.0) - sigma / majorant_s;
+    if (s >= s_tan) h_min = h_s;
+  }
+  return t;
+}
+
+/* ---- free paths: delta tracking ------------------------------------------------------------ */
+/* From altitude h along mu: 0 if the walk leaves through the top, 1 if it collides (distance
+ * in *s, altitude in *h_s), 2 if it reaches the ground (distance in *s). */
+FN int truth_free_path(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu,
+                       PhiloxStream* rng, real* s_out, real* h_s_out, int* violations) {
+  const int ground = ray_hits_ground(a, h, mu);
+  const real d = distance_to_nearest_boundary(a, h, mu, ground);
+  const real s_tan = (mu < R(0.0) && !ground) ? -radius_of(a, h) * mu : R(-1.0);
+  real h_min = ground ? R(0.0) : truth_tangent_altitude(a, h, mu);
+  real s = R(0.0);
+  for (;;) {
+    const real majorant_s = truth_majorant(a, majorant, c, h_min);
+    if (!(majorant_s > R(0.0))) break; /* an empty medium */
+    s += -log(philox_uniform(rng)) / majorant_s;
+    if (s >= d) break;
+    real h_s, mu_s;
+    point_along(a, h, mu, s, ground, &h_s, &mu_s);
+    const real sigma = truth_extinction(a, c, h_s);
+    if (sigma > majorant_s) *violations += 1;
+    if (philox_uniform(rng) * majorant_s < sigma) {
+      *s_out = s;
+      *h_s_out = h_s;
+      return 1;
+    }
+    if (!ground && s >= s_tan) h_min = h_s;
+  }
+  *s_out = d;
+  *h_s_out = ground ? R(0.0) : thickness(a);
+  return ground ? 2 : 0;
+}
+
+/* ---- phase functions: sampling ------------------------------------------------------------ */
+FN real henyey_greenstein_phase(real g, real cos_t) {
+  const real x = R(1.0) + g * g - R(2.0) * g * cos_t;
+  return (R(1.0) - g * g) / (R(4.0) * ATM_PI * x * sqrt(x));
+}
+/* cos θ with density ∝ 1 + cos² θ: the real root of c³ + 3c = 8u − 4, c = A − 1/A. */
+FN real sample_rayleigh_cosine(real u) {
+  const real q = R(4.0) * u - R(2.0);
+  const real A = cbrt(q + sqrt(q * q + R(1.0)));
+  return clamp_cosine(A - R(1.0) / A);
+}
+FN real sample_henyey_greenstein_cosine(real g, real u) {
+  if (fabs(g) < R(1e-3)) return R(2.0) * u - R(1.0);
+  const real k = (R(1.0) - g * g) / (R(1.0) - g + R(2.0) * g * u);
+  return clamp_cosine((R(1.0) + g * g - k * k) / (R(2.0) * g));
+}
+
+/* ---- one walk ---------------------------------------------------------------------------- */
+/* The radiance estimate of one walk for channel c of point `pt`. node_tau and node_cdf are the
+ * view-ray table of this point and channel (node distances in node_t). max_orders: 0 = all. */
+FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, GLOBAL const real* node_t,
+                   GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
+                   int max_orders, PhiloxStream* rng, int* events, int* truncated, int* violations) {
+  const int n = (int)pt[PT_NODES];
+  if (n < 2) return R(0.0);
+  const real sun[3] = {pt[PT_S], pt[PT_S + 1], pt[PT_S + 2]};
+  const real e_sun = a->solar_irradiance[c];
+
+  /* the view ray's vertex: segment k with probability cdf[k+1] − cdf[k], t uniform in it */
+  const real u = philox_uniform(rng);
+  int lo = 0, hi = n - 1; /* cdf[lo] ≤ u < cdf[hi] */
+  while (hi - lo > 1) {
+    const int mid = (lo + hi) / 2;
+    if (node_cdf[mid] <= u) lo = mid;
+    else hi = mid;
+  }
+  const real p_k = node_cdf[lo + 1] - node_cdf[lo];
+  const real t0 = node_t[lo], dt = node_t[lo + 1] - node_t[lo];
+  if (!(p_k > R(0.0)) || !(dt > R(0.0))) return R(0.0);
+  const real t = t0 + philox_uniform(rng) * dt;
+  const real h0 = pt[PT_H], mu0 = pt[PT_MU];
+  const int ground0 = pt[PT_GROUND] != R(0.0);
+  const real tau = node_tau[lo] + truth_segment_depth(a, c, h0, mu0, ground0, t0, t);
+  real weight = exp(-tau) * dt / p_k; /* T / pdf */
+  real rho = R(1.0);                  /* throughput relative to the view ray's vertex */
+
+  real z[3] = {pt[PT_Z], pt[PT_Z + 1], pt[PT_Z + 2]};
+  real w[3] = {pt[PT_V], pt[PT_V + 1], pt[PT_V + 2]};
+  real h, mu_dummy;
+  point_along(a, h0, mu0, t, ground0, &h, &mu_dummy);
+  {
+    real z1[3];
+    truth_move_zenith(a, h0, z, w, t, z1);
+    for (int k = 0; k < 3; ++k) z[k] = z1[k];
+  }
+  int on_ground = 0;
+  real radiance = R(0.0);
+  for (int order = 1;; ++order) {
+    *events += 1;
+    const real mu_s = clamp_cosine(dot3(sun, z));
+    if (on_ground) {
+      /* ground vertex: the sun, then a cosine-weighted direction */
+      const real albedo = a->ground_albedo[c];
+      const real cos_factor = sun_horizontal_cosine(a, mu_s);
+      if (cos_factor > R(0.0) && albedo > R(0.0)) {
+        const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, rng, violations);
+        radiance += weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
+      }
+      if (max_orders > 0 && order >= max_orders) break;
+      weight *= albedo;
+      rho *= albedo;
+      const real cos_t = sqrt(philox_uniform(rng));
+      const real phi = R(2.0) * ATM_PI * philox_uniform(rng);
+      truth_rotate(z, cos_t, phi, w);
+    } else {
+      /* scattering vertex: the sun, then the phase function */
+      real s_r, s_m, s_t;
+      truth_coefficients(a, c, h, &s_r, &s_m, &s_t);
+      const real nu = clamp_cosine(dot3(w, sun));
+      const real visible = sun_visible_fraction(a, h, mu_s);
+      if (visible > R(0.0) && s_r + s_m > R(0.0)) {
+        const real t_sun = truth_sun_transmittance(a, c, majorant, h, mu_s, rng, violations);
+        radiance += weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
+      }
+      if (max_orders > 0 && order >= max_orders) break;
+      if (!(s_r + s_m > R(0.0))) break;
+      const real g = a->mie_g;
+      const real u_type = philox_uniform(rng), u_cos = philox_uniform(rng), u_phi = philox_uniform(rng);
+      const real cos_t =
+          u_type * (s_r + s_m) < s_r ? sample_rayleigh_cosine(u_cos) : sample_henyey_greenstein_cosine(g, u_cos);
+      const real p_r = rayleigh_phase(cos_t);
+      const real ratio = (s_r * p_r + s_m * mie_phase(g, cos_t)) / (s_r * p_r + s_m * henyey_greenstein_phase(g, cos_t));
+      weight *= (s_r + s_m) * ratio;
+      rho *= ratio;
+      real w1[3];
+      truth_rotate(w, cos_t, R(2.0) * ATM_PI * u_phi, w1);
+      for (int k = 0; k < 3; ++k) w[k] = w1[k];
+    }
+    if (max_orders == 0 && order >= TRUTH_MAX_EVENTS) {
+      *truncated += 1;
+      break;
+    }
+    /* Russian roulette on the relative throughput. The uniform is drawn at every vertex, so
+     * that a throughput within rounding of 1 (e.g. a Mie share of 1e-17 at 45 km) cannot shift
+     * the stream between builds that round differently. */
+    const real u_rr = philox_uniform(rng);
+    if (rho < R(1.0)) {
+      if (u_rr >= rho) break;
+      weight /= rho;
+      rho = R(1.0);
+    }
+    /* the next free path */
+    const real mu = clamp_cosine(dot3(w, z));
+    const real h_start = on_ground ? R(0.0) : h;
+    real s, h_s;
+    const int what = truth_free_path(a, c, majorant, h_start, mu, rng, &s, &h_s, violations);
+    if (what == 0) break;
+    real z1[3];
+    truth_move_zenith(a, h_start, z, w, s, z1);
+    for (int k = 0; k < 3; ++k) z[k] = z1[k];
+    if (what == 1) {
+      real s_r, s_m, s_t;
+      truth_coefficients(a, c, h_s, &s_r, &s_m, &s_t);
+      weight /= s_t;
+      rho *= (s_r + s_m) / s_t;
+      h = h_s;
+      on_ground = 0;
+    } else {
+      h = R(0.0);
+      on_ground = 1;
+    }
+  }
+  return radiance;
+}
+
+/* ---- one work item: a batch of walks of one point, every channel ------------------------- */
+/* Point p (point point_base + p of the request, for the random streams) and batch b (walks
+ * b·paths_per_batch ... (b + 1)·paths_per_batch − 1); channel c of this group is channel
+ * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item. Table layouts:
+ * node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], majorant [TRUTH_SHELLS][NCH]. */
+FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
+                         GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
+                         int nodes, int p, int point_base, int b, int paths_per_batch, int max_orders,
+                         philox_u32 seed_lo, philox_u32 seed_hi, int channel_base, int channels,
+                         GLOBAL real* out_item) {
+  GLOBAL const real* pt = points + p * TRUTH_POINT_STRIDE;
+  int events = 0, truncated = 0, violations = 0;
+  for (int c = 0; c < NCH; ++c) {
+    real mean = R(0.0), m2 = R(0.0);
+    if (c < channels) {
+      for (int i = 0; i < paths_per_batch; ++i) {
+        PhiloxStream rng;
+        philox_stream_init(&rng, seed_lo, seed_hi, (philox_u32)b * (philox_u32)paths_per_batch + (philox_u32)i,
+                           (philox_u32)(point_base + p),
+                           (philox_u32)(channel_base + c));
+        const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
+                                  node_cdf + (p * NCH + c) * nodes, majorant, max_orders, &rng, &events, &truncated,
+                                  &violations);
+        const real delta = x - mean;
+        mean += delta / (real)(i + 1);
+        m2 += delta * (x - mean);
+      }
+    }
+    out_item[2 * c] = mean;
+    out_item[2 * c + 1] = m2;
+  }
+  out_item[2 * NCH] = (real)events;
+  out_item[2 * NCH + 1] = (real)truncated;
+  out_item[2 * NCH + 2] = (real)violations;
+  out_item[2 * NCH + 3] = (real)paths_per_batch;
+}
+
+/* ---- host-side helpers (tables) ------------------------------------------------------------ */
+/* The maximum of one layer a·exp(b·h) + c·h + d, clamped to [0, 1], over [lo, hi]: the clamp is
+ * monotone, so it is the clamp of the unclamped maximum, which lies at an end, or for a < 0
+ * (concave) possibly where a·b·exp(b·h) + c = 0. */
+FN real layer_max_over(const DensityProfile* p, int layer, real lo, real hi) {
+  real m = fmax(layer_density(p, layer, lo), layer_density(p, layer, hi));
+  const real ea = p->exp_term[layer], eb = p->exp_scale[layer], lc = p->linear_term[layer];
+  if (ea < R(0.0) && eb != R(0.0) && lc != R(0.0)) {
+    const real arg = -lc / (ea * eb);
+    if (arg > R(0.0)) {
+      const real h_star = log(arg) / eb;
+      if (h_star > lo && h_star < hi) m = fmax(m, layer_density(p, layer, h_star));
+    }
+  }
+  return m;
+}
+/* max of profile_density() over [lo, hi] (layer 0 below width[0], layer 1 from it). */
+FN real profile_max_over(const DensityProfile* p, real lo, real hi) {
+  const real w = p->width[0];
+  real m = R(0.0);
+  if (lo < w) m = fmax(m, layer_max_over(p, 0, lo, fmin(hi, w)));
+  if (hi >= w) m = fmax(m, layer_max_over(p, 1, fmax(lo, w), hi));
+  return m;
+}

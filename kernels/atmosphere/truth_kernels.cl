@@ -1,0 +1,24 @@
+/* truth_kernels.cl — OpenCL entry point of the path-traced atmosphere truth: one work item per
+ * (point, batch of walks). The maths is in path_tracer.cl (and atmosphere.cl).
+ * Built with -DNCH=3 (channels per launch) and real = double where the device has
+ * cl_khr_fp64 (-DSPECBAKE_REAL_DOUBLE), else float. */
+#include "atmosphere/atmosphere.cl"
+#include "atmosphere/path_tracer.cl"
+
+/* Work item id → point p = id / batch_stride (point point_base + p of the request) and its
+ * j-th batch of this launch, j = id % batch_stride (items with j >= batch_count[p] return at
+ * once), walks of batch batch_base[p] + j; out holds [points][batch_stride][TRUTH_OUT_STRIDE]. */
+__kernel void truth_trace(AtmosphereParameters a, __global const real* points, __global const real* node_t,
+                          __global const real* node_tau, __global const real* node_cdf,
+                          __global const real* majorant, int point_count, int point_base, int nodes,
+                          __global const int* batch_base, __global const int* batch_count, int batch_stride,
+                          int paths_per_batch, int max_orders, uint seed_lo, uint seed_hi, int channel_base,
+                          int channels, __global real* out) {
+  const int id = get_global_id(0);
+  if (id >= point_count * batch_stride) return;
+  const int p = id / batch_stride, j = id % batch_stride;
+  if (j >= batch_count[p]) return;
+  truth_trace_item(&a, points, node_t, node_tau, node_cdf, majorant, nodes, p, point_base, batch_base[p] + j,
+                   paths_per_batch, max_orders, seed_lo, seed_hi, channel_base, channels,
+                   out + (p * batch_stride + j) * TRUTH_OUT_STRIDE);
+}

@@ -1,0 +1,641 @@
+#include "kinds/atmosphere/truth.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+
+#include "cl/buffers.hpp"
+#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/truth_reference.hpp"
+
+namespace specbake::atmosphere {
+
+namespace {
+
+using ref3::AtmosphereParameters;
+using ref3::DensityProfile;
+
+constexpr const char* kKernel = "kernels/atmosphere/truth_kernels.cl";
+constexpr int kGroup = ref3::kTruthChannels;  // channels per launch (the kernels' NCH)
+constexpr int kStride = ref3::kTruthOutStride;
+// The view ray's table: kSegments equal segments, split again at every altitude where a
+// profile has a kink (its layer boundary, where it reaches 0 or 1), so that no segment holds
+// one; each segment's optical depth by kSubSegments × 8-point Gauss–Legendre.
+constexpr int kSegments = 256;
+constexpr int kSubSegments = 4;
+constexpr int kMaxKinkAltitudes = 32;
+constexpr int kNodes = kSegments + 1 + 2 * kMaxKinkAltitudes;
+// Segment probabilities mix in this much of the uniform density, so that every segment has a
+// positive probability whatever the approximations of the table.
+constexpr double kUniformMix = 1e-3;
+// Majorants: the exact maxima of the profiles over [h_j − δ, top] (δ = 1e-3 shell) times
+// 1 + 1e-5, far above float32 rounding of the densities (6e-8 relative).
+constexpr double kMajorantMargin = 1e-5;
+constexpr double kShellOverlap = 1e-3;
+constexpr double kGaussX[4] = {0.1834346424956498, 0.5255324099163290, 0.7966664774136267, 0.9602898564975363};
+constexpr double kGaussW[4] = {0.3626837833783620, 0.3137066458778873, 0.2223810344533745, 0.1012285362903763};
+
+double radians(double deg) { return deg * M_PI / 180.0; }
+
+void check_options(const std::vector<TruthPoint>& points, const TruthOptions& o) {
+  if (points.empty()) throw InputError(Location{{}, 0, 0, "points"}, "at least one point");
+  if (o.paths < 1) throw InputError(Location{{}, 0, 0, "paths"}, "paths >= 1, got " + std::to_string(o.paths));
+  if (o.paths_per_batch < 1 || o.paths_per_batch > 1 << 20)
+    throw InputError(Location{{}, 0, 0, "paths_per_batch"}, "1..1048576, got " + std::to_string(o.paths_per_batch));
+  if (o.orders < 0 || o.orders > 1000)
+    throw InputError(Location{{}, 0, 0, "orders"}, "0 (all) or 1..1000, got " + std::to_string(o.orders));
+  if (!(o.target_relative_se >= 0.0 && std::isfinite(o.target_relative_se)))
+    throw InputError(Location{{}, 0, 0, "target_relative_se"}, "a fraction >= 0 (0: off)");
+  if (o.paths > (1LL << 32) || (o.paths + o.paths_per_batch - 1) / o.paths_per_batch > std::numeric_limits<int>::max())
+    throw InputError(Location{{}, 0, 0, "paths"}, "at most 2^32 walks per point, and 2^31 batches");
+  if (o.max_paths < 1) throw InputError(Location{{}, 0, 0, "max_paths"}, "max_paths >= 1");
+  // the random streams count points in 32 bits; the kernels index [point][node] with int
+  if (points.size() > (1u << 24)) throw InputError(Location{{}, 0, 0, "points"}, "at most 2^24 points per call");
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const TruthPoint& p = points[i];
+    const std::string at = "points[" + std::to_string(i) + "].";
+    if (!(std::isfinite(p.altitude_km) && p.altitude_km >= 0.0))
+      throw InputError(Location{{}, 0, 0, at + "altitude_km"}, "a finite altitude >= 0 km");
+    if (!(p.view_zenith_deg >= 0.0 && p.view_zenith_deg <= 180.0))
+      throw InputError(Location{{}, 0, 0, at + "view_zenith_deg"}, "an angle in [0, 180]");
+    if (!(p.sun_zenith_deg >= 0.0 && p.sun_zenith_deg <= 180.0))
+      throw InputError(Location{{}, 0, 0, at + "sun_zenith_deg"}, "an angle in [0, 180]");
+    if (!(std::isfinite(p.view_sun_azimuth_deg) && std::fabs(p.view_sun_azimuth_deg) <= 360.0))
+      throw InputError(Location{{}, 0, 0, at + "view_sun_azimuth_deg"}, "an angle in [-360, 360]");
+  }
+}
+
+// Altitudes in (0, t) where a profile has a kink or a jump: its layer boundary, and where a
+// layer's a·exp(b·h) + c·h + d crosses 0 or 1 (the clamp), found on a 4096-step scan and
+// refined by bisection.
+std::vector<double> kink_altitudes(const AtmosphereParameters& a) {
+  const double t = a.top_radius - a.bottom_radius;
+  std::vector<double> out;
+  for (const DensityProfile* p : {&a.rayleigh_density, &a.mie_density, &a.absorption_density}) {
+    if (p->width[0] > 0.0 && p->width[0] < t) out.push_back(p->width[0]);
+    for (int layer = 0; layer < 2; ++layer) {
+      auto f = [&](double h) {
+        return p->exp_term[layer] * std::exp(p->exp_scale[layer] * h) + p->linear_term[layer] * h +
+               p->constant_term[layer];
+      };
+      for (double level : {0.0, 1.0}) {
+        constexpr int n = 4096;
+        double h0 = 0.0, f0 = f(0.0) - level;
+        for (int i = 1; i <= n; ++i) {
+          const double h1 = t * i / n, f1 = f(h1) - level;
+          if ((f0 < 0.0) != (f1 < 0.0)) {
+            double lo = h0, hi = h1;
+            for (int k = 0; k < 100 && hi - lo > 1e-13 * t; ++k) {
+              const double mid = 0.5 * (lo + hi);
+              if (((f(mid) - level) < 0.0) == (f0 < 0.0)) lo = mid;
+              else hi = mid;
+            }
+            const double h = 0.5 * (lo + hi);
+            if (h > 0.0 && h < t) out.push_back(h);
+          }
+          h0 = h1;
+          f0 = f1;
+        }
+      }
+    }
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end(), [&](double x, double y) { return y - x < 1e-9 * t; }), out.end());
+  if (out.size() > kMaxKinkAltitudes) {
+    spdlog::warn("truth: {} kink altitudes in the density profiles; the view-ray table splits at the first {}",
+                 out.size(), kMaxKinkAltitudes);
+    out.resize(kMaxKinkAltitudes);
+  }
+  return out;
+}
+
+// Everything the walks need, for all channels; the kernels read one group of kGroup channels.
+struct Prepared {
+  Model model;
+  Channels channels;
+  std::size_t point_base = 0;  // index of the first point in the request (random streams)
+  std::size_t n_points = 0, n_channels = 0;
+  std::vector<double> points;    // [P][TRUTH_POINT_STRIDE]
+  std::vector<double> node_t;    // [P][kNodes]
+  std::vector<double> node_tau;  // [P][C][kNodes]
+  std::vector<double> node_cdf;  // [P][C][kNodes]
+};
+
+// The view ray of point p in the frame zenith = (0, 0, 1), view in the xz plane.
+void point_geometry(const AtmosphereParameters& a, const TruthPoint& p, double* row) {
+  const double tv = radians(p.view_zenith_deg), ts = radians(p.sun_zenith_deg), phi = radians(p.view_sun_azimuth_deg);
+  double z[3] = {0.0, 0.0, 1.0};
+  const double v[3] = {std::sin(tv), 0.0, std::cos(tv)};
+  const double s[3] = {std::sin(ts) * std::cos(phi), std::sin(ts) * std::sin(phi), std::cos(ts)};
+  const double t = a.top_radius - a.bottom_radius;
+  double h = p.altitude_km, mu = v[2];
+  for (int k = 0; k < TRUTH_POINT_STRIDE; ++k) row[k] = 0.0;
+  if (h > t) {
+    // enter the atmosphere as GetSkyRadiance does (or see nothing)
+    const double r = a.bottom_radius + h, rmu = r * mu;
+    const double disc = rmu * rmu - (r - a.top_radius) * (r + a.top_radius);
+    if (rmu >= 0.0 || disc < 0.0) return;
+    const double d = -rmu - std::sqrt(disc);
+    for (int k = 0; k < 3; ++k) z[k] = r * z[k] + d * v[k];
+    const double n = std::sqrt(ref3::dot3(z, z));
+    for (double& x : z) x /= n;
+    h = t;
+    mu = std::clamp((rmu + d) / a.top_radius, -1.0, 1.0);
+  }
+  const int ground = ref3::ray_hits_ground(&a, h, mu);
+  const double length = ref3::distance_to_nearest_boundary(&a, h, mu, ground);
+  if (!(length > 0.0)) return;
+  row[PT_H] = h;
+  row[PT_MU] = mu;
+  row[PT_MU_S] = std::clamp(ref3::dot3(s, z), -1.0, 1.0);
+  row[PT_NU] = std::clamp(ref3::dot3(v, s), -1.0, 1.0);
+  row[PT_D] = length;
+  row[PT_GROUND] = ground;
+  for (int k = 0; k < 3; ++k) {
+    row[PT_Z + k] = z[k];
+    row[PT_V + k] = v[k];
+    row[PT_S + k] = s[k];
+  }
+  row[PT_NODES] = 2;  // refined by view_table
+}
+
+// Nodes, optical depth at the nodes and segment probabilities of one point's view ray, for
+// every channel.
+void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, double* row,
+                double* node_t, double* node_tau, double* node_cdf) {
+  const std::size_t C = ch.size();
+  for (int k = 0; k < kNodes; ++k) node_t[k] = 0.0;
+  for (std::size_t c = 0; c < C; ++c)
+    for (int k = 0; k < kNodes; ++k) node_tau[c * kNodes + k] = node_cdf[c * kNodes + k] = 0.0;
+  if (row[PT_NODES] == 0.0) return;
+  const double h = row[PT_H], mu = row[PT_MU], D = row[PT_D];
+  const int ground = row[PT_GROUND] != 0.0;
+  std::vector<double> t;
+  for (int k = 0; k <= kSegments; ++k) t.push_back(D * k / kSegments);
+  // crossings of the kink altitudes: s² + 2 rμ s + (ρ² − ρ_k²) = 0
+  const double r_mu = (a.bottom_radius + h) * mu, rho2 = ref3::horizon_distance2(&a, h);
+  for (double hk : kinks) {
+    const double c0 = rho2 - ref3::horizon_distance2(&a, hk);
+    const double disc = r_mu * r_mu - c0;
+    if (disc < 0.0) continue;
+    const double q = -(r_mu + std::copysign(std::sqrt(disc), r_mu));
+    for (double s : {q, q != 0.0 ? c0 / q : 0.0})
+      if (s > 0.0 && s < D) t.push_back(s);
+  }
+  std::sort(t.begin(), t.end());
+  t.erase(std::unique(t.begin(), t.end(), [&](double x, double y) { return y - x < 1e-9 * D; }), t.end());
+  t.back() = D;
+  const int n = static_cast<int>(t.size());
+  row[PT_NODES] = n;
+  for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
+
+  // per segment: optical lengths of the three profiles, and per sub-segment its Rayleigh and
+  // Mie lengths (for the masses)
+  struct Sub {
+    double t_mid, l_r, l_m;
+  };
+  std::vector<std::array<double, 3>> lengths(n - 1);
+  std::vector<std::array<Sub, kSubSegments>> subs(n - 1);
+  for (int k = 0; k + 1 < n; ++k) {
+    std::array<double, 3> l{0.0, 0.0, 0.0};
+    const double dt = (t[k + 1] - t[k]) / kSubSegments;
+    for (int j = 0; j < kSubSegments; ++j) {
+      const double mid = t[k] + (j + 0.5) * dt, half = 0.5 * dt;
+      Sub sub{mid, 0.0, 0.0};
+      for (int i = 0; i < 4; ++i)
+        for (int side = 0; side < 2; ++side) {
+          const double s = side == 0 ? mid - half * kGaussX[i] : mid + half * kGaussX[i];
+          double h_s, mu_s;
+          ref3::point_along(&a, h, mu, s, ground, &h_s, &mu_s);
+          const double w = kGaussW[i] * half;
+          const double rr = w * ref3::profile_density(&a.rayleigh_density, h_s);
+          const double rm = w * ref3::profile_density(&a.mie_density, h_s);
+          l[0] += rr;
+          l[1] += rm;
+          l[2] += w * ref3::profile_density(&a.absorption_density, h_s);
+          sub.l_r += rr;
+          sub.l_m += rm;
+        }
+      subs[k][j] = sub;
+    }
+    lengths[k] = l;
+  }
+  for (std::size_t c = 0; c < C; ++c) {
+    double* tau = node_tau + c * kNodes;
+    double* cdf = node_cdf + c * kNodes;
+    tau[0] = 0.0;
+    for (int k = 0; k + 1 < n; ++k)
+      tau[k + 1] = tau[k] + ch.rayleigh_scattering[c] * lengths[k][0] + ch.mie_extinction[c] * lengths[k][1] +
+                   ch.absorption_extinction[c] * lengths[k][2];
+    // segment masses ≈ ∫ β_s ρ T dt, T at each sub-segment's middle with τ linear between the
+    // nodes: only the pdf depends on them
+    std::vector<double> mass(n - 1, 0.0);
+    double total = 0.0;
+    for (int k = 0; k + 1 < n; ++k) {
+      const double dt = t[k + 1] - t[k];
+      for (const Sub& sub : subs[k]) {
+        const double tau_s = tau[k] + (tau[k + 1] - tau[k]) * (sub.t_mid - t[k]) / dt;
+        mass[k] += (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * std::exp(-tau_s);
+      }
+      total += mass[k];
+    }
+    cdf[0] = 0.0;
+    for (int k = 0; k + 1 < n; ++k) {
+      const double uniform = (t[k + 1] - t[k]) / D;
+      const double p = total > 0.0 ? (1.0 - kUniformMix) * mass[k] / total + kUniformMix * uniform : uniform;
+      cdf[k + 1] = cdf[k] + p;
+    }
+    const double norm = cdf[n - 1];
+    for (int k = 1; k < n; ++k) cdf[k] /= norm;
+    cdf[n - 1] = 1.0;
+    for (int k = n; k < kNodes; ++k) {
+      tau[k] = tau[n - 1];
+      cdf[k] = 1.0;
+    }
+  }
+}
+
+Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base) {
+  Prepared P;
+  P.point_base = point_base;
+  P.model = model_of(spec);
+  const Spectrum sp = spectrum_of(spec);
+  P.channels = channels_at(spec, sp.lambda_nm);
+  P.n_points = points.size();
+  P.n_channels = P.channels.size();
+  const AtmosphereParameters a = ref3::make_parameters(P.model, Channels{});
+  const std::vector<double> kinks = kink_altitudes(a);
+  P.points.assign(P.n_points * TRUTH_POINT_STRIDE, 0.0);
+  P.node_t.assign(P.n_points * kNodes, 0.0);
+  P.node_tau.assign(P.n_points * P.n_channels * kNodes, 0.0);
+  P.node_cdf.assign(P.n_points * P.n_channels * kNodes, 0.0);
+  parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
+    double* row = &P.points[i * TRUTH_POINT_STRIDE];
+    point_geometry(a, points[i], row);
+    view_table(a, P.channels, kinks, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
+               &P.node_cdf[i * P.n_channels * kNodes]);
+  });
+  return P;
+}
+
+// The majorant table of one channel group, [TRUTH_SHELLS][kGroup].
+std::vector<double> majorant_table(const Model& m, const Channels& group) {
+  const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
+  const double t = m.top_radius_km - m.bottom_radius_km, width = t / TRUTH_SHELLS;
+  std::vector<double> out(TRUTH_SHELLS * kGroup, 0.0);
+  for (int j = 0; j < TRUTH_SHELLS; ++j) {
+    const double lo = std::max(0.0, (j - kShellOverlap) * width);
+    const double hi = t * (1.0 + 1e-9);
+    const double mr = ref3::profile_max_over(&a.rayleigh_density, lo, hi);
+    const double mm = ref3::profile_max_over(&a.mie_density, lo, hi);
+    const double ma = ref3::profile_max_over(&a.absorption_density, lo, hi);
+    for (std::size_t c = 0; c < group.size(); ++c)
+      out[j * kGroup + c] = (group.rayleigh_scattering[c] * mr + group.mie_extinction[c] * mm +
+                             group.absorption_extinction[c] * ma) *
+                            (1.0 + kMajorantMargin);
+  }
+  return out;
+}
+
+// The [P][kGroup][kNodes] slice of a [P][C][kNodes] table for channels first..first+count.
+std::vector<double> group_slice(const std::vector<double>& v, std::size_t n_points, std::size_t n_channels,
+                                std::size_t first, std::size_t count) {
+  std::vector<double> out(n_points * kGroup * kNodes, 0.0);
+  for (std::size_t p = 0; p < n_points; ++p)
+    for (std::size_t c = 0; c < count; ++c)
+      std::copy_n(&v[(p * n_channels + first + c) * kNodes], kNodes, &out[(p * kGroup + c) * kNodes]);
+  for (std::size_t p = 0; p < n_points; ++p)  // unused channels: a valid table (never read)
+    for (std::size_t c = count; c < kGroup; ++c)
+      for (int k = 0; k < kNodes; ++k) out[(p * kGroup + c) * kNodes + k] = 1.0;
+  return out;
+}
+
+// Running statistics of one (point, channel): walks, mean, sum of squared deviations; batches
+// merge by the pairwise update of Chan, Golub and LeVeque.
+struct Stat {
+  double n = 0.0, mean = 0.0, m2 = 0.0;
+  void merge(double nb, double mean_b, double m2_b) {
+    const double total = n + nb, delta = mean_b - mean;
+    mean += delta * nb / total;
+    m2 += m2_b + delta * delta * n * nb / total;
+    n = total;
+  }
+  double se() const { return n > 1.0 ? std::sqrt(std::max(m2, 0.0) / (n - 1.0) / n) : 0.0; }
+};
+
+// Runs, for every point p, count[p] batches from batch base[p], of one channel group; returns
+// [P][stride][kStride].
+class Engine {
+ public:
+  virtual ~Engine() = default;
+  virtual std::vector<double> run(std::size_t group, const std::vector<int>& base, const std::vector<int>& count,
+                                  int stride) = 0;
+};
+
+struct Group {
+  std::size_t first = 0, count = 0;
+  Channels channels;
+  AtmosphereParameters a{};
+  std::vector<double> tau, cdf, majorant;
+};
+std::vector<Group> groups_of(const Prepared& P) {
+  std::vector<Group> out;
+  for (std::size_t first = 0; first < P.n_channels; first += kGroup) {
+    Group g;
+    g.first = first;
+    g.count = std::min<std::size_t>(kGroup, P.n_channels - first);
+    g.channels = P.channels.slice(first, g.count);
+    g.a = ref3::make_parameters(P.model, g.channels);
+    g.tau = group_slice(P.node_tau, P.n_points, P.n_channels, first, g.count);
+    g.cdf = group_slice(P.node_cdf, P.n_points, P.n_channels, first, g.count);
+    g.majorant = majorant_table(P.model, g.channels);
+    out.push_back(std::move(g));
+  }
+  return out;
+}
+
+class HostEngine final : public Engine {
+ public:
+  HostEngine(const Prepared& P, const TruthOptions& o) : P_(P), o_(o), groups_(groups_of(P)) {}
+  std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count,
+                          int stride) override {
+    const Group& g = groups_[gi];
+    std::vector<double> out(P_.n_points * stride * kStride, 0.0);
+    parallel_for(static_cast<long long>(P_.n_points) * stride, [&](long long id) {
+      const int p = static_cast<int>(id / stride), j = static_cast<int>(id % stride);
+      if (j >= count[p]) return;
+      ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.majorant.data(),
+                             kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
+                             static_cast<philox_u32>(o_.seed & 0xffffffffu), static_cast<philox_u32>(o_.seed >> 32),
+                             static_cast<int>(g.first), static_cast<int>(g.count), &out[id * kStride]);
+    });
+    return out;
+  }
+
+ private:
+  const Prepared& P_;
+  const TruthOptions& o_;
+  std::vector<Group> groups_;
+};
+
+class DeviceEngine final : public Engine {
+ public:
+  DeviceEngine(cl_util::Device& dev, const Prepared& P, const TruthOptions& o)
+      : dev_(dev), P_(P), o_(o), groups_(groups_of(P)) {
+    program_ = dev.build(kKernel, std::string("-DNCH=") + std::to_string(kGroup) + " " + dev.real_options());
+    points_ = cl_util::upload_real(dev, P.points);
+    node_t_ = cl_util::upload_real(dev, P.node_t);
+    for (const Group& g : groups_) {
+      GroupBuffers b;
+      b.block = ref3::parameter_block(g.a, dev.info().fp64);
+      b.tau = cl_util::upload_real(dev, g.tau);
+      b.cdf = cl_util::upload_real(dev, g.cdf);
+      b.majorant = cl_util::upload_real(dev, g.majorant);
+      buffers_.push_back(std::move(b));
+    }
+  }
+  std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count,
+                          int stride) override {
+    const Group& g = groups_[gi];
+    GroupBuffers& b = buffers_[gi];
+    const std::size_t n_out = P_.n_points * stride * kStride;
+    return cl_util::checked("truth_trace", [&] {
+      const cl::Buffer base_buf(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, base.size() * sizeof(int),
+                                const_cast<int*>(base.data()));
+      const cl::Buffer count_buf(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, count.size() * sizeof(int),
+                                 const_cast<int*>(count.data()));
+      cl::Buffer out_buf = cl_util::device_real(dev_, n_out);
+      cl::Kernel k(program_, "truth_trace");
+      cl_uint i = 0;
+      k.setArg(i++, b.block.size(), b.block.data());
+      k.setArg(i++, points_);
+      k.setArg(i++, node_t_);
+      k.setArg(i++, b.tau);
+      k.setArg(i++, b.cdf);
+      k.setArg(i++, b.majorant);
+      k.setArg(i++, static_cast<cl_int>(P_.n_points));
+      k.setArg(i++, static_cast<cl_int>(P_.point_base));
+      k.setArg(i++, static_cast<cl_int>(kNodes));
+      k.setArg(i++, base_buf);
+      k.setArg(i++, count_buf);
+      k.setArg(i++, static_cast<cl_int>(stride));
+      k.setArg(i++, static_cast<cl_int>(o_.paths_per_batch));
+      k.setArg(i++, static_cast<cl_int>(o_.orders));
+      k.setArg(i++, static_cast<cl_uint>(o_.seed & 0xffffffffu));
+      k.setArg(i++, static_cast<cl_uint>(o_.seed >> 32));
+      k.setArg(i++, static_cast<cl_int>(g.first));
+      k.setArg(i++, static_cast<cl_int>(g.count));
+      k.setArg(i++, out_buf);
+      cl_util::run_1d(dev_, k, P_.n_points * static_cast<std::size_t>(stride));
+      return cl_util::download_real(dev_, out_buf, n_out);
+    });
+  }
+
+ private:
+  struct GroupBuffers {
+    std::vector<unsigned char> block;
+    cl::Buffer tau, cdf, majorant;
+  };
+  cl_util::Device& dev_;
+  const Prepared& P_;
+  const TruthOptions& o_;
+  std::vector<Group> groups_;
+  std::vector<GroupBuffers> buffers_;
+  cl::Program program_;
+  cl::Buffer points_, node_t_;
+};
+
+constexpr int kMaxRounds = 4;           // the first `paths`, then up to 3 top-ups towards the target
+constexpr double kTopUpMargin = 1.1;    // a top-up asks for 10 % more walks than the estimate
+constexpr long long kLaunchWalks = 1LL << 16;  // walks per point and launch (progress, short launches)
+constexpr long long kLaunchItems = 1LL << 20;  // work items (batches) per launch: bounds the output buffer
+constexpr double kChunkTableBytes = 64e6;      // view-ray tables of one chunk of points (all channels)
+
+// What the walks of all chunks add up to.
+struct Totals {
+  double events = 0.0;
+  long long walks = 0, truncated = 0, violations = 0;
+};
+
+// Traces one chunk of points into r (rows point_base ... of radiance, se, paths).
+void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, TruthResult& r, Totals& totals,
+                 const std::function<void(double)>& progress) {
+  const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
+  const long long ppb = o.paths_per_batch;
+  const long long max_walks = std::min<long long>(std::max(o.max_paths, o.paths), 1LL << 32);
+  const long long max_batches = std::min<long long>((max_walks + ppb - 1) / ppb, std::numeric_limits<int>::max());
+  std::vector<long long> done(P.n_points, 0), want(P.n_points, std::min(max_batches, (o.paths + ppb - 1) / ppb));
+  std::vector<Stat> stats(P.n_points * P.n_channels);
+  const long long launch_batches =
+      std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
+  for (int round = 0; round < kMaxRounds; ++round) {
+    for (;;) {
+      std::vector<int> base(P.n_points), count(P.n_points);
+      int stride = 0;
+      for (std::size_t p = 0; p < P.n_points; ++p) {
+        base[p] = static_cast<int>(done[p]);
+        count[p] = static_cast<int>(std::min(want[p] - done[p], launch_batches));
+        stride = std::max(stride, count[p]);
+      }
+      if (stride == 0) break;
+      for (std::size_t g = 0; g < n_groups; ++g) {
+        const std::size_t first = g * kGroup, n_ch = std::min<std::size_t>(kGroup, P.n_channels - first);
+        const std::vector<double> out = engine.run(g, base, count, stride);
+        for (std::size_t p = 0; p < P.n_points; ++p)
+          for (int j = 0; j < count[p]; ++j) {
+            const double* item = &out[(p * stride + j) * kStride];
+            for (std::size_t c = 0; c < n_ch; ++c)
+              stats[p * P.n_channels + first + c].merge(static_cast<double>(ppb), item[2 * c], item[2 * c + 1]);
+            totals.events += item[2 * kGroup];
+            totals.truncated += static_cast<long long>(item[2 * kGroup + 1]);
+            totals.violations += static_cast<long long>(item[2 * kGroup + 2]);
+          }
+      }
+      long long total_done = 0, total_want = 0;
+      for (std::size_t p = 0; p < P.n_points; ++p) {
+        done[p] += count[p];
+        total_done += done[p];
+        total_want += want[p];
+      }
+      if (progress) progress(static_cast<double>(total_done) / static_cast<double>(total_want));
+    }
+    if (!(o.target_relative_se > 0.0)) break;
+    bool more = false;
+    for (std::size_t p = 0; p < P.n_points; ++p) {
+      double need = 0.0;  // walks for the target, from this point's worst channel
+      for (std::size_t c = 0; c < P.n_channels; ++c) {
+        const Stat& st = stats[p * P.n_channels + c];
+        const double L = std::fabs(st.mean), se = st.se();
+        if (se > o.target_relative_se * L && L > 0.0) {
+          const double ratio = se / (o.target_relative_se * L);
+          need = std::max(need, st.n * ratio * ratio * kTopUpMargin);
+        }
+      }
+      const long long w = std::min(max_batches, static_cast<long long>(std::ceil(need / ppb)));
+      if (w > want[p]) {
+        want[p] = w;
+        more = true;
+      }
+    }
+    if (!more) break;
+  }
+  for (std::size_t p = 0; p < P.n_points; ++p) {
+    const std::size_t row = P.point_base + p;
+    r.paths[row] = done[p] * ppb;
+    totals.walks += done[p] * ppb * static_cast<long long>(P.n_channels);
+    for (std::size_t c = 0; c < P.n_channels; ++c) {
+      r.radiance[row * P.n_channels + c] = stats[p * P.n_channels + c].mean;
+      r.standard_error[row * P.n_channels + c] = stats[p * P.n_channels + c].se();
+    }
+  }
+}
+
+using MakeEngine = std::function<std::unique_ptr<Engine>(const Prepared&)>;
+
+// Every point, in chunks whose view-ray tables stay within kChunkTableBytes.
+TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, const TruthOptions& o,
+                      const Progress& progress, const MakeEngine& make_engine) {
+  const Spectrum sp = spectrum_of(spec);
+  TruthResult r;
+  r.lambda_nm = sp.lambda_nm;
+  for (double l : r.lambda_nm) {
+    if (!spec.spectral) {
+      r.channel_names.push_back(l == kLambdaR ? "R" : (l == kLambdaG ? "G" : "B"));
+    } else {
+      char b[32];
+      std::snprintf(b, sizeof b, "%g", l);
+      r.channel_names.push_back(b);
+    }
+  }
+  r.points = points.size();
+  r.channels = r.lambda_nm.size();
+  r.orders = o.orders;
+  r.seed = o.seed;
+  r.radiance.assign(r.points * r.channels, 0.0);
+  r.standard_error.assign(r.points * r.channels, 0.0);
+  r.paths.assign(r.points, 0);
+  const std::size_t chunk = std::max<std::size_t>(
+      1, static_cast<std::size_t>(kChunkTableBytes / (static_cast<double>(r.channels) * kNodes * 2 * sizeof(double))));
+  const std::size_t n_chunks = (points.size() + chunk - 1) / chunk;
+  Totals totals;
+  for (std::size_t k = 0; k < n_chunks; ++k) {
+    const std::size_t first = k * chunk, n = std::min(chunk, points.size() - first);
+    const std::vector<TruthPoint> part(points.begin() + first, points.begin() + first + n);
+    const Prepared P = prepare(spec, part, first);
+    const auto engine = make_engine(P);
+    trace_chunk(*engine, P, o, r, totals, [&](double f) {
+      if (progress) progress("tracing", (static_cast<double>(k) + f) / static_cast<double>(n_chunks));
+    });
+  }
+  r.mean_events = totals.walks > 0 ? totals.events / static_cast<double>(totals.walks) : 0.0;
+  r.truncated = totals.truncated;
+  if (totals.violations > 0)
+    throw JobError("truth: a density exceeded its majorant " + std::to_string(totals.violations) +
+                   " times; the estimate would be biased");
+  if (totals.truncated > 0)
+    spdlog::warn("truth: {} walks stopped after {} events (all orders): their later orders are missing",
+                 totals.truncated, TRUTH_MAX_EVENTS);
+  for (std::size_t i = 0; i < r.radiance.size(); ++i)
+    if (!std::isfinite(r.radiance[i]) || !std::isfinite(r.standard_error[i]))
+      throw JobError("truth: non-finite radiance at point " + std::to_string(i / r.channels));
+  return r;
+}
+
+}  // namespace
+
+nlohmann::json TruthResult::summary() const {
+  long long lo = paths.empty() ? 0 : paths[0], hi = lo, total = 0;
+  for (long long n : paths) {
+    lo = std::min(lo, n);
+    hi = std::max(hi, n);
+    total += n;
+  }
+  return {{"method", "Monte Carlo path tracing (kernels/atmosphere/path_tracer.cl): view-ray vertex from the "
+                     "tabulated optical depth, delta tracking, sun by next-event estimation with ratio "
+                     "tracking, Philox4x32-10 streams per (seed, path, point, channel)"},
+          {"wavelengths_nm", lambda_nm},
+          {"channels", channel_names},
+          {"points", points},
+          {"paths_per_point", {{"min", lo}, {"max", hi}, {"total", total}}},
+          {"orders", orders == 0 ? nlohmann::json("all") : nlohmann::json(orders)},
+          {"seed", seed},
+          {"mean_events_per_walk", mean_events},
+          {"truncated_walks", truncated},
+          {"precision", precision},
+          {"device", device},
+          {"seconds", seconds},
+          {"units", "W m^-2 sr^-1 nm^-1 per traced wavelength"}};
+}
+
+TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const std::vector<TruthPoint>& points,
+                        const TruthOptions& o, const Progress& progress) {
+  check_options(points, o);
+  const auto t0 = std::chrono::steady_clock::now();
+  TruthResult r = trace_all(spec, points, o, progress,
+                            [&](const Prepared& P) { return std::make_unique<DeviceEngine>(dev, P, o); });
+  r.precision = dev.info().fp64 ? "float64" : "float32";
+  r.device = dev.description();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  spdlog::debug("truth: {} points x {} channels in {:.2f} s ({}), {:.2f} events per walk", r.points, r.channels,
+                r.seconds, r.precision, r.mean_events);
+  return r;
+}
+
+TruthResult trace_truth_reference(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points,
+                                  const TruthOptions& o) {
+  check_options(points, o);
+  const auto t0 = std::chrono::steady_clock::now();
+  TruthResult r =
+      trace_all(spec, points, o, {}, [&](const Prepared& P) { return std::make_unique<HostEngine>(P, o); });
+  r.precision = "float64";
+  r.device = "host (C++ double)";
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return r;
+}
+
+}  // namespace specbake::atmosphere

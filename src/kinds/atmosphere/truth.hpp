@@ -1,0 +1,136 @@
+#pragma once
+// The path-traced ground truth of an atmosphere bake: Monte Carlo estimates, with standard
+// errors, of what GetSkyRadiance returns from the baked LUTs (the light scattered into a view
+// ray, all orders or orders 1..N; not the sun disc, not the ground's own radiance at the end
+// of the ray), computed from the same model (kernels/atmosphere/path_tracer.cl, which uses
+// atmosphere.cl's parameter block, profiles, phase functions and sun terms) without any table
+// of the bake. See docs/atmosphere.md, "Path-traced truth".
+//
+// Library entry points (the `specbake truth` command, the `scene:` block and the manifest
+// block are built on these):
+//   read_truth_points / parse_truth_points   POINTS.csv → points (InputError at file:line:column)
+//   scene_points                              a scene description → a low-discrepancy point set
+//   trace_truth                               points → radiance and standard error per channel
+//   trace_truth_reference                     the same walks in C++ double on the host (tests)
+//   to_bundle_units                           per wavelength → what the bundle stores (R, G, B)
+//   load_bundle_luts / lut_sky_radiance       a bundle's textures → GetSkyRadiance at the points
+//   truth_result_csv / truth_points_csv       RESULT.csv / POINTS.csv text
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cl/device.hpp"
+#include "core/config.hpp"
+#include "kinds/atmosphere/render.hpp"
+#include "job/kind.hpp"
+
+namespace specbake::atmosphere {
+
+namespace fs = std::filesystem;
+
+// One view: a camera at altitude_km above the ground (above the top of the atmosphere: the
+// view enters it, as GetSkyRadiance does), looking at view_zenith_deg from the local zenith,
+// the sun at sun_zenith_deg, view_sun_azimuth_deg between the view's and the sun's azimuths.
+struct TruthPoint {
+  double altitude_km = 0.0;
+  double view_zenith_deg = 0.0;
+  double sun_zenith_deg = 0.0;
+  double view_sun_azimuth_deg = 0.0;
+};
+
+// The POINTS.csv header, exactly.
+inline constexpr const char* kTruthPointsHeader = "altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg";
+
+struct TruthOptions {
+  long long paths = 4096;           // walks per point and channel (rounded up to whole batches)
+  int orders = 0;                   // 0: all orders (Russian roulette); N >= 1: orders 1..N only
+  std::uint64_t seed = 1;           // same seed, points and options on one device: byte-identical results
+  int paths_per_batch = 64;         // walks per work item (and per Welford batch); >= 1
+  // > 0: after the first `paths` walks, trace more for each point (continuing its random
+  // streams) until every channel's standard error is at most this fraction of its radiance,
+  // or the point has max(paths, max_paths) walks. 0: exactly `paths` walks.
+  double target_relative_se = 0.0;
+  long long max_paths = 1LL << 22;
+};
+
+// Radiance per point and traced channel, [point][channel] row-major.
+struct TruthResult {
+  std::vector<double> lambda_nm;           // the traced wavelengths (the bake's: 680/550/440 for rgb)
+  std::vector<std::string> channel_names;  // "R","G","B" (rgb) or the wavelength in nm ("364.896")
+  std::size_t points = 0, channels = 0;
+  std::vector<double> radiance;        // W m^-2 sr^-1 nm^-1
+  std::vector<double> standard_error;  // of radiance, from the per-walk sample variance
+  std::vector<long long> paths;        // walks per point (for each of its channels)
+  int orders = 0;                      // 0: all
+  std::uint64_t seed = 0;
+  double mean_events = 0.0;            // scattering events + ground hits per walk
+  long long truncated = 0;             // all-orders walks stopped after 1000 events (bias; expected 0)
+  std::string precision;               // "float64" or "float32" (device arithmetic)
+  std::string device;                  // device description, or "host (C++ double)"
+  double seconds = 0.0;                // wall time (tables and walks)
+  double L(std::size_t point, std::size_t channel) const { return radiance[point * channels + channel]; }
+  double se(std::size_t point, std::size_t channel) const { return standard_error[point * channels + channel]; }
+  // Parameters and diagnostics for a manifest or report (no values per point).
+  nlohmann::json summary() const;
+};
+
+// Traces every point on the device. Throws InputError for an invalid point or option (no
+// location: the caller knows where they came from), DeviceError for OpenCL failures, JobError
+// when a density exceeded its majorant (a bug: the estimate would be biased).
+TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const std::vector<TruthPoint>& points,
+                        const TruthOptions& options, const Progress& progress = {});
+// The same walks on the host in C++ double (path_tracer.cl compiled by the C++ compiler): with
+// a float64 device, the same numbers up to libm rounding. Slow: for tests.
+TruthResult trace_truth_reference(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points,
+                                  const TruthOptions& options);
+
+// What the bundle stores, R, G, B per point: rgb bakes the radiance at 680/550/440 nm itself;
+// spectral bakes Σ_i to_rgb[c][i] L(λ_i) with the job's own weights (spectrum_of(spec).to_rgb:
+// linear sRGB luminance / 683), standard errors combined as independent (each wavelength is
+// traced by its own walks).
+struct TruthBundleValues {
+  std::vector<double> radiance, standard_error;  // [point][3]
+  std::string units;
+};
+TruthBundleValues to_bundle_units(const AtmosphereSpec& spec, const TruthResult& r);
+
+// POINTS.csv: the header kTruthPointsHeader, then one point per line (4 numbers). Blank lines
+// only at the end. altitude >= 0; zenith angles in [0, 180]; azimuth in [-360, 360].
+std::vector<TruthPoint> read_truth_points(const fs::path& file);  // IoError if unreadable
+std::vector<TruthPoint> parse_truth_points(const std::string& text, const fs::path& file_for_messages);
+std::string truth_points_csv(const std::vector<TruthPoint>& points);
+
+// RESULT.csv: the four point columns, then L_<c>,se_<c> per traced channel; for spectral
+// results also L_R,se_R,L_G,se_G,L_B,se_B in the bundle's units; with `lut` (one R,G,B per
+// point, in the bundle's units), lut_R,lut_G,lut_B.
+std::string truth_result_csv(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, const TruthResult& r,
+                             const std::vector<Vec3>* lut = nullptr);
+void write_text_file(const fs::path& file, const std::string& text);  // IoError on failure
+
+// A deterministic low-discrepancy point set (the Halton sequence in bases 2, 3, 5, 7, from its
+// second point): altitude uniform in [min, max], sun elevation uniform in [min, max], view directions uniform in solid angle
+// over the sky (above the planet's horizon; for cameras above the atmosphere, the part of it
+// that crosses the atmosphere), the ground, or all; view–sun azimuth uniform in [0, 180].
+enum class TruthViews { sky, ground, all };
+struct TruthScene {
+  double altitude_min_km = 0.0, altitude_max_km = 0.0;
+  double sun_elevation_min_deg = 0.0, sun_elevation_max_deg = 90.0;
+  TruthViews views = TruthViews::sky;
+  int count = 256;
+};
+std::vector<TruthPoint> scene_points(const TruthScene& scene, const AtmosphereSpec& spec);
+
+// The final textures of a bundle (rgb or spectral; 3D layout), with the geometry from its
+// manifest. IoError for unreadable files, InputError (naming the manifest) for a bundle that
+// is not an atmosphere bundle with scattering.bin and single_mie_scattering.bin.
+Luts load_bundle_luts(const fs::path& bundle_dir);
+// GetSkyRadiance (separate single-Mie texture, no shadow length) at each point, R, G, B in
+// the bundle's units, through Renderer::sky_radiance.
+std::vector<Vec3> lut_sky_radiance(const Luts& luts, const std::vector<TruthPoint>& points);
+
+}  // namespace specbake::atmosphere

@@ -1,0 +1,317 @@
+// The truth's inputs and outputs: POINTS.csv and RESULT.csv, the scene point sets, the
+// conversion to the bundle's units, and GetSkyRadiance from a bundle's textures.
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/truth.hpp"
+
+namespace specbake::atmosphere {
+
+namespace {
+
+const char* const kColumns[4] = {"altitude_km", "view_zenith_deg", "sun_zenith_deg", "view_sun_azimuth_deg"};
+
+std::string read_all(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw IoError("cannot read " + file.string() + ": " + std::strerror(errno));
+  std::ostringstream s;
+  s << in.rdbuf();
+  if (in.bad()) throw IoError("cannot read " + file.string());
+  return s.str();
+}
+
+std::string fmt(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.10g", v);
+  return b;
+}
+
+}  // namespace
+
+std::vector<TruthPoint> parse_truth_points(const std::string& text, const fs::path& file) {
+  std::vector<std::string> lines;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t end = text.find('\n', start);
+    std::string line = text.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    lines.push_back(line);
+    if (end == std::string::npos) break;
+    start = end + 1;
+  }
+  while (!lines.empty() && lines.back().empty()) lines.pop_back();  // trailing blank lines
+  if (lines.empty())
+    throw InputError(Location{file, 1, 1, ""}, std::string("the header '") + kTruthPointsHeader + "'");
+  const std::string header = lines[0].rfind("\xEF\xBB\xBF", 0) == 0 ? lines[0].substr(3) : lines[0];
+  if (header != kTruthPointsHeader) {
+    std::size_t col = 0;
+    while (col < header.size() && col < std::strlen(kTruthPointsHeader) && header[col] == kTruthPointsHeader[col]) ++col;
+    throw InputError(Location{file, 1, static_cast<int>(col) + 1, ""},
+                     std::string("the header exactly '") + kTruthPointsHeader + "'");
+  }
+  std::vector<TruthPoint> points;
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    const std::string& line = lines[i];
+    const int lineno = static_cast<int>(i) + 1;
+    if (line.empty()) throw InputError(Location{file, lineno, 1, ""}, "4 numbers (blank lines only at the end)");
+    double v[4];
+    std::size_t pos = 0;
+    for (int f = 0; f < 4; ++f) {
+      const std::size_t comma = line.find(',', pos);
+      const bool last = f == 3;
+      if (!last && comma == std::string::npos)
+        throw InputError(Location{file, lineno, static_cast<int>(line.size()) + 1, kColumns[f + 1]},
+                         "4 comma-separated numbers, found " + std::to_string(f + 1));
+      const std::size_t end = last ? line.size() : comma;
+      if (last && comma != std::string::npos)
+        throw InputError(Location{file, lineno, static_cast<int>(comma) + 1, ""},
+                         "4 comma-separated numbers, found more");
+      const std::string field = line.substr(pos, end - pos);
+      const Location at{file, lineno, static_cast<int>(pos) + 1, kColumns[f]};
+      std::size_t b = 0, e = field.size();
+      while (b < e && (field[b] == ' ' || field[b] == '\t')) ++b;
+      while (e > b && (field[e - 1] == ' ' || field[e - 1] == '\t')) --e;
+      const std::string num = field.substr(b, e - b);
+      char* stop = nullptr;
+      errno = 0;
+      const double x = num.empty() ? 0.0 : std::strtod(num.c_str(), &stop);
+      if (num.empty() || stop != num.c_str() + num.size() || errno == ERANGE || !std::isfinite(x))
+        throw InputError(at, "a finite number, got '" + field + "'");
+      v[f] = x;
+      pos = end + 1;
+    }
+    const TruthPoint p{v[0], v[1], v[2], v[3]};
+    auto range = [&](int f, bool ok, const char* what) {
+      if (!ok) {
+        std::size_t col = 0;
+        for (int k = 0; k < f; ++k) col = line.find(',', col) + 1;
+        throw InputError(Location{file, lineno, static_cast<int>(col) + 1, kColumns[f]}, what);
+      }
+    };
+    range(0, p.altitude_km >= 0.0, "an altitude >= 0 km");
+    range(1, p.view_zenith_deg >= 0.0 && p.view_zenith_deg <= 180.0, "a view zenith angle in [0, 180] degrees");
+    range(2, p.sun_zenith_deg >= 0.0 && p.sun_zenith_deg <= 180.0, "a sun zenith angle in [0, 180] degrees");
+    range(3, std::fabs(p.view_sun_azimuth_deg) <= 360.0, "an azimuth in [-360, 360] degrees");
+    points.push_back(p);
+  }
+  if (points.empty()) throw InputError(Location{file, 2, 1, ""}, "at least one point after the header");
+  return points;
+}
+
+std::vector<TruthPoint> read_truth_points(const fs::path& file) { return parse_truth_points(read_all(file), file); }
+
+std::string truth_points_csv(const std::vector<TruthPoint>& points) {
+  std::string s = std::string(kTruthPointsHeader) + "\n";
+  char b[160];
+  for (const TruthPoint& p : points) {
+    std::snprintf(b, sizeof b, "%.17g,%.17g,%.17g,%.17g\n", p.altitude_km, p.view_zenith_deg, p.sun_zenith_deg,
+                  p.view_sun_azimuth_deg);
+    s += b;
+  }
+  return s;
+}
+
+TruthBundleValues to_bundle_units(const AtmosphereSpec& spec, const TruthResult& r) {
+  TruthBundleValues v;
+  v.radiance.assign(r.points * 3, 0.0);
+  v.standard_error.assign(r.points * 3, 0.0);
+  if (!spec.spectral) {
+    if (r.channels != 3) throw JobError("truth: an rgb result needs 3 channels");
+    v.radiance = r.radiance;
+    v.standard_error = r.standard_error;
+    v.units = "W m^-2 sr^-1 nm^-1 at 680/550/440 nm";
+    return v;
+  }
+  const Spectrum sp = spectrum_of(spec);
+  const std::size_t n = sp.lambda_nm.size();
+  if (n != r.channels) throw JobError("truth: the result's wavelengths are not the spec's");
+  for (std::size_t p = 0; p < r.points; ++p)
+    for (int c = 0; c < 3; ++c) {
+      double l = 0.0, var = 0.0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const double k = sp.to_rgb[c * n + i];
+        l += k * r.L(p, i);
+        var += k * k * r.se(p, i) * r.se(p, i);
+      }
+      v.radiance[p * 3 + c] = l;
+      v.standard_error[p * 3 + c] = std::sqrt(var);
+    }
+  v.units = "linear sRGB luminance / 683 (the bundle's precomputed-luminance values)";
+  return v;
+}
+
+std::string truth_result_csv(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, const TruthResult& r,
+                             const std::vector<Vec3>* lut) {
+  if (points.size() != r.points) throw JobError("truth: points and result differ in length");
+  if (lut && lut->size() != r.points) throw JobError("truth: points and LUT values differ in length");
+  const TruthBundleValues bundle = to_bundle_units(spec, r);
+  const char* rgb[3] = {"R", "G", "B"};
+  std::string s = kTruthPointsHeader;
+  for (const std::string& c : r.channel_names) s += ",L_" + c + ",se_" + c;
+  if (spec.spectral)
+    for (const char* c : rgb) s += std::string(",L_") + c + ",se_" + c;
+  if (lut)
+    for (const char* c : rgb) s += std::string(",lut_") + c;
+  s += "\n";
+  auto cell = [&](double v) {
+    s += ',';
+    s += fmt(v);
+  };
+  for (std::size_t p = 0; p < r.points; ++p) {
+    const TruthPoint& q = points[p];
+    s += fmt(q.altitude_km);
+    cell(q.view_zenith_deg);
+    cell(q.sun_zenith_deg);
+    cell(q.view_sun_azimuth_deg);
+    for (std::size_t c = 0; c < r.channels; ++c) {
+      cell(r.L(p, c));
+      cell(r.se(p, c));
+    }
+    if (spec.spectral)
+      for (int c = 0; c < 3; ++c) {
+        cell(bundle.radiance[p * 3 + c]);
+        cell(bundle.standard_error[p * 3 + c]);
+      }
+    if (lut)
+      for (int c = 0; c < 3; ++c) cell((*lut)[p][c]);
+    s += '\n';
+  }
+  return s;
+}
+
+void write_text_file(const fs::path& file, const std::string& text) {
+  std::ofstream out(file, std::ios::binary | std::ios::trunc);
+  if (!out) throw IoError("cannot write " + file.string() + ": " + std::strerror(errno));
+  out << text;
+  out.flush();
+  if (!out) throw IoError("cannot write " + file.string());
+}
+
+std::vector<TruthPoint> scene_points(const TruthScene& s, const AtmosphereSpec& spec) {
+  const Location at{{}, 0, 0, "scene"};
+  if (!(s.altitude_min_km >= 0.0 && s.altitude_max_km >= s.altitude_min_km && std::isfinite(s.altitude_max_km)))
+    throw InputError(at, "0 <= altitude min <= altitude max (km)");
+  if (!(s.sun_elevation_min_deg >= -90.0 && s.sun_elevation_max_deg <= 90.0 &&
+        s.sun_elevation_max_deg >= s.sun_elevation_min_deg))
+    throw InputError(at, "-90 <= sun elevation min <= sun elevation max <= 90 (degrees)");
+  if (s.count < 1) throw InputError(at, "a point count >= 1");
+  // Halton: coordinate k of point i is the radical inverse of i + 1 in the k-th prime base
+  auto radical_inverse = [](int i, int base) {
+    double f = 1.0, r = 0.0;
+    for (; i > 0; i /= base) {
+      f /= base;
+      r += f * (i % base);
+    }
+    return r;
+  };
+  const int bases[4] = {2, 3, 5, 7};
+  const double rb = spec.bottom_radius_km, rt = spec.top_radius_km;
+  std::vector<TruthPoint> out;
+  for (int i = 0; i < s.count; ++i) {
+    double u[4];
+    for (int k = 0; k < 4; ++k) u[k] = radical_inverse(i + 1, bases[k]);
+    TruthPoint p;
+    p.altitude_km = s.altitude_min_km + u[0] * (s.altitude_max_km - s.altitude_min_km);
+    p.sun_zenith_deg = 90.0 - (s.sun_elevation_min_deg + u[1] * (s.sun_elevation_max_deg - s.sun_elevation_min_deg));
+    const double r = rb + p.altitude_km;
+    const double mu_horizon = -std::sqrt(std::max(0.0, 1.0 - (rb / r) * (rb / r)));
+    const double mu_sky_max = r > rt ? -std::sqrt(std::max(0.0, 1.0 - (rt / r) * (rt / r))) : 1.0;
+    double lo = -1.0, hi = mu_sky_max;
+    if (s.views == TruthViews::sky) lo = mu_horizon;
+    if (s.views == TruthViews::ground) hi = mu_horizon;
+    const double mu = hi - u[2] * (hi - lo);
+    p.view_zenith_deg = std::acos(std::clamp(mu, -1.0, 1.0)) * 180.0 / M_PI;
+    p.view_sun_azimuth_deg = u[3] * 180.0;
+    out.push_back(p);
+  }
+  return out;
+}
+
+Luts load_bundle_luts(const fs::path& dir) {
+  const fs::path manifest_path = dir / "manifest.json";
+  nlohmann::json m;
+  try {
+    m = nlohmann::json::parse(read_all(manifest_path));
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(Location{manifest_path, 0, 0, ""}, std::string("a JSON manifest (") + e.what() + ")");
+  }
+  const Location at{manifest_path, 0, 0, ""};
+  Luts luts;
+  try {
+    if (m.at("job").at("kind").get<std::string>() != "atmosphere") throw InputError(at, "an atmosphere bundle");
+    const auto& atm = m.at("parameters").at("atmosphere");
+    luts.model.bottom_radius_km = atm.at("bottom_radius_km").get<double>();
+    luts.model.top_radius_km = atm.at("top_radius_km").get<double>();
+    luts.model.sun_angular_radius_rad = atm.at("sun_angular_radius_rad").get<double>();
+    luts.model.mu_s_min = atm.at("mu_s_min").get<double>();
+    luts.model.mie_g = atm.at("mie").is_object() ? atm.at("mie").at("phase_g").get<double>() : 0.0;
+    const auto& sz = m.at("parameters").at("sizes");
+    Sizes& s = luts.model.sizes;
+    s.transmittance_w = sz.at("transmittance").at("mu").get<int>();
+    s.transmittance_h = sz.at("transmittance").at("r").get<int>();
+    s.irradiance_w = sz.at("irradiance").at("mu_s").get<int>();
+    s.irradiance_h = sz.at("irradiance").at("r").get<int>();
+    s.r = sz.at("scattering").at("r").get<int>();
+    s.mu = sz.at("scattering").at("mu").get<int>();
+    s.mu_s = sz.at("scattering").at("mu_s").get<int>();
+    s.nu = sz.at("scattering").at("nu").get<int>();
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(at, std::string("an atmosphere bundle manifest (") + e.what() + ")");
+  }
+  const Sizes& s = luts.model.sizes;
+  auto load = [&](const char* name, std::size_t count, bool required) {
+    std::vector<double> v;
+    const fs::path p = dir / name;
+    std::error_code ec;
+    if (!fs::exists(p, ec)) {
+      if (required) throw InputError(at, std::string("a bundle with ") + name + " (outputs and layout 3d)");
+      v.assign(count, 0.0);
+      return v;
+    }
+    const std::string bytes = read_all(p);
+    if (bytes.size() != count * 4)
+      throw InputError(at, std::string(name) + " of " + std::to_string(count * 4) + " bytes (the manifest's sizes), found " +
+                               std::to_string(bytes.size()));
+    v.resize(count);
+    for (std::size_t i = 0; i < count; ++i) {
+      std::uint32_t u = 0;
+      for (int k = 0; k < 4; ++k) u |= static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[4 * i + k])) << (8 * k);
+      float f;
+      std::memcpy(&f, &u, 4);
+      v[i] = f;
+    }
+    return v;
+  };
+  const std::size_t n_s = 3 * static_cast<std::size_t>(s.scattering_texels());
+  luts.scattering = load("scattering.bin", n_s, true);
+  luts.single_mie = load("single_mie_scattering.bin", n_s, true);
+  luts.transmittance = load("transmittance.bin", 3ULL * s.transmittance_w * s.transmittance_h, false);
+  luts.irradiance = load("irradiance.bin", 3ULL * s.irradiance_w * s.irradiance_h, false);
+  return luts;
+}
+
+std::vector<Vec3> lut_sky_radiance(const Luts& luts, const std::vector<TruthPoint>& points) {
+  const Renderer render(luts);
+  std::vector<Vec3> out;
+  out.reserve(points.size());
+  for (const TruthPoint& p : points) {
+    const double tv = p.view_zenith_deg * M_PI / 180.0, ts = p.sun_zenith_deg * M_PI / 180.0,
+                 az = p.view_sun_azimuth_deg * M_PI / 180.0;
+    const Vec3 camera{0.0, 0.0, luts.model.bottom_radius_km + p.altitude_km};
+    const Vec3 view{std::sin(tv), 0.0, std::cos(tv)};
+    const Vec3 sun{std::sin(ts) * std::cos(az), std::sin(ts) * std::sin(az), std::cos(ts)};
+    Vec3 t{};
+    out.push_back(render.sky_radiance(camera, view, sun, &t));
+  }
+  return out;
+}
+
+}  // namespace specbake::atmosphere

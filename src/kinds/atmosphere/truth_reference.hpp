@@ -1,0 +1,17 @@
+#pragma once
+// The path tracer's maths in C++ double: kernels/atmosphere/path_tracer.cl compiled into ref3
+// (after atmosphere.cl, as the OpenCL program does), so that the host builds the tracer's
+// tables with the very functions the kernel uses and can run the same walks.
+#include <cmath>
+
+#include "common/philox.h"  // at namespace scope: path_tracer.cl's own include is then a no-op
+#include "kinds/atmosphere/reference.hpp"
+
+namespace specbake::atmosphere::ref3 {
+using std::cbrt, std::fabs, std::log;
+#define NCH 3
+#include "atmosphere/path_tracer.cl"
+inline constexpr int kTruthOutStride = TRUTH_OUT_STRIDE;
+inline constexpr int kTruthChannels = NCH;
+#undef NCH
+}  // namespace specbake::atmosphere::ref3
