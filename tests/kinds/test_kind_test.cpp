@@ -109,11 +109,11 @@ TEST_F(TestKind, RegisteredKindIsParsedPlannedBakedAndWritten) {
   EXPECT_EQ(exact->at("value").get<double>(), 0.0);
   EXPECT_TRUE(exact->at("passed").get<bool>());
   // inspect (through the job folder's `latest`) finds every file as the manifest lists it.
-  const Inspection in = inspect_bundle(opts.out.value() / "sq");
-  EXPECT_EQ(in.bad, 0);
-  ASSERT_EQ(in.files.size(), 1u);
-  EXPECT_EQ(in.files[0].path, "squares.bin");
-  EXPECT_EQ(in.files[0].status, "ok");
+  const Inspection seen = inspect_bundle(opts.out.value() / "sq");
+  EXPECT_EQ(seen.bad, 0);
+  ASSERT_EQ(seen.files.size(), 1u);
+  EXPECT_EQ(seen.files[0].path, "squares.bin");
+  EXPECT_EQ(seen.files[0].status, "ok");
   // The same job again is up to date.
   Runner again({c}, opts);
   EXPECT_EQ(again.run().at(0).status, "up-to-date");
