@@ -62,6 +62,46 @@ std::vector<double> spectrum_rows(const RangeNm& r, double& y_norm) {
   return rows;
 }
 
+std::vector<double> add_spectrum_file(const RangeNm& range, BakeResult& r) {
+  double y_norm = 0.0;
+  const auto spectrum = spectrum_rows(range, y_norm);
+  r.files.push_back({"spectrum.bin", float32_le(spectrum, "spectrum"), "float32",
+                     {static_cast<std::int64_t>(spectrum.size() / 4), 4},
+                     "little-endian float32, C order; [l][lambda_nm, X, Y, Z]", "nm, 1/nm",
+                     "lambda and D65 * CIE 1931 xbar, ybar, zbar at 1 nm steps, normalised so sum(Y) * 1 nm = 1"});
+  r.parameters["spectrum_normalisation"] = y_norm;
+  return spectrum;
+}
+
+void add_term_exrs(const std::vector<float>& values, const std::vector<Band>& bands, int width, int height,
+                   Storage storage, const std::string& folder, const std::string& source_file,
+                   const std::string& rows_columns, Timings& tm, BakeResult& r) {
+  const std::size_t per = static_cast<std::size_t>(width) * height;
+  for (const auto& band : bands)
+    for (int n = 0; n < band.terms; ++n) {
+      const int term = band.first_term + n;
+      ExrImage img;
+      img.width = width;
+      img.height = height;
+      img.channels = {"R", "G"};
+      img.half = storage == Storage::half;
+      // Float32 terms are noise-like in their low bytes: ZIP saved 0.4 % of a 1024² field's term
+      // at 15–20× the encoding time, so they go uncompressed; half terms shrink ~3× under ZIP.
+      img.zip = img.half;
+      img.pixels.assign(values.begin() + 2 * term * per, values.begin() + 2 * (term + 1) * per);
+      img.attributes = {{"specbake.term", std::to_string(term)},
+                        {"specbake.expansion", name(band.expansion)},
+                        {"specbake.band_order", std::to_string(n)},
+                        {"specbake.kappa_expansion", num(band.kappa0)},
+                        {"specbake.channels", "R = Re F_n, G = Im F_n; " + rows_columns}};
+      char path[64];
+      std::snprintf(path, sizeof path, "%s/F_%03d.exr", folder.c_str(), term);
+      r.files.push_back({path, tm.time("EXR", [&] { return exr_bytes(img); }), img.half ? "half" : "float32",
+                         {height, width, 2}, "EXR, R = Re, G = Im", "1",
+                         "term " + std::to_string(term) + " of " + source_file});
+    }
+}
+
 // κ values where the error is measured: κ_lo, κ_hi, every band's edges and middle (the
 // Taylor bound peaks at band edges), at most ~16.
 std::vector<double> measurement_kappas(const Plan& p) {
@@ -412,35 +452,8 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
                        le + "; [n][kv][ku][re,im], kv and ku ascending from the bins' lower ends (fftshifted)", "1",
                        "F_n = DFT(q_n)/M^2 of every band's terms (see the manifest's diffraction block)"});
   });
-  double y_norm = 0.0;
-  const auto spectrum = spectrum_rows(spec.range_nm, y_norm);
-  r.files.push_back({"spectrum.bin", float32_le(spectrum, "spectrum"), "float32",
-                     {static_cast<std::int64_t>(spectrum.size() / 4), 4}, le + "; [l][lambda_nm, X, Y, Z]", "nm, 1/nm",
-                     "lambda and D65 * CIE 1931 xbar, ybar, zbar at 1 nm steps, normalised so sum(Y) * 1 nm = 1"});
-  r.parameters["spectrum_normalisation"] = y_norm;
-  for (const auto& band : p.bands)
-    for (int n = 0; n < band.terms; ++n) {
-      const int term = band.first_term + n;
-      ExrImage img;
-      img.width = ku;
-      img.height = kv;
-      img.channels = {"R", "G"};
-      img.half = spec.storage == Storage::half;
-      // Float32 terms are noise-like in their low bytes: ZIP saved 0.4 % of a 1024² field's term
-      // at 15–20× the encoding time, so they go uncompressed; half terms shrink ~3× under ZIP.
-      img.zip = img.half;
-      img.pixels.assign(terms.values.begin() + 2 * term * terms.per_term(),
-                        terms.values.begin() + 2 * (term + 1) * terms.per_term());
-      img.attributes = {{"specbake.term", std::to_string(term)},
-                        {"specbake.expansion", name(band.expansion)},
-                        {"specbake.band_order", std::to_string(n)},
-                        {"specbake.kappa_expansion", num(band.kappa0)},
-                        {"specbake.channels", "R = Re F_n, G = Im F_n; rows kv, columns ku (fftshifted)"}};
-      char path[64];
-      std::snprintf(path, sizeof path, "terms/F_%03d.exr", term);
-      r.files.push_back({path, tm.time("EXR", [&] { return exr_bytes(img); }), img.half ? "half" : "float32", {kv, ku, 2}, "EXR, R = Re, G = Im",
-                         "1", "term " + std::to_string(term) + " of terms.bin"});
-    }
+  const auto spectrum = add_spectrum_file(spec.range_nm, r);
+  add_term_exrs(terms.values, p.bands, ku, kv, spec.storage, "terms", "terms.bin", "rows kv, columns ku (fftshifted)", tm, r);
 
   ctx.progress("preview", 0.95);
   if (spec.w_max >= 1.0) {

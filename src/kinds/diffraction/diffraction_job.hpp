@@ -11,6 +11,16 @@ struct Field;
 struct Plan;
 // Spectrum rows (λ nm, D65·x̄, D65·ȳ, D65·z̄) at 1 nm steps over range_nm, Σ D65·ȳ·1 nm = 1.
 std::vector<double> spectrum_rows(const RangeNm& r, double& y_norm);
+struct Band;
+class Timings;
+// spectrum.bin: those rows as float32 [L][4], and parameters.spectrum_normalisation (Σ D65·ȳ·1 nm);
+// returns the rows.
+std::vector<double> add_spectrum_file(const RangeNm& range, BakeResult& r);
+// One EXR per term of `values` ([T][height][width][re, im] float32), `folder`/F_nnn.exr with
+// R = Re F_n, G = Im F_n (half when storage is half), naming the band it belongs to.
+void add_term_exrs(const std::vector<float>& values, const std::vector<Band>& bands, int width, int height,
+                   Storage storage, const std::string& folder, const std::string& source_file,
+                   const std::string& rows_columns, Timings& tm, BakeResult& r);
 // κ values where the error is measured: κ_lo, κ_hi, band edges and middles.
 std::vector<double> measurement_kappas(const Plan& p);
 

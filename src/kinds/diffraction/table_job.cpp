@@ -225,33 +225,9 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   r.files.push_back({"table_terms.bin", float32_le(values, "table terms"), "float32", {p.total_terms, n, n, 2},
                      le + "; [n][iv][iu][re,im], texel centres s = 2(i+0.5)/N - 1 mapped as the manifest's table block",
                      "1", "F_n of every band's terms at the table texels (see the manifest's diffraction block)"});
-  double y_norm = 0.0;
-  const auto spectrum = spectrum_rows(spec.range_nm, y_norm);
-  r.files.push_back({"spectrum.bin", float32_le(spectrum, "spectrum"), "float32",
-                     {static_cast<std::int64_t>(spectrum.size() / 4), 4}, le + "; [l][lambda_nm, X, Y, Z]", "nm, 1/nm",
-                     "lambda and D65 * CIE 1931 xbar, ybar, zbar at 1 nm steps, normalised so sum(Y) * 1 nm = 1"});
-  r.parameters["spectrum_normalisation"] = y_norm;
-  const std::size_t per = static_cast<std::size_t>(n) * n;
-  for (const auto& band : p.bands)
-    for (int t = 0; t < band.terms; ++t) {
-      const int term = band.first_term + t;
-      ExrImage img;
-      img.width = n;
-      img.height = n;
-      img.channels = {"R", "G"};
-      img.half = spec.storage == Storage::half;
-      img.zip = img.half;
-      img.pixels.assign(values.begin() + 2 * term * per, values.begin() + 2 * (term + 1) * per);
-      img.attributes = {{"specbake.term", std::to_string(term)},
-                        {"specbake.expansion", band.expansion == Expansion::taylor ? "taylor" : "chebyshev"},
-                        {"specbake.band_order", std::to_string(t)},
-                        {"specbake.kappa_expansion", num(band.kappa0)},
-                        {"specbake.channels", "R = Re F_n, G = Im F_n; rows iv (f_v), columns iu (f_u), table texels"}};
-      char path[64];
-      std::snprintf(path, sizeof path, "table/F_%03d.exr", term);
-      r.files.push_back({path, tm.time("EXR", [&] { return exr_bytes(img); }), img.half ? "half" : "float32",
-                         {n, n, 2}, "EXR, R = Re, G = Im", "1", "term " + std::to_string(term) + " of table_terms.bin"});
-    }
+  add_spectrum_file(spec.range_nm, r);
+  add_term_exrs(values, p.bands, n, n, spec.storage, "table", "table_terms.bin",
+                "rows iv (f_v), columns iu (f_u), table texels", tm, r);
   block["timings_s"] = tm.json();
   r.manifest_blocks["diffraction"] = block;
   ctx.progress("done", 1.0);
