@@ -33,10 +33,7 @@ cl_util::Device& device() {
 
 AtmosphereSpec earth(int scale_percent) {
   AtmosphereSpec s;
-  s.rayleigh_density[1] = DensityLayer{0, 1, -1.0 / 8.0, 0, 0};
-  s.mie_density[1] = DensityLayer{0, 1, -1.0 / 1.2, 0, 0};
-  s.ozone_density[0] = DensityLayer{25.0, 0, 0, 1.0 / 15.0, -2.0 / 3.0};
-  s.ozone_density[1] = DensityLayer{0, 0, 0, -1.0 / 15.0, 8.0 / 3.0};
+  set_earth_profiles(s);  // Bruneton's demo Earth, as `preset: earth`
   auto sc = [&](int v) { return std::max(2, v * scale_percent / 100); };
   s.transmittance_mu = sc(256);
   s.transmittance_r = sc(64);

@@ -31,10 +31,7 @@ cl_util::Device& device() {
 
 AtmosphereSpec earth() {
   AtmosphereSpec s;
-  s.rayleigh_density[1] = DensityLayer{0, 1, -1.0 / 8.0, 0, 0};
-  s.mie_density[1] = DensityLayer{0, 1, -1.0 / 1.2, 0, 0};
-  s.ozone_density[0] = DensityLayer{25.0, 0, 0, 1.0 / 15.0, -2.0 / 3.0};
-  s.ozone_density[1] = DensityLayer{0, 0, 0, -1.0 / 15.0, 8.0 / 3.0};
+  set_earth_profiles(s);  // Bruneton's demo Earth, as `preset: earth`
   return s;
 }
 

@@ -16,18 +16,12 @@ using namespace specbake::atmosphere;
 
 namespace {
 
-cl_util::Device& device() {
-  static std::unique_ptr<cl_util::Device> d = std::make_unique<cl_util::Device>(cl_util::select_device("auto"));
-  return *d;
-}
+cl_util::Device& device() { return specbake::testing::shared_device(); }
 const Progress kQuiet = [](std::string_view, double) {};
 
 AtmosphereSpec earth() {
   AtmosphereSpec s;
-  s.rayleigh_density[1] = DensityLayer{0, 1, -1.0 / 8.0, 0, 0};
-  s.mie_density[1] = DensityLayer{0, 1, -1.0 / 1.2, 0, 0};
-  s.ozone_density[0] = DensityLayer{25.0, 0, 0, 1.0 / 15.0, -2.0 / 3.0};
-  s.ozone_density[1] = DensityLayer{0, 0, 0, -1.0 / 15.0, 8.0 / 3.0};
+  set_earth_profiles(s);  // Bruneton's demo Earth, as `preset: earth`
   return s;
 }
 AtmosphereSpec small(AtmosphereSpec s) {

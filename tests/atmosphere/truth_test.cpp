@@ -26,10 +26,7 @@ using namespace specbake::atmosphere;
 
 namespace {
 
-cl_util::Device& device() {
-  static std::unique_ptr<cl_util::Device> d = std::make_unique<cl_util::Device>(cl_util::select_device("auto"));
-  return *d;
-}
+cl_util::Device& device() { return specbake::testing::shared_device(); }
 
 AtmosphereSpec spec_of(const std::string& job_yaml) {
   const Config c = parse_config("specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n" + job_yaml, "truth.yaml");

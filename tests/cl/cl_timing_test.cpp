@@ -10,16 +10,14 @@
 #include "cl/device.hpp"
 #include "cl/fft.hpp"
 #include "cl/timing.hpp"
+#include "support/testing.hpp"
 
 using namespace specbake;
 using cl_util::Profiler;
 
 namespace {
 
-cl_util::Device& device() {
-  static std::unique_ptr<cl_util::Device> dev = std::make_unique<cl_util::Device>(cl_util::select_device("auto"));
-  return *dev;
-}
+cl_util::Device& device() { return specbake::testing::shared_device(); }
 
 // A dependent chain of multiply-adds per work item: the compiler can neither vectorise nor
 // shorten it, and the result is stored, so the loop runs.

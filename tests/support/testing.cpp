@@ -16,6 +16,11 @@
 
 namespace specbake::testing {
 
+cl_util::Device& shared_device() {
+  static cl_util::Device dev(cl_util::select_device("auto"));
+  return dev;
+}
+
 fs::path refdata_dir() {
   const fs::path p = SPECBAKE_REFDATA_DIR;
   if (!fs::is_directory(p))

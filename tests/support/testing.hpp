@@ -9,9 +9,14 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cl/device.hpp"
+
 namespace specbake::testing {
 
 namespace fs = std::filesystem;
+
+// The OpenCL device `auto` picks, opened once per test program.
+cl_util::Device& shared_device();
 
 fs::path refdata_dir();   // SPECBAKE_REFDATA_DIR; fails the test if missing
 fs::path source_dir();    // the repository root
