@@ -2,7 +2,7 @@
  * Atmospheric Scattering: a New Implementation" (2017), itself an update of Bruneton &
  * Neyret, "Precomputed Atmospheric Scattering", EGSR 2008. Shared by the OpenCL kernels
  * (kernels/atmosphere/kernels.cl, real = float) and the C++ double reference
- * (src/jobs/atmosphere/reference.hpp, real = double).
+ * (src/kinds/atmosphere/reference.hpp, real = double).
  *
  * Model. A spherical planet of radius rb (bottom) under an atmosphere ending at rt (top).
  * A point is described by its altitude h = r − rb above the ground (r: distance to the planet

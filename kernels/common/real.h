@@ -4,7 +4,7 @@
  *   - the OpenCL build compiles with real = float, or real = double when the host passes
  *     -DSPECBAKE_REAL_DOUBLE (only on devices with cl_khr_fp64), and
  *   - the C++ reference path #includes inside a namespace that defines real = double
- *     (see src/jobs/<kind>/reference.hpp).
+ *     (see src/kinds/<kind>/reference.hpp).
  * Literals go through R(x) so that float builds stay in float.
  *
  * REQUIRE(condition) states a function's domain (as Bruneton's reference asserts each one):

@@ -1,6 +1,6 @@
 /* diffraction.cl — the maths of a diffraction bake (Stam 1999; Dhillon, Single et al. 2014),
  * shared by the OpenCL kernels (kernels/diffraction/kernels.cl) and the C++ double-precision
- * reference (src/jobs/diffraction/reference.hpp).
+ * reference (src/kinds/diffraction/reference.hpp).
  *
  * Units: heights h, centre c and scale s in µm; κ = k·w = 2π·w/λ in rad/µm (λ in µm).
  * A bake approximates, for every κ in a band [κ_a, κ_b], the DFT of p = e^{iκh}:

@@ -1,6 +1,7 @@
 #include "job/kind.hpp"
 
 #include <cmath>
+#include <map>
 
 #include "core/resources.hpp"
 
@@ -64,6 +65,13 @@ void check_device_memory(const JobSpec& job, const MemoryEstimate& need, const c
                                     " MiB); expected smaller sizes");
 }
 
-std::string expanded_program(const std::string& path) { return kernel_source(path); }
+std::string expanded_program(const std::string& path) {
+  // Embedded files do not change while the process runs: expand each program once (the hash
+  // and the manifest both need it, for every job of its kind).
+  static std::map<std::string, std::string> cache;
+  auto it = cache.find(path);
+  if (it == cache.end()) it = cache.emplace(path, kernel_source(path)).first;
+  return it->second;
+}
 
 }  // namespace specbake

@@ -1,5 +1,5 @@
 // CIEDE2000 and CIELAB of kernels/common/colour.cl, in the double reference (the .cl compiled
-// as C++, src/jobs/dispersion/reference.hpp) and on the OpenCL device, against:
+// as C++, src/kinds/dispersion/reference.hpp) and on the OpenCL device, against:
 //   G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula: implementation
 //   notes, supplementary test data, and mathematical observations", Color Research &
 //   Application 30(1):21–30, 2005, Table 1 (34 pairs, ΔE00 printed to 4 decimals).

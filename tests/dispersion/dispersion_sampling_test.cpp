@@ -1,4 +1,4 @@
-// Sampling schemes of the dispersion job (src/jobs/dispersion/sampling.*): Gauss–Legendre
+// Sampling schemes of the dispersion job (src/kinds/dispersion/sampling.*): Gauss–Legendre
 // exactness and its known error term, uniform midpoints, the visible-wavelength pdf
 // (pbrt-v4 / Mitsuba 3) inverted at stratum midpoints, and samples even in 1/λ².
 #include <gtest/gtest.h>
