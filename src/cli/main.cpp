@@ -193,8 +193,9 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
       std::string est = "-", dmem = "-", hmem = "-";
       if (r.estimate.is_object()) {
         est = "~" + ProgressLine::duration(r.estimate.value("seconds_2core_cpu", 0.0));
-        dmem = std::to_string(r.estimate.value("device_bytes", std::uint64_t{0}) >> 20) + " MiB";
-        hmem = std::to_string(r.estimate.value("host_bytes", std::uint64_t{0}) >> 20) + " MiB";
+        auto mib = [](std::uint64_t bytes) { return bytes < (1u << 20) ? std::string("<1 MiB") : std::to_string(bytes >> 20) + " MiB"; };
+        dmem = mib(r.estimate.value("device_bytes", std::uint64_t{0}));
+        hmem = mib(r.estimate.value("host_bytes", std::uint64_t{0}));
       }
       rows.push_back({r.name, r.kind, r.status == "planned" ? r.reason : r.status, est, dmem, hmem, describe(r)});
     } else {
