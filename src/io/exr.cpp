@@ -79,11 +79,11 @@ ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& chan
     img.pixels.assign(static_cast<std::size_t>(img.width) * img.height * channels.size(), 0.0f);
     Imf::FrameBuffer fb;
     const std::size_t nc = channels.size();
-    char* base = reinterpret_cast<char*>(img.pixels.data()) -
-                 (static_cast<std::ptrdiff_t>(dw.min.x) + static_cast<std::ptrdiff_t>(dw.min.y) * img.width) * nc * sizeof(float);
+    // Slice::Make places the data window's origin (any min.x, min.y) at the buffer's start
+    // without forming an out-of-range pointer.
     for (std::size_t c = 0; c < nc; ++c)
-      fb.insert(channels[c], Imf::Slice(Imf::FLOAT, base + c * sizeof(float), sizeof(float) * nc,
-                                        sizeof(float) * nc * img.width));
+      fb.insert(channels[c], Imf::Slice::Make(Imf::FLOAT, img.pixels.data() + c, dw, sizeof(float) * nc,
+                                              sizeof(float) * nc * img.width));
     file.setFrameBuffer(fb);
     file.readPixels(dw.min.y, dw.max.y);
     for (auto it = file.header().begin(); it != file.header().end(); ++it)
