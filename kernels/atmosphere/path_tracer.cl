@@ -77,9 +77,14 @@
 #define PT_NODES 15  /* node count of the view ray's table (0: nothing to trace) */
 #define TRUTH_POINT_STRIDE 16
 
-/* Output per (point, batch): per channel the batch mean and the sum of squared deviations
- * (Welford), then events, truncated walks, majorant violations, walks. */
-#define TRUTH_OUT_STRIDE (2 * NCH + 4)
+/* Output per (point, batch): per channel three running statistics (Welford: the batch mean
+ * and the sum of squared deviations) of the walk's radiance: all of it (orders 1..max_orders,
+ * or all), the part of orders 1..split_order, and the part of orders > split_order (the same
+ * walks: the two parts add up to the whole, and their difference from another bake's orders
+ * is measured without the noise of an independent trace); then events, truncated walks,
+ * majorant violations, walks. */
+#define TRUTH_STATS 3
+#define TRUTH_OUT_STRIDE (2 * TRUTH_STATS * NCH + 4)
 
 /* ---- random numbers ------------------------------------------------------------------- */
 /* A 32-bit word to (0, 1), never 0 or 1 (float builds keep the top 24 bits). */
@@ -243,10 +248,15 @@ FN real sample_henyey_greenstein_cosine(real g, real u) {
 
 /* ---- one walk ---------------------------------------------------------------------------- */
 /* The radiance estimate of one walk for channel c of point `pt`. node_tau and node_cdf are the
- * view-ray table of this point and channel (node distances in node_t). max_orders: 0 = all. */
+ * view-ray table of this point and channel (node distances in node_t). max_orders: 0 = all.
+ * *radiance_low receives the part of orders 1..split_order (split_order 0: none). Russian
+ * roulette keeps every order's expectation, so both parts are unbiased; the split draws no
+ * random numbers, so a walk's stream and value do not depend on it. */
 FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, GLOBAL const real* node_t,
                    GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
-                   int max_orders, PhiloxStream* rng, int* events, int* truncated, int* violations) {
+                   int max_orders, int split_order, PhiloxStream* rng, real* radiance_low, int* events,
+                   int* truncated, int* violations) {
+  *radiance_low = R(0.0);
   const int n = (int)pt[PT_NODES];
   if (n < 2) return R(0.0);
   const real sun[3] = {pt[PT_S], pt[PT_S + 1], pt[PT_S + 2]};
@@ -290,7 +300,9 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real cos_factor = sun_horizontal_cosine(a, mu_s);
       if (cos_factor > R(0.0) && albedo > R(0.0)) {
         const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, rng, violations);
-        radiance += weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
+        const real add = weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
+        radiance += add;
+        if (order <= split_order) *radiance_low += add;
       }
       if (max_orders > 0 && order >= max_orders) break;
       weight *= albedo;
@@ -306,7 +318,9 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real visible = sun_visible_fraction(a, h, mu_s);
       if (visible > R(0.0) && s_r + s_m > R(0.0)) {
         const real t_sun = truth_sun_transmittance(a, c, majorant, h, mu_s, rng, violations);
-        radiance += weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
+        const real add = weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
+        radiance += add;
+        if (order <= split_order) *radiance_low += add;
       }
       if (max_orders > 0 && order >= max_orders) break;
       if (!(s_r + s_m > R(0.0))) break;
@@ -362,38 +376,46 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
 /* ---- one work item: a batch of walks of one point, every channel ------------------------- */
 /* Point p (point point_base + p of the request, for the random streams) and batch b (walks
  * b·paths_per_batch ... (b + 1)·paths_per_batch − 1); channel c of this group is channel
- * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item. Table layouts:
- * node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], majorant [TRUTH_SHELLS][NCH]. */
+ * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item: per channel
+ * (mean, m2) of the whole walk, of orders 1..split_order and of the orders above it. Table
+ * layouts: node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], majorant
+ * [TRUTH_SHELLS][NCH]. */
 FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
                          GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
                          int nodes, int p, int point_base, int b, int paths_per_batch, int max_orders,
-                         philox_u32 seed_lo, philox_u32 seed_hi, int channel_base, int channels,
+                         int split_order, philox_u32 seed_lo, philox_u32 seed_hi, int channel_base, int channels,
                          GLOBAL real* out_item) {
   GLOBAL const real* pt = points + p * TRUTH_POINT_STRIDE;
   int events = 0, truncated = 0, violations = 0;
   for (int c = 0; c < NCH; ++c) {
-    real mean = R(0.0), m2 = R(0.0);
+    real mean[TRUTH_STATS] = {R(0.0), R(0.0), R(0.0)}, m2[TRUTH_STATS] = {R(0.0), R(0.0), R(0.0)};
     if (c < channels) {
       for (int i = 0; i < paths_per_batch; ++i) {
         PhiloxStream rng;
         philox_stream_init(&rng, seed_lo, seed_hi, (philox_u32)b * (philox_u32)paths_per_batch + (philox_u32)i,
                            (philox_u32)(point_base + p),
                            (philox_u32)(channel_base + c));
+        real low;
         const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
-                                  node_cdf + (p * NCH + c) * nodes, majorant, max_orders, &rng, &events, &truncated,
-                                  &violations);
-        const real delta = x - mean;
-        mean += delta / (real)(i + 1);
-        m2 += delta * (x - mean);
+                                  node_cdf + (p * NCH + c) * nodes, majorant, max_orders, split_order, &rng, &low,
+                                  &events, &truncated, &violations);
+        const real xs[TRUTH_STATS] = {x, low, x - low};
+        for (int k = 0; k < TRUTH_STATS; ++k) {
+          const real delta = xs[k] - mean[k];
+          mean[k] += delta / (real)(i + 1);
+          m2[k] += delta * (xs[k] - mean[k]);
+        }
       }
     }
-    out_item[2 * c] = mean;
-    out_item[2 * c + 1] = m2;
+    for (int k = 0; k < TRUTH_STATS; ++k) {
+      out_item[2 * (TRUTH_STATS * c + k)] = mean[k];
+      out_item[2 * (TRUTH_STATS * c + k) + 1] = m2[k];
+    }
   }
-  out_item[2 * NCH] = (real)events;
-  out_item[2 * NCH + 1] = (real)truncated;
-  out_item[2 * NCH + 2] = (real)violations;
-  out_item[2 * NCH + 3] = (real)paths_per_batch;
+  out_item[2 * TRUTH_STATS * NCH] = (real)events;
+  out_item[2 * TRUTH_STATS * NCH + 1] = (real)truncated;
+  out_item[2 * TRUTH_STATS * NCH + 2] = (real)violations;
+  out_item[2 * TRUTH_STATS * NCH + 3] = (real)paths_per_batch;
 }
 
 /* ---- host-side helpers (tables) ------------------------------------------------------------ */

@@ -22,6 +22,16 @@ std::array<double, 3> CmfTable::at(double nm) const {
   return v;
 }
 
+std::array<double, 3> xyz_to_lab(const std::array<double, 3>& xyz, const std::array<double, 3>& w) {
+  std::array<double, 3> lab{};
+  cie::xyz_to_lab(xyz[0], xyz[1], xyz[2], w[0], w[1], w[2], &lab[0], &lab[1], &lab[2]);
+  return lab;
+}
+
+double ciede2000(const std::array<double, 3>& a, const std::array<double, 3>& b) {
+  return cie::ciede2000(a[0], a[1], a[2], b[0], b[1], b[2]);
+}
+
 double SpdTable::at_whole_nm(double nm) const {
   const double i = nm - first_nm;
   if (!(i >= 0.0) || i > static_cast<double>(values.size() - 1) || i != std::floor(i)) return 0.0;

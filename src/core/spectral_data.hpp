@@ -53,6 +53,11 @@ struct GlassEntry {
 };
 
 const std::vector<GlassEntry>& glass_catalog();
+
+// kernels/common/colour.cl's colour difference on the host: CIE 1976 L*a*b* of `xyz` relative
+// to the white `white_xyz`, and CIEDE2000 (kL = kC = kH = 1) between two such colours.
+std::array<double, 3> xyz_to_lab(const std::array<double, 3>& xyz, const std::array<double, 3>& white_xyz);
+double ciede2000(const std::array<double, 3>& lab1, const std::array<double, 3>& lab2);
 const GlassEntry* find_glass(const std::string& id);  // nullptr if unknown
 
 }  // namespace specbake

@@ -45,6 +45,9 @@ struct BadConfig {
 std::string job(const std::string& body) {
   return "specbake: 1\noutput: fresh\njobs:\n  - name: j\n    kind: dispersion\n" + body;
 }
+std::string sky(const std::string& body) {
+  return "specbake: 1\noutput: fresh\njobs:\n  - name: j\n    kind: atmosphere\n" + body;
+}
 const std::string kMat = "    material: {n_d: 1.5168, v_d: 64.17}\n";
 
 std::vector<BadConfig> bad_configs() {
@@ -116,6 +119,22 @@ std::vector<BadConfig> bad_configs() {
       {"duplicate top-level key", "specbake: 1\noutput: fresh\noutput: other\njobs:\n  - name: j\n    kind: dispersion\n" + kMat,
        3, "output", 2, "", "output", {"duplicate key 'output'"}},
       {"empty jobs list", "specbake: 1\noutput: fresh\njobs: []\n", 3, "[]", 1, "", "jobs", {"non-empty list of jobs"}},
+      // the atmosphere's scene (docs/atmosphere.md, "The scene check")
+      {"scene: unknown views", sky("    scene: {views: skyy}\n"), 3, "skyy", 1, "", "jobs[0].scene.views",
+       {"sky | ground | all", "did you mean 'sky'"}},
+      {"scene: a sun below what the textures hold", sky("    scene: {sun_elevation_deg: [-20, 10]}\n"), 3, "-20", 1,
+       "", "jobs[0].scene.sun_elevation_deg", {"sun elevations >= -12", "raise max_sun_zenith_deg to 110"}},
+      {"scene: min above max", sky("    scene: {camera_altitude_km: [2, 1]}\n"), 3, "[2, 1]", 1, "",
+       "jobs[0].scene.camera_altitude_km", {"min <= max"}},
+      {"scene: no points", sky("    scene: {points: -5}\n"), 3, "-5", 1, "", "jobs[0].scene.points",
+       {"integer in [1, 65536]"}},
+      {"scene: two tolerances", sky("    scene: {tolerance_de2000: 2, tolerance_relative: 0.25}\n"), 3, "0.25", 1, "",
+       "jobs[0].scene.tolerance_relative", {"one of tolerance_de2000 and tolerance_relative"}},
+      {"scene: ground views above the horizon", sky("    scene: {views: ground, view_elevation_deg: [0, 10]}\n"), 3,
+       "[0, 10]", 1, "", "jobs[0].scene.view_elevation_deg", {"meet the ground views"}},
+      {"scene: unknown key", sky("    scene: {point: 10}\n"), 3, "point", 1, "", "jobs[0].scene.point",
+       {"unknown key 'point'", "points"}},
+      {"scene: not none", sky("    scene: nothing\n"), 3, "nothing", 1, "", "jobs[0].scene", {"none"}},
   };
 }
 

@@ -9,6 +9,7 @@
 #include "core/version.hpp"
 #include "io/exr.hpp"
 #include "io/ktx2.hpp"
+#include "kinds/atmosphere/scene_check.hpp"
 
 namespace specbake::atmosphere {
 
@@ -318,9 +319,13 @@ json plan(const AtmosphereSpec& spec, JobContext&) { return parameters_json(spec
 
 namespace {
 
+// Job fractions: the passes report 0..0.9 of their own; with a scene check they get 0..kComputeShare.
+constexpr double kComputeShare = 0.75, kSceneCheckEnd = 0.92;
+
 void compute_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b) {
   ctx.enter(Stage::compute);
-  b = bake_luts(spec, ctx.device, ctx.progress, 24);
+  const double scale = spec.scene.check ? kComputeShare / 0.9 : 1.0;
+  b = bake_luts(spec, ctx.device, [&](std::string_view what, double f) { ctx.progress(what, f * scale); }, 24);
 
   r.parameters["orders"] = {{"requested", spec.orders ? json(*spec.orders) : json("auto")},
                             {"used", b.orders_used},
@@ -339,7 +344,7 @@ void compute_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Ba
 
 }
 
-void check_step(const Baked& b, JobContext& ctx, BakeResult& r) {
+void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
   ctx.enter(Stage::check);
   r.accuracy.push_back(Accuracy::judged(
       "self_check", "max relative error |device - reference| / (|reference| + 1e-3 * channel max)",
@@ -355,6 +360,15 @@ void check_step(const Baked& b, JobContext& ctx, BakeResult& r) {
                    ". Check the atmosphere's inputs first (optical depths far beyond any planet's make the float "
                    "sums lose their digits); `precision: double` computes in float64 on devices that have it");
   }
+  if (!spec.scene.check) return;
+  // the error in the user's scene: the LUTs against the path-traced truth at the scene's points
+  SceneCheck sc = check_scene(spec, b.luts, b.orders_used, ctx.device, [&](std::string_view what, double f) {
+    ctx.progress(what, kComputeShare + (kSceneCheckEnd - kComputeShare) * f);
+  });
+  r.accuracy.push_back(sc.record);
+  r.files.push_back(std::move(sc.points_csv));
+  r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
+  if (!sc.failure.empty()) throw JobError(sc.failure);
 }
 
 // KTX2 copies of the textures: 2D transmittance [r][mu] and irradiance [r][mu_s], 3D
@@ -510,7 +524,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                     "'self_check' = the double recomputation after each stage, 'host' = reads and sums between "
                     "stages; per_order[0] = transmittance and direct irradiance, per_order[n] = the stages of "
                     "order n (indirect_irradiance of order n is computed during order n + 1)";
-  r.manifest_blocks["atmosphere"] = {{"timings_s", timings}};
+  r.manifest_blocks["atmosphere"]["timings_s"] = timings;
   for (const auto& [stage, sec] : timings["total"].items())
     spdlog::debug("atmosphere: {} total: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", stage,
                   sec["device_s"].get<double>(), sec["host_s"].get<double>(), sec["wall_s"].get<double>());
@@ -525,7 +539,7 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx) {
   r.parameters = parameters_json(spec);
   Baked b;
   compute_step(spec, ctx, r, b);
-  check_step(b, ctx, r);
+  check_step(spec, b, ctx, r);
   files_step(spec, b, ctx, r);
   ctx.progress("done", 1.0);
   return r;

@@ -1,11 +1,14 @@
 // Config of the atmosphere job kind: a preset (Bruneton's demo Earth) with overrides.
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <regex>
 
 #include "core/hash.hpp"
 #include "core/resources.hpp"
 #include "core/spectral_data.hpp"
 #include "atmosphere/limits.h"
+#include "kinds/atmosphere/scene_check.hpp"
 #include "kinds/atmosphere/spec.hpp"
 
 namespace specbake::atmosphere {
@@ -61,6 +64,84 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
   }
 }
 
+std::string shown_number(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%g", v);
+  return b;
+}
+
+// `scene:` — none, or {camera_altitude_km, sun_elevation_deg, views, points, relative_se,
+// seed, tolerance_de2000 | tolerance_relative}; a range is [min, max] or one number.
+void parse_scene(const At& at, AtmosphereSpec& s) {
+  AtmosphereScene& sc = s.scene;
+  if (at.node.IsScalar()) {
+    at.choice<int>({{"none", 0}});
+    sc.check = false;
+    return;
+  }
+  at.expect_map("a scene {camera_altitude_km, sun_elevation_deg, views, view_elevation_deg, points, relative_se, "
+                "seed, tolerance_de2000 | tolerance_relative} or none");
+  at.allow_keys({"camera_altitude_km", "sun_elevation_deg", "views", "view_elevation_deg", "points", "relative_se",
+                 "seed", "tolerance_de2000", "tolerance_relative"});
+  auto range = [](const At& r, double lo, double hi, const char* text, double& a, double& b) {
+    if (r.node.IsScalar()) {
+      a = b = r.number_in(lo, hi, text);
+      return;
+    }
+    if (!r.node.IsSequence() || r.node.size() != 2) r.fail(std::string("expected [min, max] or one number ") + text);
+    a = r.item(0).number_in(lo, hi, text);
+    b = r.item(1).number_in(lo, hi, text);
+    if (!(a <= b)) r.fail("expected min <= max, got " + r.shown());
+  };
+  if (at.has("camera_altitude_km"))
+    range(at.child("camera_altitude_km"), 0.0, 1e5, "in [0, 100000] km", sc.camera_altitude_min_km,
+          sc.camera_altitude_max_km);
+  if (at.has("sun_elevation_deg")) {
+    const At e = at.child("sun_elevation_deg");
+    range(e, -90.0, 90.0, "in [-90, 90] degrees", sc.sun_elevation_min_deg, sc.sun_elevation_max_deg);
+    // the LUTs hold sun zenith angles up to max_sun_zenith_deg; a scene below that is not baked
+    const double lowest = 90.0 - s.max_sun_zenith_deg;
+    if (sc.sun_elevation_min_deg < lowest - 1e-9)
+      e.fail("expected sun elevations >= " + shown_number(lowest) + " degrees (90 - max_sun_zenith_deg, the " +
+             "lowest sun the textures hold); raise max_sun_zenith_deg to " +
+             shown_number(90.0 - sc.sun_elevation_min_deg) + " or more to bake a sun that low");
+  } else {
+    sc.sun_elevation_min_deg = std::max(sc.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
+  }
+  if (at.has("views")) sc.views = at.child("views").choice<int>({{"sky", 0}, {"ground", 1}, {"all", 2}});
+  if (at.has("view_elevation_deg"))
+    range(at.child("view_elevation_deg"), -90.0, 90.0, "in [-90, 90] degrees", sc.view_elevation_min_deg,
+          sc.view_elevation_max_deg);
+  if (at.has("points")) {
+    const At n = at.child("points");
+    const long long v = n.integer();
+    if (v < 1 || v > 65536) n.fail("expected an integer in [1, 65536], got " + n.shown());
+    sc.points = static_cast<int>(v);
+  }
+  if (at.has("relative_se")) sc.relative_se = at.child("relative_se").number_in(1e-4, 0.5, "in [1e-4, 0.5]");
+  if (at.has("seed")) {
+    const At n = at.child("seed");
+    const long long v = n.integer();
+    if (v < 0) n.fail("expected an integer >= 0, got " + n.shown());
+    sc.seed = static_cast<std::uint64_t>(v);
+  }
+  if (at.has("tolerance_de2000") && at.has("tolerance_relative"))
+    at.child("tolerance_relative").fail("expected one of tolerance_de2000 and tolerance_relative, not both");
+  if (at.has("tolerance_de2000"))
+    sc.tolerance_de2000 = at.child("tolerance_de2000").number_in(1e-3, 100.0, "in [0.001, 100] (CIEDE2000)");
+  if (at.has("tolerance_relative"))
+    sc.tolerance_relative = at.child("tolerance_relative").number_in(1e-4, 10.0, "in [1e-4, 10]");
+  // every camera altitude must leave view directions in both the views and the elevation range
+  try {
+    (void)scene_points_of(s);
+  } catch (const InputError&) {
+    (at.has("view_elevation_deg") ? at.child("view_elevation_deg") : at)
+        .fail("expected view elevations that meet the " + std::string(sc.views == 0 ? "sky" : sc.views == 1 ? "ground" : "all") +
+              " views from every camera altitude of the scene (the horizon dips below the horizontal plane by "
+              "acos(bottom_radius / (bottom_radius + altitude)): 1.4 degrees at 2 km on Earth)");
+  }
+}
+
 template <class F>
 void parse_list(const At& at, const char* what, F&& on_item) {
   if (!at.node.IsSequence() || at.node.size() == 0) at.fail(std::string("expected a non-empty list of ") + what);
@@ -73,7 +154,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   job.allow_keys({"name", "kind", "preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
                   "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
                   "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
-                  "ktx2"});
+                  "ktx2", "scene"});
   AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
   if (job.has("preset")) job.child("preset").choice<int>({{"earth", 0}});
   set_earth_profiles(s);
@@ -176,6 +257,9 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
     if (k.has("format")) s.ktx2_half = k.child("format").choice<int>({{"rgba16f", 1}, {"rgba32f", 0}}) == 1;
     if (k.has("zstd")) s.ktx2_zstd = k.child("zstd").choice<int>({{"true", 1}, {"false", 0}}) == 1;
   }
+  // after max_sun_zenith_deg: the scene's lowest sun defaults to what the textures hold
+  s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
+  if (job.has("scene")) parse_scene(job.child("scene"), s);
 
   // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
   const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
@@ -207,6 +291,20 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   if (s.format_ktx2) {
     norm["formats"] = {"bin", "exr", "ktx2"};
     norm["ktx2"] = {{"format", s.ktx2_half ? "rgba16f" : "rgba32f"}, {"zstd", s.ktx2_zstd}};
+  }
+  const AtmosphereScene& sc = s.scene;
+  if (!sc.check) {
+    norm["scene"] = "none";
+  } else {
+    norm["scene"] = {{"camera_altitude_km", {sc.camera_altitude_min_km, sc.camera_altitude_max_km}},
+                     {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
+                     {"views", sc.views == 0 ? "sky" : sc.views == 1 ? "ground" : "all"},
+                     {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
+                     {"points", sc.points},
+                     {"relative_se", sc.relative_se},
+                     {"seed", sc.seed}};
+    if (sc.tolerance_de2000) norm["scene"]["tolerance_de2000"] = *sc.tolerance_de2000;
+    if (sc.tolerance_relative) norm["scene"]["tolerance_relative"] = *sc.tolerance_relative;
   }
   norm.update(media_json(s));
   return s;

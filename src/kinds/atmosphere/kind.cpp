@@ -5,6 +5,7 @@
 
 #include "atmosphere/limits.h"
 #include "kinds/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/truth.hpp"
 
 namespace specbake::atmosphere {
 
@@ -40,7 +41,7 @@ Kind kind() {
   Kind k = Kind::of<AtmosphereSpec>("atmosphere", "Bruneton 2017 precomputed atmospheric scattering LUTs, all orders", parse_spec, plan, bake);
   k.cost_s = [](const JobSpec& j) { return estimated_seconds(j.as<AtmosphereSpec>()); };
   k.memory = [](const JobSpec& j) { return device_memory(j.as<AtmosphereSpec>()); };
-  k.programs = {kProgram};
+  k.programs = {kProgram, kTruthProgram};
   k.describe = [](const nlohmann::json& p) {
     std::string s;
     const auto& w = p.value("wavelengths_nm", nlohmann::json::array());

@@ -1,11 +1,27 @@
 #pragma once
 // The typed spec of an atmosphere job (parsed in config.cpp; keys in docs/atmosphere.md).
+#include <cstdint>
 #include <optional>
 
 #include "core/config.hpp"
 #include "media/media.hpp"
 
 namespace specbake {
+
+// What the user's scene needs of the sky (`scene:`): after every bake its points are path-traced
+// and the LUTs judged against them (docs/atmosphere.md, "The scene check").
+struct AtmosphereScene {
+  bool check = true;  // `scene: none`: no check
+  double camera_altitude_min_km = 0.0, camera_altitude_max_km = 2.0;
+  double sun_elevation_min_deg = -6.0, sun_elevation_max_deg = 90.0;
+  int views = 0;      // 0 sky, 1 ground, 2 all (TruthViews)
+  double view_elevation_min_deg = -90.0, view_elevation_max_deg = 90.0;  // above the horizontal plane
+  int points = 128;
+  double relative_se = 0.01;  // the truth's standard error at each point, relative (top-ups until met)
+  std::uint64_t seed = 1;
+  std::optional<double> tolerance_de2000;    // judged on the p99 CIEDE2000 of the displayed colour
+  std::optional<double> tolerance_relative;  // judged on the p99 relative radiance error (worst channel)
+};
 
 // Geometry, sun, ground, the media (AtmosphereMedia) and what to bake.
 struct AtmosphereSpec : KindSpec, AtmosphereMedia {
@@ -28,6 +44,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool ktx2_half = true;   // rgba16f (measured half error in the manifest) or rgba32f
   bool ktx2_zstd = false;  // Zstandard supercompression
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
+  AtmosphereScene scene;
 };
 
 namespace atmosphere {

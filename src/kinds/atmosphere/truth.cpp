@@ -20,7 +20,6 @@ namespace {
 using ref3::AtmosphereParameters;
 using ref3::DensityProfile;
 
-constexpr const char* kKernel = "kernels/atmosphere/truth_kernels.cl";
 constexpr int kGroup = ref3::kTruthChannels;  // channels per launch (the kernels' NCH)
 constexpr int kStride = ref3::kTruthOutStride;
 // The view ray's table: kSegments equal segments, split again at every altitude where a
@@ -54,6 +53,8 @@ void check_options(const std::vector<TruthPoint>& points, const TruthOptions& o)
   if (o.paths > (1LL << 32) || (o.paths + o.paths_per_batch - 1) / o.paths_per_batch > std::numeric_limits<int>::max())
     throw InputError(Location{{}, 0, 0, "paths"}, "at most 2^32 walks per point, and 2^31 batches");
   if (o.max_paths < 1) throw InputError(Location{{}, 0, 0, "max_paths"}, "max_paths >= 1");
+  if (o.split_orders < 0 || o.split_orders > 1000)
+    throw InputError(Location{{}, 0, 0, "split_orders"}, "0 (none) or 1..1000, got " + std::to_string(o.split_orders));
   // the random streams count points in 32 bits; the kernels index [point][node] with int
   if (points.size() > (1u << 24)) throw InputError(Location{{}, 0, 0, "points"}, "at most 2^24 points per call");
   for (std::size_t i = 0; i < points.size(); ++i) {
@@ -371,7 +372,7 @@ class HostEngine final : public Engine {
       if (j >= count[p]) return;
       ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.majorant.data(),
                              kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
-                             static_cast<philox_u32>(o_.seed & 0xffffffffu), static_cast<philox_u32>(o_.seed >> 32),
+                             o_.split_orders, static_cast<philox_u32>(o_.seed & 0xffffffffu), static_cast<philox_u32>(o_.seed >> 32),
                              static_cast<int>(g.first), static_cast<int>(g.count), &out[id * kStride]);
     });
     return out;
@@ -387,7 +388,7 @@ class DeviceEngine final : public Engine {
  public:
   DeviceEngine(cl_util::Device& dev, const Prepared& P, const TruthOptions& o)
       : dev_(dev), P_(P), o_(o), groups_(groups_of(P)) {
-    program_ = dev.build(kKernel, std::string("-DNCH=") + std::to_string(kGroup) + " " + dev.real_options());
+    program_ = dev.build(kTruthProgram, std::string("-DNCH=") + std::to_string(kGroup) + " " + dev.real_options());
     points_ = cl_util::upload_real(dev, P.points);
     node_t_ = cl_util::upload_real(dev, P.node_t);
     for (const Group& g : groups_) {
@@ -426,6 +427,7 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, static_cast<cl_int>(stride));
       k.setArg(i++, static_cast<cl_int>(o_.paths_per_batch));
       k.setArg(i++, static_cast<cl_int>(o_.orders));
+      k.setArg(i++, static_cast<cl_int>(o_.split_orders));
       k.setArg(i++, static_cast<cl_uint>(o_.seed & 0xffffffffu));
       k.setArg(i++, static_cast<cl_uint>(o_.seed >> 32));
       k.setArg(i++, static_cast<cl_int>(g.first));
@@ -470,7 +472,10 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   const long long max_walks = std::min<long long>(std::max(o.max_paths, o.paths), 1LL << 32);
   const long long max_batches = std::min<long long>((max_walks + ppb - 1) / ppb, std::numeric_limits<int>::max());
   std::vector<long long> done(P.n_points, 0), want(P.n_points, std::min(max_batches, (o.paths + ppb - 1) / ppb));
-  std::vector<Stat> stats(P.n_points * P.n_channels);
+  constexpr int kStats = TRUTH_STATS;  // whole walk, orders 1..split, orders above split
+  std::vector<Stat> stats(P.n_points * P.n_channels * kStats);
+  auto stat = [&](std::size_t p, std::size_t c, int k = 0) -> Stat& { return stats[(p * P.n_channels + c) * kStats + k]; };
+  const std::size_t weight_rows = o.target_weights.size() / P.n_channels;
   const long long launch_batches =
       std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
   for (int round = 0; round < kMaxRounds; ++round) {
@@ -490,10 +495,12 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
           for (int j = 0; j < count[p]; ++j) {
             const double* item = &out[(p * stride + j) * kStride];
             for (std::size_t c = 0; c < n_ch; ++c)
-              stats[p * P.n_channels + first + c].merge(static_cast<double>(ppb), item[2 * c], item[2 * c + 1]);
-            totals.events += item[2 * kGroup];
-            totals.truncated += static_cast<long long>(item[2 * kGroup + 1]);
-            totals.violations += static_cast<long long>(item[2 * kGroup + 2]);
+              for (int k = 0; k < kStats; ++k)
+                stat(p, first + c, k).merge(static_cast<double>(ppb), item[2 * (kStats * c + k)],
+                                            item[2 * (kStats * c + k) + 1]);
+            totals.events += item[2 * kStats * kGroup];
+            totals.truncated += static_cast<long long>(item[2 * kStats * kGroup + 1]);
+            totals.violations += static_cast<long long>(item[2 * kStats * kGroup + 2]);
           }
       }
       long long total_done = 0, total_want = 0;
@@ -507,13 +514,25 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
     if (!(o.target_relative_se > 0.0)) break;
     bool more = false;
     for (std::size_t p = 0; p < P.n_points; ++p) {
-      double need = 0.0;  // walks for the target, from this point's worst channel
-      for (std::size_t c = 0; c < P.n_channels; ++c) {
-        const Stat& st = stats[p * P.n_channels + c];
-        const double L = std::fabs(st.mean), se = st.se();
+      double need = 0.0;  // walks for the target, from this point's worst channel (or weighted sum)
+      auto ask = [&](double n, double L, double se) {
+        L = std::fabs(L);
         if (se > o.target_relative_se * L && L > 0.0) {
           const double ratio = se / (o.target_relative_se * L);
-          need = std::max(need, st.n * ratio * ratio * kTopUpMargin);
+          need = std::max(need, n * ratio * ratio * kTopUpMargin);
+        }
+      };
+      if (weight_rows == 0) {
+        for (std::size_t c = 0; c < P.n_channels; ++c) ask(stat(p, c).n, stat(p, c).mean, stat(p, c).se());
+      } else {
+        for (std::size_t row = 0; row < weight_rows; ++row) {
+          double L = 0.0, var = 0.0;
+          for (std::size_t c = 0; c < P.n_channels; ++c) {
+            const double w = o.target_weights[row * P.n_channels + c];
+            L += w * stat(p, c).mean;
+            var += w * w * stat(p, c).se() * stat(p, c).se();
+          }
+          ask(stat(p, 0).n, L, std::sqrt(var));
         }
       }
       const long long w = std::min(max_batches, static_cast<long long>(std::ceil(need / ppb)));
@@ -529,8 +548,15 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
     r.paths[row] = done[p] * ppb;
     totals.walks += done[p] * ppb * static_cast<long long>(P.n_channels);
     for (std::size_t c = 0; c < P.n_channels; ++c) {
-      r.radiance[row * P.n_channels + c] = stats[p * P.n_channels + c].mean;
-      r.standard_error[row * P.n_channels + c] = stats[p * P.n_channels + c].se();
+      const std::size_t i = row * P.n_channels + c;
+      r.radiance[i] = stat(p, c).mean;
+      r.standard_error[i] = stat(p, c).se();
+      if (o.split_orders > 0) {
+        r.radiance_low[i] = stat(p, c, 1).mean;
+        r.standard_error_low[i] = stat(p, c, 1).se();
+        r.radiance_high[i] = stat(p, c, 2).mean;
+        r.standard_error_high[i] = stat(p, c, 2).se();
+      }
     }
   }
 }
@@ -559,6 +585,13 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
   r.radiance.assign(r.points * r.channels, 0.0);
   r.standard_error.assign(r.points * r.channels, 0.0);
   r.paths.assign(r.points, 0);
+  if (!o.target_weights.empty() && o.target_weights.size() % r.channels != 0)
+    throw InputError(Location{{}, 0, 0, "target_weights"},
+                     "rows of " + std::to_string(r.channels) + " weights (one per traced channel)");
+  r.split_orders = o.split_orders;
+  if (o.split_orders > 0)
+    for (auto* v : {&r.radiance_low, &r.standard_error_low, &r.radiance_high, &r.standard_error_high})
+      v->assign(r.points * r.channels, 0.0);
   const std::size_t chunk = std::max<std::size_t>(
       1, static_cast<std::size_t>(kChunkTableBytes / (static_cast<double>(r.channels) * kNodes * 2 * sizeof(double))));
   const std::size_t n_chunks = (points.size() + chunk - 1) / chunk;
@@ -588,6 +621,21 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
 
 }  // namespace
 
+TruthResult TruthResult::low_part() const {
+  TruthResult r = *this;
+  if (split_orders > 0) {
+    r.radiance = radiance_low;
+    r.standard_error = standard_error_low;
+    r.orders = split_orders;
+  }
+  r.split_orders = 0;
+  r.radiance_low.clear();
+  r.standard_error_low.clear();
+  r.radiance_high.clear();
+  r.standard_error_high.clear();
+  return r;
+}
+
 nlohmann::json TruthResult::summary() const {
   long long lo = paths.empty() ? 0 : paths[0], hi = lo, total = 0;
   for (long long n : paths) {
@@ -603,6 +651,7 @@ nlohmann::json TruthResult::summary() const {
           {"points", points},
           {"paths_per_point", {{"min", lo}, {"max", hi}, {"total", total}}},
           {"orders", orders == 0 ? nlohmann::json("all") : nlohmann::json(orders)},
+          {"split_orders", split_orders == 0 ? nlohmann::json(nullptr) : nlohmann::json(split_orders)},
           {"seed", seed},
           {"mean_events_per_walk", mean_events},
           {"truncated_walks", truncated},

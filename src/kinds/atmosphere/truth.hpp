@@ -33,6 +33,9 @@ namespace specbake::atmosphere {
 
 namespace fs = std::filesystem;
 
+// The tracer's OpenCL program (its expanded source enters the hash of bakes with a scene check).
+inline constexpr const char* kTruthProgram = "kernels/atmosphere/truth_kernels.cl";
+
 // One view: a camera at altitude_km above the ground (above the top of the atmosphere: the
 // view enters it, as GetSkyRadiance does), looking at view_zenith_deg from the local zenith,
 // the sun at sun_zenith_deg, view_sun_azimuth_deg between the view's and the sun's azimuths.
@@ -56,6 +59,14 @@ struct TruthOptions {
   // or the point has max(paths, max_paths) walks. 0: exactly `paths` walks.
   double target_relative_se = 0.0;
   long long max_paths = 1LL << 22;
+  // N >= 1: also estimate, from the same walks, the part of orders 1..N and the part of orders
+  // above N (TruthResult::low / high). 0: no split.
+  int split_orders = 0;
+  // Optional [rows][channels] weights: the precision target then applies to each row's
+  // weighted sum Σ_c w[row][c] L_c (e.g. CIE XYZ over a spectrum's wavelengths, whose
+  // channels each need far fewer walks than the sum's precision asks of one channel) rather
+  // than to every channel. Empty: every channel.
+  std::vector<double> target_weights;
 };
 
 // Radiance per point and traced channel, [point][channel] row-major.
@@ -66,6 +77,10 @@ struct TruthResult {
   std::vector<double> radiance;        // W m^-2 sr^-1 nm^-1
   std::vector<double> standard_error;  // of radiance, from the per-walk sample variance
   std::vector<long long> paths;        // walks per point (for each of its channels)
+  // With TruthOptions::split_orders = N: the same walks' orders 1..N (low) and orders > N
+  // (high), low + high = radiance; empty otherwise.
+  int split_orders = 0;
+  std::vector<double> radiance_low, standard_error_low, radiance_high, standard_error_high;
   int orders = 0;                      // 0: all
   std::uint64_t seed = 0;
   double mean_events = 0.0;            // scattering events + ground hits per walk
@@ -75,6 +90,8 @@ struct TruthResult {
   double seconds = 0.0;                // wall time (tables and walks)
   double L(std::size_t point, std::size_t channel) const { return radiance[point * channels + channel]; }
   double se(std::size_t point, std::size_t channel) const { return standard_error[point * channels + channel]; }
+  // The orders-1..N part as a result of its own (radiance = low), for the same conversions.
+  TruthResult low_part() const;
   // Parameters and diagnostics for a manifest or report (no values per point).
   nlohmann::json summary() const;
 };
@@ -113,15 +130,20 @@ std::string truth_result_csv(const AtmosphereSpec& spec, const std::vector<Truth
 void write_text_file(const fs::path& file, const std::string& text);  // IoError on failure
 
 // A deterministic low-discrepancy point set (the Halton sequence in bases 2, 3, 5, 7, from its
-// second point): altitude uniform in [min, max], sun elevation uniform in [min, max], view directions uniform in solid angle
+// second point, or from point `first` + 1): altitude uniform in [min, max], sun elevation uniform in [min, max], view directions uniform in solid angle
 // over the sky (above the planet's horizon; for cameras above the atmosphere, the part of it
-// that crosses the atmosphere), the ground, or all; view–sun azimuth uniform in [0, 180].
+// that crosses the atmosphere), the ground, or all, within the view elevation range; view–sun
+// azimuth uniform in [0, 180]. InputError when the ranges leave no view direction.
 enum class TruthViews { sky, ground, all };
 struct TruthScene {
   double altitude_min_km = 0.0, altitude_max_km = 0.0;
   double sun_elevation_min_deg = 0.0, sun_elevation_max_deg = 90.0;
   TruthViews views = TruthViews::sky;
   int count = 256;
+  int first = 0;  // index of the first Halton point: sets from disjoint ranges are independent point sets
+  // View elevations above the camera's horizontal plane (not the dipped horizon) the views are
+  // limited to, on top of `views` (e.g. [0, 2] for rays grazing the horizon from the ground).
+  double view_elevation_min_deg = -90.0, view_elevation_max_deg = 90.0;
 };
 std::vector<TruthPoint> scene_points(const TruthScene& scene, const AtmosphereSpec& spec);
 

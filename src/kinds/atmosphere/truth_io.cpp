@@ -202,7 +202,10 @@ std::vector<TruthPoint> scene_points(const TruthScene& s, const AtmosphereSpec& 
   if (!(s.sun_elevation_min_deg >= -90.0 && s.sun_elevation_max_deg <= 90.0 &&
         s.sun_elevation_max_deg >= s.sun_elevation_min_deg))
     throw InputError(at, "-90 <= sun elevation min <= sun elevation max <= 90 (degrees)");
-  if (s.count < 1) throw InputError(at, "a point count >= 1");
+  if (!(s.view_elevation_min_deg >= -90.0 && s.view_elevation_max_deg <= 90.0 &&
+        s.view_elevation_min_deg <= s.view_elevation_max_deg))
+    throw InputError(at, "-90 <= view elevation min <= view elevation max <= 90 (degrees)");
+  if (s.count < 1 || s.first < 0) throw InputError(at, "a point count >= 1 and a first index >= 0");
   // Halton: coordinate k of point i is the radical inverse of i + 1 in the k-th prime base
   auto radical_inverse = [](int i, int base) {
     double f = 1.0, r = 0.0;
@@ -217,7 +220,7 @@ std::vector<TruthPoint> scene_points(const TruthScene& s, const AtmosphereSpec& 
   std::vector<TruthPoint> out;
   for (int i = 0; i < s.count; ++i) {
     double u[4];
-    for (int k = 0; k < 4; ++k) u[k] = radical_inverse(i + 1, bases[k]);
+    for (int k = 0; k < 4; ++k) u[k] = radical_inverse(s.first + i + 1, bases[k]);
     TruthPoint p;
     p.altitude_km = s.altitude_min_km + u[0] * (s.altitude_max_km - s.altitude_min_km);
     p.sun_zenith_deg = 90.0 - (s.sun_elevation_min_deg + u[1] * (s.sun_elevation_max_deg - s.sun_elevation_min_deg));
@@ -227,6 +230,13 @@ std::vector<TruthPoint> scene_points(const TruthScene& s, const AtmosphereSpec& 
     double lo = -1.0, hi = mu_sky_max;
     if (s.views == TruthViews::sky) lo = mu_horizon;
     if (s.views == TruthViews::ground) hi = mu_horizon;
+    lo = std::max(lo, std::sin(s.view_elevation_min_deg * M_PI / 180.0));
+    hi = std::min(hi, std::sin(s.view_elevation_max_deg * M_PI / 180.0));
+    if (!(lo <= hi))
+      throw InputError(at, "view directions in both the views (" +
+                               std::string(s.views == TruthViews::sky ? "sky" : s.views == TruthViews::ground ? "ground" : "all") +
+                               ") and the view elevation range from a camera at " + std::to_string(p.altitude_km) +
+                               " km");
     const double mu = hi - u[2] * (hi - lo);
     p.view_zenith_deg = std::acos(std::clamp(mu, -1.0, 1.0)) * 180.0 / M_PI;
     p.view_sun_azimuth_deg = u[3] * 180.0;

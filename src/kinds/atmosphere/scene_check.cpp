@@ -1,0 +1,334 @@
+#include "kinds/atmosphere/scene_check.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "core/colour_space.hpp"
+#include "core/spectral_data.hpp"
+#include "kinds/atmosphere/model.hpp"
+
+namespace specbake::atmosphere {
+
+using nlohmann::json;
+
+namespace {
+
+// The truth's walks: 1024 per point and channel first, then top-ups until the standard error
+// is at most scene.relative_se of the radiance (every channel; for a spectrum, each of X, Y, Z),
+// at most kMaxPaths per point. A point that still misses the target is counted in the record.
+constexpr long long kFirstPaths = 1024;
+constexpr long long kMaxPaths = 1LL << 17;
+// The spectral reference of rgb bakes: 48 bins of 9.79 nm over 360–830 nm (the spectral mode's
+// default), integrated with the CIE 1931 functions as a spectral bake does.
+constexpr int kReferenceWavelengths = 48;
+constexpr double kMidGrey = 0.18;
+constexpr double kRelativeFloor = 1e-3;
+
+Vec3 times(const Vec3& v, const std::array<double, 3>& k) { return {v[0] * k[0], v[1] * k[1], v[2] * k[2]}; }
+
+std::vector<Vec3> rows_of(const std::vector<double>& v) {
+  std::vector<Vec3> out(v.size() / 3);
+  for (std::size_t p = 0; p < out.size(); ++p) out[p] = {v[3 * p], v[3 * p + 1], v[3 * p + 2]};
+  return out;
+}
+
+json summary_json(const ErrorSummary& s) { return {{"max", s.max}, {"p99", s.p99}, {"mean", s.mean}}; }
+
+// Channel c's relative errors and the displayed-colour ΔE of one part.
+struct Part {
+  std::string name;
+  std::array<ErrorSummary, 3> relative{};
+  bool has_relative = true;
+  std::vector<double> de;
+  ErrorSummary de_summary;
+};
+
+Part make_part(std::string name, const std::vector<Vec3>* test, const std::vector<Vec3>* ref,
+               const std::vector<Vec3>& shown_test, const std::vector<Vec3>& shown_ref) {
+  Part part;
+  part.name = std::move(name);
+  part.has_relative = test && ref;
+  if (part.has_relative)
+    for (int c = 0; c < 3; ++c) part.relative[c] = summarize_errors(relative_errors(*test, *ref, c));
+  part.de.resize(shown_test.size());
+  for (std::size_t p = 0; p < shown_test.size(); ++p) part.de[p] = displayed_de2000(shown_test[p], shown_ref[p]);
+  part.de_summary = summarize_errors(part.de);
+  return part;
+}
+
+json part_json(const Part& part) {
+  json j = {{"de2000", summary_json(part.de_summary)}};
+  if (part.has_relative) {
+    const char* names[3] = {"R", "G", "B"};
+    json rel = json::object();
+    for (int c = 0; c < 3; ++c) rel[names[c]] = summary_json(part.relative[c]);
+    j["relative"] = rel;
+  }
+  return j;
+}
+
+std::string num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
+std::string views_name(int v) { return v == 0 ? "sky" : v == 1 ? "ground" : "all"; }
+
+// What to raise when a part dominates.
+std::string advice(const std::string& part, const AtmosphereSpec& spec, int orders_used) {
+  if (part == "lut_discretisation")
+    return "raise the texture sizes (sizes: scattering {r, mu, mu_s, nu}; near the horizon and in twilight mu_s "
+           "and nu first; now " + std::to_string(spec.scattering_r) + "x" + std::to_string(spec.scattering_mu) + "x" +
+           std::to_string(spec.scattering_mu_s) + "x" + std::to_string(spec.scattering_nu) + ")";
+  if (part == "order_truncation")
+    return "raise orders (now " + std::to_string(orders_used) + "), or use orders: auto with a smaller tolerance";
+  return "bake a spectrum (spectrum: {count: 16} or more) instead of rgb";
+}
+
+}  // namespace
+
+double displayed_de2000(const Vec3& test, const Vec3& ref) {
+  static const Mat3 M = srgb_to_xyz();
+  auto xyz = [&](const Vec3& rgb) {
+    return std::array<double, 3>{M[0] * rgb[0] + M[1] * rgb[1] + M[2] * rgb[2],
+                                 M[3] * rgb[0] + M[4] * rgb[1] + M[5] * rgb[2],
+                                 M[6] * rgb[0] + M[7] * rgb[1] + M[8] * rgb[2]};
+  };
+  static const std::array<double, 3> white = xyz({1.0, 1.0, 1.0});
+  const auto x_ref = xyz(ref), x_test = xyz(test);
+  if (!(x_ref[1] > 0.0) || !std::isfinite(x_ref[1])) return std::numeric_limits<double>::quiet_NaN();
+  const double k = kMidGrey / x_ref[1];
+  const std::array<double, 3> a{k * x_test[0], k * x_test[1], k * x_test[2]}, b{k * x_ref[0], k * x_ref[1], k * x_ref[2]};
+  return ciede2000(xyz_to_lab(a, white), xyz_to_lab(b, white));
+}
+
+ErrorSummary summarize_errors(std::vector<double> v) {
+  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }), v.end());
+  ErrorSummary s;
+  s.count = v.size();
+  if (v.empty()) return s;
+  std::sort(v.begin(), v.end());
+  s.max = v.back();
+  s.p99 = v[static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(v.size()))) - 1];
+  double sum = 0.0;
+  for (double x : v) sum += x;
+  s.mean = sum / static_cast<double>(v.size());
+  return s;
+}
+
+std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::vector<Vec3>& ref, int c) {
+  double top = 0.0;
+  for (const Vec3& r : ref) top = std::max(top, std::fabs(r[c]));
+  const double floor = kRelativeFloor * top;
+  std::vector<double> out(ref.size());
+  for (std::size_t p = 0; p < ref.size(); ++p) {
+    const double d = std::max(std::fabs(ref[p][c]), floor);
+    out[p] = d > 0.0 ? std::fabs(test[p][c] - ref[p][c]) / d : 0.0;
+  }
+  return out;
+}
+
+std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first) {
+  const AtmosphereScene& sc = spec.scene;
+  TruthScene scene;
+  scene.altitude_min_km = sc.camera_altitude_min_km;
+  scene.altitude_max_km = sc.camera_altitude_max_km;
+  scene.sun_elevation_min_deg = sc.sun_elevation_min_deg;
+  scene.sun_elevation_max_deg = sc.sun_elevation_max_deg;
+  scene.views = sc.views == 0 ? TruthViews::sky : sc.views == 1 ? TruthViews::ground : TruthViews::all;
+  scene.view_elevation_min_deg = sc.view_elevation_min_deg;
+  scene.view_elevation_max_deg = sc.view_elevation_max_deg;
+  scene.count = sc.points;
+  scene.first = first;
+  return scene_points(scene, spec);
+}
+
+SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
+                       const Progress& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const AtmosphereScene& sc = spec.scene;
+  const std::vector<TruthPoint> points = scene_points_of(spec);
+  const std::size_t n = points.size();
+  const Spectrum sp = spectrum_of(spec);
+  const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
+  // X, Y, Z rows over a spectrum's wavelengths: the precision target of spectral traces
+  auto xyz_weights = [&](const Spectrum& s) {
+    std::vector<double> w(3 * s.lambda_nm.size());
+    for (std::size_t i = 0; i < s.lambda_nm.size(); ++i) {
+      const auto x = cmf.at(s.lambda_nm[i]);
+      for (int row = 0; row < 3; ++row) w[row * s.lambda_nm.size() + i] = x[row] * s.bin_nm;
+    }
+    return w;
+  };
+  auto report = [&](double from, double to) {
+    return [&, from, to](std::string_view, double f) { progress("scene check", from + (to - from) * f); };
+  };
+
+  // The bake's wavelengths, all orders, split at the bake's orders.
+  TruthOptions o;
+  o.paths = kFirstPaths;
+  o.max_paths = kMaxPaths;
+  o.target_relative_se = sc.relative_se;
+  o.seed = sc.seed;
+  o.split_orders = orders_used;
+  if (spec.spectral) {
+    o.paths = std::max<long long>(64, kFirstPaths * 3 / static_cast<long long>(sp.lambda_nm.size()));
+    o.target_weights = xyz_weights(sp);
+  }
+  const double split = spec.spectral ? 0.9 : 0.5;
+  const TruthResult t = trace_truth(spec, dev, points, o, report(0.0, split));
+  const TruthBundleValues all = to_bundle_units(spec, t), low = to_bundle_units(spec, t.low_part());
+  const std::vector<Vec3> t_all = rows_of(all.radiance), t_low = rows_of(low.radiance), se_all = rows_of(all.standard_error);
+  const std::vector<Vec3> lut = lut_sky_radiance(luts, points);
+
+  // rgb bakes: the same sky as a spectrum (independent streams: another seed)
+  AtmosphereSpec ss = spec;
+  std::vector<Vec3> s_all, s_se;
+  TruthResult s;
+  if (!spec.spectral) {
+    ss.spectral = true;
+    ss.min_nm = 360.0;
+    ss.max_nm = 830.0;
+    ss.count = kReferenceWavelengths;
+    TruthOptions so = o;
+    so.split_orders = 0;
+    so.seed = sc.seed + 0x9e3779b97f4a7c15ULL;
+    so.paths = std::max<long long>(64, kFirstPaths * 3 / kReferenceWavelengths);
+    so.target_weights = xyz_weights(spectrum_of(ss));
+    s = trace_truth(ss, dev, points, so, report(split, 1.0));
+    const TruthBundleValues v = to_bundle_units(ss, s);
+    s_all = rows_of(v.radiance);
+    s_se = rows_of(v.standard_error);
+  }
+
+  // displayed colours (linear sRGB luminance)
+  const std::array<double, 3> k = sp.sky_radiance_to_luminance;
+  const std::array<double, 3> k683{kMaxLuminousEfficacy, kMaxLuminousEfficacy, kMaxLuminousEfficacy};
+  std::vector<Vec3> shown_lut(n), shown_low(n), shown_all(n), shown_ref(n);
+  for (std::size_t p = 0; p < n; ++p) {
+    shown_lut[p] = times(lut[p], k);
+    shown_low[p] = times(t_low[p], k);
+    shown_all[p] = times(t_all[p], k);
+    shown_ref[p] = spec.spectral ? shown_all[p] : times(s_all[p], k683);
+  }
+  std::vector<Part> parts;
+  parts.push_back(make_part("total", &lut, &t_all, shown_lut, shown_ref));
+  parts.push_back(make_part("lut_discretisation", &lut, &t_low, shown_lut, shown_low));
+  parts.push_back(make_part("order_truncation", &t_low, &t_all, shown_low, shown_all));
+  if (!spec.spectral) parts.push_back(make_part("spectral_sampling", nullptr, nullptr, shown_all, shown_ref));
+
+  // the truth's own standard error: relative per channel, and in ΔE as the colour moved by one
+  // se in each channel in turn, combined in quadrature
+  std::vector<double> se_rel, de_se(n);
+  const std::vector<Vec3>& ref_se = spec.spectral ? se_all : s_se;
+  const std::array<double, 3>& k_ref = spec.spectral ? k : k683;
+  for (std::size_t p = 0; p < n; ++p) {
+    double q = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      if (t_all[p][c] > 0.0) se_rel.push_back(se_all[p][c] / t_all[p][c]);
+      Vec3 moved = shown_ref[p];
+      moved[c] += ref_se[p][c] * k_ref[c];
+      const double d = displayed_de2000(moved, shown_ref[p]);
+      if (std::isfinite(d)) q += d * d;
+    }
+    de_se[p] = std::sqrt(q);
+  }
+  long long below_target = 0;
+  for (std::size_t p = 0; p < n; ++p)
+    if (t.paths[p] >= kMaxPaths || (!spec.spectral && s.paths[p] >= kMaxPaths)) ++below_target;
+
+  const Part& total = parts[0];
+  double worst_rel = 0.0;
+  for (int c = 0; c < 3; ++c) worst_rel = std::max(worst_rel, total.relative[c].p99);
+  const bool by_radiance = sc.tolerance_relative.has_value();
+  const double value = by_radiance ? worst_rel : total.de_summary.p99;
+  const std::optional<double> tolerance = by_radiance ? sc.tolerance_relative : sc.tolerance_de2000;
+
+  json details = {
+      {"scene", {{"camera_altitude_km", {sc.camera_altitude_min_km, sc.camera_altitude_max_km}},
+                 {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
+                 {"views", views_name(sc.views)},
+                 {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
+                 {"points", n},
+                 {"point_set", "Halton (bases 2, 3, 5, 7) from its second point: altitude and sun elevation uniform "
+                               "in their ranges, view directions uniform in solid angle, view-sun azimuth in [0, 180]"}}},
+      {"orders_baked", orders_used},
+      {"exposure", "per view: the reference's luminance Y brought to 0.18, both colours scaled alike; CIE L*a*b* "
+                   "against D65 (Y = 1), no gamut clipping, no tone curve"},
+      {"relative_error", "|test - reference| / max(|reference|, 1e-3 x the channel's maximum over the points), "
+                         "per channel in the bundle's units"},
+      {"parts", json::object()},
+      {"standard_error", {{"relative", summary_json(summarize_errors(se_rel))},
+                          {"de2000", summary_json(summarize_errors(de_se))},
+                          {"target_relative", sc.relative_se},
+                          {"points_at_max_paths", below_target}}},
+      {"truth", t.summary()}};
+  for (const Part& part : parts) details["parts"][part.name] = part_json(part);
+  details["parts"]["total"]["note"] = spec.spectral ? "the LUT against the all-orders truth at the bake's wavelengths"
+                                                    : "the LUT against the all-orders truth; de2000 against the "
+                                                      "48-wavelength spectral truth (what the sky looks like)";
+  if (!spec.spectral) details["spectral_truth"] = s.summary();
+  SceneCheck out;
+  out.record = Accuracy::judged(
+      "vs_path_traced",
+      by_radiance ? "p99 over the scene's points of the relative radiance error, worst channel"
+                  : "p99 over the scene's points of the CIEDE2000 of the displayed colour",
+      value, tolerance, "Monte Carlo path tracing of the same model at the scene's points (all orders)", details);
+
+  // the per-point file
+  std::string csv = std::string(kTruthPointsHeader) +
+                    ",L_R,L_G,L_B,se_R,se_G,se_B,L_orders_R,L_orders_G,L_orders_B,lut_R,lut_G,lut_B";
+  if (!spec.spectral) csv += ",spectral_R,spectral_G,spectral_B";
+  csv += ",de2000";
+  for (std::size_t i = 1; i < parts.size(); ++i) csv += ",de2000_" + parts[i].name;
+  csv += ",de2000_se\n";
+  for (std::size_t p = 0; p < n; ++p) {
+    const TruthPoint& q = points[p];
+    std::string row = num(q.altitude_km) + "," + num(q.view_zenith_deg) + "," + num(q.sun_zenith_deg) + "," +
+                      num(q.view_sun_azimuth_deg);
+    char b[64];
+    auto add = [&](double v) {
+      std::snprintf(b, sizeof b, ",%.9g", v);
+      row += b;
+    };
+    for (const auto* v : {&t_all, &se_all, &t_low, &lut})
+      for (int c = 0; c < 3; ++c) add((*v)[p][c]);
+    if (!spec.spectral)
+      for (int c = 0; c < 3; ++c) add(s_all[p][c]);
+    for (const Part& part : parts) add(part.de[p]);
+    add(de_se[p]);
+    csv += row + "\n";
+  }
+  out.points_csv = {"scene_check.csv", csv, "", {static_cast<std::int64_t>(n)}, "CSV, one row per scene point",
+                    all.units,
+                    "the scene check per point: the truth (all orders, its se, the bake's orders), the LUT's "
+                    "GetSkyRadiance, and the CIEDE2000 of each part (docs/atmosphere.md, \"The scene check\")"};
+
+  if (!out.record.passed) {
+    const Part* worst = nullptr;
+    for (std::size_t i = 1; i < parts.size(); ++i)
+      if (!worst || parts[i].de_summary.p99 > worst->de_summary.p99) worst = &parts[i];
+    std::string split_text;
+    for (std::size_t i = 1; i < parts.size(); ++i)
+      split_text += (i > 1 ? ", " : "") + parts[i].name + " " + num(parts[i].de_summary.p99);
+    out.failure = "scene check: p99 " + std::string(by_radiance ? "relative radiance error " : "CIEDE2000 ") +
+                  num(value) + " > tolerance " + num(*tolerance) + " at the scene's " + std::to_string(n) +
+                  " points (cameras " + num(sc.camera_altitude_min_km) + "-" + num(sc.camera_altitude_max_km) +
+                  " km, sun " + num(sc.sun_elevation_min_deg) + " to " + num(sc.sun_elevation_max_deg) + " deg, " +
+                  views_name(sc.views) + " views). p99 CIEDE2000 by cause: " + split_text + "; the largest is " +
+                  worst->name + ": " + advice(worst->name, spec, orders_used) +
+                  ". Per point: scene_check.csv of a bake without the tolerance";
+  }
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  spdlog::debug("atmosphere: scene check of {} points in {:.2f} s: p99 CIEDE2000 {:.3g}, max {:.3g}", n, out.seconds,
+                total.de_summary.p99, total.de_summary.max);
+  return out;
+}
+
+}  // namespace specbake::atmosphere

@@ -1,0 +1,59 @@
+#pragma once
+// The scene check of an atmosphere bake: the error a user sees in their own scene. After the
+// LUTs are baked, the points of the config's `scene:` (a low-discrepancy set of cameras, sun
+// elevations and view directions) are path-traced (truth.hpp) and compared with what a shader
+// computes from the baked textures (GetSkyRadiance, lut_sky_radiance). The error is split
+// into its causes:
+//   lut_discretisation  LUT vs the truth with the bake's own orders (texture sizes, the bake's
+//                       quadratures and parameterisation)
+//   order_truncation    the truth with the bake's orders vs all orders (same walks)
+//   spectral_sampling   rgb bakes: the three-wavelength sky (680/550/440 nm, displayed with
+//                       Bruneton's radiance-to-luminance factors) vs a 48-wavelength spectrum
+//                       integrated with the CIE 1931 functions
+//   total               what the user sees: the LUT vs the all-orders truth (spectral for rgb)
+// each per channel (relative radiance) and in displayed colour (CIEDE2000 after a per-view
+// exposure), with the truth's own Monte Carlo standard error. docs/atmosphere.md, "The scene
+// check".
+#include <array>
+#include <string>
+#include <vector>
+
+#include "cl/device.hpp"
+#include "job/kind.hpp"
+#include "kinds/atmosphere/truth.hpp"
+
+namespace specbake::atmosphere {
+
+// The displayed colour's difference: both colours are linear sRGB luminances (cd m⁻²: the
+// bundle's values times the radiance-to-luminance factors), taken to CIE XYZ, scaled by one
+// exposure that brings the reference's luminance Y to 0.18 (mid grey, the per-view auto
+// exposure of a renderer), then CIE L*a*b* against D65 (Y = 1) and CIEDE2000. No clipping to
+// the sRGB gamut and no tone curve: the difference is the sky's, not a display's. NaN when the
+// reference has no luminance (Y <= 0).
+double displayed_de2000(const Vec3& test_luminance_rgb, const Vec3& reference_luminance_rgb);
+
+// max, 99th percentile (nearest rank) and mean of the finite values; count of them.
+struct ErrorSummary {
+  double max = 0.0, p99 = 0.0, mean = 0.0;
+  std::size_t count = 0;
+};
+ErrorSummary summarize_errors(std::vector<double> values);
+
+// Per point relative errors |test − ref| / max(|ref|, 1e-3 · max_points |ref|) of one channel.
+std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::vector<Vec3>& ref, int channel);
+
+struct SceneCheck {
+  Accuracy record;           // "vs_path_traced", judged against the scene's tolerance when it has one
+  OutputFile points_csv;     // scene_check.csv: per point the truth, the LUT and every error
+  std::string failure;       // non-empty when the tolerance is missed: what dominates, what to raise
+  double seconds = 0.0;
+};
+
+// The scene's point set (Halton points first + 1 ...; `first` > 0 gives an independent set).
+std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first = 0);
+
+// Traces the scene of `spec` and judges `luts` (baked with `orders_used` orders) against it.
+SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
+                       const Progress& progress);
+
+}  // namespace specbake::atmosphere
