@@ -32,6 +32,11 @@ constexpr int kNodes = kSegments + 1 + 2 * kMaxKinkAltitudes;
 // Segment probabilities mix in this much of the uniform density, so that every segment has a
 // positive probability whatever the approximations of the table.
 constexpr double kUniformMix = 1e-3;
+// The rest is an even mixture of two densities: ∝ β_s ρ T (what scattering of any order at the
+// vertex is weighted by) and ∝ β_s ρ T × V T_sun (single scattering: in twilight only the part
+// of the ray above the Earth's shadow is lit, and the first density alone would put most
+// vertices in the dark).
+constexpr double kSunlitShare = 0.5;
 // Majorants: the exact maxima of the profiles over [h_j − δ, top] (δ = 1e-3 shell) times
 // 1 + 1e-5, far above float32 rounding of the densities (6e-8 relative).
 constexpr double kMajorantMargin = 1e-5;
@@ -199,6 +204,41 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   // Mie lengths (for the masses)
   struct Sub {
     double t_mid, l_r, l_m;
+    double visible;      // the sun's visible fraction at the middle
+    double sun_l[3];     // optical lengths (Rayleigh, Mie, absorption profiles) towards the sun from it
+  };
+  const double zenith[3] = {row[PT_Z], row[PT_Z + 1], row[PT_Z + 2]}, view[3] = {row[PT_V], row[PT_V + 1], row[PT_V + 2]},
+               sun[3] = {row[PT_S], row[PT_S + 1], row[PT_S + 2]};
+  // the sun's visible fraction and the optical lengths of the ray towards it (along the
+  // horizon when the disc centre is below it, as the model does) from distance t on the view
+  // ray: 8-point Gauss–Legendre on each side of the sun ray's tangent point (an approximation:
+  // it only shapes the sampling density)
+  auto sunlit = [&](double t_mid, double h_mid, Sub& sub) {
+    const double r0 = a.bottom_radius + h;
+    double z[3];
+    for (int k = 0; k < 3; ++k) z[k] = r0 * zenith[k] + t_mid * view[k];
+    const double zn = std::sqrt(ref3::dot3(z, z));
+    const double mu_s = std::clamp(ref3::dot3(sun, z) / zn, -1.0, 1.0);
+    sub.visible = ref3::sun_visible_fraction(&a, h_mid, mu_s);
+    sub.sun_l[0] = sub.sun_l[1] = sub.sun_l[2] = 0.0;
+    if (!(sub.visible > 0.0)) return;
+    const double r = a.bottom_radius + h_mid;
+    const double mu = std::max(mu_s, -ref3::horizon_distance(&a, h_mid) / r);
+    const double d = ref3::distance_to_top(&a, h_mid, mu);
+    const double s_tan = mu < 0.0 ? std::min(-r * mu, d) : 0.0;
+    for (const auto& [lo, hi] : {std::pair{0.0, s_tan}, std::pair{s_tan, d}}) {
+      if (!(hi > lo)) continue;
+      const double c = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
+      for (int i = 0; i < 4; ++i)
+        for (int side = 0; side < 2; ++side) {
+          double h_s, mu_s_;
+          ref3::point_along(&a, h_mid, mu, side == 0 ? c - half * kGaussX[i] : c + half * kGaussX[i], 0, &h_s, &mu_s_);
+          const double w = kGaussW[i] * half;
+          sub.sun_l[0] += w * ref3::profile_density(&a.rayleigh_density, h_s);
+          sub.sun_l[1] += w * ref3::profile_density(&a.mie_density, h_s);
+          sub.sun_l[2] += w * ref3::profile_density(&a.absorption_density, h_s);
+        }
+    }
   };
   std::vector<std::array<double, 3>> lengths(n - 1);
   std::vector<std::array<Sub, kSubSegments>> subs(n - 1);
@@ -207,7 +247,12 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
     const double dt = (t[k + 1] - t[k]) / kSubSegments;
     for (int j = 0; j < kSubSegments; ++j) {
       const double mid = t[k] + (j + 0.5) * dt, half = 0.5 * dt;
-      Sub sub{mid, 0.0, 0.0};
+      Sub sub{mid, 0.0, 0.0, 0.0, {0.0, 0.0, 0.0}};
+      {
+        double h_mid, mu_mid;
+        ref3::point_along(&a, h, mu, mid, ground, &h_mid, &mu_mid);
+        sunlit(mid, h_mid, sub);
+      }
       for (int i = 0; i < 4; ++i)
         for (int side = 0; side < 2; ++side) {
           const double s = side == 0 ? mid - half * kGaussX[i] : mid + half * kGaussX[i];
@@ -233,22 +278,32 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
     for (int k = 0; k + 1 < n; ++k)
       tau[k + 1] = tau[k] + ch.rayleigh_scattering[c] * lengths[k][0] + ch.mie_extinction[c] * lengths[k][1] +
                    ch.absorption_extinction[c] * lengths[k][2];
-    // segment masses ≈ ∫ β_s ρ T dt, T at each sub-segment's middle with τ linear between the
-    // nodes: only the pdf depends on them
-    std::vector<double> mass(n - 1, 0.0);
-    double total = 0.0;
+    // segment masses ≈ ∫ β_s ρ T dt (and × V T_sun), T at each sub-segment's middle with τ
+    // linear between the nodes: only the pdf depends on them
+    std::vector<double> mass(n - 1, 0.0), lit(n - 1, 0.0);
+    double total = 0.0, total_lit = 0.0;
     for (int k = 0; k + 1 < n; ++k) {
       const double dt = t[k + 1] - t[k];
       for (const Sub& sub : subs[k]) {
         const double tau_s = tau[k] + (tau[k + 1] - tau[k]) * (sub.t_mid - t[k]) / dt;
-        mass[k] += (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * std::exp(-tau_s);
+        const double m = (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * std::exp(-tau_s);
+        mass[k] += m;
+        if (sub.visible > 0.0)
+          lit[k] += m * sub.visible *
+                    std::exp(-(ch.rayleigh_scattering[c] * sub.sun_l[0] + ch.mie_extinction[c] * sub.sun_l[1] +
+                               ch.absorption_extinction[c] * sub.sun_l[2]));
       }
       total += mass[k];
+      total_lit += lit[k];
     }
+    const double lit_share = total_lit > 0.0 ? kSunlitShare : 0.0;
     cdf[0] = 0.0;
     for (int k = 0; k + 1 < n; ++k) {
       const double uniform = (t[k + 1] - t[k]) / D;
-      const double p = total > 0.0 ? (1.0 - kUniformMix) * mass[k] / total + kUniformMix * uniform : uniform;
+      const double p = total > 0.0 ? (1.0 - kUniformMix) * ((1.0 - lit_share) * mass[k] / total +
+                                                            (lit_share > 0.0 ? lit_share * lit[k] / total_lit : 0.0)) +
+                                         kUniformMix * uniform
+                                   : uniform;
       cdf[k + 1] = cdf[k] + p;
     }
     const double norm = cdf[n - 1];
