@@ -80,9 +80,9 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
     return;
   }
   at.expect_map("a scene {camera_altitude_km, sun_elevation_deg, views, view_elevation_deg, points, relative_se, "
-                "seed, tolerance_de2000 | tolerance_relative} or none");
-  at.allow_keys({"camera_altitude_km", "sun_elevation_deg", "views", "view_elevation_deg", "points", "relative_se",
-                 "seed", "tolerance_de2000", "tolerance_relative"});
+                "view_sun_azimuth_deg, seed, tolerance_de2000 | tolerance_relative} or none");
+  at.allow_keys({"camera_altitude_km", "sun_elevation_deg", "views", "view_elevation_deg", "view_sun_azimuth_deg",
+                 "points", "relative_se", "seed", "tolerance_de2000", "tolerance_relative"});
   auto range = [](const At& r, double lo, double hi, const char* text, double& a, double& b) {
     if (r.node.IsScalar()) {
       a = b = r.number_in(lo, hi, text);
@@ -112,6 +112,9 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
   if (at.has("view_elevation_deg"))
     range(at.child("view_elevation_deg"), -90.0, 90.0, "in [-90, 90] degrees", sc.view_elevation_min_deg,
           sc.view_elevation_max_deg);
+  if (at.has("view_sun_azimuth_deg"))
+    range(at.child("view_sun_azimuth_deg"), 0.0, 180.0, "in [0, 180] degrees", sc.view_sun_azimuth_min_deg,
+          sc.view_sun_azimuth_max_deg);
   if (at.has("points")) {
     const At n = at.child("points");
     const long long v = n.integer();
@@ -300,6 +303,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
                      {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
                      {"views", sc.views == 0 ? "sky" : sc.views == 1 ? "ground" : "all"},
                      {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
+                     {"view_sun_azimuth_deg", {sc.view_sun_azimuth_min_deg, sc.view_sun_azimuth_max_deg}},
                      {"points", sc.points},
                      {"relative_se", sc.relative_se},
                      {"seed", sc.seed}};

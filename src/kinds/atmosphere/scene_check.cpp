@@ -148,6 +148,8 @@ std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first) {
   scene.views = sc.views == 0 ? TruthViews::sky : sc.views == 1 ? TruthViews::ground : TruthViews::all;
   scene.view_elevation_min_deg = sc.view_elevation_min_deg;
   scene.view_elevation_max_deg = sc.view_elevation_max_deg;
+  scene.view_sun_azimuth_min_deg = sc.view_sun_azimuth_min_deg;
+  scene.view_sun_azimuth_max_deg = sc.view_sun_azimuth_max_deg;
   scene.count = sc.points;
   scene.first = first;
   return scene_points(scene, spec);
@@ -263,9 +265,10 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                  {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
                  {"views", views_name(sc.views)},
                  {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
+                 {"view_sun_azimuth_deg", {sc.view_sun_azimuth_min_deg, sc.view_sun_azimuth_max_deg}},
                  {"points", n},
                  {"point_set", "Halton (bases 2, 3, 5, 7) from its second point: altitude and sun elevation uniform "
-                               "in their ranges, view directions uniform in solid angle, view-sun azimuth in [0, 180]"}}},
+                               "in their ranges, view directions uniform in solid angle within the view elevations, view-sun azimuth uniform in its range"}}},
       {"orders_baked", orders_used},
       {"exposure", "per view: the reference's luminance Y brought to 0.18, both colours scaled alike; CIE L*a*b* "
                    "against D65 (Y = 1), no gamut clipping, no tone curve"},

@@ -16,6 +16,7 @@ struct AtmosphereScene {
   double sun_elevation_min_deg = -6.0, sun_elevation_max_deg = 90.0;
   int views = 0;      // 0 sky, 1 ground, 2 all (TruthViews)
   double view_elevation_min_deg = -90.0, view_elevation_max_deg = 90.0;  // above the horizontal plane
+  double view_sun_azimuth_min_deg = 0.0, view_sun_azimuth_max_deg = 180.0;  // between view and sun
   int points = 128;
   double relative_se = 0.01;  // the truth's standard error at each point, relative (top-ups until met)
   std::uint64_t seed = 1;

@@ -133,7 +133,7 @@ void write_text_file(const fs::path& file, const std::string& text);  // IoError
 // second point, or from point `first` + 1): altitude uniform in [min, max], sun elevation uniform in [min, max], view directions uniform in solid angle
 // over the sky (above the planet's horizon; for cameras above the atmosphere, the part of it
 // that crosses the atmosphere), the ground, or all, within the view elevation range; view–sun
-// azimuth uniform in [0, 180]. InputError when the ranges leave no view direction.
+// azimuth uniform in its range ([0, 180] by default). InputError when the ranges leave no view direction.
 enum class TruthViews { sky, ground, all };
 struct TruthScene {
   double altitude_min_km = 0.0, altitude_max_km = 0.0;
@@ -144,6 +144,7 @@ struct TruthScene {
   // View elevations above the camera's horizontal plane (not the dipped horizon) the views are
   // limited to, on top of `views` (e.g. [0, 2] for rays grazing the horizon from the ground).
   double view_elevation_min_deg = -90.0, view_elevation_max_deg = 90.0;
+  double view_sun_azimuth_min_deg = 0.0, view_sun_azimuth_max_deg = 180.0;  // within [0, 180]
 };
 std::vector<TruthPoint> scene_points(const TruthScene& scene, const AtmosphereSpec& spec);
 

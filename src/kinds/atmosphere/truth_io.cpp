@@ -205,6 +205,9 @@ std::vector<TruthPoint> scene_points(const TruthScene& s, const AtmosphereSpec& 
   if (!(s.view_elevation_min_deg >= -90.0 && s.view_elevation_max_deg <= 90.0 &&
         s.view_elevation_min_deg <= s.view_elevation_max_deg))
     throw InputError(at, "-90 <= view elevation min <= view elevation max <= 90 (degrees)");
+  if (!(s.view_sun_azimuth_min_deg >= 0.0 && s.view_sun_azimuth_max_deg <= 180.0 &&
+        s.view_sun_azimuth_min_deg <= s.view_sun_azimuth_max_deg))
+    throw InputError(at, "0 <= view-sun azimuth min <= max <= 180 (degrees)");
   if (s.count < 1 || s.first < 0) throw InputError(at, "a point count >= 1 and a first index >= 0");
   // Halton: coordinate k of point i is the radical inverse of i + 1 in the k-th prime base
   auto radical_inverse = [](int i, int base) {
@@ -239,7 +242,7 @@ std::vector<TruthPoint> scene_points(const TruthScene& s, const AtmosphereSpec& 
                                " km");
     const double mu = hi - u[2] * (hi - lo);
     p.view_zenith_deg = std::acos(std::clamp(mu, -1.0, 1.0)) * 180.0 / M_PI;
-    p.view_sun_azimuth_deg = u[3] * 180.0;
+    p.view_sun_azimuth_deg = s.view_sun_azimuth_min_deg + u[3] * (s.view_sun_azimuth_max_deg - s.view_sun_azimuth_min_deg);
     out.push_back(p);
   }
   return out;
