@@ -102,7 +102,7 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
     // the LUTs hold sun zenith angles up to max_sun_zenith_deg; a scene below that is not baked
     const double lowest = 90.0 - s.max_sun_zenith_deg;
     if (sc.sun_elevation_min_deg < lowest - 1e-9)
-      e.fail("expected sun elevations >= " + shown_number(lowest) + " degrees (90 - max_sun_zenith_deg, the " +
+      (e.node.IsSequence() ? e.item(0) : e).fail("expected sun elevations >= " + shown_number(lowest) + " degrees (90 - max_sun_zenith_deg, the " +
              "lowest sun the textures hold); raise max_sun_zenith_deg to " +
              shown_number(90.0 - sc.sun_elevation_min_deg) + " or more to bake a sun that low");
   } else {

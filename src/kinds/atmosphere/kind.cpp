@@ -56,6 +56,8 @@ Kind kind() {
            std::to_string(sc.value("mu_s", 0)) + "x" + std::to_string(sc.value("nu", 0));
     }
     s += ", " + p.value("precision", "float32");
+    if (p.contains("scene_check") && p["scene_check"].is_object())
+      s += ", scene check " + std::to_string(p["scene_check"].value("points", 0)) + " points";
     return s;
   };
   return k;
