@@ -53,6 +53,14 @@ std::vector<double> csv_column(const std::string& text, const std::string& name)
   return out;
 }
 
+// Columns <prefix>R, <prefix>G, <prefix>B as one colour per row.
+std::vector<Vec3> csv_rgb(const std::string& text, const std::string& prefix) {
+  const auto R = csv_column(text, prefix + "R"), G = csv_column(text, prefix + "G"), B = csv_column(text, prefix + "B");
+  std::vector<Vec3> v;
+  for (std::size_t i = 0; i < R.size(); ++i) v.push_back({R[i], G[i], B[i]});
+  return v;
+}
+
 double mean_of(const std::vector<double>& v) {
   double s = 0.0;
   std::size_t n = 0;
@@ -351,22 +359,8 @@ TEST_P(HardCases, TheReportedErrorIsWhatFreshPointsMeasure) {
     de_b.push_back(displayed_de2000(shown_lut, shown_ref));
     rel_b.push_back(std::fabs(lut[p][1] - tr.L(p, 1)) / std::max(tr.L(p, 1), 1e-3 * top));
   }
-  const std::vector<double> rel_a = relative_errors(
-      [&] {
-        std::vector<Vec3> v;
-        const auto R = csv_column(check.points_csv.bytes, "lut_R"), G = csv_column(check.points_csv.bytes, "lut_G"),
-                   B = csv_column(check.points_csv.bytes, "lut_B");
-        for (std::size_t i = 0; i < R.size(); ++i) v.push_back({R[i], G[i], B[i]});
-        return v;
-      }(),
-      [&] {
-        std::vector<Vec3> v;
-        const auto R = csv_column(check.points_csv.bytes, "L_R"), G = csv_column(check.points_csv.bytes, "L_G"),
-                   B = csv_column(check.points_csv.bytes, "L_B");
-        for (std::size_t i = 0; i < R.size(); ++i) v.push_back({R[i], G[i], B[i]});
-        return v;
-      }(),
-      1);
+  const std::vector<double> rel_a =
+      relative_errors(csv_rgb(check.points_csv.bytes, "lut_"), csv_rgb(check.points_csv.bytes, "L_"), 1);
   const auto& total = check.record.details["parts"]["total"];
   const double n = static_cast<double>(de_a.size());
   EXPECT_NEAR(mean_of(de_a), total["de2000"]["mean"].get<double>(), 1e-6 * mean_of(de_a) + 1e-12);

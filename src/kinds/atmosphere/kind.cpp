@@ -31,8 +31,10 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
                             std::uint64_t(s.irradiance_mu_s) * s.irradiance_r;
   const std::uint64_t host = texels * 8 * (2 * 3 + 5 * w) + t2d * 8 * (3 * 3 + 4 * w) + texels * 3 * 4 * 4 +
                              (std::uint64_t{1} << 26);
+  // the scene check: the truth's view-ray tables, at most 64 MB a chunk of points (truth.cpp)
+  const std::uint64_t check = s.scene.check ? std::uint64_t{64'000'000} : 0;
   return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24), std::max({texture, rays, incidence}),
-                        host};
+                        host + check};
 }
 
 }  // namespace
