@@ -1,13 +1,17 @@
 #pragma once
 // Host-side data parallelism for the double-precision reference paths and host sums.
 #include <algorithm>
+#include <exception>
+#include <mutex>
 #include <thread>
 #include <vector>
 
 namespace specbake {
 
 // Runs fn(i) for i in [0, n) on up to 16 hardware threads (i interleaved over threads); fn must
-// write only its own i's results, so the outcome does not depend on the thread count.
+// write only its own i's results, so the outcome does not depend on the thread count. An
+// exception from fn stops that thread's remaining work; after every thread has joined, the
+// first one thrown is rethrown on the calling thread (never std::terminate in a worker).
 template <class Fn>
 void parallel_for(long long n, Fn&& fn) {
   const long long threads = std::min<long long>({16, std::max(1u, std::thread::hardware_concurrency()), n});
@@ -16,11 +20,19 @@ void parallel_for(long long n, Fn&& fn) {
     return;
   }
   std::vector<std::thread> pool;
+  std::exception_ptr first;
+  std::mutex m;
   for (long long t = 0; t < threads; ++t)
     pool.emplace_back([&, t] {
-      for (long long i = t; i < n; i += threads) fn(i);
+      try {
+        for (long long i = t; i < n; i += threads) fn(i);
+      } catch (...) {
+        const std::lock_guard<std::mutex> lock(m);
+        if (!first) first = std::current_exception();
+      }
     });
   for (auto& th : pool) th.join();
+  if (first) std::rethrow_exception(first);
 }
 
 }  // namespace specbake

@@ -369,7 +369,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   SceneCheck sc = check_scene(spec, b.luts, b.orders_used, ctx.device, [&](std::string_view what, double f) {
     ctx.progress(what, kComputeShare + (kSceneCheckEnd - kComputeShare) * f);
   });
-  r.accuracy.push_back(sc.record);
+  r.accuracy.insert(r.accuracy.begin(), sc.record);  // the headline: the error the user sees
   r.files.push_back(std::move(sc.points_csv));
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
   if (!sc.failure.empty()) throw JobError(sc.failure);

@@ -140,8 +140,10 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
   } catch (const InputError&) {
     (at.has("view_elevation_deg") ? at.child("view_elevation_deg") : at)
         .fail("expected view elevations that meet the " + std::string(sc.views == 0 ? "sky" : sc.views == 1 ? "ground" : "all") +
-              " views from every camera altitude of the scene (the horizon dips below the horizontal plane by "
-              "acos(bottom_radius / (bottom_radius + altitude)): 1.4 degrees at 2 km on Earth)");
+              " views from every camera altitude of the scene (inside the atmosphere the horizon dips below the "
+              "horizontal plane by acos(bottom_radius / (bottom_radius + altitude)), 1.4 degrees at 2 km on "
+              "Earth; above it only views that cross the atmosphere count, below acos(top_radius / (bottom_radius "
+              "+ altitude)))");
   }
 }
 

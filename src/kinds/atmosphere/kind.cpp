@@ -31,10 +31,13 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
                             std::uint64_t(s.irradiance_mu_s) * s.irradiance_r;
   const std::uint64_t host = texels * 8 * (2 * 3 + 5 * w) + t2d * 8 * (3 * 3 + 4 * w) + texels * 3 * 4 * 4 +
                              (std::uint64_t{1} << 26);
-  // the scene check: the truth's view-ray tables, at most 64 MB a chunk of points (truth.cpp)
-  const std::uint64_t check = s.scene.check ? std::uint64_t{64'000'000} : 0;
-  return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24), std::max({texture, rays, incidence}),
-                        host + check};
+  // The scene check (truth.cpp): host view-ray tables of at most 64 MB a chunk of points plus
+  // their per-group copies, and a launch's output of at most 2^20 batches × TRUTH_OUT_STRIDE
+  // (22) doubles, on the host and on the device (with the tables).
+  const std::uint64_t tables = 64'000'000, out = (std::uint64_t{1} << 20) * 22 * 8;
+  const std::uint64_t check_host = s.scene.check ? 2 * tables + out : 0, check_device = s.scene.check ? tables + out : 0;
+  return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24) + check_device,
+                        std::max({texture, rays, incidence, s.scene.check ? out : 0}), host + check_host};
 }
 
 }  // namespace

@@ -18,10 +18,7 @@ using nlohmann::json;
 
 namespace {
 
-// The truth's walks: 1024 per point and channel first, then top-ups until the standard error
-// is at most scene.relative_se of the radiance (every channel; for a spectrum, each of X, Y, Z),
-// at most kMaxPaths per point and channel (a spectrum of n wavelengths: 3 kMaxPaths / n per
-// wavelength, the same walks in all). Points that still miss the target (in twilight, where
+// The truth's walks (scene_truth_options). Points that still miss the target (in twilight, where
 // the light scattered more than once into the Earth's shadow comes from rare walks that reach
 // the lit layers, a walk's relative standard deviation reaches ~40) are counted in the record,
 // whose standard errors say how far the figures there are resolved.
@@ -30,10 +27,20 @@ constexpr long long kMaxPaths = 1LL << 15;
 // The spectral reference of rgb bakes: 48 bins of 9.79 nm over 360–830 nm (the spectral mode's
 // default), integrated with the CIE 1931 functions as a spectral bake does.
 constexpr int kReferenceWavelengths = 48;
+constexpr std::uint64_t kSpectralSeedOffset = 0x9e3779b97f4a7c15ULL;
 constexpr double kMidGrey = 0.18;
 constexpr double kRelativeFloor = 1e-3;
 
 Vec3 times(const Vec3& v, const std::array<double, 3>& k) { return {v[0] * k[0], v[1] * k[1], v[2] * k[2]}; }
+
+const Mat3& to_xyz() {
+  static const Mat3 M = srgb_to_xyz();
+  return M;
+}
+double luminance_y(const Vec3& rgb) {
+  const Mat3& M = to_xyz();
+  return M[3] * rgb[0] + M[4] * rgb[1] + M[5] * rgb[2];
+}
 
 std::vector<Vec3> rows_of(const std::vector<double>& v) {
   std::vector<Vec3> out(v.size() / 3);
@@ -52,6 +59,13 @@ struct Part {
   ErrorSummary de_summary;
 };
 
+// The worst channel's p99 relative error of a part (0 without per-channel errors).
+double worst_relative_p99(const Part& part) {
+  double w = 0.0;
+  for (const ErrorSummary& r : part.relative) w = std::max(w, r.p99);
+  return w;
+}
+
 Part make_part(std::string name, const std::vector<Vec3>* test, const std::vector<Vec3>* ref,
                const std::vector<Vec3>& shown_test, const std::vector<Vec3>& shown_ref) {
   Part part;
@@ -59,8 +73,12 @@ Part make_part(std::string name, const std::vector<Vec3>* test, const std::vecto
   part.has_relative = test && ref;
   if (part.has_relative)
     for (int c = 0; c < 3; ++c) part.relative[c] = summarize_errors(relative_errors(*test, *ref, c));
+  // the exposure of views darker than 1e-3 of the scene's brightest is that of 1e-3 of it
+  double top = 0.0;
+  for (const Vec3& v : shown_ref) top = std::max(top, luminance_y(v));
   part.de.resize(shown_test.size());
-  for (std::size_t p = 0; p < shown_test.size(); ++p) part.de[p] = displayed_de2000(shown_test[p], shown_ref[p]);
+  for (std::size_t p = 0; p < shown_test.size(); ++p)
+    part.de[p] = displayed_de2000(shown_test[p], shown_ref[p], kRelativeFloor * top);
   part.de_summary = summarize_errors(part.de);
   return part;
 }
@@ -97,8 +115,8 @@ std::string advice(const std::string& part, const AtmosphereSpec& spec, int orde
 
 }  // namespace
 
-double displayed_de2000(const Vec3& test, const Vec3& ref) {
-  static const Mat3 M = srgb_to_xyz();
+double displayed_de2000(const Vec3& test, const Vec3& ref, double y_floor) {
+  const Mat3& M = to_xyz();
   auto xyz = [&](const Vec3& rgb) {
     return std::array<double, 3>{M[0] * rgb[0] + M[1] * rgb[1] + M[2] * rgb[2],
                                  M[3] * rgb[0] + M[4] * rgb[1] + M[5] * rgb[2],
@@ -106,8 +124,9 @@ double displayed_de2000(const Vec3& test, const Vec3& ref) {
   };
   static const std::array<double, 3> white = xyz({1.0, 1.0, 1.0});
   const auto x_ref = xyz(ref), x_test = xyz(test);
-  if (!(x_ref[1] > 0.0) || !std::isfinite(x_ref[1])) return std::numeric_limits<double>::quiet_NaN();
-  const double k = kMidGrey / x_ref[1];
+  const double y = std::max(x_ref[1], y_floor);
+  if (!(y > 0.0) || !std::isfinite(y)) return std::numeric_limits<double>::quiet_NaN();
+  const double k = kMidGrey / y;
   const std::array<double, 3> a{k * x_test[0], k * x_test[1], k * x_test[2]}, b{k * x_ref[0], k * x_ref[1], k * x_ref[2]};
   return ciede2000(xyz_to_lab(a, white), xyz_to_lab(b, white));
 }
@@ -133,7 +152,7 @@ std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::ve
   std::vector<double> out(ref.size());
   for (std::size_t p = 0; p < ref.size(); ++p) {
     const double d = std::max(std::fabs(ref[p][c]), floor);
-    out[p] = d > 0.0 ? std::fabs(test[p][c] - ref[p][c]) / d : 0.0;
+    out[p] = d > 0.0 ? std::fabs(test[p][c] - ref[p][c]) / d : (test[p][c] != 0.0 ? 1.0 : 0.0);
   }
   return out;
 }
@@ -155,6 +174,37 @@ std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first) {
   return scene_points(scene, spec);
 }
 
+TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t seed) {
+  TruthOptions o;
+  o.paths = kFirstPaths;
+  o.max_paths = kMaxPaths;
+  o.target_relative_se = traced.scene.relative_se;
+  o.seed = seed;
+  if (traced.spectral) {
+    const Spectrum sp = spectrum_of(traced);
+    const long long n = static_cast<long long>(sp.lambda_nm.size());
+    o.paths = std::max<long long>(64, kFirstPaths * 3 / n);
+    o.max_paths = std::max<long long>(o.paths, kMaxPaths * 3 / n);
+    // X, Y, Z rows over the wavelengths: the precision target
+    const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
+    o.target_weights.assign(3 * sp.lambda_nm.size(), 0.0);
+    for (std::size_t i = 0; i < sp.lambda_nm.size(); ++i) {
+      const auto x = cmf.at(sp.lambda_nm[i]);
+      for (int row = 0; row < 3; ++row) o.target_weights[row * sp.lambda_nm.size() + i] = x[row] * sp.bin_nm;
+    }
+  }
+  return o;
+}
+
+AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec) {
+  AtmosphereSpec ss = spec;
+  ss.spectral = true;
+  ss.min_nm = 360.0;
+  ss.max_nm = 830.0;
+  ss.count = kReferenceWavelengths;
+  return ss;
+}
+
 SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
                        const Progress& progress) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -162,32 +212,13 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   const std::vector<TruthPoint> points = scene_points_of(spec);
   const std::size_t n = points.size();
   const Spectrum sp = spectrum_of(spec);
-  const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
-  // X, Y, Z rows over a spectrum's wavelengths: the precision target of spectral traces
-  auto xyz_weights = [&](const Spectrum& s) {
-    std::vector<double> w(3 * s.lambda_nm.size());
-    for (std::size_t i = 0; i < s.lambda_nm.size(); ++i) {
-      const auto x = cmf.at(s.lambda_nm[i]);
-      for (int row = 0; row < 3; ++row) w[row * s.lambda_nm.size() + i] = x[row] * s.bin_nm;
-    }
-    return w;
-  };
   auto report = [&](double from, double to) {
     return [&, from, to](std::string_view, double f) { progress("scene check", from + (to - from) * f); };
   };
 
   // The bake's wavelengths, all orders, split at the bake's orders.
-  TruthOptions o;
-  o.paths = kFirstPaths;
-  o.max_paths = kMaxPaths;
-  o.target_relative_se = sc.relative_se;
-  o.seed = sc.seed;
+  TruthOptions o = scene_truth_options(spec, sc.seed);
   o.split_orders = orders_used;
-  if (spec.spectral) {
-    o.paths = std::max<long long>(64, kFirstPaths * 3 / static_cast<long long>(sp.lambda_nm.size()));
-    o.max_paths = std::max<long long>(o.paths, kMaxPaths * 3 / static_cast<long long>(sp.lambda_nm.size()));
-    o.target_weights = xyz_weights(sp);
-  }
   const double split = spec.spectral ? 0.9 : 0.5;
   const TruthResult t = trace_truth(spec, dev, points, o, report(0.0, split));
   const TruthBundleValues all = to_bundle_units(spec, t), low = to_bundle_units(spec, t.low_part());
@@ -195,22 +226,11 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   const std::vector<Vec3> lut = lut_sky_radiance(luts, points);
 
   // rgb bakes: the same sky as a spectrum (independent streams: another seed)
-  AtmosphereSpec ss = spec;
+  const AtmosphereSpec ss = spectral_reference_of(spec);
   std::vector<Vec3> s_all, s_se;
   TruthResult s;
-  long long s_max_paths = 0;
+  TruthOptions so = scene_truth_options(ss, sc.seed + kSpectralSeedOffset);
   if (!spec.spectral) {
-    ss.spectral = true;
-    ss.min_nm = 360.0;
-    ss.max_nm = 830.0;
-    ss.count = kReferenceWavelengths;
-    TruthOptions so = o;
-    so.split_orders = 0;
-    so.seed = sc.seed + 0x9e3779b97f4a7c15ULL;
-    so.paths = std::max<long long>(64, kFirstPaths * 3 / kReferenceWavelengths);
-    so.max_paths = std::max<long long>(so.paths, kMaxPaths * 3 / kReferenceWavelengths);
-    so.target_weights = xyz_weights(spectrum_of(ss));
-    s_max_paths = so.max_paths;
     s = trace_truth(ss, dev, points, so, report(split, 1.0));
     const TruthBundleValues v = to_bundle_units(ss, s);
     s_all = rows_of(v.radiance);
@@ -251,13 +271,14 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   }
   long long below_target = 0;
   for (std::size_t p = 0; p < n; ++p)
-    if (t.paths[p] >= o.max_paths || (!spec.spectral && s.paths[p] >= s_max_paths)) ++below_target;
+    if (t.paths[p] >= o.max_paths || (!spec.spectral && s.paths[p] >= so.max_paths)) ++below_target;
 
   const Part& total = parts[0];
-  double worst_rel = 0.0;
-  for (int c = 0; c < 3; ++c) worst_rel = std::max(worst_rel, total.relative[c].p99);
   const bool by_radiance = sc.tolerance_relative.has_value();
-  const double value = by_radiance ? worst_rel : total.de_summary.p99;
+  // no lit point: nothing to judge the LUTs by (NaN fails the record)
+  const bool dark = total.de_summary.count == 0;
+  const double value = dark ? std::numeric_limits<double>::quiet_NaN()
+                            : by_radiance ? worst_relative_p99(total) : total.de_summary.p99;
   const std::optional<double> tolerance = by_radiance ? sc.tolerance_relative : sc.tolerance_de2000;
 
   json details = {
@@ -270,6 +291,10 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                  {"point_set", "Halton (bases 2, 3, 5, 7) from its second point: altitude and sun elevation uniform "
                                "in their ranges, view directions uniform in solid angle within the view elevations, view-sun azimuth uniform in its range"}}},
       {"orders_baked", orders_used},
+      {"orders_note", "the walks are split at the bake's order count (for spectral bakes in several passes with "
+                      "orders: auto, the largest of the passes'; a pass that stopped earlier then counts its "
+                      "missing orders as lut_discretisation)"},
+      {"points_without_light", n - total.de_summary.count},
       {"exposure", "per view: the reference's luminance Y brought to 0.18, both colours scaled alike; CIE L*a*b* "
                    "against D65 (Y = 1), no gamut clipping, no tone curve"},
       {"relative_error", "|test - reference| / max(|reference|, 1e-3 x the channel's maximum over the points), "
@@ -278,7 +303,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       {"standard_error", {{"relative", summary_json(summarize_errors(se_rel))},
                           {"de2000", summary_json(summarize_errors(de_se))},
                           {"target_relative", sc.relative_se},
-                          {"points_at_max_paths", below_target}}},
+                          {"points_at_max_paths", below_target}}},  // reached the cap, met or not
       {"truth", t.summary()}};
   for (const Part& part : parts) details["parts"][part.name] = part_json(part);
   details["parts"]["total"]["note"] = spec.spectral ? "the LUT against the all-orders truth at the bake's wavelengths"
@@ -317,23 +342,39 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     csv += row + "\n";
   }
   out.points_csv = {"scene_check.csv", csv, "", {static_cast<std::int64_t>(n)}, "CSV, one row per scene point",
-                    all.units,
+                    all.units + (spec.spectral ? "" : "; spectral_* columns: linear sRGB luminance / 683"),
                     "the scene check per point: the truth (all orders, its se, the bake's orders), the LUT's "
                     "GetSkyRadiance, and the CIEDE2000 of each part (docs/atmosphere.md, \"The scene check\")"};
 
-  if (!out.record.passed) {
+  const ErrorSummary se_de = summarize_errors(de_se), se_rel_summary = summarize_errors(se_rel);
+  if (dark) {
+    out.failure = "scene check: none of the scene's " + std::to_string(n) +
+                  " points has light in the path-traced truth (cameras " + num(sc.camera_altitude_min_km) + "-" +
+                  num(sc.camera_altitude_max_km) + " km, sun " + num(sc.sun_elevation_min_deg) + " to " +
+                  num(sc.sun_elevation_max_deg) + " deg, " + views_name(sc.views) +
+                  " views), so the LUTs cannot be judged there; give the scene a sun and views that see sunlit "
+                  "air, or `scene: none`";
+  } else if (!out.record.passed) {
+    // the causes ranked by the judged measure: relative radiance (per channel, rgb truth) or CIEDE2000
+    auto measure = [&](const Part& part) { return by_radiance ? worst_relative_p99(part) : part.de_summary.p99; };
     const Part* worst = nullptr;
-    for (std::size_t i = 1; i < parts.size(); ++i)
-      if (!worst || parts[i].de_summary.p99 > worst->de_summary.p99) worst = &parts[i];
     std::string split_text;
-    for (std::size_t i = 1; i < parts.size(); ++i)
-      split_text += (i > 1 ? ", " : "") + parts[i].name + " " + num(parts[i].de_summary.p99);
+    for (std::size_t i = 1; i < parts.size(); ++i) {
+      if (by_radiance && !parts[i].has_relative) continue;  // spectral sampling has no radiance measure
+      if (!worst || measure(parts[i]) > measure(*worst)) worst = &parts[i];
+      split_text += (split_text.empty() ? "" : ", ") + parts[i].name + " " + num(measure(parts[i]));
+    }
+    const double noise = by_radiance ? se_rel_summary.p99 : se_de.p99;
     out.failure = "scene check: p99 " + std::string(by_radiance ? "relative radiance error " : "CIEDE2000 ") +
                   num(value) + " > tolerance " + num(*tolerance) + " at the scene's " + std::to_string(n) +
                   " points (cameras " + num(sc.camera_altitude_min_km) + "-" + num(sc.camera_altitude_max_km) +
                   " km, sun " + num(sc.sun_elevation_min_deg) + " to " + num(sc.sun_elevation_max_deg) + " deg, " +
-                  views_name(sc.views) + " views). p99 CIEDE2000 by cause: " + split_text + "; the largest is " +
+                  views_name(sc.views) + " views). p99 by cause: " + split_text + "; the largest is " +
                   worst->name + ": " + advice(worst->name, spec, orders_used) +
+                  ". The truth's own p99 standard error is " + num(noise) +
+                  (*tolerance <= 2.0 * noise ? " - comparable with the tolerance: lower scene.relative_se (now " +
+                                                   num(sc.relative_se) + ") before trusting the split"
+                                             : "") +
                   ". Per point: scene_check.csv of a bake without the tolerance";
   }
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -28,9 +28,10 @@ namespace specbake::atmosphere {
 // bundle's values times the radiance-to-luminance factors), taken to CIE XYZ, scaled by one
 // exposure that brings the reference's luminance Y to 0.18 (mid grey, the per-view auto
 // exposure of a renderer), then CIE L*a*b* against D65 (Y = 1) and CIEDE2000. No clipping to
-// the sRGB gamut and no tone curve: the difference is the sky's, not a display's. NaN when the
-// reference has no luminance (Y <= 0).
-double displayed_de2000(const Vec3& test_luminance_rgb, const Vec3& reference_luminance_rgb);
+// the sRGB gamut and no tone curve: the difference is the sky's, not a display's. The exposure
+// is that of max(Y, y_floor) (the check uses 1e-3 of the scene's brightest view, so that a LUT
+// that glows where the truth is dark counts); NaN when that is not > 0.
+double displayed_de2000(const Vec3& test_luminance_rgb, const Vec3& reference_luminance_rgb, double y_floor = 0.0);
 
 // max, 99th percentile (nearest rank) and mean of the finite values; count of them.
 struct ErrorSummary {
@@ -39,7 +40,8 @@ struct ErrorSummary {
 };
 ErrorSummary summarize_errors(std::vector<double> values);
 
-// Per point relative errors |test − ref| / max(|ref|, 1e-3 · max_points |ref|) of one channel.
+// Per point relative errors |test − ref| / max(|ref|, 1e-3 · max_points |ref|) of one channel
+// (1 where that denominator is 0 and test is not: a channel the truth has no light in).
 std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::vector<Vec3>& ref, int channel);
 
 struct SceneCheck {
@@ -51,6 +53,15 @@ struct SceneCheck {
 
 // The scene's point set (Halton points first + 1 ...; `first` > 0 gives an independent set).
 std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first = 0);
+
+// The walks of a check's trace of `traced` (the bake's spec, or the spectral reference of an
+// rgb bake): 1024 per point and channel first, then top-ups until the standard error is the
+// scene's relative_se of the radiance (every channel of an rgb trace; each of X, Y, Z of a
+// spectrum, whose n wavelengths then get 3/n of the walks each), at most 32768 per point and
+// channel (3 · 32768 / n per wavelength).
+TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t seed);
+// The spectral reference of an rgb bake: the same atmosphere at 48 wavelengths over 360–830 nm.
+AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 
 // Traces the scene of `spec` and judges `luts` (baked with `orders_used` orders) against it.
 SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,

@@ -141,7 +141,7 @@ void point_geometry(const AtmosphereParameters& a, const TruthPoint& p, double* 
   const double t = a.top_radius - a.bottom_radius;
   double h = p.altitude_km, mu = v[2];
   for (int k = 0; k < TRUTH_POINT_STRIDE; ++k) row[k] = 0.0;
-  if (h > t) {
+  if (h >= t) {
     // enter the atmosphere as GetSkyRadiance does (or see nothing)
     const double r = a.bottom_radius + h, rmu = r * mu;
     const double disc = rmu * rmu - (r - a.top_radius) * (r + a.top_radius);

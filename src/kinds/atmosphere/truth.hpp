@@ -33,7 +33,8 @@ namespace specbake::atmosphere {
 
 namespace fs = std::filesystem;
 
-// The tracer's OpenCL program (its expanded source enters the hash of bakes with a scene check).
+// The tracer's OpenCL program (the atmosphere kind's programs: its expanded source enters the hash
+// of every atmosphere bake).
 inline constexpr const char* kTruthProgram = "kernels/atmosphere/truth_kernels.cl";
 
 // One view: a camera at altitude_km above the ground (above the top of the atmosphere: the

@@ -229,7 +229,7 @@ std::vector<TruthPoint> scene_points(const TruthScene& s, const AtmosphereSpec& 
     p.sun_zenith_deg = 90.0 - (s.sun_elevation_min_deg + u[1] * (s.sun_elevation_max_deg - s.sun_elevation_min_deg));
     const double r = rb + p.altitude_km;
     const double mu_horizon = -std::sqrt(std::max(0.0, 1.0 - (rb / r) * (rb / r)));
-    const double mu_sky_max = r > rt ? -std::sqrt(std::max(0.0, 1.0 - (rt / r) * (rt / r))) : 1.0;
+    const double mu_sky_max = r >= rt ? -std::sqrt(std::max(0.0, 1.0 - (rt / r) * (rt / r))) : 1.0;
     double lo = -1.0, hi = mu_sky_max;
     if (s.views == TruthViews::sky) lo = mu_horizon;
     if (s.views == TruthViews::ground) hi = mu_horizon;
