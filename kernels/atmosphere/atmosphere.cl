@@ -231,10 +231,8 @@ FN void transmittance_to_top_integral(const AtmosphereParameters* a, real h, rea
 
 /* ---- texture coordinates ------------------------------------------------------------- */
 FN real coord_from_unit(real x, int n) { return R(0.5) / (real)n + x * (R(1.0) - R(1.0) / (real)n); }
-/* The inverse, for texel centres u in [0.5/n, 1 − 0.5/n]: in [0, 1] (clamped: the last centre
- * can round to 1 + ε, e.g. n = 48, which would put the top texel row above the atmosphere). */
 FN real unit_from_coord(real u, int n) {
-  return n > 1 ? clamp_real((u - R(0.5) / (real)n) / (R(1.0) - R(1.0) / (real)n), R(0.0), R(1.0)) : R(0.5);
+  return n > 1 ? (u - R(0.5) / (real)n) / (R(1.0) - R(1.0) / (real)n) : R(0.5);
 }
 
 FN void transmittance_uv(const AtmosphereParameters* a, real h, real mu, real* u, real* v) {
@@ -335,7 +333,8 @@ FN void scattering_ray_from_uv(const AtmosphereParameters* a, real u_mu, real u_
   const real H = horizon_top(a);
   const int half_mu = a->mu_size / 2;
   const real rho = H * unit_from_coord(u_r, a->r_size);
-  *h = clamp_altitude(a, altitude_of_rho2(a, rho * rho)); /* ρ = H: t up to rounding */
+  /* the top row's centre decodes to ρ = H (1 ± ε): t up to rounding, never above it */
+  *h = clamp_altitude(a, altitude_of_rho2(a, rho * rho));
   const real r = radius_of(a, *h);
   if (u_mu < R(0.5)) {
     const real d_min = *h, d_max = rho;

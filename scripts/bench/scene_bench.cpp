@@ -64,9 +64,7 @@ const Setting kSettings[] = {
     {"100 %, rgb, orders auto", 100, -1, 0},
     {"100 %, 16 wavelengths", 100, 0, 16},
     {"50 %, 16 wavelengths", 50, 0, 16},
-    {"150 %, 16 wavelengths", 150, 0, 16},  // Earth only (hazy Earth and Mars would take ~10 min each)
 };
-constexpr int kEarthOnlySettings = 5;  // settings from this index run for the Earth's scenes only
 
 std::string job_yaml(int atmosphere, const Setting& s, const char* scene) {
   const int own_orders[] = {4, 10, 6};
@@ -130,8 +128,7 @@ void SceneCheckBench(benchmark::State& state) {
 
 void AllArgs(benchmark::internal::Benchmark* b) {
   for (int s = 0; s < static_cast<int>(std::size(kScenes)); ++s)
-    for (int k = 0; k < static_cast<int>(std::size(kSettings)); ++k)
-      if (k < kEarthOnlySettings || kScenes[s].atmosphere == 0) b->Args({s, k});
+    for (int k = 0; k < static_cast<int>(std::size(kSettings)); ++k) b->Args({s, k});
 }
 
 }  // namespace
