@@ -41,6 +41,7 @@ const Scene kScenes[] = {
     {"terminator from space", 0, "{camera_altitude_km: 400, sun_elevation_deg: [-8, 4], views: ground}"},
     {"hazy Earth", 1, "{sun_elevation_deg: [-6, 60]}"},
     {"Mars", 2, "{sun_elevation_deg: [-10, 60]}"},
+    {"daylight ground scene", 0, "{camera_altitude_km: [0, 2], sun_elevation_deg: [2, 90]}"},
 };
 const char* kAtmospheres[] = {
     "    preset: earth\n",
