@@ -250,8 +250,9 @@ TEST(SceneCheck, AMissedToleranceFailsTheJobAndSaysWhatDominates) {
   EXPECT_EQ((rc.out + rc.err).find("spectral_sampling"), std::string::npos) << rc.out << rc.err;
 }
 
-// A spectral bake is judged at its own wavelengths (no spectral-sampling part), in the
-// bundle's units (linear sRGB luminance / 683).
+// A spectral bake is judged at its own wavelengths per channel, in the bundle's units (linear
+// sRGB luminance / 683), and its few bins against the 48-wavelength spectrum in displayed
+// colour (spectral_sampling); a bake of exactly that spectrum has no such part.
 TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
   const AtmosphereSpec s =
       spec_of("    spectrum: {min_nm: 400, max_nm: 700, count: 6}\n    orders: 2\n"
@@ -260,8 +261,22 @@ TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
   const Baked b = bake_luts(s, t::shared_device(), [](std::string_view, double) {}, 0);
   const SceneCheck c = check_scene(s, b.luts, b.orders_used, t::shared_device(), [](std::string_view, double) {});
   const auto& parts = c.record.details["parts"];
-  EXPECT_FALSE(parts.contains("spectral_sampling"));
+  EXPECT_TRUE(parts.contains("spectral_sampling"));
+  EXPECT_FALSE(parts["spectral_sampling"].contains("relative"));
   EXPECT_TRUE(parts.contains("lut_discretisation"));
+  // six 50 nm bins over 400-700 nm miss colour a 48-bin spectrum has: a visible part
+  EXPECT_GT(parts["spectral_sampling"]["de2000"]["mean"].get<double>(), 0.1);
+  {
+    AtmosphereSpec s48 = s;
+    s48.count = 48;
+    s48.min_nm = 360;
+    s48.max_nm = 830;
+    s48.orders = 1;
+    s48.scene.points = 2;
+    const Baked b48 = bake_luts(s48, t::shared_device(), [](std::string_view, double) {}, 0);
+    const SceneCheck c48 = check_scene(s48, b48.luts, 1, t::shared_device(), [](std::string_view, double) {});
+    EXPECT_FALSE(c48.record.details["parts"].contains("spectral_sampling"));
+  }
   EXPECT_EQ(c.record.details["truth"]["channels"].size(), 6u);
   // the truth in the bundle's units: an independent trace (another seed) of three points,
   // converted by to_bundle_units, within 4 combined se of the check's L columns

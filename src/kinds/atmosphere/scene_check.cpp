@@ -219,18 +219,21 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   // The bake's wavelengths, all orders, split at the bake's orders.
   TruthOptions o = scene_truth_options(spec, sc.seed);
   o.split_orders = orders_used;
-  const double split = spec.spectral ? 0.9 : 0.5;
+  // The spectral reference (48 wavelengths over 360–830 nm) is traced unless the bake is it.
+  const AtmosphereSpec ss = spectral_reference_of(spec);
+  const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm &&
+                           spec.max_nm == ss.max_nm);
+  const double split = reference ? 0.5 : 0.9;
   const TruthResult t = trace_truth(spec, dev, points, o, report(0.0, split));
   const TruthBundleValues all = to_bundle_units(spec, t), low = to_bundle_units(spec, t.low_part());
   const std::vector<Vec3> t_all = rows_of(all.radiance), t_low = rows_of(low.radiance), se_all = rows_of(all.standard_error);
   const std::vector<Vec3> lut = lut_sky_radiance(luts, points);
 
-  // rgb bakes: the same sky as a spectrum (independent streams: another seed)
-  const AtmosphereSpec ss = spectral_reference_of(spec);
+  // the same sky as the reference spectrum (independent streams: another seed)
   std::vector<Vec3> s_all, s_se;
   TruthResult s;
   TruthOptions so = scene_truth_options(ss, sc.seed + kSpectralSeedOffset);
-  if (!spec.spectral) {
+  if (reference) {
     s = trace_truth(ss, dev, points, so, report(split, 1.0));
     const TruthBundleValues v = to_bundle_units(ss, s);
     s_all = rows_of(v.radiance);
@@ -245,19 +248,19 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     shown_lut[p] = times(lut[p], k);
     shown_low[p] = times(t_low[p], k);
     shown_all[p] = times(t_all[p], k);
-    shown_ref[p] = spec.spectral ? shown_all[p] : times(s_all[p], k683);
+    shown_ref[p] = reference ? times(s_all[p], k683) : shown_all[p];
   }
   std::vector<Part> parts;
   parts.push_back(make_part("total", &lut, &t_all, shown_lut, shown_ref));
   parts.push_back(make_part("lut_discretisation", &lut, &t_low, shown_lut, shown_low));
   parts.push_back(make_part("order_truncation", &t_low, &t_all, shown_low, shown_all));
-  if (!spec.spectral) parts.push_back(make_part("spectral_sampling", nullptr, nullptr, shown_all, shown_ref));
+  if (reference) parts.push_back(make_part("spectral_sampling", nullptr, nullptr, shown_all, shown_ref));
 
   // the truth's own standard error: relative per channel, and in ΔE as the colour moved by one
   // se in each channel in turn, combined in quadrature
   std::vector<double> se_rel, de_se(n);
-  const std::vector<Vec3>& ref_se = spec.spectral ? se_all : s_se;
-  const std::array<double, 3>& k_ref = spec.spectral ? k : k683;
+  const std::vector<Vec3>& ref_se = reference ? s_se : se_all;
+  const std::array<double, 3>& k_ref = reference ? k683 : k;
   for (std::size_t p = 0; p < n; ++p) {
     double q = 0.0;
     for (int c = 0; c < 3; ++c) {
@@ -271,7 +274,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   }
   long long below_target = 0;
   for (std::size_t p = 0; p < n; ++p)
-    if (t.paths[p] >= o.max_paths || (!spec.spectral && s.paths[p] >= so.max_paths)) ++below_target;
+    if (t.paths[p] >= o.max_paths || (reference && s.paths[p] >= so.max_paths)) ++below_target;
 
   const Part& total = parts[0];
   const bool by_radiance = sc.tolerance_relative.has_value();
@@ -306,10 +309,12 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                           {"points_at_max_paths", below_target}}},  // reached the cap, met or not
       {"truth", t.summary()}};
   for (const Part& part : parts) details["parts"][part.name] = part_json(part);
-  details["parts"]["total"]["note"] = spec.spectral ? "the LUT against the all-orders truth at the bake's wavelengths"
-                                                    : "the LUT against the all-orders truth; de2000 against the "
-                                                      "48-wavelength spectral truth (what the sky looks like)";
-  if (!spec.spectral) details["spectral_truth"] = s.summary();
+  details["parts"]["total"]["note"] = reference ? "the LUT against the all-orders truth at the bake's wavelengths; "
+                                                  "de2000 against the 48-wavelength spectral truth (what the sky "
+                                                  "looks like)"
+                                                : "the LUT against the all-orders truth at the bake's wavelengths "
+                                                  "(the bake's are the 48 of the spectral reference)";
+  if (reference) details["spectral_truth"] = s.summary();
   SceneCheck out;
   out.record = Accuracy::judged(
       "vs_path_traced",
@@ -320,7 +325,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   // the per-point file
   std::string csv = std::string(kTruthPointsHeader) +
                     ",L_R,L_G,L_B,se_R,se_G,se_B,L_orders_R,L_orders_G,L_orders_B,lut_R,lut_G,lut_B";
-  if (!spec.spectral) csv += ",spectral_R,spectral_G,spectral_B";
+  if (reference) csv += ",spectral_R,spectral_G,spectral_B";
   csv += ",de2000";
   for (std::size_t i = 1; i < parts.size(); ++i) csv += ",de2000_" + parts[i].name;
   csv += ",de2000_se\n";
@@ -335,14 +340,14 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     };
     for (const auto* v : {&t_all, &se_all, &t_low, &lut})
       for (int c = 0; c < 3; ++c) add((*v)[p][c]);
-    if (!spec.spectral)
+    if (reference)
       for (int c = 0; c < 3; ++c) add(s_all[p][c]);
     for (const Part& part : parts) add(part.de[p]);
     add(de_se[p]);
     csv += row + "\n";
   }
   out.points_csv = {"scene_check.csv", csv, "", {static_cast<std::int64_t>(n)}, "CSV, one row per scene point",
-                    all.units + (spec.spectral ? "" : "; spectral_* columns: linear sRGB luminance / 683"),
+                    all.units + (reference && !spec.spectral ? "; spectral_* columns: linear sRGB luminance / 683" : ""),
                     "the scene check per point: the truth (all orders, its se, the bake's orders), the LUT's "
                     "GetSkyRadiance, and the CIEDE2000 of each part (docs/atmosphere.md, \"The scene check\")"};
 

@@ -7,10 +7,12 @@
 //   lut_discretisation  LUT vs the truth with the bake's own orders (texture sizes, the bake's
 //                       quadratures and parameterisation)
 //   order_truncation    the truth with the bake's orders vs all orders (same walks)
-//   spectral_sampling   rgb bakes: the three-wavelength sky (680/550/440 nm, displayed with
-//                       Bruneton's radiance-to-luminance factors) vs a 48-wavelength spectrum
-//                       integrated with the CIE 1931 functions
-//   total               what the user sees: the LUT vs the all-orders truth (spectral for rgb)
+//   spectral_sampling   the bake's wavelengths (rgb: 680/550/440 nm displayed with Bruneton's
+//                       radiance-to-luminance factors; spectral: its bins) vs a 48-wavelength
+//                       spectrum over 360–830 nm integrated with the CIE 1931 functions (not
+//                       for bakes of exactly that spectrum)
+//   total               what the user sees: the LUT vs the all-orders truth (per channel, at the
+//                       bake's wavelengths) and vs the 48-wavelength truth (displayed colour)
 // each per channel (relative radiance) and in displayed colour (CIEDE2000 after a per-view
 // exposure), with the truth's own Monte Carlo standard error. docs/atmosphere.md, "The scene
 // check".
