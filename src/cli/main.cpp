@@ -128,6 +128,7 @@ std::string headline(const json& accuracy) {
   const json& a = accuracy[0];
   std::string s = a.value("name", "?") + " ";
   s += a["value"].is_number() ? fmt_number(a["value"].get<double>()) : a["value"].dump();
+  if (a.contains("unit") && a["unit"].is_string()) s += " " + a["unit"].get<std::string>();
   if (a.contains("tolerance") && a["tolerance"].is_number())
     s += (a.value("passed", false) ? " <= " : " > ") + fmt_number(a["tolerance"].get<double>());
   return s;

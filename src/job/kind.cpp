@@ -39,6 +39,7 @@ json to_json(const Accuracy& a) {
             {"tolerance", a.tolerance ? json(*a.tolerance) : json(nullptr)},
             {"reference", a.reference},
             {"passed", a.passed}};
+  if (!a.unit.empty()) j["unit"] = a.unit;
   if (!a.details.empty()) j["details"] = a.details;
   return j;
 }

@@ -50,6 +50,7 @@ struct JobContext {
 struct Accuracy {
   std::string name;                 // e.g. "self_check", "sum_K_minus_I", "prism_de2000"
   std::string metric;               // what `value` is, e.g. "max relative error"
+  std::string unit;                 // optional, short, shown after the value: e.g. "p99 CIEDE2000"
   double value = 0.0;
   std::optional<double> tolerance;  // none: reported, not judged
   std::string reference;            // what it is measured against

@@ -321,6 +321,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       by_radiance ? "p99 over the scene's points of the relative radiance error, worst channel"
                   : "p99 over the scene's points of the CIEDE2000 of the displayed colour",
       value, tolerance, "Monte Carlo path tracing of the same model at the scene's points (all orders)", details);
+  out.record.unit = by_radiance ? "p99 relative" : "p99 CIEDE2000";
 
   // the per-point file
   std::string csv = std::string(kTruthPointsHeader) +
