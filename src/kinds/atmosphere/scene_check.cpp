@@ -297,7 +297,8 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       {"orders_note", "the walks are split at the bake's order count (for spectral bakes in several passes with "
                       "orders: auto, the largest of the passes'; a pass that stopped earlier then counts its "
                       "missing orders as lut_discretisation)"},
-      {"points_without_light", n - total.de_summary.count},
+      {"points_without_light", std::count_if(shown_ref.begin(), shown_ref.end(),
+                                             [](const Vec3& v) { return !(luminance_y(v) > 0.0); })},
       {"exposure", "per view: the reference's luminance Y brought to 0.18, both colours scaled alike; CIE L*a*b* "
                    "against D65 (Y = 1), no gamut clipping, no tone curve"},
       {"relative_error", "|test - reference| / max(|reference|, 1e-3 x the channel's maximum over the points), "
