@@ -31,13 +31,16 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
                             std::uint64_t(s.irradiance_mu_s) * s.irradiance_r;
   const std::uint64_t host = texels * 8 * (2 * 3 + 5 * w) + t2d * 8 * (3 * 3 + 4 * w) + texels * 3 * 4 * 4 +
                              (std::uint64_t{1} << 26);
-  // The scene check (truth.cpp): host view-ray tables of at most 64 MB a chunk of points plus
-  // their per-group copies, and a launch's output of at most 2^20 batches × TRUTH_OUT_STRIDE
-  // (22) doubles, on the host and on the device (with the tables).
-  const std::uint64_t tables = 64'000'000, out = (std::uint64_t{1} << 20) * 22 * 8;
-  const std::uint64_t check_host = s.scene.check ? 2 * tables + out : 0, check_device = s.scene.check ? tables + out : 0;
-  return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24) + check_device,
-                        std::max({texture, rays, incidence, s.scene.check ? out : 0}), host + check_host};
+  // The scene check: its traces (the bake's channels, then the 48-wavelength reference) one
+  // after the other, counted as if alive beside the bake's buffers.
+  TruthMemory check;
+  if (s.scene.check) {
+    const std::size_t points = static_cast<std::size_t>(s.scene.points);
+    const TruthMemory a = truth_memory(points, s.spectral ? s.count : 3), b = truth_memory(points, 48);
+    check = {std::max(a.host, b.host), std::max(a.device, b.device), std::max(a.largest_buffer, b.largest_buffer)};
+  }
+  return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24) + check.device,
+                        std::max({texture, rays, incidence, check.largest_buffer}), host + check.host};
 }
 
 }  // namespace

@@ -676,6 +676,17 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
 
 }  // namespace
 
+TruthMemory truth_memory(std::size_t points, std::size_t channels) {
+  const double per_point = static_cast<double>(channels) * kNodes * 2 * sizeof(double);
+  const std::size_t chunk = std::min<std::size_t>(
+      points, std::max<std::size_t>(1, static_cast<std::size_t>(kChunkTableBytes / per_point)));
+  const std::uint64_t tables = static_cast<std::uint64_t>(static_cast<double>(chunk) * per_point) +
+                               std::uint64_t{chunk} * (kNodes + TRUTH_POINT_STRIDE) * sizeof(double);
+  const std::uint64_t items = std::min<std::uint64_t>(kLaunchItems, std::uint64_t{chunk} * static_cast<std::uint64_t>(kLaunchWalks / TruthOptions{}.paths_per_batch));
+  const std::uint64_t out = items * kStride * sizeof(double);
+  return {2 * tables + out, tables + out, std::max(tables / 2, out)};
+}
+
 TruthResult TruthResult::low_part() const {
   TruthResult r = *this;
   if (split_orders > 0) {

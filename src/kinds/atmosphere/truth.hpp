@@ -102,6 +102,14 @@ struct TruthResult {
 // when a density exceeded its majorant (a bug: the estimate would be biased).
 TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const std::vector<TruthPoint>& points,
                         const TruthOptions& options, const Progress& progress = {});
+// Bytes a trace of `points` points and `channels` channels holds at once (the largest chunk's
+// view-ray tables and their per-group copies, one launch's output), on the host and on the
+// device; for memory estimates before anything is allocated.
+struct TruthMemory {
+  std::uint64_t host = 0, device = 0, largest_buffer = 0;
+};
+TruthMemory truth_memory(std::size_t points, std::size_t channels);  // with the default paths_per_batch
+
 // The same walks on the host in C++ double (path_tracer.cl compiled by the C++ compiler): with
 // a float64 device, the same numbers up to libm rounding. Slow: for tests.
 TruthResult trace_truth_reference(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points,
