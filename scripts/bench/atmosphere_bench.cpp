@@ -7,6 +7,8 @@
 // workers too).
 //   build-atmosphere/scripts/bench/atmosphere_bench --benchmark_filter='Rgb/4/1'
 #include <benchmark/benchmark.h>
+
+#include "bench_device.hpp"
 #include <sys/resource.h>
 
 #include <cmath>
@@ -26,10 +28,7 @@ double cpu_seconds() {
   return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
-cl_util::Device& device() {
-  static cl_util::Device d(cl_util::select_device("auto"));
-  return d;
-}
+using specbake::bench::device;
 
 AtmosphereSpec earth(int scale_percent) {
   AtmosphereSpec s;

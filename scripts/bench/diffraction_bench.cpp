@@ -14,6 +14,8 @@
 // Fields: 0 = the 128² random smooth reference field (refdata), 1 = a 1024² smooth random
 // field with the same height range (0…0.5 µm, dx 0.05 µm). Scene: 380–780 nm, w_max 2.
 #include <benchmark/benchmark.h>
+
+#include "bench_device.hpp"
 #include <Imath/half.h>
 #include <spdlog/spdlog.h>
 
@@ -41,10 +43,7 @@ using namespace specbake::diffraction;
 
 namespace {
 
-cl_util::Device& device() {
-  static cl_util::Device dev(cl_util::select_device("auto"));
-  return dev;
-}
+using specbake::bench::device;
 
 std::shared_ptr<const Heightfield> field(int which) {
   static std::shared_ptr<const Heightfield> cache[2];

@@ -3,16 +3,15 @@
 // 0.1 nm spectrum, spread 4 beam widths) reported as the counter `dE2000`.
 #include <benchmark/benchmark.h>
 
+#include "bench_device.hpp"
+
 #include "cl/device.hpp"
 #include "kinds/dispersion/dispersion_job.hpp"
 
 using namespace specbake;
 
 namespace {
-cl_util::Device& device() {
-  static cl_util::Device d(cl_util::select_device("auto"));
-  return d;
-}
+using specbake::bench::device;
 
 void BM_Dispersion(benchmark::State& state) {
   DispersionSpec spec;

@@ -7,6 +7,8 @@
 //   build/scripts/bench/scene_bench --benchmark_filter='Scene/0/'
 #include <benchmark/benchmark.h>
 
+#include "bench_device.hpp"
+
 #include <chrono>
 #include <map>
 #include <string>
@@ -20,10 +22,7 @@ using namespace specbake::atmosphere;
 
 namespace {
 
-cl_util::Device& device() {
-  static cl_util::Device d(cl_util::select_device("auto"));
-  return d;
-}
+using specbake::bench::device;
 
 struct Scene {
   const char* name;

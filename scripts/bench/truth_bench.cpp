@@ -6,6 +6,8 @@
 // the ratio-tracking boost is fixed in the kernel (TRUTH_RATIO_BOOST).
 //   build/scripts/bench/truth_bench --benchmark_filter='Truth256/2'
 #include <benchmark/benchmark.h>
+
+#include "bench_device.hpp"
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -24,10 +26,7 @@ double cpu_seconds() {
   return u.ru_utime.tv_sec + u.ru_stime.tv_sec + 1e-6 * (u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
-cl_util::Device& device() {
-  static cl_util::Device d(cl_util::select_device("auto"));
-  return d;
-}
+using specbake::bench::device;
 
 AtmosphereSpec earth() {
   AtmosphereSpec s;

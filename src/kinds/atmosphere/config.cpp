@@ -105,8 +105,6 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
       (e.node.IsSequence() ? e.item(0) : e).fail("expected sun elevations >= " + shown_number(lowest) + " degrees (90 - max_sun_zenith_deg, the " +
              "lowest sun the textures hold); raise max_sun_zenith_deg to " +
              shown_number(90.0 - sc.sun_elevation_min_deg) + " or more to bake a sun that low");
-  } else {
-    sc.sun_elevation_min_deg = std::max(sc.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   }
   if (at.has("views")) sc.views = at.child("views").choice<int>({{"sky", 0}, {"ground", 1}, {"all", 2}});
   if (at.has("view_elevation_deg"))
@@ -139,7 +137,7 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
     (void)scene_points_of(s);
   } catch (const InputError&) {
     (at.has("view_elevation_deg") ? at.child("view_elevation_deg") : at)
-        .fail("expected view elevations that meet the " + std::string(sc.views == 0 ? "sky" : sc.views == 1 ? "ground" : "all") +
+        .fail("expected view elevations that meet the " + std::string(views_name(sc.views)) +
               " views from every camera altitude of the scene (inside the atmosphere the horizon dips below the "
               "horizontal plane by acos(bottom_radius / (bottom_radius + altitude)), 1.4 degrees at 2 km on "
               "Earth; above it only views that cross the atmosphere count, below acos(top_radius / (bottom_radius "
@@ -297,21 +295,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
     norm["formats"] = {"bin", "exr", "ktx2"};
     norm["ktx2"] = {{"format", s.ktx2_half ? "rgba16f" : "rgba32f"}, {"zstd", s.ktx2_zstd}};
   }
-  const AtmosphereScene& sc = s.scene;
-  if (!sc.check) {
-    norm["scene"] = "none";
-  } else {
-    norm["scene"] = {{"camera_altitude_km", {sc.camera_altitude_min_km, sc.camera_altitude_max_km}},
-                     {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
-                     {"views", sc.views == 0 ? "sky" : sc.views == 1 ? "ground" : "all"},
-                     {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
-                     {"view_sun_azimuth_deg", {sc.view_sun_azimuth_min_deg, sc.view_sun_azimuth_max_deg}},
-                     {"points", sc.points},
-                     {"relative_se", sc.relative_se},
-                     {"seed", sc.seed}};
-    if (sc.tolerance_de2000) norm["scene"]["tolerance_de2000"] = *sc.tolerance_de2000;
-    if (sc.tolerance_relative) norm["scene"]["tolerance_relative"] = *sc.tolerance_relative;
-  }
+  norm["scene"] = scene_json(s.scene);
   norm.update(media_json(s));
   return s;
 }

@@ -100,8 +100,6 @@ std::string num(double v) {
   return b;
 }
 
-std::string views_name(int v) { return v == 0 ? "sky" : v == 1 ? "ground" : "all"; }
-
 // What to raise when a part dominates.
 std::string advice(const std::string& part, const AtmosphereSpec& spec, int orders_used) {
   if (part == "lut_discretisation")
@@ -114,6 +112,23 @@ std::string advice(const std::string& part, const AtmosphereSpec& spec, int orde
 }
 
 }  // namespace
+
+const char* views_name(int v) { return v == 0 ? "sky" : v == 1 ? "ground" : "all"; }
+
+json scene_json(const AtmosphereScene& sc) {
+  if (!sc.check) return "none";
+  json j = {{"camera_altitude_km", {sc.camera_altitude_min_km, sc.camera_altitude_max_km}},
+            {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
+            {"views", views_name(sc.views)},
+            {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
+            {"view_sun_azimuth_deg", {sc.view_sun_azimuth_min_deg, sc.view_sun_azimuth_max_deg}},
+            {"points", sc.points},
+            {"relative_se", sc.relative_se},
+            {"seed", sc.seed}};
+  if (sc.tolerance_de2000) j["tolerance_de2000"] = *sc.tolerance_de2000;
+  if (sc.tolerance_relative) j["tolerance_relative"] = *sc.tolerance_relative;
+  return j;
+}
 
 double displayed_de2000(const Vec3& test, const Vec3& ref, double y_floor) {
   const Mat3& M = to_xyz();
@@ -285,14 +300,10 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   const std::optional<double> tolerance = by_radiance ? sc.tolerance_relative : sc.tolerance_de2000;
 
   json details = {
-      {"scene", {{"camera_altitude_km", {sc.camera_altitude_min_km, sc.camera_altitude_max_km}},
-                 {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
-                 {"views", views_name(sc.views)},
-                 {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
-                 {"view_sun_azimuth_deg", {sc.view_sun_azimuth_min_deg, sc.view_sun_azimuth_max_deg}},
-                 {"points", n},
-                 {"point_set", "Halton (bases 2, 3, 5, 7) from its second point: altitude and sun elevation uniform "
-                               "in their ranges, view directions uniform in solid angle within the view elevations, view-sun azimuth uniform in its range"}}},
+      {"scene", scene_json(sc)},
+      {"point_set", "Halton (bases 2, 3, 5, 7) from its second point: altitude and sun elevation uniform in their "
+                    "ranges, view directions uniform in solid angle within the view elevations, view-sun azimuth "
+                    "uniform in its range"},
       {"orders_baked", orders_used},
       {"orders_note", "the walks are split at the bake's order count (for spectral bakes in several passes with "
                       "orders: auto, the largest of the passes'; a pass that stopped earlier then counts its "

@@ -53,6 +53,11 @@ struct SceneCheck {
   double seconds = 0.0;
 };
 
+// `views` of a scene by name (sky, ground, all), and the scene as the config normalises it and
+// the record reports it.
+const char* views_name(int views);
+nlohmann::json scene_json(const AtmosphereScene& scene);
+
 // The scene's point set (Halton points first + 1 ...; `first` > 0 gives an independent set).
 std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first = 0);
 
