@@ -13,7 +13,7 @@ packages=(
   libspdlog-dev libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev libfftw3-dev
   clang libclang-rt-14-dev
-  python3-numpy libzstd-dev python3-venv
+  python3-numpy python3-matplotlib libzstd-dev python3-venv
 )
 
 if [ "${SPECBAKE_NO_INSTALL:-0}" != 1 ]; then

@@ -19,6 +19,7 @@
 #include "io/inspect.hpp"
 #include "kinds/atmosphere/truth.hpp"
 #include "runner/runner.hpp"
+#include "runner/sweep.hpp"
 
 using namespace specbake;
 using nlohmann::json;
@@ -403,6 +404,63 @@ int cmd_truth(const TruthArgs& a) {
   return 0;
 }
 
+// specbake sweep: speed against error for one job over combinations of --vary values.
+struct SweepArgs {
+  std::string config, job, out, device;
+  std::vector<std::string> varies;
+  double tolerance = -1.0;
+};
+
+int cmd_sweep(const SweepArgs& a, ProgressLine& progress_line, bool quiet) {
+  SweepOptions o;
+  o.config = a.config;
+  o.job = a.job;
+  for (const auto& v : a.varies) o.varies.push_back(parse_vary(v));
+  if (!a.out.empty()) o.out = a.out;
+  if (!a.device.empty()) o.device = a.device;
+  if (a.tolerance >= 0.0) o.tolerance = a.tolerance;
+  std::signal(SIGINT, on_stop_signal);
+  std::signal(SIGTERM, on_stop_signal);
+  RunProgress on_progress;
+  if (!quiet) on_progress = [&](const ProgressEvent& e) { progress_line.show(e); };
+  const SweepResult r = run_sweep(o, on_progress);
+  progress_line.done();
+  int failed = 0;
+  std::vector<std::vector<std::string>> rows;
+  std::vector<std::string> head;
+  for (const auto& v : r.varies) head.push_back(v.key);
+  for (const char* h : {"time", "device", "error", "front", "settings"}) head.push_back(h);
+  rows.push_back(head);
+  for (const auto& p : r.points) {
+    std::vector<std::string> row = p.values;
+    auto secs = [](double v) { return v < 60 ? fmt_number(v) + " s" : ProgressLine::duration(v); };
+    row.push_back(secs(p.bake_s));
+    row.push_back(secs(p.device_s));
+    if (p.status == "measured") {
+      std::string e = fmt_number(p.error) + (p.unit.empty() ? "" : " " + p.unit);
+      if (p.tolerance) e += (p.passed ? " <= " : " > ") + fmt_number(*p.tolerance);
+      row.push_back(e);
+      row.push_back(p.pareto ? "*" : "");
+      row.push_back(p.settings);
+    } else {
+      ++failed;
+      row.push_back("FAILED");
+      row.push_back("");
+      row.push_back(p.reason);
+    }
+    rows.push_back(row);
+  }
+  if (!quiet) {
+    print_table(rows);
+    std::cout << r.points.size() << " point(s), " << failed << " failed; time: bake wall seconds without the check; "
+              << "front: * on the Pareto front\n"
+              << "wrote " << (r.out / "sweep.json").string() << ", sweep.csv" << (r.plotted ? ", sweep.png" : "")
+              << "\n";
+  }
+  if (!r.plotted) spdlog::warn("{}", r.plot_note);
+  return failed ? static_cast<int>(ExitCode::job_failed) : 0;
+}
+
 // "a,b" and repeated options → names; an empty name is a usage error.
 std::vector<std::string> split_names(const std::vector<std::string>& in, const char* option) {
   std::vector<std::string> out;
@@ -494,6 +552,24 @@ int main(int argc, char** argv) {
   truth->add_option("--bundle", truth_args.bundle, "also lut_<c>: that bundle's GetSkyRadiance at the points");
   truth->add_option("--device", truth_args.device, "OpenCL device (default: the config's, else auto)");
 
+  SweepArgs sweep_args;
+  auto* sweep = app.add_subcommand(
+      "sweep", "speed against error: bake one job over combinations of settings (nothing published); "
+               "sweep.json, sweep.csv, sweep.png");
+  sweep->add_option("config", sweep_args.config, "config file (YAML)")->required();
+  sweep->add_option("--job", sweep_args.job, "the job to sweep")->required();
+  sweep->add_option("--vary", sweep_args.varies,
+                    "KEY=V1,V2,... (repeatable; every combination is baked): a key path in the job "
+                    "(orders, sizes.scattering.mu_s, table.size, samples, ...); A..B for integer ranges, "
+                    "P% for sizes")
+      ->required()
+      ->allow_extra_args(false);
+  sweep->add_option("--out", sweep_args.out, "folder for sweep.json, sweep.csv, sweep.png (default ./sweep-<job>)");
+  sweep->add_option("--device", sweep_args.device, "OpenCL device (default: the config's, else auto)");
+  sweep->add_option("--tolerance", sweep_args.tolerance,
+                    "the tolerance drawn and judged (default: the job's own, where it has one)")
+      ->check(CLI::NonNegativeNumber);
+
   auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
   inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")
       ->required();
@@ -536,6 +612,7 @@ int main(int argc, char** argv) {
     }
     if (app.got_subcommand("diff")) return cmd_diff(diff_old, diff_new, fail_abs, fail_rel);
     if (app.got_subcommand("truth")) return cmd_truth(truth_args);
+    if (app.got_subcommand("sweep")) return cmd_sweep(sweep_args, progress_line, quiet);
 
     const bool is_plan = app.got_subcommand("plan");
     const CLI::App* sub = app.get_subcommands().front();

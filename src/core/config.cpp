@@ -156,8 +156,7 @@ InputError syntax_error(const std::string& text, const fs::path& file, const YAM
 
 }  // namespace
 
-Config parse_config(const std::string& text, const fs::path& file, const std::vector<KindSyntax>& kinds,
-                    std::vector<InputError>* job_errors) {
+YAML::Node parse_yaml(const std::string& text, const fs::path& file) {
   if (text.size() > kMaxConfigBytes)
     throw InputError({file, 0, 0, ""}, "config is " + std::to_string(text.size()) +
                                             " bytes; expected at most " + std::to_string(kMaxConfigBytes));
@@ -178,6 +177,16 @@ Config parse_config(const std::string& text, const fs::path& file, const std::ve
   } catch (const YAML::ParserException& e) {
     throw syntax_error(text, file, e);
   }
+  return root;
+}
+
+Config parse_config(const std::string& text, const fs::path& file, const std::vector<KindSyntax>& kinds,
+                    std::vector<InputError>* job_errors) {
+  return parse_config(parse_yaml(text, file), file, kinds, job_errors);
+}
+
+Config parse_config(const YAML::Node& root, const fs::path& file, const std::vector<KindSyntax>& kinds,
+                    std::vector<InputError>* job_errors) {
   const At top{root, "", &file};
   if (!root.IsMap()) top.fail("expected a mapping with keys specbake, output, device, jobs");
   top.allow_keys({"specbake", "output", "device", "jobs"});

@@ -70,5 +70,12 @@ Config parse_config(const std::string& text, const fs::path& file_for_messages, 
                     std::vector<InputError>* job_errors = nullptr);
 Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds,
                    std::vector<InputError>* job_errors = nullptr);
+// The two halves of parse_config: the text read into a YAML tree (size, alias and syntax checks;
+// InputError with file:line:col), and a tree validated into a Config. A tree edited after
+// reading (`specbake sweep` sets keys) is validated like a file; keys it added carry no
+// line, so their errors name the key path alone.
+YAML::Node parse_yaml(const std::string& text, const fs::path& file_for_messages);
+Config parse_config(const YAML::Node& root, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds,
+                    std::vector<InputError>* job_errors = nullptr);
 
 }  // namespace specbake

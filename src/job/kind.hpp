@@ -37,6 +37,9 @@ struct JobContext {
   Progress progress = [](std::string_view, double) {};
   std::function<void(Stage)> on_stage = [](Stage) {};  // called as each step begins
   Stage stage = Stage::plan;
+  // false: a measured error above the job's tolerance is a warning, not a failure (`sweep`
+  // measures every setting; `run` judges).
+  bool judge = true;
 
   void enter(Stage s) {
     stage = s;
@@ -101,6 +104,10 @@ struct Kind {
   // One line naming the resolved settings that decide the result and its cost (for the run
   // summary and `plan`), from the parameters `plan` or `bake` returned.
   std::function<std::string(const nlohmann::json& parameters)> describe;
+  // The accuracy records that measure a bake against ground truth which does not share its
+  // method (what `specbake sweep` plots), in order of preference; a bake without any of them
+  // (e.g. an atmosphere with `scene: none`) cannot be swept.
+  std::vector<std::string> truth_records;
 
   // A kind whose spec type is Spec: `parse` returns a Spec, `plan` and `bake` take one.
   template <class Spec, class Parse, class Plan, class Bake>

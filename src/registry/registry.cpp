@@ -44,6 +44,9 @@ Config load_config(const fs::path& file, std::vector<InputError>* job_errors) {
 Config parse_config(const std::string& text, const fs::path& file, std::vector<InputError>* job_errors) {
   return parse_config(text, file, syntax(), job_errors);
 }
+Config parse_config(const YAML::Node& root, const fs::path& file, std::vector<InputError>* job_errors) {
+  return parse_config(root, file, syntax(), job_errors);
+}
 
 void check_device_memory(const JobSpec& job, const cl_util::DeviceInfo& device) {
   check_device_memory(job, kind_named(job.kind).memory(job), device);

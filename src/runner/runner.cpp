@@ -244,14 +244,6 @@ json estimate_json(const Kind& kind, const JobSpec& job) {
   return {{"seconds_2core_cpu", kind.cost_s(job)}, {"device_bytes", m.total_bytes}, {"host_bytes", m.host_bytes}};
 }
 
-// Refuses a job whose host-memory estimate exceeds what the machine has available.
-void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
-  const std::uint64_t avail = available_host_memory();
-  if (avail > 0 && need.host_bytes > avail)
-    throw InputError(job.where, "job '" + job.name + "' needs about " + std::to_string(need.host_bytes >> 20) +
-                                    " MiB of host memory but " + std::to_string(avail >> 20) +
-                                    " MiB are available; expected smaller sizes");
-}
 
 // Warnings and accuracy of an existing bundle (an up-to-date job reports them again).
 void read_bundle_summary(const fs::path& bundle, JobReport& r) {
@@ -352,6 +344,54 @@ std::vector<JobReport> Runner::plan() {
   return reports;
 }
 
+// Refuses a job whose host-memory estimate exceeds what the machine has available.
+void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
+  const std::uint64_t avail = available_host_memory();
+  if (avail > 0 && need.host_bytes > avail)
+    throw InputError(job.where, "job '" + job.name + "' needs about " + std::to_string(need.host_bytes >> 20) +
+                                    " MiB of host memory but " + std::to_string(avail >> 20) +
+                                    " MiB are available; expected smaller sizes");
+}
+
+TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
+                     const RunProgress& progress, bool judge) {
+  const double estimate_s = kind.cost_s(job);
+  const auto tb = Clock::now();
+  JobContext ctx{dev};
+  ctx.judge = judge;
+  // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
+  std::vector<cl_util::Profiler::Record> steps;
+  std::optional<cl_util::Profiler::Stage> step(std::in_place, dev.profiler(), to_string(ev.stage));
+  ctx.on_stage = [&](Stage s) {
+    steps.push_back(step->close());
+    step.reset();
+    ev.stage = s;
+    step.emplace(dev.profiler(), to_string(s));
+    throw_if_stopped();
+  };
+  ctx.progress = [&](std::string_view what, double f) {
+    throw_if_stopped();
+    ev.what = std::string(what);
+    ev.fraction = std::clamp(f, 0.0, 1.0);
+    const double elapsed = seconds_since(tb);
+    // ETA: from the measured rate once a few percent are done, else from the cost model
+    // (calibrated on a 2-core CPU; other devices differ).
+    ev.eta_s = ev.fraction >= 0.05 ? elapsed * (1.0 - ev.fraction) / ev.fraction : std::max(0.0, estimate_s - elapsed);
+    spdlog::trace("{}: {} {}: {:.1f} %", ev.job, to_string(ev.stage), ev.what, 100.0 * ev.fraction);
+    if (progress) progress(ev);
+  };
+  TimedBake out{kind.bake(job, ctx), 0.0, {}};
+  steps.push_back(step->close());  // the last step
+  step.reset();
+  dev.profiler().settle();
+  out.bake_s = seconds_since(tb);
+  for (const auto& rec : steps) cl_util::accumulate(out.steps[rec->stage], *rec);
+  for (const auto& [step_name, sec] : out.steps)
+    spdlog::debug("{}: step {}: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", ev.job, step_name, sec.device_s,
+                  sec.host_s(), sec.wall_s);
+  return out;
+}
+
 std::vector<JobReport> Runner::run() {
   const auto items = select();
   // Output folders are checked before any job runs: an unwritable one stops the run.
@@ -404,47 +444,14 @@ std::vector<JobReport> Runner::run() {
           check_device_memory(*it.job, need, info);
           check_host_memory(*it.job, need);
           cl_util::Device& dev = devices.get(info);
-          const double estimate_s = kind.cost_s(*it.job);
-          const auto tb = Clock::now();
-          JobContext ctx{dev};
           ProgressEvent ev;
           ev.index = static_cast<int>(index) + 1;
           ev.count = static_cast<int>(items.size());
           ev.job = name;
-          // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
-          std::vector<cl_util::Profiler::Record> steps;
-          std::optional<cl_util::Profiler::Stage> step(std::in_place, dev.profiler(), to_string(ev.stage));
-          ctx.on_stage = [&](Stage s) {
-            steps.push_back(step->close());
-            step.reset();
-            ev.stage = s;
-            step.emplace(dev.profiler(), to_string(s));
-            throw_if_stopped();
-          };
-          ctx.progress = [&](std::string_view what, double f) {
-            throw_if_stopped();
-            ev.what = std::string(what);
-            ev.fraction = std::clamp(f, 0.0, 1.0);
-            const double elapsed = seconds_since(tb);
-            // ETA: from the measured rate once a few percent are done, else from the cost model
-            // (calibrated on a 2-core CPU; other devices differ).
-            ev.eta_s = ev.fraction >= 0.05 ? elapsed * (1.0 - ev.fraction) / ev.fraction
-                                           : std::max(0.0, estimate_s - elapsed);
-            spdlog::trace("{}: {} {}: {:.1f} %", name, to_string(ev.stage), ev.what, 100.0 * ev.fraction);
-            if (progress_) progress_(ev);
-          };
-          BakeResult result = kind.bake(*it.job, ctx);
-          steps.push_back(step->close());  // the last step
-          step.reset();
-          dev.profiler().settle();
-          const double bake_s = seconds_since(tb);
-          std::map<std::string, cl_util::StageSeconds> step_total;
-          for (const auto& rec : steps) cl_util::accumulate(step_total[rec->stage], *rec);
-          for (const auto& [step_name, sec] : step_total) {
-            stage_s[step_name] = cl_util::seconds_json(sec);
-            spdlog::debug("{}: step {}: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", name, step_name, sec.device_s,
-                          sec.host_s(), sec.wall_s);
-          }
+          TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_);
+          BakeResult& result = baked.result;
+          const double bake_s = baked.bake_s;
+          for (const auto& [step_name, sec] : baked.steps) stage_s[step_name] = cl_util::seconds_json(sec);
           for (const auto& w : result.warnings) spdlog::warn("{}: {}", name, w);
           throw_if_stopped();
 

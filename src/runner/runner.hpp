@@ -7,6 +7,7 @@
 #include <chrono>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -15,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cl/device.hpp"
+#include "cl/timing.hpp"
 #include "core/config.hpp"
 #include "core/errors.hpp"
 #include "job/kind.hpp"
@@ -80,6 +82,20 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
 
 // Stop requests, e.g. from a signal handler (async-signal-safe): the run stops at the next
 // safe point and throws Interrupted there.
+// A bake through the kind's table entry, timed per step (plan, compute, check, files) with the
+// device's profiler: what `run` publishes and `sweep` measures. `ev` names the job for progress
+// events; `judge` as JobContext::judge. Throws what the bake throws, Interrupted on a stop request.
+struct TimedBake {
+  BakeResult result;
+  double bake_s = 0.0;
+  std::map<std::string, cl_util::StageSeconds> steps;
+};
+TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
+                     const RunProgress& progress, bool judge = true);
+// Refuses (InputError at the job's entry) a job whose host-memory estimate exceeds what the
+// machine has available.
+void check_host_memory(const JobSpec& job, const MemoryEstimate& need);
+
 void request_stop(int signal);
 int stop_requested();  // the signal number, 0 if none
 void clear_stop_request();

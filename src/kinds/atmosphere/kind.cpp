@@ -50,6 +50,7 @@ Kind kind() {
   k.cost_s = [](const JobSpec& j) { return estimated_seconds(j.as<AtmosphereSpec>()); };
   k.memory = [](const JobSpec& j) { return device_memory(j.as<AtmosphereSpec>()); };
   k.programs = {kProgram, kTruthProgram};
+  k.truth_records = {"vs_path_traced"};
   k.describe = [](const nlohmann::json& p) {
     std::string s;
     const auto& w = p.value("wavelengths_nm", nlohmann::json::array());

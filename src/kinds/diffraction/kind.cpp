@@ -28,6 +28,7 @@ Kind kind() {
     return MemoryEstimate{4 * field + 2 * field, 2 * field, w * h * (8 + 2 * 16) + 6 * field + (std::uint64_t{1} << 26)};
   };
   k.programs = {kProgram};
+  k.truth_records = {"vs_exact_transform", "table_vs_exact_transform"};
   k.describe = [](const nlohmann::json& p) {
     std::string s = std::to_string(p.value("terms", 0)) + " " + p.value("expansion", "?") + " terms";
     if (p.contains("field"))

@@ -14,6 +14,7 @@ Kind kind() {
     return MemoryEstimate{std::uint64_t{1} << 22, std::uint64_t{1} << 20, std::uint64_t{1} << 26};
   };
   k.programs = {kProgram};
+  k.truth_records = {"prism_de2000"};
   k.describe = [](const nlohmann::json& p) {
     std::string s = std::to_string(p.value("samples", 0)) + " samples" + (p.contains("samples_auto") ? " (auto)" : "") +
                     ", " + p.value("sampling", "?");
