@@ -124,6 +124,12 @@ std::string fmt(double v) {
   std::snprintf(b, sizeof b, "%.6g", v);
   return b;
 }
+// Errors and tolerances: every digit (a CSV reader gets the JSON's value).
+std::string exact(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
 
 std::string csv_field(const std::string& s) {
   if (s.find_first_of(",\"\n") == std::string::npos) return s;
@@ -261,8 +267,8 @@ std::string sweep_csv(const SweepResult& r) {
     for (const auto& v : p.values) s += csv_field(v) + ",";
     const bool m = p.status == "measured";
     s += p.status + "," + fmt(p.bake_s) + "," + fmt(p.wall_s) + "," + fmt(p.device_s) + "," + fmt(p.host_s) + "," +
-         (m ? fmt(p.error) : "") + "," + csv_field(p.unit) + "," + p.record + "," +
-         (p.tolerance ? fmt(*p.tolerance) : "") + "," + (m ? (p.passed ? "1" : "0") : "") + "," +
+         (m ? exact(p.error) : "") + "," + csv_field(p.unit) + "," + p.record + "," +
+         (p.tolerance ? exact(*p.tolerance) : "") + "," + (m ? (p.passed ? "1" : "0") : "") + "," +
          (p.pareto ? "1" : "0") + "," + csv_field(m ? p.settings : p.reason) + "\n";
   }
   return s;

@@ -135,6 +135,14 @@ std::vector<BadConfig> bad_configs() {
       {"scene: unknown key", sky("    scene: {point: 10}\n"), 3, "point", 1, "", "jobs[0].scene.point",
        {"unknown key 'point'", "points"}},
       {"scene: not none", sky("    scene: nothing\n"), 3, "nothing", 1, "", "jobs[0].scene", {"none"}},
+      // sizes as a percentage of the defaults (docs/atmosphere.md, "Config")
+      {"sizes: not a percentage", sky("    sizes: large\n"), 3, "large", 1, "", "jobs[0].sizes",
+       {"percentage of the sizes", "e.g. 150%"}},
+      {"sizes: 0%", sky("    sizes: 0%\n"), 3, "0%", 1, "", "jobs[0].sizes", {"(0%, 1000%]"}},
+      {"sizes.scale: too large for nu", sky("    sizes: {scale: 900%}\n"), 3, "900%", 1, "", "jobs[0].sizes.scale",
+       {"nu size 72 exceeds 64"}},
+      {"sizes: unknown key beside scale", sky("    sizes: {scal: 50%}\n"), 3, "scal", 1, "", "jobs[0].sizes.scal",
+       {"did you mean 'scale'"}},
   };
 }
 
