@@ -12,6 +12,8 @@
 //   files    encode the bundle's files and previews
 #include <cstdint>
 #include <functional>
+#include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -32,6 +34,19 @@ const char* to_string(Stage s);
 // in [0, 1] of the whole job done.
 using Progress = std::function<void(std::string_view what, double fraction)>;
 
+// Results a kind may reuse between bakes of one process that differ only in settings the result
+// does not depend on (the atmosphere's path-traced scene is the same for every texture size):
+// keyed by the kind with everything the value depends on. `sweep` and auto searches share one.
+struct Memo {
+  std::map<std::string, std::shared_ptr<const void>> items;
+  template <class T, class Make>
+  std::shared_ptr<const T> get(const std::string& key, Make make) {
+    auto it = items.find(key);
+    if (it == items.end()) it = items.emplace(key, std::make_shared<const T>(make())).first;
+    return std::static_pointer_cast<const T>(it->second);
+  }
+};
+
 struct JobContext {
   cl_util::Device& device;
   Progress progress = [](std::string_view, double) {};
@@ -40,6 +55,7 @@ struct JobContext {
   // false: a measured error above the job's tolerance is a warning, not a failure (`sweep`
   // measures every setting; `run` judges).
   bool judge = true;
+  Memo* memo = nullptr;  // none: nothing is reused beyond this bake
 
   void enter(Stage s) {
     stage = s;

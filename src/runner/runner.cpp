@@ -354,11 +354,12 @@ void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
 }
 
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
-                     const RunProgress& progress, bool judge) {
+                     const RunProgress& progress, bool judge, Memo* memo) {
   const double estimate_s = kind.cost_s(job);
   const auto tb = Clock::now();
   JobContext ctx{dev};
   ctx.judge = judge;
+  ctx.memo = memo;
   // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
   std::vector<cl_util::Profiler::Record> steps;
   std::optional<cl_util::Profiler::Stage> step(std::in_place, dev.profiler(), to_string(ev.stage));

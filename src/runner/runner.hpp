@@ -84,14 +84,14 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
 // safe point and throws Interrupted there.
 // A bake through the kind's table entry, timed per step (plan, compute, check, files) with the
 // device's profiler: what `run` publishes and `sweep` measures. `ev` names the job for progress
-// events; `judge` as JobContext::judge. Throws what the bake throws, Interrupted on a stop request.
+// events; `judge` and `memo` as in JobContext. Throws what the bake throws, Interrupted on a stop request.
 struct TimedBake {
   BakeResult result;
   double bake_s = 0.0;
   std::map<std::string, cl_util::StageSeconds> steps;
 };
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
-                     const RunProgress& progress, bool judge = true);
+                     const RunProgress& progress, bool judge = true, Memo* memo = nullptr);
 // Refuses (InputError at the job's entry) a job whose host-memory estimate exceeds what the
 // machine has available.
 void check_host_memory(const JobSpec& job, const MemoryEstimate& need);

@@ -191,6 +191,49 @@ json profile_json(const DensityLayer* p) {
                       "altitude in km; layer 0 below its width_km"}};
 }
 
+
+std::string exr_of(int width, int height, const std::vector<double>& rgb,
+                   const std::map<std::string, std::string>& attributes) {
+  ExrImage img;
+  img.width = width;
+  img.height = height;
+  img.channels = {"R", "G", "B"};
+  img.pixels.assign(rgb.begin(), rgb.end());
+  img.attributes = attributes;
+  return exr_bytes(img);
+}
+
+}  // namespace
+
+Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, int self_check_texels) {
+  const Model m = model_of(spec);
+  return bake_impl(
+      spec, [&](const Channels& ch, int width) { return make_device_backend(dev, m, ch, width, spec.double_precision); },
+      progress, self_check_texels);
+}
+
+Baked bake_luts_reference(const AtmosphereSpec& spec) {
+  const Model m = model_of(spec);
+  return bake_impl(
+      spec, [&](const Channels& ch, int width) { return make_host_backend(m, ch, width); },
+      [](std::string_view, double) {}, 0);
+}
+
+int channels_per_pass(const AtmosphereSpec& spec) {
+  return spec.spectral ? pass_width_for(static_cast<std::size_t>(spec.count)) : 3;  // spectral: count wavelengths
+}
+
+double estimated_seconds(const AtmosphereSpec& spec) {
+  const double texels = double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s * spec.scattering_nu;
+  const int width = channels_per_pass(spec);
+  const int channels = spec.spectral ? spec.count : 3;
+  const int passes = (channels + width - 1) / width;
+  const int orders = spec.orders ? *spec.orders : 10;
+  // the scene check: ~0.07 s per point (default Earth rgb, 128 points: 9.2 s, both traces)
+  const double check = spec.scene.check ? 0.07 * spec.scene.points : 0.0;
+  return 1.0 + orders * passes * (texels / 1048576.0) * (6.4 + 0.12 * width) + check;
+}
+
 json parameters_json(const AtmosphereSpec& spec) {
   const Model m = model_of(spec);
   const Spectrum sp = spectrum_of(spec);
@@ -277,48 +320,6 @@ json parameters_json(const AtmosphereSpec& spec) {
   return p;
 }
 
-std::string exr_of(int width, int height, const std::vector<double>& rgb,
-                   const std::map<std::string, std::string>& attributes) {
-  ExrImage img;
-  img.width = width;
-  img.height = height;
-  img.channels = {"R", "G", "B"};
-  img.pixels.assign(rgb.begin(), rgb.end());
-  img.attributes = attributes;
-  return exr_bytes(img);
-}
-
-}  // namespace
-
-Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, int self_check_texels) {
-  const Model m = model_of(spec);
-  return bake_impl(
-      spec, [&](const Channels& ch, int width) { return make_device_backend(dev, m, ch, width, spec.double_precision); },
-      progress, self_check_texels);
-}
-
-Baked bake_luts_reference(const AtmosphereSpec& spec) {
-  const Model m = model_of(spec);
-  return bake_impl(
-      spec, [&](const Channels& ch, int width) { return make_host_backend(m, ch, width); },
-      [](std::string_view, double) {}, 0);
-}
-
-int channels_per_pass(const AtmosphereSpec& spec) {
-  return spec.spectral ? pass_width_for(static_cast<std::size_t>(spec.count)) : 3;  // spectral: count wavelengths
-}
-
-double estimated_seconds(const AtmosphereSpec& spec) {
-  const double texels = double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s * spec.scattering_nu;
-  const int width = channels_per_pass(spec);
-  const int channels = spec.spectral ? spec.count : 3;
-  const int passes = (channels + width - 1) / width;
-  const int orders = spec.orders ? *spec.orders : 10;
-  // the scene check: ~0.07 s per point (default Earth rgb, 128 points: 9.2 s, both traces)
-  const double check = spec.scene.check ? 0.07 * spec.scene.points : 0.0;
-  return 1.0 + orders * passes * (texels / 1048576.0) * (6.4 + 0.12 * width) + check;
-}
-
 json plan(const AtmosphereSpec& spec, JobContext&) { return parameters_json(spec); }
 
 namespace {
@@ -368,7 +369,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   // the error in the user's scene: the LUTs against the path-traced truth at the scene's points
   SceneCheck sc = check_scene(spec, b.luts, b.orders_used, ctx.device, [&](std::string_view what, double f) {
     ctx.progress(what, kComputeShare + (kSceneCheckEnd - kComputeShare) * f);
-  });
+  }, ctx.memo);
   r.accuracy.insert(r.accuracy.begin(), sc.record);  // the headline: the error the user sees
   r.files.push_back(std::move(sc.points_csv));
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;

@@ -7,6 +7,8 @@
 namespace specbake::atmosphere {
 
 nlohmann::json plan(const AtmosphereSpec& spec, JobContext& ctx);
+// The resolved model and wavelengths (the manifest's parameters): atmosphere, channels, ...
+nlohmann::json parameters_json(const AtmosphereSpec& spec);
 BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx);
 
 // Channels per pass: 3 (R, G, B) for rgb; for spectral bakes the smallest of kPassWidths that

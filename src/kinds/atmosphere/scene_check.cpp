@@ -1,5 +1,7 @@
 #include "kinds/atmosphere/scene_check.hpp"
 
+#include "kinds/atmosphere/atmosphere_job.hpp"
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -28,6 +30,7 @@ constexpr long long kMaxPaths = 1LL << 15;
 // default), integrated with the CIE 1931 functions as a spectral bake does.
 constexpr int kReferenceWavelengths = 48;
 constexpr std::uint64_t kSpectralSeedOffset = 0x9e3779b97f4a7c15ULL;
+constexpr std::uint64_t kHeldOutSeedStride = 0xbf58476d1ce4e5b9ULL;  // seed + first * stride
 constexpr double kMidGrey = 0.18;
 constexpr double kRelativeFloor = 1e-3;
 
@@ -221,10 +224,20 @@ AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec) {
 }
 
 SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
-                       const Progress& progress) {
+                       const Progress& progress, Memo* memo, int first) {
   const auto t0 = std::chrono::steady_clock::now();
   const AtmosphereScene& sc = spec.scene;
-  const std::vector<TruthPoint> points = scene_points_of(spec);
+  const std::vector<TruthPoint> points = scene_points_of(spec, first);
+  // an independent point set also draws its walks from other streams
+  const std::uint64_t seed = sc.seed + static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
+  Memo local;
+  Memo& keep = memo ? *memo : local;
+  // everything a trace depends on: the model and wavelengths, the scene and its point set, the split
+  auto key = [&](const AtmosphereSpec& traced, const char* what, int split) {
+    const json p = parameters_json(traced);
+    return std::string("atmosphere.truth/") + what + "/" + p["atmosphere"].dump() + p["channels"].dump() +
+           scene_json(sc).dump() + "/first " + std::to_string(first) + "/split " + std::to_string(split);
+  };
   const std::size_t n = points.size();
   const Spectrum sp = spectrum_of(spec);
   auto report = [&](double from, double to) {
@@ -232,24 +245,29 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   };
 
   // The bake's wavelengths, all orders, split at the bake's orders.
-  TruthOptions o = scene_truth_options(spec, sc.seed);
+  TruthOptions o = scene_truth_options(spec, seed);
   o.split_orders = orders_used;
   // The spectral reference (48 wavelengths over 360–830 nm) is traced unless the bake is it.
   const AtmosphereSpec ss = spectral_reference_of(spec);
   const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm &&
                            spec.max_nm == ss.max_nm);
   const double split = reference ? 0.5 : 0.9;
-  const TruthResult t = trace_truth(spec, dev, points, o, report(0.0, split));
+  const auto t_kept = keep.get<TruthResult>(key(spec, "bake", orders_used),
+                                            [&] { return trace_truth(spec, dev, points, o, report(0.0, split)); });
+  const TruthResult& t = *t_kept;
   const TruthBundleValues all = to_bundle_units(spec, t), low = to_bundle_units(spec, t.low_part());
   const std::vector<Vec3> t_all = rows_of(all.radiance), t_low = rows_of(low.radiance), se_all = rows_of(all.standard_error);
   const std::vector<Vec3> lut = lut_sky_radiance(luts, points);
 
   // the same sky as the reference spectrum (independent streams: another seed)
   std::vector<Vec3> s_all, s_se;
-  TruthResult s;
-  TruthOptions so = scene_truth_options(ss, sc.seed + kSpectralSeedOffset);
+  std::shared_ptr<const TruthResult> s_kept = std::make_shared<const TruthResult>();
+  TruthOptions so = scene_truth_options(ss, seed + kSpectralSeedOffset);
+  if (reference)
+    s_kept = keep.get<TruthResult>(key(ss, "reference", 0),
+                                   [&] { return trace_truth(ss, dev, points, so, report(split, 1.0)); });
+  const TruthResult& s = *s_kept;
   if (reference) {
-    s = trace_truth(ss, dev, points, so, report(split, 1.0));
     const TruthBundleValues v = to_bundle_units(ss, s);
     s_all = rows_of(v.radiance);
     s_se = rows_of(v.standard_error);

@@ -71,7 +71,11 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
 AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 
 // Traces the scene of `spec` and judges `luts` (baked with `orders_used` orders) against it.
+// `first` > 0 judges an independent point set of the same scene (scene_points_of; the walks
+// then use other random streams too). With `memo`, the traces are kept there and reused by
+// checks of the same atmosphere, wavelengths, scene, point set and order split (the truth does
+// not depend on texture sizes).
 SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
-                       const Progress& progress);
+                       const Progress& progress, Memo* memo = nullptr, int first = 0);
 
 }  // namespace specbake::atmosphere
