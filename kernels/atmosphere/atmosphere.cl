@@ -274,7 +274,8 @@ FN void irradiance_uv(const AtmosphereParameters* a, real h, real mu_s, real* u,
 FN void h_mu_s_from_irradiance_uv(const AtmosphereParameters* a, real u, real v, real* h, real* mu_s) {
   const real x_mu_s = unit_from_coord(u, a->irradiance_w);
   const real x_r = unit_from_coord(v, a->irradiance_h);
-  *h = x_r * thickness(a);
+  /* the top row's centre decodes to x_r = 1 only up to rounding (1 + 2⁻⁵² at 12 rows) */
+  *h = clamp_altitude(a, x_r * thickness(a));
   *mu_s = clamp_cosine(R(2.0) * x_mu_s - R(1.0));
 }
 /* Texel id = j·W + i of the irradiance texture → its (h, mu_s), at the texel centre. */

@@ -45,6 +45,27 @@ TEST(DomainChecks, TextureMappingsNeedAPointInsideTheAtmosphere) {
   EXPECT_THROW(irradiance_uv(&a, 1.0, kNaN, &u, &v), std::domain_error);
 }
 
+// Every texel centre of the transmittance and irradiance textures decodes to a point inside
+// the atmosphere whatever the size: the top row's centre is x = 1 only up to rounding (12 rows:
+// 1 + 2^-52, once an abort in the self-check of `sizes: auto` tries).
+TEST(DomainChecks, TexelCentresOfEverySizeDecodeInside) {
+  using namespace atmosphere::ref3;
+  AtmosphereParameters a{};
+  a.bottom_radius = 6360.0;
+  a.top_radius = 6420.0;
+  for (int n = 2; n <= 300; ++n) {
+    a.transmittance_w = a.irradiance_w = 5;
+    a.transmittance_h = a.irradiance_h = n;
+    for (int id = 0; id < 5 * n; ++id) {
+      double h = 0, mu = 0, u = 0, v = 0;
+      ASSERT_NO_THROW(irradiance_texel_params(&a, id, &h, &mu)) << n << " rows, texel " << id;
+      EXPECT_NO_THROW(irradiance_uv(&a, h, mu, &u, &v)) << n << " rows, texel " << id << ", h " << h;
+      ASSERT_NO_THROW(transmittance_texel_params(&a, id, &h, &mu)) << n << " rows, texel " << id;
+      EXPECT_NO_THROW(transmittance_uv(&a, h, mu, &u, &v)) << n << " rows, texel " << id << ", h " << h;
+    }
+  }
+}
+
 TEST(DomainChecks, ColourAndGlassTables) {
   using namespace dispersion::ref;
   const double table[6] = {0, 0, 0, 1, 1, 1};

@@ -34,7 +34,7 @@ double percent_at(const At& at) {
   std::smatch m;
   const std::string text = at.node.IsScalar() ? at.node.Scalar() : "";
   if (!std::regex_match(text, m, re) || !(std::stod(m[1]) > 0.0) || std::stod(m[1]) > 1000.0)
-    at.fail("expected a percentage of the sizes in (0%, 1000%], e.g. 150%, got " + at.shown());
+    at.fail("expected auto, or a percentage of the sizes in (0%, 1000%], e.g. 150%, got " + at.shown());
   return std::stod(m[1]) / 100.0;
 }
 
@@ -61,11 +61,15 @@ void scale_sizes(const At& at, double f, AtmosphereSpec& s) {
 }
 
 void parse_sizes(const At& at, AtmosphereSpec& s) {
+  if (at.node.IsScalar() && at.node.Scalar() == "auto") {  // searched against the scene (auto_settings.hpp)
+    s.auto_sizes = true;
+    return;
+  }
   if (at.node.IsScalar()) {  // `sizes: 150%`: the default sizes scaled
     scale_sizes(at, percent_at(at), s);
     return;
   }
-  at.expect_map("texture sizes: a percentage of the defaults (e.g. 150%) or {scale, transmittance: [mu, r], "
+  at.expect_map("texture sizes: auto, a percentage of the defaults (e.g. 150%) or {scale, transmittance: [mu, r], "
                 "irradiance: [mu_s, r], scattering: {r, mu, mu_s, nu}}");
   at.allow_keys({"scale", "transmittance", "irradiance", "scattering"});
   auto pair = [&](const char* key, int& a, int& b) {
@@ -219,7 +223,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   if (job.has("spectrum")) {
     const At sp = job.child("spectrum");
     if (sp.node.IsScalar()) {
-      sp.choice<int>({{"rgb", 0}});
+      s.auto_spectrum = sp.choice<int>({{"rgb", 0}, {"auto", 1}}) == 1;
     } else {
       sp.expect_map("rgb or {min_nm, max_nm, count}");
       sp.allow_keys({"min_nm", "max_nm", "count"});
@@ -301,6 +305,14 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   // after max_sun_zenith_deg: the scene's lowest sun defaults to what the textures hold
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);
+  // the searches judge bakes by the scene's tolerance
+  const char* no_tolerance = " searches for the cheapest bake that meets the scene's tolerance against the "
+                             "path-traced truth; expected a scene with tolerance_de2000";
+  if (s.auto_sizes && (!s.scene.check || (!s.scene.tolerance_de2000 && !s.scene.tolerance_relative)))
+    job.child("sizes").fail(std::string("sizes: auto") + no_tolerance + " (or tolerance_relative)");
+  if (s.auto_spectrum && (!s.scene.check || !s.scene.tolerance_de2000))
+    job.child("spectrum").fail(std::string("spectrum: auto") + no_tolerance +
+                               " (the spectral part of the error is a colour difference)");
 
   // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
   const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
@@ -319,7 +331,9 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
           {"max_sun_zenith_deg", s.max_sun_zenith_deg},
           {"ground_albedo", s.ground_albedo},
           {"solar_irradiance_scale", s.solar_irradiance_scale},
-          {"spectrum", s.spectral ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}} : json("rgb")},
+          {"spectrum", s.auto_spectrum ? json("auto")
+                       : s.spectral   ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}}
+                                      : json("rgb")},
           {"orders", s.orders ? json(*s.orders) : json("auto")},
           {"tolerance", s.tolerance},
           {"sizes", {{"transmittance", {s.transmittance_mu, s.transmittance_r}},
@@ -333,6 +347,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
     norm["formats"] = {"bin", "exr", "ktx2"};
     norm["ktx2"] = {{"format", s.ktx2_half ? "rgba16f" : "rgba32f"}, {"zstd", s.ktx2_zstd}};
   }
+  if (s.auto_sizes) norm["sizes"] = "auto";
   norm["scene"] = scene_json(s.scene);
   norm.update(media_json(s));
   return s;

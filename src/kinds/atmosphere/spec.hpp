@@ -46,6 +46,9 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool ktx2_zstd = false;  // Zstandard supercompression
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
   AtmosphereScene scene;
+  // `sizes: auto` / `spectrum: auto`: the cheapest sizes / channel count whose bake meets the
+  // scene's tolerance against the path-traced truth (auto_settings.hpp).
+  bool auto_sizes = false, auto_spectrum = false;
 };
 
 namespace atmosphere {

@@ -1,0 +1,273 @@
+#include "kinds/atmosphere/auto_settings.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "atmosphere/limits.h"
+
+namespace specbake::atmosphere {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr int kMaxAxis = 4096;
+constexpr long long kMaxScatteringTexels = 1LL << 26;
+
+// One refinement: its name and what it does to a spec (false: it cannot, at a limit).
+struct Refinement {
+  const char* name;
+  std::function<bool(AtmosphereSpec&)> apply;
+};
+
+int finer(int v, bool even) {
+  int f = static_cast<int>(std::ceil(v * kRefineFactor));
+  if (even) f += f % 2;
+  return std::max(f, v + (even ? 2 : 1));
+}
+
+bool within_limits(const AtmosphereSpec& s) {
+  for (int v : {s.transmittance_mu, s.transmittance_r, s.irradiance_mu_s, s.irradiance_r, s.scattering_r,
+                s.scattering_mu, s.scattering_mu_s, s.scattering_nu})
+    if (v > kMaxAxis) return false;
+  return s.scattering_nu <= ATMOSPHERE_NU_LIMIT &&
+         1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu <= kMaxScatteringTexels;
+}
+
+std::vector<Refinement> refinements(const AtmosphereSpec& spec) {
+  std::vector<Refinement> out;
+  auto axis = [&](const char* name, std::vector<int AtmosphereSpec::*> fields, bool even) {
+    out.push_back({name, [fields, even](AtmosphereSpec& s) {
+                     for (auto f : fields) s.*f = finer(s.*f, even && f == &AtmosphereSpec::scattering_mu);
+                     return within_limits(s);
+                   }});
+  };
+  if (spec.auto_sizes) {
+    axis("scattering.r", {&AtmosphereSpec::scattering_r}, false);
+    axis("scattering.mu", {&AtmosphereSpec::scattering_mu}, true);
+    axis("scattering.mu_s", {&AtmosphereSpec::scattering_mu_s}, false);
+    axis("scattering.nu", {&AtmosphereSpec::scattering_nu}, false);
+    axis("transmittance", {&AtmosphereSpec::transmittance_mu, &AtmosphereSpec::transmittance_r}, false);
+    axis("irradiance", {&AtmosphereSpec::irradiance_mu_s, &AtmosphereSpec::irradiance_r}, false);
+  }
+  if (spec.auto_spectrum)
+    out.push_back({"spectrum", [](AtmosphereSpec& s) {
+                     const int now = s.spectral ? s.count : 3;
+                     for (int n : kSpectrumLadder)
+                       if (n > now) {
+                         s.spectral = true;
+                         s.min_nm = 360.0;
+                         s.max_nm = 830.0;
+                         s.count = n;
+                         return true;
+                       }
+                     return false;
+                   }});
+  return out;
+}
+
+// Half the default sizes (mu even, at least 2 texels an axis).
+void start_sizes(AtmosphereSpec& s) {
+  const AtmosphereSpec d;
+  auto half = [](int v, bool even) { return even ? std::max(2, 2 * ((v / 2 + 1) / 2)) : std::max(2, (v + 1) / 2); };
+  s.transmittance_mu = half(d.transmittance_mu, false);
+  s.transmittance_r = half(d.transmittance_r, false);
+  s.irradiance_mu_s = half(d.irradiance_mu_s, false);
+  s.irradiance_r = half(d.irradiance_r, false);
+  s.scattering_r = half(d.scattering_r, false);
+  s.scattering_mu = half(d.scattering_mu, true);
+  s.scattering_mu_s = half(d.scattering_mu_s, false);
+  s.scattering_nu = half(d.scattering_nu, false);
+}
+
+struct Try {
+  AtmosphereSpec spec;
+  std::string refined;  // what this try refined from the step's state ("start" for the first)
+  double predicted_s = 0.0, bake_s = 0.0, error = 0.0;
+  Baked baked;
+  SceneCheck check;
+};
+
+std::string num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.4g", v);
+  return b;
+}
+
+double p99_of(const SceneCheck& c, const char* part) {
+  const json& d = c.record.details;
+  if (!d.contains("parts") || !d["parts"].contains(part)) return std::nan("");
+  return d["parts"][part]["de2000"].value("p99", std::nan(""));
+}
+
+json try_json(const Try& t, int step) {
+  json parts = json::object();
+  for (const char* p : {"lut_discretisation", "order_truncation", "spectral_sampling"})
+    if (const double v = p99_of(t.check, p); std::isfinite(v)) parts[p] = v;
+  return {{"step", step},
+          {"refined", t.refined},
+          {"settings", settings_json(t.spec)},
+          {"predicted_s", t.predicted_s},
+          {"bake_s", t.bake_s},
+          {"error", t.error},
+          {"parts_p99_de2000", parts}};
+}
+
+}  // namespace
+
+double predicted_bake_seconds(const AtmosphereSpec& spec) {
+  AtmosphereSpec s = spec;
+  s.scene.check = false;
+  return estimated_seconds(s);
+}
+
+json settings_json(const AtmosphereSpec& s) {
+  return {{"sizes", {{"transmittance", {s.transmittance_mu, s.transmittance_r}},
+                     {"irradiance", {s.irradiance_mu_s, s.irradiance_r}},
+                     {"scattering", {{"r", s.scattering_r}, {"mu", s.scattering_mu}, {"mu_s", s.scattering_mu_s},
+                                     {"nu", s.scattering_nu}}}}},
+          {"spectrum", s.spectral ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}} : json("rgb")}};
+}
+
+AtmosphereSpec search_start(const AtmosphereSpec& spec) {
+  AtmosphereSpec start = spec;
+  start.auto_sizes = start.auto_spectrum = false;
+  if (spec.auto_sizes) start_sizes(start);
+  if (spec.auto_spectrum) start.spectral = false;
+  return start;
+}
+
+AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo) {
+  const AtmosphereSpec start = search_start(spec);
+  const std::vector<Refinement> steps = refinements(spec);
+  const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
+  AtmosphereSpec defaults = start;
+  {
+    const AtmosphereSpec d;
+    if (spec.auto_sizes) {
+      defaults.transmittance_mu = d.transmittance_mu, defaults.transmittance_r = d.transmittance_r;
+      defaults.irradiance_mu_s = d.irradiance_mu_s, defaults.irradiance_r = d.irradiance_r;
+      defaults.scattering_r = d.scattering_r, defaults.scattering_mu = d.scattering_mu;
+      defaults.scattering_mu_s = d.scattering_mu_s, defaults.scattering_nu = d.scattering_nu;
+    }
+  }
+  const double cost_cap = kMaxCostFactor * predicted_bake_seconds(defaults);
+
+  int tries = 0;
+  auto evaluate = [&](const AtmosphereSpec& s, const std::string& refined) {
+    Try t;
+    t.spec = s;
+    t.refined = refined;
+    t.predicted_s = predicted_bake_seconds(s);
+    const double base = 1.0 - std::pow(0.9, tries), next = 1.0 - std::pow(0.9, tries + 1);
+    auto part = [&](double from, double to) {
+      return [&, from, to](std::string_view, double f) {
+        progress("auto: try " + std::to_string(tries + 1) + " (" + refined + ")", base + (next - base) * (from + (to - from) * f));
+      };
+    };
+    const auto t0 = std::chrono::steady_clock::now();
+    t.baked = bake_luts(s, dev, part(0.0, 0.8), 24);
+    t.bake_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    t.check = check_scene(s, t.baked.luts, t.baked.orders_used, dev, part(0.8, 1.0), &memo);
+    t.error = t.check.record.value;
+    ++tries;
+    spdlog::debug("atmosphere: auto try {} ({}): predicted {:.1f} s, baked in {:.1f} s, error {:.4g}", tries, refined,
+                  t.predicted_s, t.bake_s, t.error);
+    return t;
+  };
+
+  json tries_j = json::array();
+  Try best = evaluate(start, "start");
+  tries_j.push_back(try_json(best, 0));
+  std::string stop;
+  for (int step = 1; !(best.error <= tolerance); ++step) {
+    if (step > kMaxSearchSteps) {
+      stop = "the search reached its " + std::to_string(kMaxSearchSteps) + " steps";
+      break;
+    }
+    std::optional<Try> chosen;
+    double chosen_rate = 0.0;
+    // a plateau (8 wavelengths can be worse than rgb; one texel more may not move the p99) is
+    // crossed by refining further: each refinement applied twice, then three times
+    for (int reach = 1; reach <= kMaxReach && !chosen; ++reach)
+      for (const auto& r : steps) {
+        AtmosphereSpec s = best.spec;
+        bool ok = true;
+        for (int k = 0; k < reach && ok; ++k) ok = r.apply(s);
+        if (!ok || predicted_bake_seconds(s) > cost_cap) continue;
+        Try t = evaluate(s, reach == 1 ? std::string(r.name) : std::string(r.name) + " x" + std::to_string(reach));
+        tries_j.push_back(try_json(t, step));
+        if (!(t.error < (1.0 - kMinGain) * best.error)) continue;
+        const double rate = (best.error - t.error) / std::max(t.predicted_s - best.predicted_s, 1e-3 * best.predicted_s);
+        if (!chosen || rate > chosen_rate) chosen_rate = rate, chosen = std::move(t);
+      }
+    if (!chosen) {
+      stop = "no refinement within " + std::to_string(static_cast<int>(kMaxCostFactor)) +
+             "x the default sizes' predicted bake time lowers the error further";
+      break;
+    }
+    spdlog::info("atmosphere: auto step {}: refined {} -> error {:.4g} (predicted bake {:.1f} s)", step,
+                 chosen->refined, chosen->error, chosen->predicted_s);
+    for (auto& t : tries_j)
+      if (t["step"] == step && t["refined"] == chosen->refined) t["chosen"] = true;
+    best = std::move(*chosen);
+  }
+
+  AutoSearch out;
+  out.met = best.error <= tolerance;
+  out.resolved = best.spec;
+  out.baked = std::move(best.baked);
+  out.check = std::move(best.check);
+  if (!out.met) {
+    const std::string largest = [&] {
+      std::string name;
+      double v = -1;
+      for (const char* p : {"lut_discretisation", "order_truncation", "spectral_sampling"})
+        if (const double x = p99_of(out.check, p); std::isfinite(x) && x > v) v = x, name = p;
+      return name;
+    }();
+    out.failure = std::string(spec.auto_sizes ? "sizes" : "spectrum") +
+                  (spec.auto_sizes && spec.auto_spectrum ? " and spectrum" : "") + ": auto did not meet the scene's tolerance " +
+                  num(tolerance) + ": " + stop + "; the best of " + std::to_string(tries) +
+                  " tries reached " + num(out.check.record.value) + " (" + out.check.record.unit + ")" +
+                  (largest.empty() ? "" : ", its largest cause " + largest) +
+                  " (the manifest's parameters.auto lists every try)";
+  }
+  std::vector<std::string> searched;
+  if (spec.auto_sizes) searched.push_back("sizes");
+  if (spec.auto_spectrum) searched.push_back("spectrum");
+  out.record = {
+      {"searched", searched},
+      {"tolerance", tolerance},
+      {"measure", out.check.record.unit},
+      {"rule", "greedy: from half the default sizes and rgb, bake every refinement (one axis group x1.5, or the next "
+               "channel count of rgb, 8, 12, 16, 24, 32, 48) and keep the one that lowers the judged error most per "
+               "second of predicted bake time; stop when the tolerance is met or nothing lowers the error"},
+      {"start", settings_json(start)},
+      {"tries", tries_j},
+      {"chosen", settings_json(out.resolved)},
+      {"chosen_predicted_s", predicted_bake_seconds(out.resolved)},
+      {"met", out.met},
+      {"compared_predicted_s", {{"default_sizes", predicted_bake_seconds(defaults)},
+                                {"sizes_200_percent", [&] {
+                                   AtmosphereSpec d2 = defaults;
+                                   for (int AtmosphereSpec::*f :
+                                        {&AtmosphereSpec::transmittance_mu, &AtmosphereSpec::transmittance_r,
+                                         &AtmosphereSpec::irradiance_mu_s, &AtmosphereSpec::irradiance_r,
+                                         &AtmosphereSpec::scattering_r, &AtmosphereSpec::scattering_mu,
+                                         &AtmosphereSpec::scattering_mu_s, &AtmosphereSpec::scattering_nu})
+                                     d2.*f *= 2;
+                                   return predicted_bake_seconds(d2);
+                                 }()}}}};
+  if (!stop.empty()) out.record["stopped"] = stop;
+  return out;
+}
+
+}  // namespace specbake::atmosphere

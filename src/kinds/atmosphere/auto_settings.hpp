@@ -1,0 +1,59 @@
+#pragma once
+// `sizes: auto` and `spectrum: auto`: the cheapest texture sizes and channel count whose bake meets
+// the scene's tolerance against the path-traced truth (docs/atmosphere.md, "Settings chosen from
+// the scene").
+//
+// A greedy search over bakes. It starts at half the default sizes (sizes: auto) and rgb
+// (spectrum: auto). While the bake misses the tolerance, every refinement is baked and judged at
+// the scene's points: one axis group 1.5× finer (scattering r, μ, μ_s, ν; transmittance; irradiance)
+// and the next channel count of the ladder rgb, 8, 12, 16, 24, 32, 48 wavelengths over 360–830 nm.
+// The refinement that lowers the judged error most per second of predicted bake time (the cost
+// model of estimated_seconds, so the choice does not depend on timer noise) is kept; one that
+// lowers the error by less than kMinGain of it does not count. When none lowers it, each is
+// tried applied twice, then three times (a plateau: 8 wavelengths can be
+// worse than rgb). The search ends when the tolerance is met, when nothing lowers the error
+// (the rest is another cause: orders, the truth's noise), or at kMaxSearchSteps /
+// kMaxCostFactor × the default sizes' cost. The truth is traced once (Memo); each try costs one bake and the lookups.
+// The chosen settings are then judged at an independent point set of the same scene (held out).
+#include <optional>
+
+#include <nlohmann/json.hpp>
+
+#include "job/kind.hpp"
+#include "kinds/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/scene_check.hpp"
+
+namespace specbake::atmosphere {
+
+inline constexpr int kMaxSearchSteps = 16;
+inline constexpr double kMaxCostFactor = 16.0;     // × the predicted bake time of the default sizes
+inline constexpr double kRefineFactor = 1.5;       // one axis group per step
+inline constexpr int kMaxReach = 3;                // refinements applied up to 3 times on a plateau
+inline constexpr double kMinGain = 0.01;           // a refinement counts when it lowers the error by 1 %
+inline constexpr int kSpectrumLadder[] = {8, 12, 16, 24, 32, 48};  // wavelengths after rgb
+
+struct AutoSearch {
+  AtmosphereSpec resolved;   // the spec with the chosen sizes and spectrum (auto flags cleared)
+  Baked baked;               // its bake (self-checked, as a plain bake is)
+  SceneCheck check;          // its scene check at the scene's points
+  bool met = false;          // the tolerance was met at the scene's points
+  std::string failure;       // why the search stopped short, when it did
+  nlohmann::json record;     // start, rule, every try (settings, predicted and measured seconds, error, parts), chosen
+};
+
+// Predicted bake seconds of a spec without its scene check (2-core CPU scale).
+double predicted_bake_seconds(const AtmosphereSpec& spec);
+
+// Where the search starts: half the default sizes (sizes: auto), rgb (spectrum: auto).
+AtmosphereSpec search_start(const AtmosphereSpec& spec);
+// A rough wall time of a search: kTypicalTries bakes of its start (`plan`'s estimate before the
+// search runs; the tries grow as the search refines, the start's scene check is traced once).
+inline constexpr double kTypicalTries = 20.0;
+
+// Runs the search (spec.auto_sizes and/or spec.auto_spectrum set). `memo` keeps the traces.
+AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo);
+
+// The sizes and spectrum of a spec as the manifest reports them.
+nlohmann::json settings_json(const AtmosphereSpec& spec);
+
+}  // namespace specbake::atmosphere
