@@ -141,6 +141,12 @@ std::vector<BadConfig> bad_configs() {
       {"sizes: 0%", sky("    sizes: 0%\n"), 3, "0%", 1, "", "jobs[0].sizes", {"(0%, 1000%]"}},
       {"sizes.scale: too large for nu", sky("    sizes: {scale: 900%}\n"), 3, "900%", 1, "", "jobs[0].sizes.scale",
        {"nu size 72 exceeds 64"}},
+      {"sizes: auto without a scene tolerance", sky("    sizes: auto\n"), 3, "auto", 1, "", "jobs[0].sizes",
+       {"sizes: auto searches", "tolerance_de2000"}},
+      {"spectrum: auto with a relative tolerance", sky("    spectrum: auto\n    scene: {tolerance_relative: 0.1}\n"), 3,
+       "auto", 1, "", "jobs[0].spectrum", {"spectrum: auto searches", "colour difference"}},
+      {"spectrum: neither rgb nor auto", sky("    spectrum: rbg\n"), 3, "rbg", 1, "", "jobs[0].spectrum",
+       {"rgb | auto", "did you mean 'rgb'"}},
       {"sizes: unknown key beside scale", sky("    sizes: {scal: 50%}\n"), 3, "scal", 1, "", "jobs[0].sizes.scal",
        {"did you mean 'scale'"}},
   };

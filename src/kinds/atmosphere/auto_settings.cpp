@@ -21,12 +21,6 @@ namespace {
 constexpr int kMaxAxis = 4096;
 constexpr long long kMaxScatteringTexels = 1LL << 26;
 
-// One refinement: its name and what it does to a spec (false: it cannot, at a limit).
-struct Refinement {
-  const char* name;
-  std::function<bool(AtmosphereSpec&)> apply;
-};
-
 int finer(int v, bool even) {
   int f = static_cast<int>(std::ceil(v * kRefineFactor));
   if (even) f += f % 2;
@@ -41,8 +35,8 @@ bool within_limits(const AtmosphereSpec& s) {
          1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu <= kMaxScatteringTexels;
 }
 
-std::vector<Refinement> refinements(const AtmosphereSpec& spec) {
-  std::vector<Refinement> out;
+std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) {
+  std::vector<Refinement<AtmosphereSpec>> out;
   auto axis = [&](const char* name, std::vector<int AtmosphereSpec::*> fields, bool even) {
     out.push_back({name, [fields, even](AtmosphereSpec& s) {
                      for (auto f : fields) s.*f = finer(s.*f, even && f == &AtmosphereSpec::scattering_mu);
@@ -87,14 +81,6 @@ void start_sizes(AtmosphereSpec& s) {
   s.scattering_nu = half(d.scattering_nu, false);
 }
 
-struct Try {
-  AtmosphereSpec spec;
-  std::string refined;  // what this try refined from the step's state ("start" for the first)
-  double predicted_s = 0.0, bake_s = 0.0, error = 0.0;
-  Baked baked;
-  SceneCheck check;
-};
-
 std::string num(double v) {
   char b[32];
   std::snprintf(b, sizeof b, "%.4g", v);
@@ -105,19 +91,6 @@ double p99_of(const SceneCheck& c, const char* part) {
   const json& d = c.record.details;
   if (!d.contains("parts") || !d["parts"].contains(part)) return std::nan("");
   return d["parts"][part]["de2000"].value("p99", std::nan(""));
-}
-
-json try_json(const Try& t, int step) {
-  json parts = json::object();
-  for (const char* p : {"lut_discretisation", "order_truncation", "spectral_sampling"})
-    if (const double v = p99_of(t.check, p); std::isfinite(v)) parts[p] = v;
-  return {{"step", step},
-          {"refined", t.refined},
-          {"settings", settings_json(t.spec)},
-          {"predicted_s", t.predicted_s},
-          {"bake_s", t.bake_s},
-          {"error", t.error},
-          {"parts_p99_de2000", parts}};
 }
 
 }  // namespace
@@ -146,7 +119,7 @@ AtmosphereSpec search_start(const AtmosphereSpec& spec) {
 
 AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo) {
   const AtmosphereSpec start = search_start(spec);
-  const std::vector<Refinement> steps = refinements(spec);
+  const std::vector<Refinement<AtmosphereSpec>> steps = refinements(spec);
   const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
   AtmosphereSpec defaults = start;
   {
@@ -160,71 +133,47 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
   }
   const double cost_cap = kMaxCostFactor * predicted_bake_seconds(defaults);
 
-  int tries = 0;
-  auto evaluate = [&](const AtmosphereSpec& s, const std::string& refined) {
-    Try t;
-    t.spec = s;
-    t.refined = refined;
-    t.predicted_s = predicted_bake_seconds(s);
-    const double base = 1.0 - std::pow(0.9, tries), next = 1.0 - std::pow(0.9, tries + 1);
-    auto part = [&](double from, double to) {
-      return [&, from, to](std::string_view, double f) {
-        progress("auto: try " + std::to_string(tries + 1) + " (" + refined + ")", base + (next - base) * (from + (to - from) * f));
-      };
-    };
-    const auto t0 = std::chrono::steady_clock::now();
-    t.baked = bake_luts(s, dev, part(0.0, 0.8), 24);
-    t.bake_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    t.check = check_scene(s, t.baked.luts, t.baked.orders_used, dev, part(0.8, 1.0), &memo);
-    t.error = t.check.record.value;
-    ++tries;
-    spdlog::debug("atmosphere: auto try {} ({}): predicted {:.1f} s, baked in {:.1f} s, error {:.4g}", tries, refined,
-                  t.predicted_s, t.bake_s, t.error);
-    return t;
+  struct Payload {
+    Baked baked;
+    SceneCheck check;
   };
-
-  json tries_j = json::array();
-  Try best = evaluate(start, "start");
-  tries_j.push_back(try_json(best, 0));
-  std::string stop;
-  for (int step = 1; !(best.error <= tolerance); ++step) {
-    if (step > kMaxSearchSteps) {
-      stop = "the search reached its " + std::to_string(kMaxSearchSteps) + " steps";
-      break;
-    }
-    std::optional<Try> chosen;
-    double chosen_rate = 0.0;
-    // a plateau (8 wavelengths can be worse than rgb; one texel more may not move the p99) is
-    // crossed by refining further: each refinement applied twice, then three times
-    for (int reach = 1; reach <= kMaxReach && !chosen; ++reach)
-      for (const auto& r : steps) {
-        AtmosphereSpec s = best.spec;
-        bool ok = true;
-        for (int k = 0; k < reach && ok; ++k) ok = r.apply(s);
-        if (!ok || predicted_bake_seconds(s) > cost_cap) continue;
-        Try t = evaluate(s, reach == 1 ? std::string(r.name) : std::string(r.name) + " x" + std::to_string(reach));
-        tries_j.push_back(try_json(t, step));
-        if (!(t.error < (1.0 - kMinGain) * best.error)) continue;
-        const double rate = (best.error - t.error) / std::max(t.predicted_s - best.predicted_s, 1e-3 * best.predicted_s);
-        if (!chosen || rate > chosen_rate) chosen_rate = rate, chosen = std::move(t);
-      }
-    if (!chosen) {
-      stop = "no refinement within " + std::to_string(static_cast<int>(kMaxCostFactor)) +
-             "x the default sizes' predicted bake time lowers the error further";
-      break;
-    }
-    spdlog::info("atmosphere: auto step {}: refined {} -> error {:.4g} (predicted bake {:.1f} s)", step,
-                 chosen->refined, chosen->error, chosen->predicted_s);
-    for (auto& t : tries_j)
-      if (t["step"] == step && t["refined"] == chosen->refined) t["chosen"] = true;
-    best = std::move(*chosen);
-  }
-
+  int tries = 0;
+  std::vector<json> measured;  // per evaluation, in order: measured bake seconds and the parts' p99
+  const std::function<std::pair<double, Payload>(const AtmosphereSpec&, const std::string&)> evaluate =
+      [&](const AtmosphereSpec& s, const std::string& refined) {
+        const double base = 1.0 - std::pow(0.9, tries), next = 1.0 - std::pow(0.9, tries + 1);
+        auto part = [&](double from, double to) {
+          return [&, from, to](std::string_view, double f) {
+            progress("auto: try " + std::to_string(tries + 1) + " (" + refined + ")",
+                     base + (next - base) * (from + (to - from) * f));
+          };
+        };
+        const auto t0 = std::chrono::steady_clock::now();
+        Payload p;
+        p.baked = bake_luts(s, dev, part(0.0, 0.8), 24);
+        const double bake_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        p.check = check_scene(s, p.baked.luts, p.baked.orders_used, dev, part(0.8, 1.0), &memo);
+        ++tries;
+        spdlog::debug("atmosphere: auto try {} ({}): predicted {:.1f} s, baked in {:.1f} s, error {:.4g}", tries,
+                      refined, predicted_bake_seconds(s), bake_s, p.check.record.value);
+        json parts = json::object();
+        for (const char* name : {"lut_discretisation", "order_truncation", "spectral_sampling"})
+          if (const double v = p99_of(p.check, name); std::isfinite(v)) parts[name] = v;
+        measured.push_back({{"bake_s", bake_s}, {"parts_p99_de2000", parts}});
+        const double error = p.check.record.value;
+        return std::pair<double, Payload>{error, std::move(p)};
+      };
+  auto found = greedy_search<AtmosphereSpec, Payload>(
+      start, steps, [](const AtmosphereSpec& s) { return predicted_bake_seconds(s); }, evaluate,
+      [](const AtmosphereSpec& s) { return settings_json(s); }, tolerance, cost_cap);
+  for (std::size_t i = 0; i < found.tries.size() && i < measured.size(); ++i) found.tries[i].update(measured[i]);
   AutoSearch out;
-  out.met = best.error <= tolerance;
-  out.resolved = best.spec;
-  out.baked = std::move(best.baked);
-  out.check = std::move(best.check);
+  out.met = found.met;
+  out.resolved = found.best.state;
+  out.baked = std::move(found.best.payload.baked);
+  out.check = std::move(found.best.payload.check);
+  const std::string stop = found.stop;
+  json tries_j = found.tries;
   if (!out.met) {
     const std::string largest = [&] {
       std::string name;
@@ -238,7 +187,7 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                   num(tolerance) + ": " + stop + "; the best of " + std::to_string(tries) +
                   " tries reached " + num(out.check.record.value) + " (" + out.check.record.unit + ")" +
                   (largest.empty() ? "" : ", its largest cause " + largest) +
-                  " (the manifest's parameters.auto lists every try)";
+                  " (-v logs every try; a sweep or a bake with the error's cause fixed shows the rest)";
   }
   std::vector<std::string> searched;
   if (spec.auto_sizes) searched.push_back("sizes");
@@ -249,7 +198,9 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
       {"measure", out.check.record.unit},
       {"rule", "greedy: from half the default sizes and rgb, bake every refinement (one axis group x1.5, or the next "
                "channel count of rgb, 8, 12, 16, 24, 32, 48) and keep the one that lowers the judged error most per "
-               "second of predicted bake time; stop when the tolerance is met or nothing lowers the error"},
+               "second of predicted bake time (a gain under 1 % does not count; on a plateau each refinement is "
+               "tried applied twice, then three times); stop when the tolerance is met, when nothing lowers the "
+               "error, after 16 steps, or beyond 16x the default sizes' predicted time"},
       {"start", settings_json(start)},
       {"tries", tries_j},
       {"chosen", settings_json(out.resolved)},

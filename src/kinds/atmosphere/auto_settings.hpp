@@ -15,7 +15,12 @@
 // (the rest is another cause: orders, the truth's noise), or at kMaxSearchSteps /
 // kMaxCostFactor × the default sizes' cost. The truth is traced once (Memo); each try costs one bake and the lookups.
 // The chosen settings are then judged at an independent point set of the same scene (held out).
+#include <algorithm>
+#include <functional>
 #include <optional>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -31,6 +36,81 @@ inline constexpr double kRefineFactor = 1.5;       // one axis group per step
 inline constexpr int kMaxReach = 3;                // refinements applied up to 3 times on a plateau
 inline constexpr double kMinGain = 0.01;           // a refinement counts when it lowers the error by 1 %
 inline constexpr int kSpectrumLadder[] = {8, 12, 16, 24, 32, 48};  // wavelengths after rgb
+
+// The greedy search on its own, over any settings type (tests drive it with synthetic errors).
+// `evaluate` bakes and judges a state (its error and a payload kept for the best state and the
+// step's best candidate only); `cost` predicts what a state costs; `describe` records a state.
+template <class State>
+struct Refinement {
+  std::string name;
+  std::function<bool(State&)> apply;  // false: cannot (a limit)
+};
+template <class State, class Payload>
+struct Evaluated {
+  State state;
+  std::string refined;  // "start", a refinement's name, or "name xK" (applied K times)
+  double cost = 0.0, error = 0.0;
+  Payload payload;
+};
+template <class State, class Payload>
+struct SearchOutcome {
+  Evaluated<State, Payload> best;
+  nlohmann::json tries = nlohmann::json::array();  // {step, refined, settings, predicted_s, error, chosen?}
+  bool met = false;
+  std::string stop;  // why it ended short of the tolerance
+  int evaluations = 0;
+};
+
+template <class State, class Payload>
+SearchOutcome<State, Payload> greedy_search(
+    const State& start, const std::vector<Refinement<State>>& refinements,
+    const std::function<double(const State&)>& cost,
+    const std::function<std::pair<double, Payload>(const State&, const std::string& label)>& evaluate,
+    const std::function<nlohmann::json(const State&)>& describe, double tolerance, double cost_cap) {
+  SearchOutcome<State, Payload> out;
+  auto run = [&](const State& s, const std::string& label, int step) {
+    Evaluated<State, Payload> e{s, label, cost(s), 0.0, Payload{}};
+    auto [error, payload] = evaluate(s, label);
+    e.error = error;
+    e.payload = std::move(payload);
+    ++out.evaluations;
+    out.tries.push_back({{"step", step}, {"refined", label}, {"settings", describe(s)}, {"predicted_s", e.cost},
+                         {"error", e.error}});
+    return e;
+  };
+  out.best = run(start, "start", 0);
+  for (int step = 1; !(out.best.error <= tolerance); ++step) {
+    if (step > kMaxSearchSteps) {
+      out.stop = "the search reached its " + std::to_string(kMaxSearchSteps) + " steps";
+      break;
+    }
+    std::optional<Evaluated<State, Payload>> chosen;
+    double chosen_rate = 0.0;
+    std::size_t chosen_try = 0;
+    // a plateau (8 wavelengths can be worse than rgb; one texel more may not move the p99) is
+    // crossed by refining further: each refinement applied twice, then three times
+    for (int reach = 1; reach <= kMaxReach && !chosen; ++reach)
+      for (const auto& r : refinements) {
+        State s = out.best.state;
+        bool ok = true;
+        for (int k = 0; k < reach && ok; ++k) ok = r.apply(s);
+        if (!ok || cost(s) > cost_cap) continue;
+        auto e = run(s, reach == 1 ? r.name : r.name + " x" + std::to_string(reach), step);
+        if (!(e.error < (1.0 - kMinGain) * out.best.error)) continue;
+        const double rate = (out.best.error - e.error) / std::max(e.cost - out.best.cost, 1e-3 * out.best.cost);
+        if (!chosen || rate > chosen_rate) chosen_rate = rate, chosen = std::move(e), chosen_try = out.tries.size() - 1;
+      }
+    if (!chosen) {
+      out.stop = "no refinement within the cost cap lowers the error by " + std::to_string(int(100 * kMinGain)) +
+                 " % or more, even applied " + std::to_string(kMaxReach) + " times";
+      break;
+    }
+    out.tries[chosen_try]["chosen"] = true;
+    out.best = std::move(*chosen);
+  }
+  out.met = out.best.error <= tolerance;
+  return out;
+}
 
 struct AutoSearch {
   AtmosphereSpec resolved;   // the spec with the chosen sizes and spectrum (auto flags cleared)

@@ -1,0 +1,171 @@
+// `sizes: auto` / `spectrum: auto` (auto_settings.hpp): the greedy search on synthetic errors
+// (which refinement it keeps, plateaus, stops, caps), and from the CLI on a small scene (the
+// record, the held-out check, the bundle at the chosen sizes, plan showing them).
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <string>
+
+#include "kinds/atmosphere/auto_settings.hpp"
+#include "support/testing.hpp"
+
+namespace {
+
+namespace t = specbake::testing;
+namespace fs = std::filesystem;
+using nlohmann::json;
+using specbake::atmosphere::greedy_search;
+using specbake::atmosphere::Refinement;
+
+// A state of three "axes" (texel counts); cost = a·x + b·y + c·z; error = Σ k_i / n_i² (second-order
+// interpolation error per axis) + a floor.
+using S = std::array<int, 3>;
+
+struct Model {
+  std::array<double, 3> k{1.0, 1.0, 1.0}, price{1.0, 1.0, 1.0};
+  double floor = 0.0;
+  int evaluations = 0;
+  double error(const S& s) const {
+    double e = floor;
+    for (int i = 0; i < 3; ++i) e += k[i] / (double(s[i]) * s[i]);
+    return e;
+  }
+  double cost(const S& s) const { return price[0] * s[0] + price[1] * s[1] + price[2] * s[2]; }
+};
+
+std::vector<Refinement<S>> doubling(int limit = 1 << 20) {
+  std::vector<Refinement<S>> r;
+  for (int i = 0; i < 3; ++i)
+    r.push_back({"axis" + std::to_string(i), [i, limit](S& s) {
+                   s[i] *= 2;
+                   return s[i] <= limit;
+                 }});
+  return r;
+}
+
+auto run(Model& m, double tolerance, double cap = 1e18, std::vector<Refinement<S>> refs = doubling()) {
+  return greedy_search<S, int>(
+      S{2, 2, 2}, refs, [&](const S& s) { return m.cost(s); },
+      [&](const S& s, const std::string&) {
+        ++m.evaluations;
+        return std::pair<double, int>{m.error(s), m.evaluations};
+      },
+      [](const S& s) { return json(s); }, tolerance, cap);
+}
+
+// The axis with the most error per unit of price is refined first; the search stops as soon as
+// the tolerance is met, and what it returns meets it.
+TEST(AutoSearch, RefinesTheAxisThatBuysTheMostErrorPerCost) {
+  Model m;
+  m.k = {16.0, 1.0, 1.0};  // axis 0 holds most of the error
+  const auto out = run(m, 1.0);
+  ASSERT_TRUE(out.met);
+  EXPECT_LE(out.best.error, 1.0);
+  // step 1 must pick axis 0: its gain 12 per 2 units of cost beats 0.1875 per 2
+  bool found = false;
+  for (const auto& tr : out.tries)
+    if (tr["step"] == 1 && tr.value("chosen", false)) {
+      found = true;
+      EXPECT_EQ(tr["refined"], "axis0");
+    }
+  EXPECT_TRUE(found);
+  // every try is recorded with its settings, predicted cost and error, in evaluation order
+  EXPECT_EQ(static_cast<int>(out.tries.size()), out.evaluations);
+  EXPECT_EQ(out.evaluations, m.evaluations);
+  // the payload travels with the chosen state
+  EXPECT_EQ(m.error(out.best.state), out.best.error);
+
+  // with axis 0 priced 100×, the cheap axes go first although they hold less
+  Model dear;
+  dear.k = {16.0, 1.0, 1.0};
+  dear.price = {100.0, 1.0, 1.0};
+  const auto d = run(dear, 1e9);  // met at the start: nothing refined
+  EXPECT_TRUE(d.met);
+  EXPECT_EQ(d.evaluations, 1);
+  const auto d2 = run(dear, 4.2);  // start 4.5: one cheap refinement (−0.1875 each) cannot reach 4.2
+  for (const auto& tr : d2.tries)
+    if (tr["step"] == 1 && tr.value("chosen", false)) EXPECT_NE(tr["refined"], "axis0") << tr;
+}
+
+// A floor no refinement lowers ends the search with the reason, not a loop.
+TEST(AutoSearch, AFloorStopsTheSearch) {
+  Model m;
+  m.floor = 0.5;
+  const auto out = run(m, 0.4);
+  EXPECT_FALSE(out.met);
+  EXPECT_NE(out.stop.find("lowers the error"), std::string::npos) << out.stop;
+  EXPECT_GT(out.best.error, 0.4);
+  EXPECT_LT(out.best.error, 0.5 * 1.05);  // it refined until the gains fell under 1 %
+}
+
+// A refinement that first makes things worse (8 wavelengths against rgb) is crossed by applying it
+// twice; one beyond the cost cap is not tried.
+TEST(AutoSearch, PlateausAndCaps) {
+  Model m;
+  m.k = {1.0, 0.0, 0.0};
+  int worse_then_better = 0;
+  std::vector<Refinement<S>> refs{{"bumpy", [&](S& s) {
+                                     ++worse_then_better;
+                                     s[0] += 1;  // 2 → 3 is "worse" below, 3 → 4 better
+                                     return true;
+                                   }}};
+  auto out = greedy_search<S, int>(
+      S{2, 2, 2}, refs, [](const S& s) { return double(s[0]); },
+      [&](const S& s, const std::string&) {
+        const double e = s[0] == 3 ? 1.0 : 1.0 / (double(s[0]) * s[0]);
+        return std::pair<double, int>{e, 0};
+      },
+      [](const S& s) { return json(s); }, 0.07, 1e9);
+  ASSERT_TRUE(out.met) << out.tries.dump();
+  EXPECT_EQ(out.tries[1]["refined"], "bumpy");
+  EXPECT_EQ(out.tries[2]["refined"], "bumpy x2");
+  EXPECT_TRUE(out.tries[2].value("chosen", false));
+
+  Model capped;
+  const auto c = run(capped, 1e-6, /*cap=*/12.0);  // start costs 6; one doubling costs 8; two, 10; three, 12
+  EXPECT_FALSE(c.met);
+  for (const auto& tr : c.tries) EXPECT_LE(tr["predicted_s"].get<double>(), 12.0);
+}
+
+// From the CLI: a scene the start already meets bakes once at half the default sizes; the record,
+// the held-out check and the bundle's textures follow the chosen sizes; plan shows them.
+TEST(AutoSettingsCli, MetAtTheStartBakesHalfTheDefaultSizes) {
+  t::TempDir tmp;
+  t::write_file(tmp / "c.yaml",
+                "specbake: 1\noutput: out\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 2\n"
+                "    sizes: auto\n    spectrum: auto\n"
+                "    scene: {points: 8, relative_se: 0.1, sun_elevation_deg: [20, 60], tolerance_de2000: 100}\n");
+  const auto p = t::run_cli({"plan", (tmp / "c.yaml").string(), "-v"}, tmp.path());
+  ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
+  EXPECT_NE(p.out.find("scattering 16x64x16x4"), std::string::npos) << p.out;  // the resolved sizes
+  EXPECT_FALSE(fs::exists(tmp / "out"));
+
+  const auto r = t::run_cli({"run", (tmp / "c.yaml").string()}, tmp.path());
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  const json m = t::read_json(tmp / "out" / "sky" / "latest" / "manifest.json");
+  EXPECT_EQ(m["config"]["sizes"], "auto");
+  EXPECT_EQ(m["config"]["spectrum"], "auto");
+  const json& a = m["parameters"]["auto"];
+  EXPECT_TRUE(a["met"].get<bool>());
+  ASSERT_EQ(a["tries"].size(), 1u);
+  EXPECT_EQ(a["chosen"]["spectrum"], "rgb");
+  EXPECT_EQ(a["chosen"]["sizes"]["scattering"], (json{{"r", 16}, {"mu", 64}, {"mu_s", 16}, {"nu", 4}}));
+  EXPECT_EQ(a["chosen"]["sizes"]["transmittance"], (json{128, 32}));
+  EXPECT_EQ(a["tries"][0]["error"].get<double>(), m["accuracy"][0]["value"].get<double>());
+  EXPECT_EQ(m["accuracy"][0]["name"], "vs_path_traced");
+  EXPECT_EQ(m["accuracy"][1]["name"], "vs_path_traced_held_out");
+  EXPECT_EQ(m["accuracy"][1]["details"]["first_point"], 8);
+  // the held-out points are other points: another error
+  EXPECT_NE(m["accuracy"][1]["value"].get<double>(), m["accuracy"][0]["value"].get<double>());
+  // the textures have the chosen sizes: scattering [r][mu][nu*mu_s][3]
+  bool seen = false;
+  for (const auto& f : m["files"])
+    if (f["path"] == "scattering.bin") {
+      seen = true;
+      EXPECT_EQ(f["shape"], (json{16, 64, 64, 3})) << f;
+    }
+  EXPECT_TRUE(seen);
+}
+
+}  // namespace
