@@ -2,6 +2,7 @@
 #include "kinds/atmosphere/kind.hpp"
 
 #include <algorithm>
+#include <cstdio>
 
 #include "atmosphere/limits.h"
 #include "kinds/atmosphere/atmosphere_job.hpp"
@@ -65,6 +66,15 @@ Kind kind() {
            std::to_string(sc.value("mu_s", 0)) + "x" + std::to_string(sc.value("nu", 0));
     }
     s += ", " + p.value("precision", "float32");
+    if (p.contains("auto") && p["auto"].is_object()) {
+      const auto& a = p["auto"];
+      char b[160];
+      std::snprintf(b, sizeof b, ", auto: %s after %zu tries (predicted bake %.0f s; default sizes %.0f s)",
+                    a.value("met", false) ? "met" : "NOT met", a.value("tries", nlohmann::json::array()).size(),
+                    a.value("chosen_predicted_s", 0.0),
+                    a.contains("compared_predicted_s") ? a["compared_predicted_s"].value("default_sizes", 0.0) : 0.0);
+      s += b;
+    }
     if (p.contains("scene_check") && p["scene_check"].is_object())
       s += ", scene check " + std::to_string(p["scene_check"].value("points", 0)) + " points";
     return s;
