@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "core/resources.hpp"
+#include "core/text.hpp"
 
 namespace specbake {
 
@@ -119,17 +120,9 @@ constexpr int kMaxRuns = 5;
 
 bool is_unknown_key(const InputError& e) { return std::string(e.what()).find(": unknown key '") != std::string::npos; }
 
-std::string fmt(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
-}
+std::string fmt(double v) { return format_g(v, 6); }
 // Errors and tolerances: every digit (a CSV reader gets the JSON's value).
-std::string exact(double v) {
-  char b[40];
-  std::snprintf(b, sizeof b, "%.17g", v);
-  return b;
-}
+std::string exact(double v) { return format_g(v, 17); }
 
 std::string csv_field(const std::string& s) {
   if (s.find_first_of(",\"\n") == std::string::npos) return s;

@@ -1,16 +1,16 @@
 #include "kinds/atmosphere/atmosphere_job.hpp"
 
-#include "kinds/atmosphere/auto_settings.hpp"
-
 #include <spdlog/spdlog.h>
 
 #include <chrono>
 #include <cmath>
 #include <map>
 
+#include "core/text.hpp"
 #include "core/version.hpp"
 #include "io/exr.hpp"
 #include "io/ktx2.hpp"
+#include "kinds/atmosphere/auto_settings.hpp"
 #include "kinds/atmosphere/scene_check.hpp"
 
 namespace specbake::atmosphere {
@@ -393,12 +393,6 @@ AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResu
   return use;
 }
 
-std::string fmt_g(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
-
 // The chosen settings judged at an independent point set of the same scene.
 void held_out_step(const AtmosphereSpec& use, const Baked& b, JobContext& ctx, BakeResult& r) {
   AtmosphereSpec probe = use;
@@ -410,8 +404,8 @@ void held_out_step(const AtmosphereSpec& use, const Baked& b, JobContext& ctx, B
   a.metric += " (an independent point set of the same scene: the search did not see it)";
   a.details["first_point"] = use.scene.points;
   if (!a.passed)
-    r.warnings.push_back("auto settings: the held-out points' p99 " + fmt_g(a.value) +
-                         " exceeds the tolerance " + fmt_g(*a.tolerance) +
+    r.warnings.push_back("auto settings: the held-out points' p99 " + format_g(a.value) +
+                         " exceeds the tolerance " + format_g(*a.tolerance) +
                          " met at the scene's points: more scene.points pin the p99 better");
   // after the headline (vs_path_traced) and before the self-check
   r.accuracy.insert(r.accuracy.begin() + 1, a);

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "atmosphere/limits.h"
+#include "core/text.hpp"
 
 namespace specbake::atmosphere {
 
@@ -79,12 +80,6 @@ void start_sizes(AtmosphereSpec& s) {
   s.scattering_mu = half(d.scattering_mu, true);
   s.scattering_mu_s = half(d.scattering_mu_s, false);
   s.scattering_nu = half(d.scattering_nu, false);
-}
-
-std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
 }
 
 double p99_of(const SceneCheck& c, const char* part) {
@@ -184,8 +179,8 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
     }();
     out.failure = std::string(spec.auto_sizes ? "sizes" : "spectrum") +
                   (spec.auto_sizes && spec.auto_spectrum ? " and spectrum" : "") + ": auto did not meet the scene's tolerance " +
-                  num(tolerance) + ": " + stop + "; the best of " + std::to_string(tries) +
-                  " tries reached " + num(out.check.record.value) + " (" + out.check.record.unit + ")" +
+                  format_g(tolerance) + ": " + stop + "; the best of " + std::to_string(tries) +
+                  " tries reached " + format_g(out.check.record.value) + " (" + out.check.record.unit + ")" +
                   (largest.empty() ? "" : ", its largest cause " + largest) +
                   " (-v logs every try; a sweep or a bake with the error's cause fixed shows the rest)";
   }

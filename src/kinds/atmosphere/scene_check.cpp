@@ -1,7 +1,5 @@
 #include "kinds/atmosphere/scene_check.hpp"
 
-#include "kinds/atmosphere/atmosphere_job.hpp"
-
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -12,6 +10,8 @@
 
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
+#include "core/text.hpp"
+#include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/model.hpp"
 
 namespace specbake::atmosphere {
@@ -95,12 +95,6 @@ json part_json(const Part& part) {
     j["relative"] = rel;
   }
   return j;
-}
-
-std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
 }
 
 // What to raise when a part dominates.
@@ -362,8 +356,8 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   csv += ",de2000_se\n";
   for (std::size_t p = 0; p < n; ++p) {
     const TruthPoint& q = points[p];
-    std::string row = num(q.altitude_km) + "," + num(q.view_zenith_deg) + "," + num(q.sun_zenith_deg) + "," +
-                      num(q.view_sun_azimuth_deg);
+    std::string row = format_g(q.altitude_km) + "," + format_g(q.view_zenith_deg) + "," + format_g(q.sun_zenith_deg) + "," +
+                      format_g(q.view_sun_azimuth_deg);
     char b[64];
     auto add = [&](double v) {
       std::snprintf(b, sizeof b, ",%.9g", v);
@@ -385,9 +379,9 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   const ErrorSummary se_de = summarize_errors(de_se), se_rel_summary = summarize_errors(se_rel);
   if (dark) {
     out.failure = "scene check: none of the scene's " + std::to_string(n) +
-                  " points has light in the path-traced truth (cameras " + num(sc.camera_altitude_min_km) + "-" +
-                  num(sc.camera_altitude_max_km) + " km, sun " + num(sc.sun_elevation_min_deg) + " to " +
-                  num(sc.sun_elevation_max_deg) + " deg, " + views_name(sc.views) +
+                  " points has light in the path-traced truth (cameras " + format_g(sc.camera_altitude_min_km) + "-" +
+                  format_g(sc.camera_altitude_max_km) + " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " +
+                  format_g(sc.sun_elevation_max_deg) + " deg, " + views_name(sc.views) +
                   " views), so the LUTs cannot be judged there; give the scene a sun and views that see sunlit "
                   "air, or `scene: none`";
   } else if (!out.record.passed) {
@@ -398,18 +392,18 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     for (std::size_t i = 1; i < parts.size(); ++i) {
       if (by_radiance && !parts[i].has_relative) continue;  // spectral sampling has no radiance measure
       if (!worst || measure(parts[i]) > measure(*worst)) worst = &parts[i];
-      split_text += (split_text.empty() ? "" : ", ") + parts[i].name + " " + num(measure(parts[i]));
+      split_text += (split_text.empty() ? "" : ", ") + parts[i].name + " " + format_g(measure(parts[i]));
     }
     const double noise = by_radiance ? se_rel_summary.p99 : se_de.p99;
     out.failure = "scene check: p99 " + std::string(by_radiance ? "relative radiance error " : "CIEDE2000 ") +
-                  num(value) + " > tolerance " + num(*tolerance) + " at the scene's " + std::to_string(n) +
-                  " points (cameras " + num(sc.camera_altitude_min_km) + "-" + num(sc.camera_altitude_max_km) +
-                  " km, sun " + num(sc.sun_elevation_min_deg) + " to " + num(sc.sun_elevation_max_deg) + " deg, " +
+                  format_g(value) + " > tolerance " + format_g(*tolerance) + " at the scene's " + std::to_string(n) +
+                  " points (cameras " + format_g(sc.camera_altitude_min_km) + "-" + format_g(sc.camera_altitude_max_km) +
+                  " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " + format_g(sc.sun_elevation_max_deg) + " deg, " +
                   views_name(sc.views) + " views). p99 by cause: " + split_text + "; the largest is " +
                   worst->name + ": " + advice(worst->name, spec, orders_used) +
-                  ". The truth's own p99 standard error is " + num(noise) +
+                  ". The truth's own p99 standard error is " + format_g(noise) +
                   (*tolerance <= 2.0 * noise ? " - comparable with the tolerance: lower scene.relative_se (now " +
-                                                   num(sc.relative_se) + ") before trusting the split"
+                                                   format_g(sc.relative_se) + ") before trusting the split"
                                              : "") +
                   ". Per point: scene_check.csv of a bake without the tolerance";
   }

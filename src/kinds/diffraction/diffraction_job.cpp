@@ -16,6 +16,7 @@
 #include "core/colour_space.hpp"
 #include "core/resources.hpp"
 #include "core/spectral_data.hpp"
+#include "core/text.hpp"
 #include "io/exr.hpp"
 #include "io/png.hpp"
 #include "kinds/diffraction/planning.hpp"
@@ -34,12 +35,6 @@ constexpr double kPreviewStepNm = 5.0;
 constexpr int kAutoRefinements = 3;
 
 const char* name(Expansion e) { return e == Expansion::taylor ? "taylor" : "chebyshev"; }
-
-std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
 
 }  // namespace
 
@@ -92,7 +87,7 @@ void add_term_exrs(const std::vector<float>& values, const std::vector<Band>& ba
       img.attributes = {{"specbake.term", std::to_string(term)},
                         {"specbake.expansion", name(band.expansion)},
                         {"specbake.band_order", std::to_string(n)},
-                        {"specbake.kappa_expansion", num(band.kappa0)},
+                        {"specbake.kappa_expansion", format_g(band.kappa0)},
                         {"specbake.channels", "R = Re F_n, G = Im F_n; " + rows_columns}};
       char path[64];
       std::snprintf(path, sizeof path, "%s/F_%03d.exr", folder.c_str(), term);
@@ -183,8 +178,8 @@ json self_check(cl_util::Device& dev, const Field& f, const Plan& p, const Terms
       }
     }
   if (!(worst_ratio <= 1.0))
-    throw JobError("self-check failed: device FFT terms differ from the double reference by " + num(worst_abs) +
-                   " (" + num(worst_ratio) + " x the float32 FFT bound)");
+    throw JobError("self-check failed: device FFT terms differ from the double reference by " + format_g(worst_abs) +
+                   " (" + format_g(worst_ratio) + " x the float32 FFT bound)");
   return {{"values_checked", checked}, {"max_abs_over_M2", worst_abs}, {"max_fraction_of_bound", worst_ratio}};
 }
 
@@ -347,8 +342,8 @@ void compute_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeRes
                         {"measured_max_over_M2", m.max_over_m2}});
     if (spec.terms || m.max_over_m2 <= spec.tolerance) break;
     if (attempt == kAutoRefinements)
-      throw JobError("terms: auto measured an error of " + num(m.max_over_m2) + " x M^2 at kappa = " +
-                     num(m.at_kappa) + " rad/um, above the tolerance " + num(spec.tolerance) + " after " +
+      throw JobError("terms: auto measured an error of " + format_g(m.max_over_m2) + " x M^2 at kappa = " +
+                     format_g(m.at_kappa) + " rad/um, above the tolerance " + format_g(spec.tolerance) + " after " +
                      std::to_string(kAutoRefinements) + " refinements (" + std::to_string(p.total_terms) +
                      " terms); raise the tolerance");
     spdlog::info("terms: auto: measured {:.3g} > tolerance {:.3g} with {} terms; tightening the target",
@@ -357,9 +352,9 @@ void compute_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeRes
   }
   if (m.max_over_m2 > spec.tolerance)
     r.warnings.push_back("FIXED TERMS DO NOT MEET THE TOLERANCE: terms = " + std::to_string(*spec.terms) + " (" +
-                         name(spec.expansion) + ") gives a measured error of " + num(m.max_over_m2) +
-                         " x M^2 at kappa = " + num(m.at_kappa) + " rad/um (y_max = " + num(p.y_max) +
-                         "), above the tolerance " + num(spec.tolerance) + "; use terms: auto");
+                         name(spec.expansion) + ") gives a measured error of " + format_g(m.max_over_m2) +
+                         " x M^2 at kappa = " + format_g(m.at_kappa) + " rad/um (y_max = " + format_g(p.y_max) +
+                         "), above the tolerance " + format_g(spec.tolerance) + "; use terms: auto");
 
 }
 
@@ -393,9 +388,9 @@ void check_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
     error["exr_half_max_over_M2"] = mh.max_over_m2;
     error["exr_half_meets_tolerance"] = mh.max_over_m2 <= spec.tolerance;
     if (mh.max_over_m2 > spec.tolerance)
-      r.warnings.push_back("the half-precision EXR copies reach an error of " + num(mh.max_over_m2) +
-                           " x M^2, above the tolerance " + num(spec.tolerance) +
-                           " (half has 11 bits); terms.bin (float32) meets " + num(m.max_over_m2));
+      r.warnings.push_back("the half-precision EXR copies reach an error of " + format_g(mh.max_over_m2) +
+                           " x M^2, above the tolerance " + format_g(spec.tolerance) +
+                           " (half has 11 bits); terms.bin (float32) meets " + format_g(m.max_over_m2));
   }
   if (!spec.terms) error["auto_attempts"] = w.attempts;
 

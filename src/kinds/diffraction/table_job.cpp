@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/text.hpp"
 #include "io/exr.hpp"
 #include "kinds/diffraction/diffraction_job.hpp"
 #include "kinds/diffraction/planning.hpp"
@@ -23,12 +24,6 @@ namespace {
 
 constexpr int kAutoRefinements = 3;
 constexpr double kMB = 1e6;
-
-std::string num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.4g", v);
-  return b;
-}
 
 // Bytes of the data files: the float32 terms (.bin) and their EXR copies (float32 or half).
 double term_bytes(const DiffractionSpec& spec, double terms, double texels) {
@@ -82,12 +77,12 @@ double check_bundle_budget(const DiffractionSpec& spec, const Field& f, const Pl
     const double bytes = term_bytes(spec, terms, static_cast<double>(p.bins.ku_count()) * p.bins.kv_count());
     if (bytes > budget)
       throw InputError(spec.budget_at,
-                       "the planned bundle is " + num(bytes / kMB) + " MB, above max_bundle_mb = " +
-                           num(spec.max_bundle_mb) + ": " + std::to_string(p.total_terms) + " terms (tolerance " +
-                           num(spec.tolerance) + ", y_max " + num(p.y_max) + ") x " +
+                       "the planned bundle is " + format_g(bytes / kMB) + " MB, above max_bundle_mb = " +
+                           format_g(spec.max_bundle_mb) + ": " + std::to_string(p.total_terms) + " terms (tolerance " +
+                           format_g(spec.tolerance) + ", y_max " + format_g(p.y_max) + ") x " +
                            std::to_string(p.bins.ku_count()) + " x " + std::to_string(p.bins.kv_count()) +
                            " bins (field " + std::to_string(f.width) + " x " + std::to_string(f.height) + ", dx_um " +
-                           num(f.dx_um) + ", range_nm lower end " + num(spec.range_nm.lo) +
+                           format_g(f.dx_um) + ", range_nm lower end " + format_g(spec.range_nm.lo) +
                            ") x 16 bytes; use a table (table: {size: 256}) or raise max_bundle_mb");
     return bytes / kMB;
   }
@@ -95,9 +90,9 @@ double check_bundle_budget(const DiffractionSpec& spec, const Field& f, const Pl
   const double bytes = term_bytes(spec, terms, static_cast<double>(n) * n);
   if (bytes > budget)
     throw InputError(spec.budget_at,
-                     "the planned bundle is " + num(bytes / kMB) + " MB, above max_bundle_mb = " +
-                         num(spec.max_bundle_mb) + ": " + std::to_string(p.total_terms) + " terms (tolerance " +
-                         num(spec.tolerance) + ", y_max " + num(p.y_max) + ") x table " + std::to_string(n) + " x " +
+                     "the planned bundle is " + format_g(bytes / kMB) + " MB, above max_bundle_mb = " +
+                         format_g(spec.max_bundle_mb) + ": " + std::to_string(p.total_terms) + " terms (tolerance " +
+                         format_g(spec.tolerance) + ", y_max " + format_g(p.y_max) + ") x table " + std::to_string(n) + " x " +
                          std::to_string(n) + (spec.table->size ? "" : " (the smallest of size: auto)") +
                          " x 16 bytes; lower table.size, loosen tolerance or raise max_bundle_mb");
   return bytes / kMB;
@@ -136,7 +131,7 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
     const auto sizes = candidate_sizes(spec, p.total_terms);
     if (sizes.empty())
       throw JobError("table: auto: " + std::to_string(p.total_terms) + " terms leave no table size of the ladder within " +
-                     "max_bundle_mb = " + num(spec.max_bundle_mb));
+                     "max_bundle_mb = " + format_g(spec.max_bundle_mb));
     const auto kappas = measurement_kappas(p);
     for (std::size_t k = 0; k < sizes.size(); ++k) {
       g = table_geometry(spec, sizes[k]);
@@ -161,16 +156,16 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   }
   if (!spec.table->size && err.between_max > spec.table->tolerance)
     throw JobError("table: size: auto: no size of the ladder up to " + std::to_string(g.size) +
-                   " meets table.tolerance " + num(spec.table->tolerance) + " between texels (largest: " +
-                   num(err.between_max) + " x the window's sum at kappa = " + num(err.between_at_kappa) +
+                   " meets table.tolerance " + format_g(spec.table->tolerance) + " between texels (largest: " +
+                   format_g(err.between_max) + " x the window's sum at kappa = " + format_g(err.between_at_kappa) +
                    "); use mapping: power, a shorter coherence length, or a looser table.tolerance");
   if (err.texel_max > spec.tolerance)
-    r.warnings.push_back("THE TABLE'S TEXELS DO NOT MEET THE TOLERANCE: measured " + num(err.texel_max) +
-                         " x the window's sum at kappa = " + num(err.texel_at_kappa) + " rad/um, tolerance " +
-                         num(spec.tolerance));
+    r.warnings.push_back("THE TABLE'S TEXELS DO NOT MEET THE TOLERANCE: measured " + format_g(err.texel_max) +
+                         " x the window's sum at kappa = " + format_g(err.texel_at_kappa) + " rad/um, tolerance " +
+                         format_g(spec.tolerance));
   if (spec.table->size && err.between_max > spec.table->tolerance)
-    r.warnings.push_back("the fixed table size " + std::to_string(g.size) + " gives " + num(err.between_max) +
-                         " x the window's sum between texels, above table.tolerance " + num(spec.table->tolerance));
+    r.warnings.push_back("the fixed table size " + std::to_string(g.size) + " gives " + format_g(err.between_max) +
+                         " x the window's sum between texels, above table.tolerance " + format_g(spec.table->tolerance));
   double min_energy = 1e300;
   for (double e : err.energy_ratio) min_energy = std::min(min_energy, e);
 
