@@ -99,6 +99,24 @@ TEST(AutoSearch, AFloorStopsTheSearch) {
   EXPECT_LT(out.best.error, 0.5 * 1.05);  // it refined until the gains fell under 1 %
 }
 
+// Within the measurement's own uncertainty no gain can be told from noise: the search stops
+// there (the atmosphere's truth at twilight), instead of refining on noise.
+TEST(AutoSearch, StopsAtTheMeasurementsResolution) {
+  Model m;
+  int evaluations = 0;
+  auto out = greedy_search<S, int>(
+      S{2, 2, 2}, doubling(), [&](const S& s) { return m.cost(s); },
+      [&](const S& s, const std::string&) {
+        ++evaluations;
+        return std::pair<double, int>{m.error(s), 0};
+      },
+      [](const S& s) { return json(s); }, 1e-6, 1e18, [](const int&) { return 0.1; });
+  EXPECT_FALSE(out.met);
+  EXPECT_NE(out.stop.find("own uncertainty (0.1)"), std::string::npos) << out.stop;
+  EXPECT_LE(out.best.error, 0.1);
+  EXPECT_GT(out.best.error, 0.1 / 4);  // it stopped at the first step under 0.1, not later
+}
+
 // A refinement that first makes things worse (8 wavelengths against rgb) is crossed by applying it
 // twice; one beyond the cost cap is not tried.
 TEST(AutoSearch, PlateausAndCaps) {

@@ -82,6 +82,14 @@ void start_sizes(AtmosphereSpec& s) {
   s.scattering_nu = half(d.scattering_nu, false);
 }
 
+// ", the truth's own p99 standard error X ΔE": a floor no bake goes under at the scene's points.
+std::string truth_noise(const SceneCheck& c) {
+  const json& d = c.record.details;
+  if (!d.contains("standard_error") || !d["standard_error"].contains("de2000")) return "";
+  return "; the truth's own p99 standard error is " + format_g(d["standard_error"]["de2000"].value("p99", 0.0)) +
+         " CIEDE2000 (lower scene.relative_se, or leave the twilight out of the scene, when it is comparable)";
+}
+
 double p99_of(const SceneCheck& c, const char* part) {
   const json& d = c.record.details;
   if (!d.contains("parts") || !d["parts"].contains(part)) return std::nan("");
@@ -160,7 +168,11 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
       };
   auto found = greedy_search<AtmosphereSpec, Payload>(
       start, steps, [](const AtmosphereSpec& s) { return predicted_bake_seconds(s); }, evaluate,
-      [](const AtmosphereSpec& s) { return settings_json(s); }, tolerance, cost_cap);
+      [](const AtmosphereSpec& s) { return settings_json(s); }, tolerance, cost_cap, [&](const Payload& p) {
+        // the truth's own p99 standard error, in the judged measure
+        const json& se = p.check.record.details["standard_error"];
+        return spec.scene.tolerance_relative ? se["relative"].value("p99", 0.0) : se["de2000"].value("p99", 0.0);
+      });
   for (std::size_t i = 0; i < found.tries.size() && i < measured.size(); ++i) found.tries[i].update(measured[i]);
   AutoSearch out;
   out.met = found.met;
@@ -181,7 +193,7 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                   (spec.auto_sizes && spec.auto_spectrum ? " and spectrum" : "") + ": auto did not meet the scene's tolerance " +
                   format_g(tolerance) + ": " + stop + "; the best of " + std::to_string(tries) +
                   " tries reached " + format_g(out.check.record.value) + " (" + out.check.record.unit + ")" +
-                  (largest.empty() ? "" : ", its largest cause " + largest) +
+                  (largest.empty() ? "" : ", its largest cause " + largest) + truth_noise(out.check) +
                   " (-v logs every try; a sweep or a bake with the error's cause fixed shows the rest)";
   }
   std::vector<std::string> searched;
@@ -195,7 +207,8 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                "channel count of rgb, 8, 12, 16, 24, 32, 48) and keep the one that lowers the judged error most per "
                "second of predicted bake time (a gain under 1 % does not count; on a plateau each refinement is "
                "tried applied twice, then three times); stop when the tolerance is met, when nothing lowers the "
-               "error, after 16 steps, or beyond 16x the default sizes' predicted time"},
+               "error, when the error is within the truth's own p99 standard error, after 16 steps, or beyond 16x "
+               "the default sizes' predicted time"},
       {"start", settings_json(start)},
       {"tries", tries_j},
       {"chosen", settings_json(out.resolved)},

@@ -12,7 +12,8 @@
 // lowers the error by less than kMinGain of it does not count. When none lowers it, each is
 // tried applied twice, then three times (a plateau: 8 wavelengths can be
 // worse than rgb). The search ends when the tolerance is met, when nothing lowers the error
-// (the rest is another cause: orders, the truth's noise), or at kMaxSearchSteps /
+// (the rest is another cause: orders), when the error is within the truth's own p99 standard
+// error (no gain can be measured there: twilight at the walk cap), or at kMaxSearchSteps /
 // kMaxCostFactor × the default sizes' cost. The truth is traced once (Memo); each try costs one bake and the lookups.
 // The chosen settings are then judged at an independent point set of the same scene (held out).
 #include <algorithm>
@@ -24,6 +25,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/text.hpp"
 #include "job/kind.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/scene_check.hpp"
@@ -39,7 +41,9 @@ inline constexpr int kSpectrumLadder[] = {8, 12, 16, 24, 32, 48};  // wavelength
 
 // The greedy search on its own, over any settings type (tests drive it with synthetic errors).
 // `evaluate` bakes and judges a state (its error and a payload kept for the best state and the
-// step's best candidate only); `cost` predicts what a state costs; `describe` records a state.
+// step's best candidate only); `cost` predicts what a state costs; `describe` records a state;
+// `resolution` (optional) is the measurement's own uncertainty at a state: the search stops
+// when the error is within it.
 template <class State>
 struct Refinement {
   std::string name;
@@ -66,7 +70,8 @@ SearchOutcome<State, Payload> greedy_search(
     const State& start, const std::vector<Refinement<State>>& refinements,
     const std::function<double(const State&)>& cost,
     const std::function<std::pair<double, Payload>(const State&, const std::string& label)>& evaluate,
-    const std::function<nlohmann::json(const State&)>& describe, double tolerance, double cost_cap) {
+    const std::function<nlohmann::json(const State&)>& describe, double tolerance, double cost_cap,
+    const std::function<double(const Payload&)>& resolution = {}) {
   SearchOutcome<State, Payload> out;
   auto run = [&](const State& s, const std::string& label, int step) {
     Evaluated<State, Payload> e{s, label, cost(s), 0.0, Payload{}};
@@ -82,6 +87,12 @@ SearchOutcome<State, Payload> greedy_search(
   for (int step = 1; !(out.best.error <= tolerance); ++step) {
     if (step > kMaxSearchSteps) {
       out.stop = "the search reached its " + std::to_string(kMaxSearchSteps) + " steps";
+      break;
+    }
+    // below what the measurement resolves, gains cannot be told from noise
+    if (resolution && out.best.error <= resolution(out.best.payload)) {
+      out.stop = "the error is within the measurement's own uncertainty (" + format_g(resolution(out.best.payload)) +
+                 "): no gain can be measured";
       break;
     }
     std::optional<Evaluated<State, Payload>> chosen;
