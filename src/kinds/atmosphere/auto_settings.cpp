@@ -87,7 +87,8 @@ std::string truth_noise(const SceneCheck& c) {
   const json& d = c.record.details;
   if (!d.contains("standard_error") || !d["standard_error"].contains("de2000")) return "";
   return "; the truth's own p99 standard error is " + format_g(d["standard_error"]["de2000"].value("p99", 0.0)) +
-         " CIEDE2000 (lower scene.relative_se, or leave the twilight out of the scene, when it is comparable)";
+         " CIEDE2000 (a lower scene.relative_se lowers it until the walk cap binds, as it does at twilight points;"
+         " a scene without twilight is judged finer)";
 }
 
 double p99_of(const SceneCheck& c, const char* part) {
@@ -172,6 +173,10 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
         // the truth's own p99 standard error, in the judged measure
         const json& se = p.check.record.details["standard_error"];
         return spec.scene.tolerance_relative ? se["relative"].value("p99", 0.0) : se["de2000"].value("p99", 0.0);
+      },
+      [](int step, const Evaluated<AtmosphereSpec, Payload>& kept) {
+        spdlog::info("atmosphere: auto step {}: refined {} -> error {} (predicted bake {:.1f} s)", step, kept.refined,
+                     format_g(kept.error), kept.cost);
       });
   for (std::size_t i = 0; i < found.tries.size() && i < measured.size(); ++i) found.tries[i].update(measured[i]);
   AutoSearch out;

@@ -43,7 +43,7 @@ inline constexpr int kSpectrumLadder[] = {8, 12, 16, 24, 32, 48};  // wavelength
 // `evaluate` bakes and judges a state (its error and a payload kept for the best state and the
 // step's best candidate only); `cost` predicts what a state costs; `describe` records a state;
 // `resolution` (optional) is the measurement's own uncertainty at a state: the search stops
-// when the error is within it.
+// when the error is within it; `on_step` (optional) hears of each refinement kept.
 template <class State>
 struct Refinement {
   std::string name;
@@ -71,7 +71,8 @@ SearchOutcome<State, Payload> greedy_search(
     const std::function<double(const State&)>& cost,
     const std::function<std::pair<double, Payload>(const State&, const std::string& label)>& evaluate,
     const std::function<nlohmann::json(const State&)>& describe, double tolerance, double cost_cap,
-    const std::function<double(const Payload&)>& resolution = {}) {
+    const std::function<double(const Payload&)>& resolution = {},
+    const std::function<void(int step, const Evaluated<State, Payload>& kept)>& on_step = {}) {
   SearchOutcome<State, Payload> out;
   auto run = [&](const State& s, const std::string& label, int step) {
     Evaluated<State, Payload> e{s, label, cost(s), 0.0, Payload{}};
@@ -118,6 +119,7 @@ SearchOutcome<State, Payload> greedy_search(
     }
     out.tries[chosen_try]["chosen"] = true;
     out.best = std::move(*chosen);
+    if (on_step) on_step(step, out.best);
   }
   out.met = out.best.error <= tolerance;
   return out;
