@@ -568,7 +568,8 @@ int main(int argc, char** argv) {
   sweep->add_option("--device", sweep_args.device, "OpenCL device (default: the config's, else auto)");
   sweep->add_option("--tolerance", sweep_args.tolerance,
                     "the tolerance drawn and judged (default: the job's own, where it has one)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::NonNegativeNumber)
+      ->default_str("the job's");
 
   auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
   inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")

@@ -252,6 +252,19 @@ TEST_F(Sweep, DiffractionAgainstTheExactTransform) {
   EXPECT_NE(r.out.find("terms  expansion"), std::string::npos) << r.out;
 }
 
+// With a table, the error is what a shader's filtered fetch reads (between texels), and a finer
+// table reads closer to the exact transform (bilinear error ~ texel width squared).
+TEST_F(Sweep, DiffractionTablesBetweenTexels) {
+  const fs::path c = cfg(config(kGrating));
+  const auto r = run({"sweep", c.string(), "--job", "grating", "--vary", "table.size=32,128", "--out", "sw"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  const json s = t::read_json(tmp_ / "sw" / "sweep.json");
+  ASSERT_EQ(s["points"].size(), 2u);
+  for (const auto& p : s["points"]) EXPECT_EQ(p["record"], "table_between_texels");
+  EXPECT_NE(s["points"][1]["settings"].get<std::string>().find("table 128^2"), std::string::npos);
+  EXPECT_LT(s["points"][1]["error"].get<double>(), 0.5 * s["points"][0]["error"].get<double>());
+}
+
 // Atmosphere: the path-traced scene is the truth; a percentage of a job's own sizes scales them.
 TEST_F(Sweep, AtmosphereAgainstThePathTracedScene) {
   const fs::path c = cfg(config(kSky));

@@ -28,11 +28,13 @@ Kind kind() {
     return MemoryEstimate{4 * field + 2 * field, 2 * field, w * h * (8 + 2 * 16) + 6 * field + (std::uint64_t{1} << 26)};
   };
   k.programs = {kProgram};
-  k.truth_records = {"vs_exact_transform", "table_vs_exact_transform"};
+  // with a table, what a shader's filtered fetch reads: the error between texels
+  k.truth_records = {"vs_exact_transform", "table_between_texels"};
   k.describe = [](const nlohmann::json& p) {
     std::string s = std::to_string(p.value("terms", 0)) + " " + p.value("expansion", "?") + " terms";
     if (p.contains("field"))
       s += ", field " + std::to_string(p["field"].value("width", 0)) + "x" + std::to_string(p["field"].value("height", 0));
+    if (p.contains("table_size")) s += ", table " + p["table_size"].dump() + "^2";
     if (p.contains("bins") && p["bins"].contains("ku"))
       s += ", bins " + p["bins"]["ku"].dump() + " x " + p["bins"]["kv"].dump();
     return s;
