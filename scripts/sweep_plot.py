@@ -2,7 +2,7 @@
 """Draws a specbake sweep: error against bake time on log axes (sweep_plot.py SWEEP.json OUT.png).
 
 `specbake sweep` writes this script next to sweep.json and runs it; run it again to redraw.
-One marker per measured point, labelled with its --vary values; the Pareto front (no other point
+One marker per measured point, labelled with its --vary values (in the title's key order); the Pareto front (no other point
 is both faster and more accurate) in red and joined, the other points in blue; the tolerance,
 when there is one, as a dashed green line. Failed points are listed under the axes.
 The figure is 1200 x 825 pixels (8 x 5.5 in at 150 dpi).
@@ -20,10 +20,8 @@ WIDTH_IN, HEIGHT_IN, DPI = 8.0, 5.5, 150
 
 
 def label(point, keys):
-    values = point["values"]
-    if len(keys) == 1:
-        return str(values[keys[0]])
-    return " ".join(f"{k}={values[k]}" for k in keys)
+    """The point's values in the order of the title's keys ("7, chebyshev")."""
+    return ", ".join(str(point["values"][k]) for k in keys)
 
 
 def main(src, dst):
@@ -57,8 +55,9 @@ def main(src, dst):
     record = measured[0]["record"] if measured else "error"
     ax.set_xlabel("bake time without the check (s, wall)")
     metric = measured[0].get("metric", "") if measured else ""
-    ax.set_ylabel(f"{record}: " + (unit or metric)[:60])
-    ax.set_title(f"{sweep['job']} ({sweep['kind']}): " + ", ".join(keys), fontsize=10)
+    ax.set_ylabel(record + (f" ({unit})" if unit else ""))
+    ax.set_title(f"{sweep['job']} ({sweep['kind']}): points labelled " + ", ".join(keys) +
+                 (f"\n{record}: {metric[:110]}" if metric else ""), fontsize=9)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7, loc="best")
     if failed:
