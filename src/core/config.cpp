@@ -260,7 +260,7 @@ Config parse_config(const YAML::Node& root, const fs::path& file, const std::vec
   return cfg;
 }
 
-Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds, std::vector<InputError>* job_errors) {
+YAML::Node load_yaml(const fs::path& file) {
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) throw IoError("cannot read config " + file.string() + ": not a file");
   if (fs::file_size(file, ec) > kMaxConfigBytes)
@@ -269,7 +269,11 @@ Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds, s
   if (!in) throw IoError("cannot read config " + file.string());
   std::stringstream ss;
   ss << in.rdbuf();
-  return parse_config(ss.str(), file, kinds, job_errors);
+  return parse_yaml(ss.str(), file);
+}
+
+Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds, std::vector<InputError>* job_errors) {
+  return parse_config(load_yaml(file), file, kinds, job_errors);
 }
 
 }  // namespace specbake

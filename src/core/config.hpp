@@ -75,6 +75,8 @@ Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds,
 // reading (`specbake sweep` sets keys) is validated like a file; keys it added carry no
 // line, so their errors name the key path alone.
 YAML::Node parse_yaml(const std::string& text, const fs::path& file_for_messages);
+// A config file read and parsed into a tree (IoError when it cannot be read).
+YAML::Node load_yaml(const fs::path& file);
 Config parse_config(const YAML::Node& root, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds,
                     std::vector<InputError>* job_errors = nullptr);
 

@@ -269,16 +269,7 @@ std::string sweep_csv(const SweepResult& r) {
 
 SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
   const auto combos = sweep_combinations(o.varies);
-  std::string text;
-  {
-    std::error_code ec;
-    if (!fs::is_regular_file(o.config, ec)) throw IoError("cannot read config " + o.config.string() + ": not a file");
-    std::ifstream in(o.config, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    text = ss.str();
-  }
-  const YAML::Node root = parse_yaml(text, o.config);
+  const YAML::Node root = load_yaml(o.config);
   const Config base = parse_config(root, o.config);  // the config as written must be valid
   {
     YAML::Node copy = YAML::Clone(root);
@@ -323,14 +314,17 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
     }
   }
 
+  // every combination fits the device and the host before the first bake
+  const cl_util::DeviceInfo info = cl_util::select_device(o.device ? *o.device : base.device);
+  for (const auto& job : jobs) {
+    check_device_memory(job, info);
+    check_host_memory(job, kind.memory(job));
+  }
+  spdlog::info("sweep: {} ({} job), {} combination(s) on {}", o.job, kind.name, combos.size(), info.name);
+  cl_util::Device dev(info);
   std::error_code ec;
   fs::create_directories(res.out, ec);
   if (ec || !fs::is_directory(res.out)) throw IoError("cannot create the sweep folder " + res.out.string());
-
-  const cl_util::DeviceInfo info = cl_util::select_device(o.device ? *o.device : base.device);
-  spdlog::info("sweep: {} ({} job), {} combination(s) on {}", o.job, kind.name, combos.size(), info.name);
-  check_device_memory(jobs.back(), info);  // the largest is usually last; each is checked again below
-  cl_util::Device dev(info);
   Memo memo;  // e.g. the atmosphere's path-traced scene, traced once for every size
 
   auto write_files = [&] {
@@ -348,8 +342,6 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
     ev.count = static_cast<int>(jobs.size());
     ev.job = o.job + " [" + label + "]";
     try {
-      check_device_memory(job, info);
-      check_host_memory(job, kind.memory(job));
       // A bake shorter than kShortBake_s is repeated (while the repeats stay under kRepeatBudget_s)
       // and its fastest run kept: timer noise and kernel builds (a point's first bake builds its
       // programs, later points reuse them) would otherwise decide the order of short bakes.

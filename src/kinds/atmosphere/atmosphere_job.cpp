@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <optional>
 
 #include "core/text.hpp"
 #include "core/version.hpp"
@@ -376,11 +377,13 @@ void compute_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Ba
 }
 
 // sizes: auto / spectrum: auto: the search's bakes are the compute step; the chosen one is kept.
-AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b) {
+AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b,
+                           std::optional<SceneCheck>& checked) {
   ctx.enter(Stage::compute);
   AutoSearch found = search_settings(
       spec, ctx.device, [&](std::string_view what, double f) { ctx.progress(what, f * kComputeShare); }, *ctx.memo);
   b = std::move(found.baked);
+  checked = std::move(found.check);  // the search judged its choice already
   const AtmosphereSpec& use = found.resolved;
   const json auto_record = found.record;
   r.parameters = parameters_json(use);
@@ -411,7 +414,9 @@ void held_out_step(const AtmosphereSpec& use, const Baked& b, JobContext& ctx, B
   r.accuracy.insert(r.accuracy.begin() + 1, a);
 }
 
-void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
+// `checked`: the scene check already made of these LUTs (an auto search's), not made again.
+void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r,
+                std::optional<SceneCheck> checked = std::nullopt) {
   ctx.enter(Stage::check);
   r.accuracy.push_back(Accuracy::judged(
       "self_check", "max relative error |device - reference| / (|reference| + 1e-3 * channel max)",
@@ -429,9 +434,10 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   }
   if (!spec.scene.check) return;
   // the error in the user's scene: the LUTs against the path-traced truth at the scene's points
-  SceneCheck sc = check_scene(spec, b.luts, b.orders_used, ctx.device, [&](std::string_view what, double f) {
-    ctx.progress(what, kComputeShare + (kSceneCheckEnd - kComputeShare) * f);
-  }, ctx.memo);
+  SceneCheck sc = checked ? std::move(*checked)
+                          : check_scene(spec, b.luts, b.orders_used, ctx.device, [&](std::string_view what, double f) {
+                              ctx.progress(what, kComputeShare + (kSceneCheckEnd - kComputeShare) * f);
+                            }, ctx.memo);
   r.accuracy.insert(r.accuracy.begin(), sc.record);  // the headline: the error the user sees
   r.files.push_back(std::move(sc.points_csv));
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
@@ -616,8 +622,9 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx) {
   } restore{ctx, given};
   Baked b;
   if (spec.auto_sizes || spec.auto_spectrum) {
-    const AtmosphereSpec use = search_step(spec, ctx, r, b);
-    check_step(use, b, ctx, r);
+    std::optional<SceneCheck> checked;
+    const AtmosphereSpec use = search_step(spec, ctx, r, b, checked);
+    check_step(use, b, ctx, r, std::move(checked));
     held_out_step(use, b, ctx, r);
     files_step(use, b, ctx, r);
   } else {

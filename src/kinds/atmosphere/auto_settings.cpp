@@ -19,21 +19,10 @@ using nlohmann::json;
 
 namespace {
 
-constexpr int kMaxAxis = 4096;
-constexpr long long kMaxScatteringTexels = 1LL << 26;
-
 int finer(int v, bool even) {
   int f = static_cast<int>(std::ceil(v * kRefineFactor));
   if (even) f += f % 2;
   return std::max(f, v + (even ? 2 : 1));
-}
-
-bool within_limits(const AtmosphereSpec& s) {
-  for (int v : {s.transmittance_mu, s.transmittance_r, s.irradiance_mu_s, s.irradiance_r, s.scattering_r,
-                s.scattering_mu, s.scattering_mu_s, s.scattering_nu})
-    if (v > kMaxAxis) return false;
-  return s.scattering_nu <= ATMOSPHERE_NU_LIMIT &&
-         1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu <= kMaxScatteringTexels;
 }
 
 std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) {
@@ -41,7 +30,7 @@ std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) 
   auto axis = [&](const char* name, std::vector<int AtmosphereSpec::*> fields, bool even) {
     out.push_back({name, [fields, even](AtmosphereSpec& s) {
                      for (auto f : fields) s.*f = finer(s.*f, even && f == &AtmosphereSpec::scattering_mu);
-                     return within_limits(s);
+                     return sizes_within_limits(s);
                    }});
   };
   if (spec.auto_sizes) {
@@ -68,19 +57,6 @@ std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) 
   return out;
 }
 
-// Half the default sizes (mu even, at least 2 texels an axis).
-void start_sizes(AtmosphereSpec& s) {
-  const AtmosphereSpec d;
-  auto half = [](int v, bool even) { return even ? std::max(2, 2 * ((v / 2 + 1) / 2)) : std::max(2, (v + 1) / 2); };
-  s.transmittance_mu = half(d.transmittance_mu, false);
-  s.transmittance_r = half(d.transmittance_r, false);
-  s.irradiance_mu_s = half(d.irradiance_mu_s, false);
-  s.irradiance_r = half(d.irradiance_r, false);
-  s.scattering_r = half(d.scattering_r, false);
-  s.scattering_mu = half(d.scattering_mu, true);
-  s.scattering_mu_s = half(d.scattering_mu_s, false);
-  s.scattering_nu = half(d.scattering_nu, false);
-}
 
 // ", the truth's own p99 standard error X ΔE": a floor no bake goes under at the scene's points.
 std::string truth_noise(const SceneCheck& c) {
@@ -116,7 +92,10 @@ json settings_json(const AtmosphereSpec& s) {
 AtmosphereSpec search_start(const AtmosphereSpec& spec) {
   AtmosphereSpec start = spec;
   start.auto_sizes = start.auto_spectrum = false;
-  if (spec.auto_sizes) start_sizes(start);
+  if (spec.auto_sizes) {  // half the default sizes
+    for (auto axis : kSizeAxes) start.*axis = AtmosphereSpec{}.*axis;
+    scale_sizes(start, 0.5);
+  }
   if (spec.auto_spectrum) start.spectral = false;
   return start;
 }
@@ -125,16 +104,9 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
   const AtmosphereSpec start = search_start(spec);
   const std::vector<Refinement<AtmosphereSpec>> steps = refinements(spec);
   const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
-  AtmosphereSpec defaults = start;
-  {
-    const AtmosphereSpec d;
-    if (spec.auto_sizes) {
-      defaults.transmittance_mu = d.transmittance_mu, defaults.transmittance_r = d.transmittance_r;
-      defaults.irradiance_mu_s = d.irradiance_mu_s, defaults.irradiance_r = d.irradiance_r;
-      defaults.scattering_r = d.scattering_r, defaults.scattering_mu = d.scattering_mu;
-      defaults.scattering_mu_s = d.scattering_mu_s, defaults.scattering_nu = d.scattering_nu;
-    }
-  }
+  AtmosphereSpec defaults = start;  // the comparison: the default sizes (or the given ones)
+  if (spec.auto_sizes)
+    for (auto axis : kSizeAxes) defaults.*axis = AtmosphereSpec{}.*axis;
   const double cost_cap = kMaxCostFactor * predicted_bake_seconds(defaults);
 
   struct Payload {
@@ -221,14 +193,9 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
       {"met", out.met},
       {"compared_predicted_s", {{"default_sizes", predicted_bake_seconds(defaults)},
                                 {"sizes_200_percent", [&] {
-                                   AtmosphereSpec d2 = defaults;
-                                   for (int AtmosphereSpec::*f :
-                                        {&AtmosphereSpec::transmittance_mu, &AtmosphereSpec::transmittance_r,
-                                         &AtmosphereSpec::irradiance_mu_s, &AtmosphereSpec::irradiance_r,
-                                         &AtmosphereSpec::scattering_r, &AtmosphereSpec::scattering_mu,
-                                         &AtmosphereSpec::scattering_mu_s, &AtmosphereSpec::scattering_nu})
-                                     d2.*f *= 2;
-                                   return predicted_bake_seconds(d2);
+                                   AtmosphereSpec twice = defaults;
+                                   scale_sizes(twice, 2.0);
+                                   return predicted_bake_seconds(twice);
                                  }()}}}};
   if (!stop.empty()) out.record["stopped"] = stop;
   return out;

@@ -18,8 +18,7 @@ namespace {
 using nlohmann::json;
 using yaml::At;
 
-constexpr int kMaxAxis = 4096;
-constexpr long long kMaxScatteringTexels = 1LL << 26;
+constexpr int kMaxAxis = kMaxAtmosphereAxis;
 constexpr int kMaxNu = ATMOSPHERE_NU_LIMIT;
 
 int size_at(const At& at) {
@@ -38,21 +37,11 @@ double percent_at(const At& at) {
   return std::stod(m[1]) / 100.0;
 }
 
-// Every axis times `f`, rounded (mu to an even count), at least 2; checked like given sizes.
-void scale_sizes(const At& at, double f, AtmosphereSpec& s) {
-  auto scaled = [&](int& v, bool even) {
-    const double x = v * f;
-    v = even ? 2 * std::max(1, static_cast<int>(std::lround(x / 2.0))) : std::max(2, static_cast<int>(std::lround(x)));
-    if (v > kMaxAxis) at.fail("the scaled sizes exceed " + std::to_string(kMaxAxis) + " texels on an axis");
-  };
-  scaled(s.transmittance_mu, false);
-  scaled(s.transmittance_r, false);
-  scaled(s.irradiance_mu_s, false);
-  scaled(s.irradiance_r, false);
-  scaled(s.scattering_r, false);
-  scaled(s.scattering_mu, true);
-  scaled(s.scattering_mu_s, false);
-  scaled(s.scattering_nu, false);
+// Every axis times `f` (scale_sizes), checked like given sizes.
+void scale_sizes_at(const At& at, double f, AtmosphereSpec& s) {
+  scale_sizes(s, f);
+  for (auto axis : kSizeAxes)
+    if (s.*axis > kMaxAxis) at.fail("the scaled sizes exceed " + std::to_string(kMaxAxis) + " texels on an axis");
   if (s.scattering_nu > kMaxNu)
     at.fail("the scaled nu size " + std::to_string(s.scattering_nu) + " exceeds " + std::to_string(kMaxNu) +
             "; give scattering.nu explicitly");
@@ -66,7 +55,7 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
     return;
   }
   if (at.node.IsScalar()) {  // `sizes: 150%`: the default sizes scaled
-    scale_sizes(at, percent_at(at), s);
+    scale_sizes_at(at, percent_at(at), s);
     return;
   }
   at.expect_map("texture sizes: auto, a percentage of the defaults (e.g. 150%) or {scale, transmittance: [mu, r], "
@@ -103,7 +92,7 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
       sc.fail("expected at most " + std::to_string(kMaxScatteringTexels) + " scattering texels, got " +
               std::to_string(texels));
   }
-  if (at.has("scale")) scale_sizes(at.child("scale"), percent_at(at.child("scale")), s);  // given or default, scaled
+  if (at.has("scale")) scale_sizes_at(at.child("scale"), percent_at(at.child("scale")), s);  // given or default, scaled
 }
 
 std::string shown_number(double v) {
@@ -194,6 +183,21 @@ void parse_list(const At& at, const char* what, F&& on_item) {
 }
 
 }  // namespace
+
+void scale_sizes(AtmosphereSpec& s, double f) {
+  for (auto axis : kSizeAxes) {
+    const double x = s.*axis * f;
+    s.*axis = axis == &AtmosphereSpec::scattering_mu ? 2 * std::max(1, static_cast<int>(std::lround(x / 2.0)))
+                                                     : std::max(2, static_cast<int>(std::lround(x)));
+  }
+}
+
+bool sizes_within_limits(const AtmosphereSpec& s) {
+  for (auto axis : kSizeAxes)
+    if (s.*axis > kMaxAxis) return false;
+  return s.scattering_nu <= kMaxNu &&
+         1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu <= kMaxScatteringTexels;
+}
 
 AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   job.allow_keys({"name", "kind", "preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",

@@ -51,7 +51,23 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool auto_sizes = false, auto_spectrum = false;
 };
 
+// Texture size limits (config errors name them; searches stay inside them).
+inline constexpr int kMaxAtmosphereAxis = 4096;
+inline constexpr long long kMaxScatteringTexels = 1LL << 26;
+
 namespace atmosphere {
+// Every texture axis of a spec: transmittance [mu, r], irradiance [mu_s, r], scattering r, mu,
+// mu_s, nu (the scattering mu count stays even).
+inline constexpr int AtmosphereSpec::*const kSizeAxes[] = {
+    &AtmosphereSpec::transmittance_mu, &AtmosphereSpec::transmittance_r, &AtmosphereSpec::irradiance_mu_s,
+    &AtmosphereSpec::irradiance_r,     &AtmosphereSpec::scattering_r,    &AtmosphereSpec::scattering_mu,
+    &AtmosphereSpec::scattering_mu_s,  &AtmosphereSpec::scattering_nu};
+// Every axis times f, rounded (mu to an even count), at least 2; no limit checked.
+void scale_sizes(AtmosphereSpec& s, double f);
+// Each axis at most kMaxAtmosphereAxis, nu at most ATMOSPHERE_NU_LIMIT, the scattering texture at
+// most kMaxScatteringTexels.
+bool sizes_within_limits(const AtmosphereSpec& s);
+
 // Reads a `kind: atmosphere` job entry: Bruneton's demo Earth with the entry's overrides.
 AtmosphereSpec parse_spec(const yaml::At& job, nlohmann::json& norm, Inputs& inputs);
 }  // namespace atmosphere
