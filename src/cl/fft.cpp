@@ -32,7 +32,7 @@ Fft2d::Fft2d(Device& dev, std::size_t width, std::size_t height, std::size_t bat
     throw DeviceError("FFT plan: allocating " + std::to_string(impl_->buffer_bytes) + " bytes failed with " +
                       error_name(err));
   VkFFTConfiguration config{};
-  config.FFTdim = 2;
+  config.FFTdim = height == 1 ? 1 : 2;  // height 1: batched 1D transforms of the rows
   config.size[0] = width;
   config.size[1] = height;
   config.numberBatches = batch;
@@ -86,6 +86,25 @@ Fft2d& shared_fft(Device& dev, std::size_t width, std::size_t height, std::size_
   const std::string key = "fft2d:" + std::to_string(width) + "x" + std::to_string(height) + "x" +
                           std::to_string(batch) + (precision == FftPrecision::single ? ":f32" : ":f64");
   return dev.reusable<Fft2d>(key, [&] { return std::make_unique<Fft2d>(dev, width, height, batch, precision); });
+}
+
+void fft_rows(Device& dev, std::vector<float>& data, std::size_t n, std::size_t count) {
+  if (count == 0) return;
+  constexpr std::size_t kBatch = 64;
+  const std::size_t batch = std::min(count, kBatch);
+  Fft2d& fft = shared_fft(dev, n, 1, batch, FftPrecision::single);
+  const std::size_t groups = (count + batch - 1) / batch, array_bytes = n * 2 * sizeof(float);
+  cl::Buffer buf = checked("FFT rows: buffer", [&] {
+    return cl::Buffer(dev.context(), CL_MEM_READ_WRITE, groups * batch * array_bytes);
+  });
+  checked("FFT rows: upload", [&] {
+    if (groups * batch > count)
+      dev.queue().enqueueFillBuffer(buf, 0.0f, count * array_bytes, (groups * batch - count) * array_bytes);
+    return dev.queue().enqueueWriteBuffer(buf, CL_TRUE, 0, count * array_bytes, data.data());
+  });
+  for (std::size_t g = 0; g < groups; ++g) fft.forward(buf, g * batch);
+  checked("FFT rows: download",
+          [&] { return dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, count * array_bytes, data.data()); });
 }
 
 }  // namespace specbake::cl_util

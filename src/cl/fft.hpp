@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <vector>
 
 #include "cl/device.hpp"
 
@@ -42,5 +43,10 @@ class Fft2d {
 // The plan for (width, height, batch, precision) on `dev`, built on first use and reused by
 // later jobs in the process (a 1024² plan takes ~0.08 s to build on PoCL).
 Fft2d& shared_fft(Device& dev, std::size_t width, std::size_t height, std::size_t batch, FftPrecision precision);
+
+// Forward FFTs of `count` consecutive length-n complex arrays (interleaved float re, im, as the
+// 2D transform's sign), in place, on the device in float32: batches of up to 64 rows share one
+// plan (a Fft2d of height 1). The caller's vector holds count·n·2 floats.
+void fft_rows(Device& dev, std::vector<float>& data, std::size_t n, std::size_t count);
 
 }  // namespace specbake::cl_util

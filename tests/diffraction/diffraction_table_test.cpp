@@ -122,6 +122,66 @@ TEST(DiffractionTable, SymmetricAndAsymmetricFieldsMatchDirectSums) {
   }
 }
 
+// The job's FFT path against the direct double sums, term by term, for every table size at once.
+// Its error is float32 rounding of the inputs and of the FFTs: per output at most
+// u·(log2 n_x + log2 n_y + 2) (u = 2^-24, the standard FFT bound with unit-roundoff inputs)
+// times Σ_j |a_j| with a_j the deconvolved inputs — at most 1/φ̂_min ≈ 3.4× Σ_j w_j|q_n(h_j)|
+// for R = 1.5 — plus the gridding's aliasing (about 1e-8 relative) and the samples the window
+// floor leaves out (at most their weight times max|q_n|). The tolerance is that bound:
+// 4u·(log2 n_x + log2 n_y + 2)·Σ_j w_j|q_n(h_j)|/(W·H) + dropped·Σw·max|q_n|/(W·H), 4 covering
+// 1/φ̂_min and the aliasing.
+void expect_fft_matches_direct(const DiffractionSpec& spec, const std::vector<int>& sizes, const char* what) {
+  const Field f = make_field(spec);
+  const Plan p = make_plan(spec, f, spec.tolerance);
+  const Window w = make_window(f, coherence_length_um(spec) / std::sqrt(2.0));
+  std::vector<TableGeometry> geoms;
+  for (int n : sizes) geoms.push_back(table_geometry(spec, n));
+  const auto fft = table_terms_fft(tst::shared_device(), f, w, p.bands, geoms);
+  const auto pad = [](int m) { return std::log2(3.0 * m); };  // n ≤ 2·(1.5m) after rounding up to a smooth length
+  const double u = std::ldexp(1.0, -24), logs = pad(f.width) + pad(f.height) + 2.0;
+  for (std::size_t k = 0; k < sizes.size(); ++k) {
+    const auto direct = table_terms(f, w, p.bands, geoms[k]);
+    ASSERT_EQ(direct.size(), fft[k].size());
+    const std::size_t per = static_cast<std::size_t>(sizes[k]) * sizes[k];
+    for (const auto& band : p.bands) {
+      const auto q = reference_inputs(f, band, 0, band.terms);
+      for (int t = 0; t < band.terms; ++t) {
+        double mass = 0, q_max = 0;
+        for (int iy = 0; iy < f.height; ++iy)
+          for (int ix = 0; ix < f.width; ++ix) {
+            const std::size_t j = static_cast<std::size_t>(iy) * f.width + ix;
+            mass += w.wx[ix] * w.wy[iy] * std::abs(q[t * f.count() + j]);
+            q_max = std::max(q_max, std::abs(q[t * f.count() + j]));
+          }
+        const double tol =
+            (4.0 * u * logs * mass + dropped_window_fraction(w) * w.sum * q_max) / static_cast<double>(f.count());
+        double worst = 0;
+        for (std::size_t i = 0; i < per; ++i) {
+          const std::size_t at = (band.first_term + t) * per + i;
+          worst = std::max(worst, std::abs(fft[k][at] - direct[at]));
+        }
+        EXPECT_LE(worst, tol) << what << ": size " << sizes[k] << " term " << band.first_term + t;
+        EXPECT_GT(worst, 0.0) << what << ": the FFT path must not be the direct sums";
+      }
+    }
+  }
+}
+
+TEST(DiffractionTable, FftPathMatchesDirectSums) {
+  // Asymmetric (sawtooth) field, the window inside the patch (samples cropped), power mapping,
+  // two sizes from one pass.
+  auto blazed = grating(ProceduralField::Type::blazed_grating, 192, 0.125, 0.75, 0.3, 16, 3.0, 2.0);
+  ASSERT_GT(dropped_window_fraction(make_window(make_field(blazed), 2.0 / std::sqrt(2.0))), 0.0) << "crops nothing";
+  expect_fft_matches_direct(blazed, {16, 24}, "blazed, cropped window");
+  // f_max beyond the sampling's Nyquist frequency 1/(2dx) = 2: the transform's periodic images.
+  auto coarse = grating(ProceduralField::Type::eggcrate, 20, 0.25, 1.0, 0.3, 12, 1.0, 1e6);
+  coarse.table->f_max_per_um = 3.5;
+  expect_fft_matches_direct(coarse, {12}, "beyond Nyquist");
+  // Tall field across bands (y_max ≈ 40).
+  expect_fft_matches_direct(grating(ProceduralField::Type::sine_grating, 20, 0.1, 0.4, 1.21, 12, 1.0, 1.5), {12},
+                            "tall field");
+}
+
 TEST(DiffractionTable, TallFieldAcrossBands) {
   // y_max = κ_hi·s ≈ 40: amplitude 1.21 µm, κ_hi = 2π·2/0.38 µm.
   const auto spec = grating(ProceduralField::Type::sine_grating, 20, 0.1, 0.4, 1.21, 12, 1.0, 1.5);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "cl/fft.hpp"
 #include "core/parallel.hpp"
 #include "kinds/diffraction/reference.hpp"
 #include "kinds/diffraction/terms.hpp"
@@ -164,6 +165,219 @@ std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector
   return out;
 }
 
+// ---- table terms by a separable non-uniform FFT (type 2, Kaiser–Bessel gridding) ----------
+//
+// One axis, samples a_l (l = 0 … L−1) at y_l = l − c sample spacings from the patch centre, a
+// target t = f·dx cycles per sample: with φ the Kaiser–Bessel kernel of width w grid points,
+//   φ(ξ) = I₀(β·√(1 − (2ξ/w)²)),  |ξ| ≤ w/2,      φ̂(ν) = w·sinh(√(β² − (πwν)²))/√(β² − (πwν)²),
+// Poisson summation over the grid k/n gives
+//   Σ_l a_l e^{−2πi t y_l} = Σ_k φ(n t − k)·e^{2πi k c/n}·B[k mod n],   B = FFT_n(a_l / φ̂(y_l/n)),
+// up to the aliased images φ̂((y + m n)/n)/φ̂(y/n), m ≠ 0: about 1e-8 for n ≥ 1.5·L, w = 10 and
+// β = π·√((w/R)²(R − ½)² − 0.8) with R = 1.5 (Beatty, Nishimura & Pauly 2005), below the
+// float32 FFT's rounding. The t are any
+// frequencies (beyond the sampling's Nyquist too: B is periodic, the phase is not).
+namespace {
+
+constexpr int kKernelWidth = 10;
+constexpr double kOversampling = 1.5;
+
+double kb_beta() {
+  const double w = kKernelWidth, r = kOversampling;
+  return kPi * std::sqrt(w * w / (r * r) * (r - 0.5) * (r - 0.5) - 0.8);
+}
+double kb(double xi, double beta) {
+  const double z = 2.0 * xi / kKernelWidth;
+  return std::fabs(z) > 1.0 ? 0.0 : std::cyl_bessel_i(0.0, beta * std::sqrt(1.0 - z * z));
+}
+double kb_hat(double nu, double beta) {
+  const double a = kPi * kKernelWidth * nu, z2 = beta * beta - a * a;
+  if (z2 > 0) return kKernelWidth * std::sinh(std::sqrt(z2)) / std::sqrt(z2);
+  if (z2 < 0) return kKernelWidth * std::sin(std::sqrt(-z2)) / std::sqrt(-z2);
+  return kKernelWidth;
+}
+
+// The smallest n ≥ m whose prime factors are 2, 3, 5, 7 (VkFFT's radix kernels, no Bluestein).
+int smooth_length(int m) {
+  for (int n = std::max(m, 1);; ++n) {
+    int r = n;
+    for (int p : {2, 3, 5, 7})
+      while (r % p == 0) r /= p;
+    if (r == 1) return n;
+  }
+}
+
+// The first kept sample of an axis (the window is symmetric: the kept range is centred).
+int first_kept(const std::vector<double>& window) {
+  const int m = static_cast<int>(window.size());
+  int lo = 0;
+  while (lo < m / 2 && window[lo] < kWindowFloor) ++lo;
+  return lo;
+}
+
+// One axis: the samples the window keeps, the padded length, the deconvolution 1/φ̂.
+struct Axis {
+  int lo = 0, count = 0, n = 0;
+  double c = 0.0;  // the patch centre in kept-sample indices
+  std::vector<double> deconv;
+};
+Axis make_axis(const std::vector<double>& window, double beta) {
+  Axis a;
+  a.lo = first_kept(window);
+  a.count = static_cast<int>(window.size()) - 2 * a.lo;  // the window is symmetric about the centre
+  a.n = smooth_length(static_cast<int>(std::ceil(kOversampling * a.count)));
+  a.c = 0.5 * (a.count - 1);
+  a.deconv.resize(a.count);
+  for (int l = 0; l < a.count; ++l) a.deconv[l] = 1.0 / kb_hat((l - a.c) / a.n, beta);
+  return a;
+}
+
+// Per target frequency: the first grid index and kKernelWidth + 1 complex weights φ·e^{2πikc/n}.
+struct Spread {
+  std::vector<long long> k0;
+  std::vector<cplx> wt;
+};
+constexpr int kTaps = kKernelWidth + 1;
+Spread make_spread(const Axis& a, const TableGeometry& g, double dx, double beta) {
+  Spread s;
+  s.k0.resize(g.size);
+  s.wt.resize(static_cast<std::size_t>(g.size) * kTaps);
+  for (int i = 0; i < g.size; ++i) {
+    const double u = a.n * g.freq(i) * dx;
+    const long long k0 = static_cast<long long>(std::ceil(u - 0.5 * kKernelWidth));
+    s.k0[i] = k0;
+    for (int j = 0; j < kTaps; ++j) {
+      const long long k = k0 + j;
+      const double cyc = std::fmod(static_cast<double>(k) * a.c, static_cast<double>(a.n)) / a.n;
+      s.wt[static_cast<std::size_t>(i) * kTaps + j] = kb(u - static_cast<double>(k), beta) * std::polar(1.0, kTwoPi * cyc);
+    }
+  }
+  return s;
+}
+
+// Σ_j wt_j·B[(k0 + j) mod n] over one transformed array B (interleaved float).
+cplx spread_at(const Spread& s, int i, const float* b, int n) {
+  long long k = s.k0[i] % n;
+  if (k < 0) k += n;
+  const cplx* wt = s.wt.data() + static_cast<std::size_t>(i) * kTaps;
+  double sr = 0, si = 0;
+  for (int j = 0; j < kTaps; ++j) {
+    const double br = b[2 * k], bi = b[2 * k + 1];
+    sr += wt[j].real() * br - wt[j].imag() * bi;
+    si += wt[j].real() * bi + wt[j].imag() * br;
+    if (++k == n) k = 0;
+  }
+  return {sr, si};
+}
+
+constexpr std::size_t kRowChunkBytes = 128u << 20;  // device buffer per batch of transformed rows
+constexpr std::size_t kGroupBytes = 768u << 20;     // row-stage results held per group of terms
+
+}  // namespace
+
+double dropped_window_fraction(const Window& w) {
+  const auto kept = [](const std::vector<double>& v) {
+    const int lo = first_kept(v);
+    double s = 0;
+    for (std::size_t i = lo; i + lo < v.size(); ++i) s += v[i];
+    return s;
+  };
+  return std::max(0.0, 1.0 - kept(w.wx) * kept(w.wy) / w.sum);
+}
+
+std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
+                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables) {
+  const double beta = kb_beta();
+  const Axis ax = make_axis(w.wx, beta), ay = make_axis(w.wy, beta);
+  int total = 0;
+  for (const auto& b : bands) total = std::max(total, b.first_term + b.terms);
+  std::vector<Spread> su, sv;
+  std::vector<std::size_t> offset;  // each table's columns in the row-stage results
+  std::size_t sum_n = 0;
+  std::vector<std::vector<cplx>> out;
+  for (const auto& g : tables) {
+    su.push_back(make_spread(ax, g, f.dx_um, beta));
+    sv.push_back(make_spread(ay, g, f.dx_um, beta));
+    offset.push_back(sum_n);
+    sum_n += g.size;
+    out.emplace_back(static_cast<std::size_t>(total) * g.size * g.size);
+  }
+  const double inv = 1.0 / (static_cast<double>(f.width) * f.height);
+  const double inv_s = f.s > 0 ? 1.0 / f.s : 0.0;
+  // Row-stage results are held as float32 pairs (they feed a float32 transform next).
+  const std::size_t per_term = static_cast<std::size_t>(ay.count) * sum_n;
+  const int group = static_cast<int>(
+      std::clamp<std::size_t>(kGroupBytes / (per_term * 2 * sizeof(float)), 1, DIFFRACTION_MAX_BATCH));
+  for (const auto& band : bands)
+    for (int t0 = 0; t0 < band.terms; t0 += group) {
+      const int g = std::min(group, band.terms - t0);
+      std::vector<std::complex<float>> rows(per_term * g);  // [term][kept row][table columns]
+      const int chunk = static_cast<int>(std::clamp<std::size_t>(
+          kRowChunkBytes / (static_cast<std::size_t>(g) * ax.n * 2 * sizeof(float)), 1, ay.count));
+      std::vector<float> buf;
+      for (int r0 = 0; r0 < ay.count; r0 += chunk) {
+        const int c = std::min(chunk, ay.count - r0);
+        buf.assign(static_cast<std::size_t>(g) * c * ax.n * 2, 0.0f);
+        // Term inputs q_n·w / φ̂ of the kept samples, [term][row][n] (zero-padded).
+        parallel_for(c, [&](long long r) {
+          const int iy = ay.lo + r0 + static_cast<int>(r);
+          double re[DIFFRACTION_MAX_BATCH], im[DIFFRACTION_MAX_BATCH];
+          for (int l = 0; l < ax.count; ++l) {
+            const int ix = ax.lo + l;
+            ref::term_inputs(f.h_um[static_cast<std::size_t>(iy) * f.width + ix], f.c, inv_s,
+                             band.expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV,
+                             band.kappa0, band.delta, t0, g, re, im);
+            const double a = w.wx[ix] * w.wy[iy] * ax.deconv[l];
+            for (int j = 0; j < g; ++j) {
+              float* dst = buf.data() + ((static_cast<std::size_t>(j) * c + r) * ax.n + l) * 2;
+              dst[0] = static_cast<float>(a * re[j]);
+              dst[1] = static_cast<float>(a * im[j]);
+            }
+          }
+        });
+        cl_util::fft_rows(dev, buf, ax.n, static_cast<std::size_t>(g) * c);
+        parallel_for(static_cast<long long>(g) * c, [&](long long idx) {
+          const long long j = idx / c, r = idx % c;
+          const float* b = buf.data() + static_cast<std::size_t>(idx) * ax.n * 2;
+          auto* dst = rows.data() + static_cast<std::size_t>(j) * per_term + static_cast<std::size_t>(r0 + r) * sum_n;
+          for (std::size_t k = 0; k < tables.size(); ++k)
+            for (int iu = 0; iu < tables[k].size; ++iu)
+              dst[offset[k] + iu] = std::complex<float>(spread_at(su[k], iu, b, ax.n));
+        });
+      }
+      // Columns: for each table column iu, Σ over the kept rows, by the y axis's transform; the
+      // columns of all tables and terms of the group in batches.
+      const std::size_t columns = sum_n * g;
+      const std::size_t batch = std::clamp<std::size_t>(kRowChunkBytes / (ay.n * 2 * sizeof(float)), 1, columns);
+      std::vector<float> col;
+      for (std::size_t c0 = 0; c0 < columns; c0 += batch) {
+        const std::size_t cn = std::min(batch, columns - c0);
+        col.assign(cn * ay.n * 2, 0.0f);
+        // Column index ci = j·sum_n + (offset of table k) + iu.
+        parallel_for(static_cast<long long>(cn), [&](long long i) {
+          const std::size_t ci = c0 + static_cast<std::size_t>(i), j = ci / sum_n, rest = ci % sum_n;
+          const auto* src = rows.data() + j * per_term + rest;
+          float* dst = col.data() + static_cast<std::size_t>(i) * ay.n * 2;
+          for (int l = 0; l < ay.count; ++l) {
+            const std::complex<float> v = src[static_cast<std::size_t>(l) * sum_n];
+            dst[2 * l] = static_cast<float>(v.real() * ay.deconv[l]);
+            dst[2 * l + 1] = static_cast<float>(v.imag() * ay.deconv[l]);
+          }
+        });
+        cl_util::fft_rows(dev, col, ay.n, cn);
+        parallel_for(static_cast<long long>(cn), [&](long long i) {
+          const std::size_t ci = c0 + static_cast<std::size_t>(i), j = ci / sum_n, rest = ci % sum_n;
+          std::size_t k = 0;
+          while (rest >= offset[k] + tables[k].size) ++k;
+          const int n = tables[k].size, iu = static_cast<int>(rest - offset[k]);
+          const float* b = col.data() + static_cast<std::size_t>(i) * ay.n * 2;
+          cplx* term = out[k].data() + static_cast<std::size_t>(band.first_term + t0 + j) * n * n;
+          for (int iv = 0; iv < n; ++iv) term[static_cast<std::size_t>(iv) * n + iu] = spread_at(sv[k], iv, b, ay.n) * inv;
+        });
+      }
+    }
+  return out;
+}
+
 std::vector<cplx> windowed_field(const Field& f, const Window& w, double kappa) {
   std::vector<cplx> a(static_cast<std::size_t>(f.count()));
   for (int iy = 0; iy < f.height; ++iy)
@@ -190,30 +404,91 @@ cplx direct_transform(const std::vector<cplx>& a, const Field& f, double fu, dou
   return {sr, si};
 }
 
+std::vector<cplx> direct_transform_grid(const Field& f, const Window& w, double kappa, const std::vector<double>& fu,
+                                        const std::vector<double>& fv) {
+  const int W = f.width, H = f.height, nu = static_cast<int>(fu.size()), nv = static_cast<int>(fv.size());
+  std::vector<double> eur, eui, evr, evi;
+  axis_phasors(fu, W, f.dx_um, eur, eui);
+  axis_phasors(fv, H, f.dx_um, evr, evi);
+  // Rows: R[iy][a] = Σ_ix w·e^{iκh}·e^{−2πi fu[a] x}, each row on its own (deterministic).
+  std::vector<double> rr(static_cast<std::size_t>(H) * nu), ri(rr.size());
+  parallel_for(H, [&](long long iy) {
+    std::vector<double> ar(W), ai(W);
+    for (int ix = 0; ix < W; ++ix) {
+      const double wj = w.wx[ix] * w.wy[iy], ph = kappa * f.h_um[static_cast<std::size_t>(iy) * W + ix];
+      ar[ix] = wj * std::cos(ph);
+      ai[ix] = wj * std::sin(ph);
+    }
+    for (int a = 0; a < nu; ++a) {
+      const double* er = eur.data() + static_cast<std::size_t>(a) * W;
+      const double* ei = eui.data() + static_cast<std::size_t>(a) * W;
+      double sr = 0, si = 0;
+      for (int ix = 0; ix < W; ++ix) {
+        sr += ar[ix] * er[ix] - ai[ix] * ei[ix];
+        si += ar[ix] * ei[ix] + ai[ix] * er[ix];
+      }
+      rr[iy * nu + a] = sr;
+      ri[iy * nu + a] = si;
+    }
+  });
+  std::vector<cplx> out(static_cast<std::size_t>(nu) * nv);
+  parallel_for(nv, [&](long long b) {
+    for (int a = 0; a < nu; ++a) {
+      double sr = 0, si = 0;
+      for (int iy = 0; iy < H; ++iy) {
+        const double er = evr[b * H + iy], ei = evi[b * H + iy], pr = rr[iy * nu + a], pi = ri[iy * nu + a];
+        sr += er * pr - ei * pi;
+        si += er * pi + ei * pr;
+      }
+      out[b * nu + a] = {sr, si};
+    }
+  });
+  return out;
+}
+
+namespace {
+// P from the table at texel coordinates, with the band's coefficients computed once.
+struct Evaluator {
+  const std::vector<float>& terms;
+  const TableGeometry& g;
+  const Band& band;
+  std::vector<double> coef;
+  cplx scale;
+  Evaluator(const std::vector<float>& t, const TableGeometry& geo, const Field& f, const Band& b, double kappa)
+      : terms(t), g(geo), band(b), coef(b.terms) {
+    ref::expansion_coefficients(b.expansion == Expansion::taylor ? 0 : 1, kappa, b.kappa0, b.delta, f.s, b.terms,
+                                coef.data());
+    scale = static_cast<double>(f.count()) * std::polar(1.0, kappa * f.c);
+  }
+  cplx at(int iu, int iv) const {
+    const std::size_t per = static_cast<std::size_t>(g.size) * g.size, at = static_cast<std::size_t>(iv) * g.size + iu;
+    double sr = 0, si = 0;
+    for (int t = 0; t < band.terms; ++t) {
+      const std::size_t i = 2 * ((band.first_term + t) * per + at);
+      sr += coef[t] * terms[i];
+      si += coef[t] * terms[i + 1];
+    }
+    return scale * cplx(sr, si);
+  }
+  cplx bilinear(double tu, double tv) const {
+    const double cu = std::clamp(tu, 0.0, g.size - 1.0), cv = std::clamp(tv, 0.0, g.size - 1.0);
+    const int u0 = std::min(static_cast<int>(std::floor(cu)), g.size - 2);
+    const int v0 = std::min(static_cast<int>(std::floor(cv)), g.size - 2);
+    const double a = cu - u0, b = cv - v0;
+    return (1 - a) * (1 - b) * at(u0, v0) + a * (1 - b) * at(u0 + 1, v0) + (1 - a) * b * at(u0, v0 + 1) +
+           a * b * at(u0 + 1, v0 + 1);
+  }
+};
+}  // namespace
+
 cplx table_value(const std::vector<float>& terms, const TableGeometry& g, const Field& f, const Band& band,
                  double kappa, int iu, int iv) {
-  std::vector<double> coef(band.terms);
-  ref::expansion_coefficients(band.expansion == Expansion::taylor ? 0 : 1, kappa, band.kappa0, band.delta, f.s,
-                              band.terms, coef.data());
-  const std::size_t per = static_cast<std::size_t>(g.size) * g.size, at = static_cast<std::size_t>(iv) * g.size + iu;
-  double sr = 0, si = 0;
-  for (int t = 0; t < band.terms; ++t) {
-    const std::size_t i = 2 * ((band.first_term + t) * per + at);
-    sr += coef[t] * terms[i];
-    si += coef[t] * terms[i + 1];
-  }
-  return static_cast<double>(f.count()) * std::polar(1.0, kappa * f.c) * cplx(sr, si);
+  return Evaluator(terms, g, f, band, kappa).at(iu, iv);
 }
 
 cplx table_bilinear(const std::vector<float>& terms, const TableGeometry& g, const Field& f, const Band& band,
                     double kappa, double tu, double tv) {
-  const double cu = std::clamp(tu, 0.0, g.size - 1.0), cv = std::clamp(tv, 0.0, g.size - 1.0);
-  const int u0 = std::min(static_cast<int>(std::floor(cu)), g.size - 2), v0 = std::min(static_cast<int>(std::floor(cv)), g.size - 2);
-  const double a = cu - u0, b = cv - v0;
-  return (1 - a) * (1 - b) * table_value(terms, g, f, band, kappa, u0, v0) +
-         a * (1 - b) * table_value(terms, g, f, band, kappa, u0 + 1, v0) +
-         (1 - a) * b * table_value(terms, g, f, band, kappa, u0, v0 + 1) +
-         a * b * table_value(terms, g, f, band, kappa, u0 + 1, v0 + 1);
+  return Evaluator(terms, g, f, band, kappa).bilinear(tu, tv);
 }
 
 nlohmann::json TableError::json() const {
@@ -228,49 +503,79 @@ nlohmann::json TableError::json() const {
           {"reference", "direct double-precision sum over the samples of w * exp(i kappa h) * exp(-2 pi i f.x)"}};
 }
 
-TableError measure_table(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g,
-                         const std::vector<float>& terms, const std::vector<double>& kappas) {
-  const int n = g.size;
-  // Points per κ: as many as keep the direct sums near 1.5e8 sample visits per κ (32–256 of each kind).
-  const int budget = static_cast<int>(std::clamp(1.5e8 / static_cast<double>(f.count()), 32.0, 256.0));
-  // Texel centres: the 4×4 around the centre (the specular peak), the corners, then a fixed
-  // pseudo-random sample.
-  std::vector<std::pair<double, double>> texels, between;
-  for (int dv = -2; dv < 2; ++dv)
-    for (int du = -2; du < 2; ++du) texels.emplace_back(n / 2 + du, n / 2 + dv);
-  for (auto [u, v] : std::vector<std::pair<int, int>>{{0, 0}, {n - 1, 0}, {0, n - 1}, {n - 1, n - 1}})
-    texels.emplace_back(u, v);
-  Lcg rng;
-  while (static_cast<int>(texels.size()) < budget)
-    texels.emplace_back(std::floor(rng.next() * n), std::floor(rng.next() * n));
-  // Between texels: the 8×8 cell centres around the peak, then fixed pseudo-random positions.
-  for (int dv = -4; dv < 4; ++dv)
-    for (int du = -4; du < 4; ++du) between.emplace_back(n / 2 + du - 0.5 + 1.0, n / 2 + dv - 0.5 + 1.0);
-  while (static_cast<int>(between.size()) < budget)
-    between.emplace_back(rng.next() * (n - 1), rng.next() * (n - 1));
+namespace {
+// Pseudo-random values per axis: as many as keep one κ's direct sums near kVisits sample visits
+// (the grid's cost is (fixed + random)·W·H), between `lo` and `hi`.
+constexpr double kVisits = 1e9;
+int random_count(const Field& f, int fixed, int lo, int hi) {
+  return static_cast<int>(std::clamp(kVisits / static_cast<double>(f.count()) - fixed, double(lo), double(hi)));
+}
 
-  auto freq_of = [&](double t) { return g.freq_at_s(2.0 * (t + 0.5) / n - 1.0); };
+}  // namespace
+
+TableMeasurement::TableMeasurement(const Field& f, const Window& w, const TableGeometry& shape, std::vector<double> kappas)
+    : f_(f), w_(w), kappas_(std::move(kappas)) {
+  // s-values: 8 around the centre spanning ±0.08 (the specular peak; not on any ladder size's
+  // texel centres or cell edges), then pseudo-random ones in (−1, 1).
+  random_per_axis_ = random_count(f, 8, 4, 24);
+  Lcg rng;
+  for (auto* axis : {&bu_, &bv_}) {
+    for (int k = 0; k < 8; ++k) axis->push_back(shape.freq_at_s((k - 3.5 + 0.3) / 48.0));
+    for (int k = 0; k < random_per_axis_; ++k) axis->push_back(shape.freq_at_s(2.0 * rng.next() - 1.0));
+  }
+  for (double kappa : kappas_) exact_.push_back(direct_transform_grid(f, w, kappa, bu_, bv_));
+}
+
+std::vector<double> TableMeasurement::between_errors(const std::vector<Band>& bands, const TableGeometry& g,
+                                                     const std::vector<float>& terms, std::size_t k) const {
+  const Evaluator ev(terms, g, f_, band_for(bands, kappas_[k]), kappas_[k]);
+  const std::size_t nu = bu_.size();
+  std::vector<double> e(nu * bv_.size());
+  const double inv = 1.0 / w_.sum;
+  parallel_for(static_cast<long long>(e.size()), [&](long long i) {
+    const std::size_t a = static_cast<std::size_t>(i) % nu, b = static_cast<std::size_t>(i) / nu;
+    e[i] = std::abs(ev.bilinear(g.texel_of(bu_[a]), g.texel_of(bv_[b])) - exact_[k][i]) * inv;
+  });
+  return e;
+}
+
+double TableMeasurement::between_max(const std::vector<Band>& bands, const TableGeometry& g,
+                                     const std::vector<float>& terms) const {
+  double m = 0;
+  for (std::size_t k = 0; k < kappas_.size(); ++k)
+    for (double e : between_errors(bands, g, terms, k)) m = std::max(m, e);
+  return m;
+}
+
+TableError TableMeasurement::measure(const std::vector<Band>& bands, const TableGeometry& g,
+                                     const std::vector<float>& terms) const {
+  const int n = g.size;
+  // Texel indices per axis: the 4 around the centre, both edges, pseudo-random ones.
+  const int r = random_count(f_, 6, 2, 16);
+  std::vector<int> tu, tv;
+  Lcg rng;
+  for (auto* axis : {&tu, &tv}) {
+    for (int i : {n / 2 - 2, n / 2 - 1, n / 2, n / 2 + 1, 0, n - 1}) axis->push_back(i);
+    for (int k = 0; k < r; ++k) axis->push_back(std::min(n - 1, static_cast<int>(rng.next() * n)));
+  }
+  std::vector<double> fu, fv;
+  for (int i : tu) fu.push_back(g.freq(i));
+  for (int i : tv) fv.push_back(g.freq(i));
+
   TableError e;
-  e.kappas = kappas;
-  e.texel_points = static_cast<int>(texels.size());
-  e.between_points = static_cast<int>(between.size());
+  e.kappas = kappas_;
+  e.texel_points = static_cast<int>(tu.size() * tv.size());
+  e.between_points = static_cast<int>(bu_.size() * bv_.size());
   std::vector<double> all_t, all_b;
-  const double inv = 1.0 / w.sum;
-  for (double kappa : kappas) {
-    const Band& band = band_for(bands, kappa);
-    const auto a = windowed_field(f, w, kappa);
-    std::vector<double> et(texels.size()), eb(between.size());
-    parallel_for(static_cast<long long>(texels.size() + between.size()), [&](long long i) {
-      if (i < static_cast<long long>(texels.size())) {
-        const auto [tu, tv] = texels[i];
-        const cplx ex = direct_transform(a, f, freq_of(tu), freq_of(tv));
-        et[i] = std::abs(table_value(terms, g, f, band, kappa, static_cast<int>(tu), static_cast<int>(tv)) - ex) * inv;
-      } else {
-        const auto [tu, tv] = between[i - texels.size()];
-        const cplx ex = direct_transform(a, f, freq_of(tu), freq_of(tv));
-        eb[i - texels.size()] = std::abs(table_bilinear(terms, g, f, band, kappa, tu, tv) - ex) * inv;
-      }
-    });
+  const double inv = 1.0 / w_.sum;
+  for (std::size_t k = 0; k < kappas_.size(); ++k) {
+    const double kappa = kappas_[k];
+    const Evaluator ev(terms, g, f_, band_for(bands, kappa), kappa);
+    const auto exact = direct_transform_grid(f_, w_, kappa, fu, fv);
+    std::vector<double> et(exact.size());
+    for (std::size_t i = 0; i < et.size(); ++i)
+      et[i] = std::abs(ev.at(tu[i % tu.size()], tv[i / tu.size()]) - exact[i]) * inv;
+    const auto eb = between_errors(bands, g, terms, k);
     const double mt = *std::max_element(et.begin(), et.end()), mb = *std::max_element(eb.begin(), eb.end());
     e.texel_per_kappa.push_back(mt);
     e.between_per_kappa.push_back(mb);
@@ -282,16 +587,21 @@ TableError measure_table(const Field& f, const Window& w, const std::vector<Band
     std::vector<double> rows(n);
     parallel_for(n, [&](long long iv) {
       double s = 0;
-      for (int iu = 0; iu < n; ++iu) s += std::norm(table_value(terms, g, f, band, kappa, iu, iv)) * g.width(iu);
+      for (int iu = 0; iu < n; ++iu) s += std::norm(ev.at(iu, static_cast<int>(iv))) * g.width(iu);
       rows[iv] = s * g.width(static_cast<int>(iv));
     });
     double energy = 0;
-    for (double r : rows) energy += r;
-    e.energy_ratio.push_back(energy / (w.sum_sq / (f.dx_um * f.dx_um)));
+    for (double v : rows) energy += v;
+    e.energy_ratio.push_back(energy / (w_.sum_sq / (f_.dx_um * f_.dx_um)));
   }
   e.texel_p99 = percentile99(all_t);
   e.between_p99 = percentile99(all_b);
   return e;
+}
+
+TableError measure_table(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g,
+                         const std::vector<float>& terms, const std::vector<double>& kappas) {
+  return TableMeasurement(f, w, g, kappas).measure(bands, g, terms);
 }
 
 }  // namespace specbake::diffraction

@@ -13,14 +13,18 @@
 // f = sign(s)·|s|^p·f_max (cycles/µm), p = 1 for the linear mapping. The terms at a texel are
 //   F_n(f_u, f_v) = Σ_j w_j·q_n(h_j)·e^{−2πi(f_u x_j + f_v y_j)} / (W·H),
 // x_j = (ix − (W − 1)/2)·dx, y_j = (iy − (H − 1)/2)·dx (centred, so F_n varies smoothly between
-// texels), evaluated directly as a separable non-uniform DFT in double precision (no FFT, no
-// interpolation: the stored values carry only the expansion's truncation and float32 rounding).
+// texels). The job evaluates them by a separable non-uniform FFT (type 2, Kaiser–Bessel
+// gridding; table_terms_fft): per axis, the samples the window keeps are divided by the kernel's
+// Fourier transform, zero-padded to n ≥ 1.5× their count, transformed on the device in float32 and
+// spread to the texel frequencies by the kernel; rows, then columns. table_terms evaluates the
+// same sums directly in double (the reference the tests compare with).
 // The reconstruction is the one of the full-bin terms: P(f;κ) = W·H·e^{iκc}·Σ_n coef_n(κ)·F_n(f).
 #include <complex>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "cl/device.hpp"
 #include "kinds/diffraction/planning.hpp"
 
 namespace specbake::diffraction {
@@ -59,13 +63,31 @@ struct Window {
 };
 Window make_window(const Field& f, double sigma_um);
 
-// F_n of every band's terms at every texel, over W·H: [T][iv][iu] (iv: f_v rows, iu: f_u columns).
+// F_n of every band's terms at every texel, over W·H: [T][iv][iu] (iv: f_v rows, iu: f_u columns),
+// by direct sums in double (the reference; O(N·W·H) per term).
 std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g);
+
+// The same terms for every table in `tables` at once, by the separable non-uniform FFT on `dev`
+// (the header's method): out[k] is [T][iv][iu] for tables[k]. One pass over the field serves all
+// sizes; its error against table_terms is float32 FFT rounding (≈ 1e-7 of the window's sum) plus
+// the gridding's (below 1e-9; tests/diffraction/diffraction_table_test.cpp).
+std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
+                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables);
+
+// The window's samples the FFT path keeps: per axis, those with weight ≥ kWindowFloor, |x| ≤ 5.68σ
+// (a patch narrower than the window keeps every sample). What the rest hold, as a fraction of
+// Σw, is dropped_window_fraction (recorded; ~1e-8 for a window inside the patch).
+inline constexpr double kWindowFloor = 1e-7;
+double dropped_window_fraction(const Window& w);
 
 // The windowed field a_j = w_j·e^{iκh_j} ([iy][ix]) and its transform at one frequency by the
 // direct 2D sum (the ground truth: no expansion, no separable pass shared with table_terms).
 std::vector<cplx> windowed_field(const Field& f, const Window& w, double kappa);
 cplx direct_transform(const std::vector<cplx>& a, const Field& f, double fu, double fv);
+// The same transform at every pair (fu[a], fv[b]) of a product grid, [b][a], by direct sums in
+// double, row by row (the field's e^{iκh} is formed one row at a time: no W·H array).
+std::vector<cplx> direct_transform_grid(const Field& f, const Window& w, double kappa, const std::vector<double>& fu,
+                                        const std::vector<double>& fv);
 
 // P from stored table terms (float32 [T][N][N][2]) at texel (iu, iv) for κ in `band`.
 cplx table_value(const std::vector<float>& terms, const TableGeometry& g, const Field& f, const Band& band,
@@ -75,13 +97,39 @@ cplx table_bilinear(const std::vector<float>& terms, const TableGeometry& g, con
                     double kappa, double tu, double tv);
 
 // The measured error of a table (see docs): at texel centres and between texels, over Σw,
-// against direct_transform, at `kappas`; and Parseval's energy ratio per κ.
+// against direct sums, at `kappas`; and Parseval's energy ratio per κ.
 struct TableError {
   double texel_max = 0.0, texel_p99 = 0.0, texel_at_kappa = 0.0;
   double between_max = 0.0, between_p99 = 0.0, between_at_kappa = 0.0;
   int texel_points = 0, between_points = 0;
   std::vector<double> kappas, texel_per_kappa, between_per_kappa, energy_ratio;
   nlohmann::json json() const;
+};
+
+// The measurement points and their exact values. Between texels the points are fixed frequencies
+// (a product grid in s: 8 values around s = 0, where the specular peak is, and pseudo-random
+// ones), the same for every size, so their direct sums are made once for all the sizes a
+// `size: auto` bake compares; at texels they are a product grid of texel indices of each size
+// (the 4 around the centre, both edges, pseudo-random ones). The number of pseudo-random values
+// per axis keeps each κ's direct sums near 1e9 sample visits (fewer for large fields).
+class TableMeasurement {
+ public:
+  // `shape`: the mapping (power, f_max) every measured table shares; its size is not used.
+  TableMeasurement(const Field& f, const Window& w, const TableGeometry& shape, std::vector<double> kappas);
+  // Between-texel error only (what `size: auto` compares), max over the points and κ.
+  double between_max(const std::vector<Band>& bands, const TableGeometry& g, const std::vector<float>& terms) const;
+  // Everything: texels (direct sums made now), between texels, energy.
+  TableError measure(const std::vector<Band>& bands, const TableGeometry& g, const std::vector<float>& terms) const;
+
+ private:
+  std::vector<double> between_errors(const std::vector<Band>& bands, const TableGeometry& g,
+                                     const std::vector<float>& terms, std::size_t k) const;
+  const Field& f_;
+  const Window& w_;
+  std::vector<double> kappas_;
+  std::vector<double> bu_, bv_;             // between-texel frequencies (cycles/µm)
+  std::vector<std::vector<cplx>> exact_;    // per κ: [b][a] at (bu_[a], bv_[b])
+  int random_per_axis_ = 0;
 };
 TableError measure_table(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g,
                          const std::vector<float>& terms, const std::vector<double>& kappas);

@@ -1,6 +1,6 @@
 // The diffraction job with a table (`table: {size, mapping, power, f_max_per_um, tolerance}`):
 // the band/expansion plan of the full-bin job, the field weighted by the coherence window, the
-// terms F_n evaluated directly at the N×N table texels, their error measured at texels and
+// terms F_n at the N×N table texels by a non-uniform FFT, their error measured at texels and
 // between them against direct sums, Parseval's energy ratio per κ, and the bundle size budget
 // every diffraction job obeys (table.hpp and docs/diffraction.md, "Coherence and tables").
 #include <Imath/half.h>
@@ -23,6 +23,7 @@ using nlohmann::json;
 namespace {
 
 constexpr int kAutoRefinements = 3;
+constexpr int kPhaseTexels = 1024;  // table columns per pass over the field (memory: table.cpp)
 constexpr double kMB = 1e6;
 
 // Bytes of the data files: the float32 terms (.bin) and their EXR copies (float32 or half).
@@ -36,6 +37,15 @@ std::vector<int> candidate_sizes(const DiffractionSpec& spec, int terms) {
   std::vector<int> out;
   for (int n : kTableLadder)
     if (term_bytes(spec, terms, static_cast<double>(n) * n) <= spec.max_bundle_mb * kMB) out.push_back(n);
+  return out;
+}
+
+std::vector<float> to_float32(const std::vector<cplx>& v) {
+  std::vector<float> out(2 * v.size());
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    out[2 * i] = static_cast<float>(v[i].real());
+    out[2 * i + 1] = static_cast<float>(v[i].imag());
+  }
   return out;
 }
 
@@ -112,6 +122,7 @@ json table_plan_json(const DiffractionSpec& spec, const Field& f, const Plan& p)
 BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   BakeResult r;
   Timings tm;
+  tm.use(&ctx.device.profiler());
   ctx.enter(Stage::plan);
   ctx.progress("field", 0.0);
   const Field f = tm.time("field", [&] { return make_field(spec); });
@@ -132,23 +143,36 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
     if (sizes.empty())
       throw JobError("table: auto: " + std::to_string(p.total_terms) + " terms leave no table size of the ladder within " +
                      "max_bundle_mb = " + format_g(spec.max_bundle_mb));
-    const auto kappas = measurement_kappas(p);
-    for (std::size_t k = 0; k < sizes.size(); ++k) {
-      g = table_geometry(spec, sizes[k]);
-      ctx.progress("table terms", 0.1 + 0.6 * k / sizes.size());
-      const auto terms = tm.time("table terms", [&] { return table_terms(f, win, p.bands, g); });
-      values.resize(2 * terms.size());
-      for (std::size_t i = 0; i < terms.size(); ++i) {
-        values[2 * i] = static_cast<float>(terms[i].real());
-        values[2 * i + 1] = static_cast<float>(terms[i].imag());
+    std::vector<TableGeometry> geoms;
+    for (int n : sizes) geoms.push_back(table_geometry(spec, n));
+    // The candidate sizes in phases of at most kPhaseTexels table columns: each phase's tables
+    // come from one pass over the field; the between-texel error (its exact values shared by
+    // all sizes) picks the first size that meets table.tolerance, and later phases run only if
+    // none of an earlier phase did. The chosen table is then measured at texels and for energy.
+    ctx.progress("error measurement", 0.1);
+    const TableMeasurement meas =
+        tm.time("error measurement", [&] { return TableMeasurement(f, win, geoms.front(), measurement_kappas(p)); });
+    std::size_t chosen = 0;
+    bool met = false;
+    for (std::size_t first = 0; first < sizes.size() && !met;) {
+      std::size_t last = first, columns = 0;
+      while (last < sizes.size() && (last == first || columns + sizes[last] <= kPhaseTexels)) columns += sizes[last++];
+      ctx.progress("table terms", 0.2 + 0.6 * static_cast<double>(first) / sizes.size());
+      const std::vector<TableGeometry> phase(geoms.begin() + first, geoms.begin() + last);
+      const auto tables = tm.time("table terms", [&] { return table_terms_fft(ctx.device, f, win, p.bands, phase); });
+      for (std::size_t k = first; k < last && !met; ++k) {
+        chosen = k;
+        values = to_float32(tables[k - first]);
+        const double between = tm.time("error measurement", [&] { return meas.between_max(p.bands, geoms[k], values); });
+        attempts.push_back({{"target", target}, {"terms", p.total_terms}, {"size", sizes[k]}, {"between_texels_max", between}});
+        spdlog::debug("table {}: {} terms, error between texels {:.3g}", sizes[k], p.total_terms, between);
+        met = between <= spec.table->tolerance;
       }
-      err = tm.time("error measurement", [&] { return measure_table(f, win, p.bands, g, values, kappas); });
-      attempts.push_back({{"target", target}, {"terms", p.total_terms}, {"size", g.size},
-                          {"at_texels_max", err.texel_max}, {"between_texels_max", err.between_max}});
-      spdlog::debug("table {}: {} terms, error at texels {:.3g}, between texels {:.3g}", g.size, p.total_terms,
-                    err.texel_max, err.between_max);
-      if (err.between_max <= spec.table->tolerance) break;
+      first = last;
     }
+    g = geoms[chosen];
+    err = tm.time("error measurement", [&] { return meas.measure(p.bands, g, values); });
+    attempts.back()["at_texels_max"] = err.texel_max;
     if (spec.terms || err.texel_max <= spec.tolerance || refinement == kAutoRefinements) break;
     spdlog::info("table: measured {:.3g} at texels > tolerance {:.3g} with {} terms; tightening the target",
                  err.texel_max, spec.tolerance, p.total_terms);

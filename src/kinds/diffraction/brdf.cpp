@@ -1,0 +1,105 @@
+#include "kinds/diffraction/brdf.hpp"
+
+#include <cmath>
+
+#include "core/colour_space.hpp"
+#include "core/parallel.hpp"
+
+namespace specbake::diffraction {
+
+namespace {
+constexpr double kPi = 3.141592653589793238462643;
+
+using Vec3 = std::array<double, 3>;
+double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3 normalize(const Vec3& a) {
+  const double l = std::sqrt(dot(a, a));
+  return {a[0] / l, a[1] / l, a[2] / l};
+}
+Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+
+// Unpolarised Fresnel reflectance of a dielectric of index n at incidence cosine c (from air).
+double fresnel(double c, double n) {
+  const double s2 = 1.0 - c * c, t = std::sqrt(std::max(0.0, n * n - s2));
+  const double rs = (c - t) / (c + t), rp = (n * n * c - t) / (n * n * c + t);
+  return 0.5 * (rs * rs + rp * rp);
+}
+
+// Σ_λ ρ·D65·x̄ȳz̄·Δλ → linear sRGB, for one pair of directions.
+std::array<float, 3> colour(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const std::vector<double>& spectrum,
+                            int step_nm, const Mat3& m) {
+  double xyz[3] = {0, 0, 0};
+  for (std::size_t row = 0; row < spectrum.size(); row += 4 * static_cast<std::size_t>(step_nm)) {
+    const double rho = brdf(t, wi, wo, spectrum[row] * 1e-3);
+    for (int c = 0; c < 3; ++c) xyz[c] += rho * spectrum[row + 1 + c] * step_nm;
+  }
+  std::array<float, 3> rgb{};
+  for (int r = 0; r < 3; ++r)
+    rgb[r] = static_cast<float>(m[3 * r] * xyz[0] + m[3 * r + 1] * xyz[1] + m[3 * r + 2] * xyz[2]);
+  return rgb;
+}
+}  // namespace
+
+double brdf(const BrdfTable& t, const Vec3& wi, const Vec3& wo, double lambda_um) {
+  const double ci = wi[2], co = wo[2];
+  if (ci <= 0.0 || co <= 0.0) return 0.0;
+  const double fu = -(wi[0] + wo[0]) / lambda_um, fv = -(wi[1] + wo[1]) / lambda_um;
+  if (std::fabs(fu) > t.g.f_max || std::fabs(fv) > t.g.f_max) return 0.0;
+  const double kappa = 2.0 * kPi * (ci + co) / lambda_um;
+  const Band& band = band_for(t.bands, kappa);
+  const cplx p = table_bilinear(t.terms, t.g, t.f, band, kappa, t.g.texel_of(fu), t.g.texel_of(fv)) / t.window_sum;
+  const Vec3 h = normalize({wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]});
+  const double gain = fresnel(dot(wi, h), t.ior) / fresnel(1.0, t.ior) * std::pow(1.0 + dot(wi, wo), 2) /
+                      ((ci + co) * (ci + co) * co);
+  return gain * std::norm(p);
+}
+
+std::vector<float> brdf_lobes(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
+                              const std::vector<double>& light_deg, int panel) {
+  const int width = panel * static_cast<int>(light_deg.size());
+  std::vector<float> rgb(3 * static_cast<std::size_t>(width) * panel, 0.0f);
+  const Mat3 m = xyz_to_srgb();
+  parallel_for(panel, [&](long long py) {
+    const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / panel;
+    for (std::size_t k = 0; k < light_deg.size(); ++k) {
+      const double a = light_deg[k] * kPi / 180.0;
+      const Vec3 wi = {std::sin(a), 0.0, std::cos(a)};
+      for (int px = 0; px < panel; ++px) {
+        const double x = -1.0 + (px + 0.5) * 2.0 / panel, r2 = x * x + y * y;
+        if (r2 >= 1.0) continue;
+        const auto c = colour(t, wi, {x, y, std::sqrt(1.0 - r2)}, spectrum, step_nm, m);
+        float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * width + k * panel + px);
+        for (int i = 0; i < 3; ++i) dst[i] = c[i];
+      }
+    }
+  });
+  return rgb;
+}
+
+std::vector<float> brdf_sphere(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
+                               const Vec3& light, int size) {
+  std::vector<float> rgb(3 * static_cast<std::size_t>(size) * size, 0.0f);
+  const Mat3 m = xyz_to_srgb();
+  const Vec3 view = {0.0, 0.0, 1.0};
+  parallel_for(size, [&](long long py) {
+    const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / size;
+    for (int px = 0; px < size; ++px) {
+      const double x = -1.0 + (px + 0.5) * 2.0 / size, r2 = x * x + y * y;
+      if (r2 >= 1.0) continue;
+      const Vec3 n = {x, y, std::sqrt(1.0 - r2)};
+      // Tangent along the latitude circle about the view axis (any direction at the pole).
+      const Vec3 tx = r2 > 1e-12 ? normalize({-y, x, 0.0}) : Vec3{1.0, 0.0, 0.0};
+      const Vec3 ty = cross(n, tx);
+      const Vec3 l = normalize({light[0] - n[0], light[1] - n[1], light[2] - n[2]});
+      const Vec3 wi = {dot(l, tx), dot(l, ty), dot(l, n)}, wo = {dot(view, tx), dot(view, ty), dot(view, n)};
+      const auto c = colour(t, wi, wo, spectrum, step_nm, m);
+      float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * size + px);
+      for (int i = 0; i < 3; ++i) dst[i] = c[i];
+    }
+  });
+  return rgb;
+}
+
+}  // namespace specbake::diffraction

@@ -1,0 +1,48 @@
+#pragma once
+// The diffraction BRDF a shader evaluates from a table, and the previews drawn with it.
+//
+// Stam's BRDF (Stam 1999, "Diffraction shaders") in the relative form of the diffraction thesis
+// (seeds/003, eqs. 19–20: reflected radiance over that of a flat mirror's specular reflection):
+//   ρ_λ(ω_i, ω_o) = C(ω_i, ω_o)·|P(f; κ) / Σ_j w_j|²,
+//   C = R(ω_i·h)·(1 + ω_i·ω_o)² / (R(1)·(cos θ_i + cos θ_o)²·cos θ_o),
+// with ω_i (towards the light) and ω_o (towards the viewer) in the surface's tangent frame
+// (x along the field's x axis, z the normal), h = normalize(ω_i + ω_o), R the unpolarised Fresnel
+// reflectance of a dielectric of index n (Stam's F², here divided by its value at normal
+// incidence), (u, v, w) = −(ω_i + ω_o) (Stam's k̂₁ − k̂₂), the table looked up at
+// f = (u, v)/λ cycles/µm and κ = 2π·(cos θ_i + cos θ_o)/λ. |P/Σw|² = 1 for a flat mirror at
+// f = 0, so ρ = 1 there: a mirror reflects the light source's spectrum unchanged. The table is
+// fetched bilinearly (a shader's filtered fetch); beyond f_max it reads 0.
+#include <array>
+#include <string>
+#include <vector>
+
+#include "kinds/diffraction/table.hpp"
+#include "kinds/diffraction/terms.hpp"
+
+namespace specbake::diffraction {
+
+struct BrdfTable {
+  const Field& f;
+  const std::vector<Band>& bands;
+  const TableGeometry& g;
+  const std::vector<float>& terms;  // [T][N][N][2]
+  double window_sum = 1.0;           // Σ w_j
+  double ior = 1.5;                  // Fresnel: dielectric index
+};
+
+// ρ_λ for unit vectors in the tangent frame (0 below the horizon on either side).
+double brdf(const BrdfTable& t, const std::array<double, 3>& wi, const std::array<double, 3>& wo, double lambda_um);
+
+// Linear sRGB images (row-major, 3 floats per pixel) of the radiance ρ·D65 summed against the CIE
+// 1931 functions (`spectrum`: rows λ nm, D65·x̄, D65·ȳ, D65·z̄ at 1 nm, as spectrum.bin) every
+// `step_nm`:
+//  - lobes: for each light angle (degrees from the normal, in the x–z plane), the outgoing
+//    hemisphere seen from above (pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²))), panels side by side;
+//  - sphere: a unit sphere seen along −z (orthographic), tangent x along the lines of latitude
+//    around the view axis, lit by a point light at `light` (sphere radii) of D65 spectrum.
+std::vector<float> brdf_lobes(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
+                              const std::vector<double>& light_deg, int panel);
+std::vector<float> brdf_sphere(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
+                               const std::array<double, 3>& light, int size);
+
+}  // namespace specbake::diffraction
