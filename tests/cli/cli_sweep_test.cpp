@@ -3,7 +3,6 @@
 // same settings; sweep.json, sweep.csv and the picture (size, not blank, one marker per point);
 // bad --vary keys and values (exit 2 / exit 3) with nothing written.
 #include <gtest/gtest.h>
-#include <png.h>
 
 #include <cmath>
 #include <iomanip>
@@ -85,28 +84,11 @@ TEST(SweepVary, ParetoFront) {
 
 // ---- the picture --------------------------------------------------------------------------
 
-struct Image {
-  int width = 0, height = 0;
-  std::vector<unsigned char> rgba;
-};
-
-Image read_png(const fs::path& p) {
-  png_image img{};
-  img.version = PNG_IMAGE_VERSION;
-  Image out;
-  if (!png_image_begin_read_from_file(&img, p.c_str())) return out;
-  img.format = PNG_FORMAT_RGBA;
-  out.rgba.resize(PNG_IMAGE_SIZE(img));
-  if (!png_image_finish_read(&img, nullptr, out.rgba.data(), 0, nullptr)) return {};
-  out.width = static_cast<int>(img.width);
-  out.height = static_cast<int>(img.height);
-  return out;
-}
 
 // Connected groups (4-neighbour) of at least `min_pixels` pixels within `tol` of the colour:
 // the markers of one colour (scripts/sweep_plot.py draws them in two colours no line or text
 // uses; a 7 pt marker at 150 dpi covers ~150 pixels, antialiased edges aside).
-int blobs(const Image& im, int r, int g, int b, int tol = 24, int min_pixels = 40) {
+int blobs(const t::Image& im, int r, int g, int b, int tol = 24, int min_pixels = 40) {
   auto near = [&](int i) {
     const unsigned char* p = &im.rgba[4 * i];
     return std::abs(p[0] - r) <= tol && std::abs(p[1] - g) <= tol && std::abs(p[2] - b) <= tol;
@@ -135,7 +117,7 @@ int blobs(const Image& im, int r, int g, int b, int tol = 24, int min_pixels = 4
   return count;
 }
 
-int pixels_near(const Image& im, int r, int g, int b, int tol = 24) {
+int pixels_near(const t::Image& im, int r, int g, int b, int tol = 24) {
   int n = 0;
   for (std::size_t i = 0; i + 3 < im.rgba.size(); i += 4)
     n += std::abs(im.rgba[i] - r) <= tol && std::abs(im.rgba[i + 1] - g) <= tol && std::abs(im.rgba[i + 2] - b) <= tol;
@@ -145,7 +127,7 @@ int pixels_near(const Image& im, int r, int g, int b, int tol = 24) {
 // The picture of a sweep with `points` measured points: 1200 x 825 (scripts/sweep_plot.py), not
 // blank, one marker per point (front: #d62728 red, dominated: #1f77b4 blue), the tolerance line.
 void expect_picture(const fs::path& png, int points, bool tolerance_line) {
-  const Image im = read_png(png);
+  const t::Image im = t::read_png(png);
   ASSERT_EQ(im.width, 1200) << png << " (is python3-matplotlib installed? scripts/setup.sh installs it)";
   ASSERT_EQ(im.height, 825);
   int not_white = 0;

@@ -5,8 +5,14 @@
 
 #include <cmath>
 #include <complex>
+#include <cstring>
+#include <regex>
+#include <tuple>
 
 #include "job/kind.hpp"
+#include "io/exr.hpp"
+#include "io/png.hpp"
+#include "kinds/diffraction/brdf.hpp"
 #include "kinds/diffraction/diffraction_job.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "kinds/diffraction/table.hpp"
@@ -258,6 +264,109 @@ TEST(DiffractionTable, CliBundleBudgetAndBadKeys) {
     r = tst::run_cli({"run", (dir / "c.yaml").string()});
     EXPECT_EQ(r.exit_code, 3) << c.body << r.err;
     EXPECT_NE((r.out + r.err).find(c.expect), std::string::npos) << c.expect << " not named in:\n" << r.err;
+    // Every refusal points at the config's line and column.
+    EXPECT_TRUE(std::regex_search(r.err, std::regex("c\\.yaml:[0-9]+:[0-9]+: "))) << "no file:line:col in:\n" << r.err;
     EXPECT_FALSE(fs::exists(dir / "out/d/latest")) << "a bundle was written for " << c.body;
+  }
+}
+
+TEST(DiffractionTable, BrdfOfAFlatMirrorIsFresnelTimesCosine) {
+  // A flat field: P(f) is the window's transform, real and positive at the centred origin, and at
+  // a specular pair (ω_o the mirror of ω_i) the lookup f = −(ω_i + ω_o)_xy/λ = 0 falls between the
+  // four centre texels, which all hold |P| of (f1, f1), f1 the first texel's frequency. There
+  // C = R(θ)/R(0)·(1 + cos 2θ)²/((2 cos θ)²·cos θ) = R(θ)/R(0)·cos θ, so
+  // ρ = R(θ)/R(0)·cos θ·|P(f1, f1)/Σw|², to the float32 rounding of the stored terms (≈ 1e-7).
+  auto spec = grating(ProceduralField::Type::sine_grating, 32, 0.1, 1.0, 0.0, 16, 3.0, 1.0);
+  const Baked b = bake_table_terms(spec);
+  const BrdfTable t{b.f, b.p.bands, b.g, b.values, b.w.sum, 1.5};
+  const double f1 = b.g.freq(8);
+  const double peak = std::norm(direct_transform(windowed_field(b.f, b.w, 0.0), b.f, f1, f1) / b.w.sum);
+  ASSERT_GT(peak, 0.5);
+  const auto fresnel = [](double c) {  // unpolarised, n = 1.5, written out independently
+    const double n = 1.5, st = std::sqrt(1 - c * c) / n, ct = std::sqrt(1 - st * st);
+    const double rs = (c - n * ct) / (c + n * ct), rp = (ct - n * c) / (ct + n * c);
+    return 0.5 * (rs * rs + rp * rp);
+  };
+  for (double deg : {0.0, 30.0, 60.0}) {
+    const double a = deg * kPi / 180.0, c = std::cos(a);
+    const double rho = brdf(t, {std::sin(a), 0.0, c}, {-std::sin(a), 0.0, c}, 0.55);
+    EXPECT_NEAR(rho, fresnel(c) / fresnel(1.0) * c * peak, 1e-6) << deg;
+  }
+  // Beyond the table's reach (|f| > f_max = 2/0.38 µm⁻¹) the lookup reads nothing, and nothing
+  // is reflected from below the horizon.
+  const double s9 = std::sqrt(1 - 0.81);
+  EXPECT_EQ(brdf(t, {0.9, 0.0, s9}, {0.9, 0.0, s9}, 0.3), 0.0);
+  EXPECT_EQ(brdf(t, {0.0, 0.0, 1.0}, {0.0, 0.0, -1.0}, 0.55), 0.0);
+}
+
+TEST(DiffractionTable, TableBakesFromEveryHeightfieldSource) {
+  // size: auto from every source the job reads: a grey PNG, a single-channel EXR, a non-square raw
+  // float32 field and a procedural binary grating; each must meet both tolerances at the measured
+  // points and ship the table, its EXRs and BRDF previews that are not blank.
+  tst::TempDir dir;
+  const int w = 40, h = 24;
+  std::vector<float> v, grey;
+  for (int iy = 0; iy < h; ++iy)
+    for (int ix = 0; ix < w; ++ix) {
+      const float z = 0.05f * (1.0f + std::sin(0.7f * ix + 0.2f * iy * iy));
+      v.push_back(z);
+      for (int c = 0; c < 3; ++c) grey.push_back(z / 0.1f);
+    }
+  std::string raw(v.size() * 4, '\0');
+  std::memcpy(raw.data(), v.data(), raw.size());
+  tst::write_file(dir / "f.raw", raw);
+  ExrImage exr;
+  exr.width = w;
+  exr.height = h;
+  exr.channels = {"H"};
+  exr.pixels = v;
+  tst::write_file(dir / "f.exr", exr_bytes(exr));
+  tst::write_file(dir / "f.png", png_from_linear(w, h, grey));
+  const std::string table = "    table: {size: auto, mapping: power}\n    coherence: {length_um: 1.5}\n";
+  const std::vector<std::pair<std::string, std::string>> sources = {
+      {"png", "    heightfield: {file: f.png, dx_um: 0.1, height_um: 0.1}\n"},
+      {"exr", "    heightfield: {file: f.exr, dx_um: 0.1}\n"},
+      {"raw", "    heightfield: {file: f.raw, dx_um: 0.1, size: [40, 24]}\n"},
+      {"binary", "    procedural: {type: binary-grating, size: 48, dx_um: 0.1, period_um: 1.2, depth_um: 0.1}\n"},
+  };
+  for (const auto& [name, source] : sources) {
+    fs::remove_all(dir / "out");
+    tst::write_file(dir / "c.yaml", "specbake: 1\noutput: out\ndevice: auto\njobs:\n  - name: d\n    kind: diffraction\n" +
+                                        source + table);
+    const auto r = tst::run_cli({"run", (dir / "c.yaml").string()});
+    ASSERT_EQ(r.exit_code, 0) << name << "\n" << r.err;
+    const fs::path b = dir / "out/d/latest";
+    const auto m = tst::read_json(b / "manifest.json");
+    const auto& d = m["diffraction"];
+    const int n = d["table"]["size"].get<int>(), T = d["terms"].get<int>();
+    EXPECT_NE(std::find(std::begin(kTableLadder), std::end(kTableLadder), n), std::end(kTableLadder)) << name;
+    EXPECT_LE(d["error"]["between_texels_bilinear"]["max_over_window_sum"].get<double>(), 1e-2) << name;
+    EXPECT_LE(d["error"]["at_texels"]["max_over_window_sum"].get<double>(), 1e-4) << name;
+    for (const char* rec : {"table_vs_exact_transform", "table_between_texels"}) {
+      const auto a = find_accuracy(m["accuracy"], rec);
+      ASSERT_TRUE(a) << name << " " << rec;
+      EXPECT_TRUE((*a)["passed"].get<bool>()) << name << " " << rec;
+    }
+    EXPECT_EQ(tst::read_f32(b / "table_terms.bin").size(), static_cast<std::size_t>(T) * n * n * 2) << name;
+    EXPECT_TRUE(fs::exists(b / "table/F_000.exr")) << name;
+    // The ladder was climbed in order and stopped at the first size that met table.tolerance.
+    const auto& attempts = d["error"]["attempts"];
+    ASSERT_FALSE(attempts.empty()) << name;
+    for (std::size_t k = 0; k < attempts.size(); ++k) {
+      EXPECT_EQ(attempts[k]["size"].get<int>(), kTableLadder[k]) << name;
+      const double between = attempts[k]["between_texels_max"].get<double>();
+      if (k + 1 < attempts.size()) EXPECT_GT(between, 1e-2) << name << " stopped late";
+      else EXPECT_LE(between, 1e-2) << name;
+    }
+    if (name == "binary") EXPECT_GT(n, kTableLadder[0]) << "the grating's sharp orders need more than the first size";
+    for (const auto& [file, width, height] :
+         std::vector<std::tuple<std::string, int, int>>{{"preview/brdf_lobes.png", 768, 256}, {"preview/sphere.png", 512, 512}}) {
+      const auto im = tst::read_png(b / file);
+      EXPECT_EQ(im.width, width) << name << " " << file;
+      EXPECT_EQ(im.height, height) << name << " " << file;
+      int lit = 0;
+      for (std::size_t i = 0; i < im.rgba.size(); i += 4) lit += std::max({im.rgba[i], im.rgba[i + 1], im.rgba[i + 2]}) > 16;
+      EXPECT_GT(lit, 20) << name << " " << file << ": blank";
+    }
   }
 }

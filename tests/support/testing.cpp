@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <fcntl.h>
 #include <sys/wait.h>
+#include <png.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -15,6 +16,19 @@
 #include "core/hash.hpp"
 
 namespace specbake::testing {
+
+Image read_png(const fs::path& p) {
+  png_image img{};
+  img.version = PNG_IMAGE_VERSION;
+  Image out;
+  if (!png_image_begin_read_from_file(&img, p.c_str())) return out;
+  img.format = PNG_FORMAT_RGBA;
+  out.rgba.resize(PNG_IMAGE_SIZE(img));
+  if (!png_image_finish_read(&img, nullptr, out.rgba.data(), 0, nullptr)) return {};
+  out.width = static_cast<int>(img.width);
+  out.height = static_cast<int>(img.height);
+  return out;
+}
 
 cl_util::Device& shared_device() {
   static cl_util::Device dev(cl_util::select_device("auto"));

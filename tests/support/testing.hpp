@@ -25,6 +25,12 @@ fs::path specbake_exe();  // the built CLI
 nlohmann::json read_json(const fs::path& p);
 std::string read_file(const fs::path& p);
 std::vector<float> read_f32(const fs::path& p);
+// A PNG decoded to 8-bit RGBA by libpng's simplified API (width 0 when unreadable).
+struct Image {
+  int width = 0, height = 0;
+  std::vector<unsigned char> rgba;
+};
+Image read_png(const fs::path& p);
 void write_file(const fs::path& p, const std::string& text);
 
 // A fresh folder under the system temp dir, removed when the object dies.

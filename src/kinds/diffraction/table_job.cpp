@@ -6,11 +6,15 @@
 #include <Imath/half.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 
 #include "core/text.hpp"
 #include "io/exr.hpp"
+#include "io/png.hpp"
+#include "kinds/diffraction/brdf.hpp"
 #include "kinds/diffraction/diffraction_job.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "kinds/diffraction/table.hpp"
@@ -25,6 +29,10 @@ namespace {
 constexpr int kAutoRefinements = 3;
 constexpr int kPhaseTexels = 1024;  // table columns per pass over the field (memory: table.cpp)
 constexpr double kMB = 1e6;
+constexpr int kBrdfStepNm = 10;     // wavelength step of the previews' spectral sums
+constexpr int kLobePanel = 256;     // pixels per side of each lobe panel
+constexpr int kSpherePixels = 512;  // the sphere preview's size
+constexpr std::array<double, 3> kSphereLight = {2.0, 1.5, 3.0};
 
 // Bytes of the data files: the float32 terms (.bin) and their EXR copies (float32 or half).
 double term_bytes(const DiffractionSpec& spec, double terms, double texels) {
@@ -47,6 +55,39 @@ std::vector<float> to_float32(const std::vector<cplx>& v) {
     out[2 * i + 1] = static_cast<float>(v[i].imag());
   }
   return out;
+}
+
+// Exposure that maps the 99.5th percentile of the lit pixels' luminance to 1.
+float percentile_exposure(const std::vector<float>& rgb) {
+  std::vector<double> lum;
+  for (std::size_t i = 0; i + 2 < rgb.size(); i += 3) {
+    const double y = 0.2126 * rgb[i] + 0.7152 * rgb[i + 1] + 0.0722 * rgb[i + 2];
+    if (y > 0) lum.push_back(y);
+  }
+  if (lum.empty()) return 1.0f;
+  std::sort(lum.begin(), lum.end());
+  const double hi = lum[static_cast<std::size_t>(0.995 * static_cast<double>(lum.size() - 1))];
+  return static_cast<float>(hi > 0 ? 1.0 / hi : 1.0);
+}
+
+// The BRDF previews (brdf.hpp): lobes for three light angles, and a lit sphere.
+void add_brdf_previews(const BrdfTable& t, const std::vector<double>& spectrum, BakeResult& r) {
+  const std::vector<double> angles = {0.0, 30.0, 60.0};
+  const auto lobes = brdf_lobes(t, spectrum, kBrdfStepNm, angles, kLobePanel);
+  const float el = percentile_exposure(lobes);
+  const int width = kLobePanel * static_cast<int>(angles.size());
+  r.files.push_back({"preview/brdf_lobes.png", png_from_linear(width, kLobePanel, lobes, el), "",
+                     {kLobePanel, width, 3}, "", "",
+                     "Stam's diffraction BRDF from the table (Fresnel n = 1.5 and geometry factor, docs/diffraction.md) "
+                     "times D65 over the outgoing hemisphere seen from above, light at 0, 30 and 60 degrees from the "
+                     "normal in the x-z plane; exposure " + format_g(el) + " (99.5th percentile of the lit pixels)"});
+  const auto sphere = brdf_sphere(t, spectrum, kBrdfStepNm, kSphereLight, kSpherePixels);
+  const float es = percentile_exposure(sphere);
+  r.files.push_back({"preview/sphere.png", png_from_linear(kSpherePixels, kSpherePixels, sphere, es), "",
+                     {kSpherePixels, kSpherePixels, 3}, "", "",
+                     "a unit sphere covered by the surface (tangent x along circles about the view axis), seen along "
+                     "-z, lit by a D65 point light at (2, 1.5, 3) radii; exposure " + format_g(es) +
+                         " (99.5th percentile of the lit pixels)"});
 }
 
 json window_json(const DiffractionSpec& spec, const Window& w, double length_um) {
@@ -244,9 +285,11 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   r.files.push_back({"table_terms.bin", float32_le(values, "table terms"), "float32", {p.total_terms, n, n, 2},
                      le + "; [n][iv][iu][re,im], texel centres s = 2(i+0.5)/N - 1 mapped as the manifest's table block",
                      "1", "F_n of every band's terms at the table texels (see the manifest's diffraction block)"});
-  add_spectrum_file(spec.range_nm, r);
+  const auto spectrum = add_spectrum_file(spec.range_nm, r);
   add_term_exrs(values, p.bands, n, n, spec.storage, "table", "table_terms.bin",
                 "rows iv (f_v), columns iu (f_u), table texels", tm, r);
+  ctx.progress("preview", 0.95);
+  tm.time("preview", [&] { add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum}, spectrum, r); });
   block["timings_s"] = tm.json();
   r.manifest_blocks["diffraction"] = block;
   ctx.progress("done", 1.0);
