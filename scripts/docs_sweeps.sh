@@ -8,16 +8,16 @@ bin="$root/build/specbake"
 work=${1:-"$root/build/docs-sweeps"}
 mkdir -p "$work" "$root/docs/figures"
 
-sweep() {  # sweep CONFIG JOB VARY...
-  local config=$1 job=$2
+sweep() {  # sweep CONFIG JOB[:NAME] VARY...   (NAME: the figure's name, default JOB)
+  local config=$1 job=${2%%:*} name=${2#*:}
   shift 2
   local args=()
   for v in "$@"; do args+=(--vary "$v"); done
   echo "== $job: $*"
   local t0=$SECONDS
-  "$bin" sweep "$root/configs/$config" --job "$job" "${args[@]}" --out "$work/$job" -q
-  echo "$job: $((SECONDS - t0)) s wall"
-  cp "$work/$job/sweep.png" "$root/docs/figures/sweep-$job.png"
+  "$bin" sweep "$root/configs/$config" --job "$job" "${args[@]}" --out "$work/$name" -q
+  echo "$name: $((SECONDS - t0)) s wall"
+  cp "$work/$name/sweep.png" "$root/docs/figures/sweep-$name.png"
 }
 
 # dispersion: sample count and placement
@@ -31,3 +31,7 @@ sweep earth-rgb.yaml earth-rgb "sizes=50%,100%" "orders=2,4,6"
 sweep earth-spectral.yaml earth-spectral "spectrum.count=8,16,32,48" "sizes=50%"
 sweep hazy-earth.yaml hazy-earth "orders=2,4,8,auto" "sizes=50%"
 sweep mars.yaml mars "sizes=50%,100%" "orders=2,4"
+# diffraction tables: size and mapping, and the coherence length (sun: 39.9 µm), on the bundled
+# Elaphe scan (docs/diffraction.md, "Coherence and tables")
+sweep elaphe-diffraction.yaml elaphe:elaphe-table "table.size=64,96,128,192,256,384" "table.mapping=linear,power"
+sweep elaphe-diffraction.yaml elaphe:elaphe-coherence "coherence.length_um=10,20,40,80" "table.size=128,256"

@@ -254,7 +254,7 @@ TEST(DiffractionTable, CliBundleBudgetAndBadKeys) {
       {field + "    table: {size: 1024}\n    max_bundle_mb: 2\n", "table 1024 x 1024"},
       {field + "    coherence: {length_um: 3}\n", "coherence"},
       {field + "    table: {size: 33}\n", "table.size"},
-      {field + "    table: {size: 32, power: 2}\n", "table.power"},
+      {field + "    table: {size: 32, mapping: linear, power: 2}\n", "table.power"},
       {field + "    table: {size: 32}\n    coherence: {length_um: 3, source_angular_diameter_deg: 0.5}\n", "coherence"},
       {field + "    table: {size: 32, mapping: cubic}\n", "table.mapping"},
   };
@@ -322,7 +322,7 @@ TEST(DiffractionTable, TableBakesFromEveryHeightfieldSource) {
   exr.pixels = v;
   tst::write_file(dir / "f.exr", exr_bytes(exr));
   tst::write_file(dir / "f.png", png_from_linear(w, h, grey));
-  const std::string table = "    table: {size: auto, mapping: power}\n    coherence: {length_um: 1.5}\n";
+  const std::string table = "    table: {size: auto}\n    coherence: {length_um: 1.5}\n";  // mapping: power by default
   const std::vector<std::pair<std::string, std::string>> sources = {
       {"png", "    heightfield: {file: f.png, dx_um: 0.1, height_um: 0.1}\n"},
       {"exr", "    heightfield: {file: f.exr, dx_um: 0.1}\n"},
@@ -339,6 +339,8 @@ TEST(DiffractionTable, TableBakesFromEveryHeightfieldSource) {
     const auto m = tst::read_json(b / "manifest.json");
     const auto& d = m["diffraction"];
     const int n = d["table"]["size"].get<int>(), T = d["terms"].get<int>();
+    EXPECT_EQ(d["table"]["mapping"], "power") << name;
+    EXPECT_EQ(d["table"]["power"], 3.0) << name;
     EXPECT_NE(std::find(std::begin(kTableLadder), std::end(kTableLadder), n), std::end(kTableLadder)) << name;
     EXPECT_LE(d["error"]["between_texels_bilinear"]["max_over_window_sum"].get<double>(), 1e-2) << name;
     EXPECT_LE(d["error"]["at_texels"]["max_over_window_sum"].get<double>(), 1e-4) << name;

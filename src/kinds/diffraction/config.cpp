@@ -141,6 +141,8 @@ void parse_table_keys(const At& job, DiffractionSpec& d) {
         if (ts.size && *ts.size % 2) t.child("size").fail("expected an even size (the centre falls between texels), got " +
                                                           t.child("size").shown());
       }
+      // The power mapping is the default: it puts texels across the specular peak (docs/diffraction.md).
+      ts.power_mapping = true;
       if (t.has("mapping")) ts.power_mapping = t.child("mapping").choice<bool>({{"linear", false}, {"power", true}});
       if (t.has("power")) {
         if (!ts.power_mapping) t.child("power").fail("'power' applies to mapping: power only");

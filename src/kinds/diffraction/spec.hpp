@@ -36,8 +36,8 @@ struct CoherenceSpec {
 // spatial frequency f = sign(s)·|s|^p·f_max (cycles/µm); p = 1 is the linear mapping.
 struct TableSpec {
   std::optional<int> size;                 // nullopt: auto (smallest of the ladder meeting tolerance)
-  double power = 1.0;                      // mapping: linear → 1, power → `power`
-  bool power_mapping = false;
+  double power = 1.0;                      // mapping: linear → 1, power → `power` (3 unless given)
+  bool power_mapping = false;              // the config's default is power (config.cpp)
   std::optional<double> f_max_per_um;      // nullopt: 2/λ_min
   double tolerance = 1e-2;                 // between texels, over the window's sum Σw
 };

@@ -452,12 +452,23 @@ struct Evaluator {
   const std::vector<float>& terms;
   const TableGeometry& g;
   const Band& band;
-  std::vector<double> coef;
+  // The coefficients on the stack for the usual term counts (this runs per pixel and wavelength
+  // in the previews), on the heap beyond.
+  static constexpr int kSmall = 64;
+  double small[kSmall];
+  std::vector<double> big;
+  double* coef;
   cplx scale;
+  Evaluator(const Evaluator&) = delete;
+  Evaluator& operator=(const Evaluator&) = delete;
   Evaluator(const std::vector<float>& t, const TableGeometry& geo, const Field& f, const Band& b, double kappa)
-      : terms(t), g(geo), band(b), coef(b.terms) {
+      : terms(t), g(geo), band(b), coef(small) {
+    if (b.terms > kSmall) {
+      big.resize(b.terms);
+      coef = big.data();
+    }
     ref::expansion_coefficients(b.expansion == Expansion::taylor ? 0 : 1, kappa, b.kappa0, b.delta, f.s, b.terms,
-                                coef.data());
+                                coef);
     scale = static_cast<double>(f.count()) * std::polar(1.0, kappa * f.c);
   }
   cplx at(int iu, int iv) const {
