@@ -292,7 +292,11 @@ json plan(const DiffractionSpec& spec, JobContext&) {
   const Plan p = make_plan(spec, f, spec.tolerance);
   json j = plan_json(spec, f, p);
   j["planned_bundle_mb"] = check_bundle_budget(spec, f, p);
-  if (spec.table) j["table"] = table_plan_json(spec, f, p);
+  if (spec.table) {
+    j["table"] = table_plan_json(spec, f, p);
+    j["table_size"] = j["table"]["size"];
+    j.erase("bins");  // a table job keeps no bins
+  }
   return j;
 }
 

@@ -284,6 +284,16 @@ double dropped_window_fraction(const Window& w) {
   return std::max(0.0, 1.0 - kept(w.wx) * kept(w.wy) / w.sum);
 }
 
+AxisExtent fft_extent(int m, double dx_um, double sigma_um) {
+  std::vector<double> w(m);
+  for (int j = 0; j < m; ++j) {
+    const double x = (j - 0.5 * (m - 1)) * dx_um;
+    w[j] = std::exp(-x * x / (2.0 * sigma_um * sigma_um));
+  }
+  const Axis a = make_axis(w, kb_beta());
+  return {a.count, a.n};
+}
+
 std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
                                                const std::vector<Band>& bands, const std::vector<TableGeometry>& tables) {
   const double beta = kb_beta();

@@ -79,6 +79,12 @@ std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field
 // Σw, is dropped_window_fraction (recorded; ~1e-8 for a window inside the patch).
 inline constexpr double kWindowFloor = 1e-7;
 double dropped_window_fraction(const Window& w);
+// One axis of m samples at dx under a window of σ: the samples the FFT path keeps and its padded
+// transform length (for plan's estimates).
+struct AxisExtent {
+  int kept = 0, n = 0;
+};
+AxisExtent fft_extent(int m, double dx_um, double sigma_um);
 
 // The windowed field a_j = w_j·e^{iκh_j} ([iy][ix]) and its transform at one frequency by the
 // direct 2D sum (the ground truth: no expansion, no separable pass shared with table_terms).
