@@ -257,6 +257,11 @@ TEST(DiffractionTable, CliBundleBudgetAndBadKeys) {
       {field + "    table: {size: 32, mapping: linear, power: 2}\n", "table.power"},
       {field + "    table: {size: 32}\n    coherence: {length_um: 3, source_angular_diameter_deg: 0.5}\n", "coherence"},
       {field + "    table: {size: 32, mapping: cubic}\n", "table.mapping"},
+      // σ = L/√2 below dx = 0.125 µm: a window of about one sample.
+      {field + "    table: {size: 32}\n    coherence: {length_um: 0.1}\n", "coherence.length_um"},
+      {"    procedural: {type: blazed-grating, size: 32, dx_um: 1.0, period_um: 4.0, depth_um: 0.2}\n"
+       "    table: {size: 32}\n    coherence: {source_angular_diameter_deg: 30}\n",  // L = 0.71 µm
+       "coherence.source_angular_diameter_deg"},
   };
   for (const auto& c : cases) {
     fs::remove_all(dir / "out");

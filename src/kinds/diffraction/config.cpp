@@ -10,8 +10,10 @@
 #include "core/hash.hpp"
 #include "core/resources.hpp"
 #include "core/spectral_data.hpp"
+#include "core/text.hpp"
 #include "io/heightfield.hpp"
 #include "kinds/diffraction/spec.hpp"
+#include "kinds/diffraction/table.hpp"
 
 namespace specbake::diffraction {
 
@@ -213,6 +215,19 @@ DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) 
     d.storage = job.child("storage").choice<Storage>({{"float32", Storage::float32}, {"half", Storage::half}});
 
   parse_table_keys(job, d);
+  if (d.table) {
+    // The window must span samples: σ = L/√2 below the spacing leaves about one sample.
+    const double dx = d.procedural ? d.procedural->dx_um : d.field->dx_um;
+    const double length = coherence_length_um(d);
+    if (length / std::sqrt(2.0) < dx) {
+      const At at = !job.has("coherence")                 ? job
+                    : job.child("coherence").has("length_um") ? job.child("coherence").child("length_um")
+                                                              : job.child("coherence").child("source_angular_diameter_deg");
+      at.fail("the coherence length " + format_g(length) + " um gives a window sigma = L/sqrt(2) below the sample "
+              "spacing dx_um = " + format_g(dx) + ": the table would hold the transform of about one sample; "
+              "expected L >= " + format_g(dx * std::sqrt(2.0)) + " um");
+    }
+  }
 
   norm = {{"kind", "diffraction"},
           {"field", field_norm},
