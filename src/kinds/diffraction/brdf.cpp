@@ -4,6 +4,7 @@
 
 #include "core/colour_space.hpp"
 #include "core/parallel.hpp"
+#include "kinds/diffraction/reference.hpp"
 
 namespace specbake::diffraction {
 
@@ -18,13 +19,6 @@ Vec3 normalize(const Vec3& a) {
 }
 Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-
-// Unpolarised Fresnel reflectance of a dielectric of index n at incidence cosine c (from air).
-double fresnel(double c, double n) {
-  const double s2 = 1.0 - c * c, t = std::sqrt(std::max(0.0, n * n - s2));
-  const double rs = (c - t) / (c + t), rp = (n * n * c - t) / (n * n * c + t);
-  return 0.5 * (rs * rs + rp * rp);
 }
 
 // Σ_λ ρ·D65·x̄ȳz̄·Δλ → linear sRGB, for one pair of directions.
@@ -51,9 +45,7 @@ double brdf(const BrdfTable& t, const Vec3& wi, const Vec3& wo, double lambda_um
   const Band& band = band_for(t.bands, kappa);
   const cplx p = table_bilinear(t.terms, t.g, t.f, band, kappa, t.g.texel_of(fu), t.g.texel_of(fv)) / t.window_sum;
   const Vec3 h = normalize({wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]});
-  const double gain = fresnel(dot(wi, h), t.ior) / fresnel(1.0, t.ior) * std::pow(1.0 + dot(wi, wo), 2) /
-                      ((ci + co) * (ci + co) * co);
-  return gain * std::norm(p);
+  return ref::stam_gain(ci, co, dot(wi, wo), dot(wi, h), t.ior) * std::norm(p);
 }
 
 std::vector<float> brdf_lobes(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,

@@ -71,11 +71,7 @@ double TableGeometry::width(int i) const {
   return power * (power == 1.0 ? 1.0 : std::pow(sv, power - 1.0)) * f_max * 2.0 / size;
 }
 
-double TableGeometry::texel_of(double f) const {
-  const double a = std::pow(std::fabs(f) / f_max, 1.0 / power);
-  const double sv = f < 0 ? -a : a;
-  return (sv + 1.0) * size / 2.0 - 0.5;
-}
+double TableGeometry::texel_of(double f) const { return ref::diffraction_texel(f, f_max, power, size); }
 
 TableGeometry table_geometry(const DiffractionSpec& spec, int size) {
   TableGeometry g;

@@ -15,6 +15,7 @@
 #include "io/exr.hpp"
 #include "io/png.hpp"
 #include "kinds/diffraction/brdf.hpp"
+#include "kinds/diffraction/shader.hpp"
 #include "kinds/diffraction/diffraction_job.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "kinds/diffraction/table.hpp"
@@ -29,6 +30,7 @@ namespace {
 constexpr int kAutoRefinements = 3;
 constexpr int kPhaseTexels = 1024;  // table columns per pass over the field (memory: table.cpp)
 constexpr double kMB = 1e6;
+constexpr double kPreviewIor = 1.5;  // the Fresnel term's dielectric index (shader and previews)
 constexpr int kBrdfStepNm = 10;     // wavelength step of the previews' spectral sums
 constexpr int kLobePanel = 256;     // pixels per side of each lobe panel
 constexpr int kSpherePixels = 512;  // the sphere preview's size
@@ -288,8 +290,10 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   const auto spectrum = add_spectrum_file(spec.range_nm, r);
   add_term_exrs(values, p.bands, n, n, spec.storage, "table", "table_terms.bin",
                 "rows iv (f_v), columns iu (f_u), table texels", tm, r);
+  r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win.sum, kPreviewIor), "", {}, "",
+                     "", "GLSL: the table's lookup and the BRDF the previews draw (Stam, relative form)"});
   ctx.progress("preview", 0.95);
-  tm.time("preview", [&] { add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum}, spectrum, r); });
+  tm.time("preview", [&] { add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum, kPreviewIor}, spectrum, r); });
   block["timings_s"] = tm.json();
   r.manifest_blocks["diffraction"] = block;
   ctx.progress("done", 1.0);

@@ -1,0 +1,138 @@
+#include "kinds/diffraction/shader.hpp"
+
+#include <cstdio>
+#include <sstream>
+
+#include "core/colour_space.hpp"
+#include "core/resources.hpp"
+
+namespace specbake::diffraction {
+
+namespace {
+std::string g9(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.9g", v);
+  std::string s = b;
+  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
+  return s;
+}
+
+template <class T, class F>
+std::string array(const char* type, const std::vector<T>& v, F&& show) {
+  std::string s = std::string(type) + "[" + std::to_string(v.size()) + "](";
+  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + show(v[i]);
+  return s + ")";
+}
+}  // namespace
+
+std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, const TableGeometry& g,
+                             double window_sum, double ior) {
+  // The shared maths without its C/OpenCL include line.
+  std::string shared(resource("kernels/diffraction/brdf.cl"));
+  const std::string inc = "#include \"common/real.h\"\n";
+  if (const auto at = shared.find(inc); at != std::string::npos) shared.erase(at, inc.size());
+  std::vector<double> hi, k0, delta;
+  std::vector<int> first, count;
+  for (const auto& b : bands) {
+    hi.push_back(b.kappa_hi);
+    k0.push_back(b.kappa0);
+    delta.push_back(b.delta);
+    first.push_back(b.first_term);
+    count.push_back(b.terms);
+  }
+  const auto real = [](double v) { return g9(v); };
+  const auto integer = [](int v) { return std::to_string(v); };
+  const Mat3 m = xyz_to_srgb();
+  std::ostringstream o;
+  o << "// specbake diffraction BRDF from a baked table (docs/diffraction.md, \"Use it in an engine\").\n"
+    << "// GLSL 4.50 core or ES 3.20, without #version: include it after yours (ES: precision highp float\n"
+    << "// and highp sampler2DArray).\n"
+    << "// Textures:\n"
+    << "//   terms: sampler2DArray RG32F (RG16F from half EXRs), " << g.size << " x " << g.size
+    << " x (layers = terms): layer n holds F_n from\n"
+    << "//     table_terms.bin [n][iv][iu][re, im] or table/F_nnn.exr (R = Re, G = Im); texel (x = iu, y = iv).\n"
+    << "//     Filtering LINEAR, wrap CLAMP_TO_EDGE, no mipmaps: the filtered fetch is the bilinear\n"
+    << "//     interpolation the bake's between-texel error measures.\n"
+    << "//   spectrum: sampler2D RGBA32F, L x 1, from spectrum.bin (lambda nm, D65*xbar, D65*ybar, D65*zbar\n"
+    << "//     at 1 nm steps, sum of Y = 1); filtering NEAREST.\n"
+    << "// Directions: unit vectors in the surface's tangent frame (x along the heightfield's x, z the\n"
+    << "// normal); wi towards the light, wo towards the viewer.\n"
+    << "#ifndef SPECBAKE_DIFFRACTION_GLSL\n#define SPECBAKE_DIFFRACTION_GLSL\n\n"
+    << "// The prelude that lets brdf.cl's C/GLSL common subset compile as GLSL.\n"
+    << "#define real float\n#define FN\n#define R(x) float(x)\n#define fabs abs\n#define fmax max\n\n"
+    << "// ---- kernels/diffraction/brdf.cl, verbatim ----\n"
+    << shared << "// ---- end of brdf.cl ----\n\n"
+    << "const float DIFFRACTION_TABLE_SIZE = " << g9(g.size) << ";\n"
+    << "const float DIFFRACTION_F_MAX = " << g9(g.f_max) << ";  // cycles/um\n"
+    << "const float DIFFRACTION_POWER = " << g9(g.power) << ";\n"
+    << "const float DIFFRACTION_SAMPLES = " << g9(static_cast<double>(f.count())) << ";  // W*H\n"
+    << "const float DIFFRACTION_CENTER_UM = " << g9(f.c) << ";\n"
+    << "const float DIFFRACTION_SCALE_UM = " << g9(f.s) << ";\n"
+    << "const float DIFFRACTION_WINDOW_SUM = " << g9(window_sum) << ";\n"
+    << "const float DIFFRACTION_IOR = " << g9(ior) << ";\n"
+    << "const int DIFFRACTION_EXPANSION = " << (bands.front().expansion == Expansion::taylor ? 0 : 1)
+    << ";  // 0 taylor, 1 chebyshev\n"
+    << "const int DIFFRACTION_BANDS = " << bands.size() << ";\n"
+    << "const float DIFFRACTION_BAND_KAPPA_HI[" << bands.size() << "] = " << array("float", hi, real) << ";\n"
+    << "const float DIFFRACTION_BAND_KAPPA0[" << bands.size() << "] = " << array("float", k0, real) << ";\n"
+    << "const float DIFFRACTION_BAND_DELTA[" << bands.size() << "] = " << array("float", delta, real) << ";\n"
+    << "const int DIFFRACTION_BAND_FIRST[" << bands.size() << "] = " << array("int", first, integer) << ";\n"
+    << "const int DIFFRACTION_BAND_TERMS[" << bands.size() << "] = " << array("int", count, integer) << ";\n"
+    << "const float DIFFRACTION_PI = 3.14159265358979;\n"
+    << "// CIE XYZ -> linear sRGB (D65 white), column-major.\n"
+    << "const mat3 DIFFRACTION_XYZ_TO_SRGB = mat3(" << g9(m[0]) << ", " << g9(m[3]) << ", " << g9(m[6]) << ", "
+    << g9(m[1]) << ", " << g9(m[4]) << ", " << g9(m[7]) << ", " << g9(m[2]) << ", " << g9(m[5]) << ", " << g9(m[8])
+    << ");\n\n"
+    << R"GLSL(// P(f; kappa) / sum(w) as (re, im): the band holding kappa (the first whose upper end is >= kappa),
+// its coefficients (taylor: ((kappa - kappa0)*s)^n/n!, chebyshev: T_n((kappa - kappa0)/delta)),
+// one filtered fetch per term; 0 beyond the table's reach.
+vec2 diffraction_p(sampler2DArray terms, vec2 f, float kappa) {
+  if (abs(f.x) > DIFFRACTION_F_MAX || abs(f.y) > DIFFRACTION_F_MAX) return vec2(0.0);
+  int b = 0;
+  while (b + 1 < DIFFRACTION_BANDS && kappa > DIFFRACTION_BAND_KAPPA_HI[b]) ++b;
+  vec2 uv = (vec2(diffraction_texel(f.x, DIFFRACTION_F_MAX, DIFFRACTION_POWER, DIFFRACTION_TABLE_SIZE),
+                  diffraction_texel(f.y, DIFFRACTION_F_MAX, DIFFRACTION_POWER, DIFFRACTION_TABLE_SIZE)) + 0.5) /
+            DIFFRACTION_TABLE_SIZE;
+  float y = (kappa - DIFFRACTION_BAND_KAPPA0[b]) * DIFFRACTION_SCALE_UM;
+  float t = DIFFRACTION_BAND_DELTA[b] > 0.0 ? (kappa - DIFFRACTION_BAND_KAPPA0[b]) / DIFFRACTION_BAND_DELTA[b] : 0.0;
+  float coef = 1.0, previous = 1.0;
+  vec2 sum = vec2(0.0);
+  for (int n = 0; n < DIFFRACTION_BAND_TERMS[b]; ++n) {
+    if (n > 0) {
+      float next = DIFFRACTION_EXPANSION == 0 ? coef * y / float(n) : (n == 1 ? t : 2.0 * t * coef - previous);
+      previous = coef;
+      coef = next;
+    }
+    sum += coef * texture(terms, vec3(uv, float(DIFFRACTION_BAND_FIRST[b] + n))).xy;
+  }
+  float phase = kappa * DIFFRACTION_CENTER_UM;
+  vec2 e = vec2(cos(phase), sin(phase));
+  return vec2(e.x * sum.x - e.y * sum.y, e.x * sum.y + e.y * sum.x) * (DIFFRACTION_SAMPLES / DIFFRACTION_WINDOW_SUM);
+}
+
+// The relative BRDF rho_lambda(wi, wo) (brdf.cl's header): stam_gain * |P / sum(w)|^2.
+float diffraction_brdf(sampler2DArray terms, vec3 wi, vec3 wo, float lambda_um) {
+  if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+  vec2 p = diffraction_p(terms, -(wi.xy + wo.xy) / lambda_um, 2.0 * DIFFRACTION_PI * (wi.z + wo.z) / lambda_um);
+  vec3 h = normalize(wi + wo);
+  return stam_gain(wi.z, wo.z, dot(wi, wo), dot(wi, h), DIFFRACTION_IOR) * dot(p, p);
+}
+
+// Linear sRGB radiance under a D65 light whose mirror reflection is white (Y = 1): the sum over
+// every step_nm-th row of the spectrum texture of rho * D65 * (xbar, ybar, zbar) * step_nm.
+vec3 diffraction_srgb(sampler2DArray terms, sampler2D spectrum, vec3 wi, vec3 wo, int step_nm) {
+  int count = textureSize(spectrum, 0).x;
+  vec3 xyz = vec3(0.0);
+  for (int i = 0; i < count; i += step_nm) {
+    vec4 s = texelFetch(spectrum, ivec2(i, 0), 0);
+    xyz += diffraction_brdf(terms, wi, wo, s.x * 1e-3) * s.yzw * float(step_nm);
+  }
+  return DIFFRACTION_XYZ_TO_SRGB * xyz;
+}
+
+#endif  // SPECBAKE_DIFFRACTION_GLSL
+)GLSL";
+  return o.str();
+}
+
+}  // namespace specbake::diffraction
