@@ -10,4 +10,10 @@ std::string format_g(double v, int digits) {
   return b;
 }
 
+std::string glsl_float(double v) {
+  std::string s = format_g(v, 9);
+  if (s.find_first_of(".eE") == std::string::npos) s += ".0";
+  return s;
+}
+
 }  // namespace specbake

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "core/text.hpp"
 #include "io/png.hpp"
 #include "kinds/atmosphere/reference.hpp"
 
@@ -99,18 +100,6 @@ Vec3 sample_tiled2d(const Model& m, const std::vector<double>& tiled, double r, 
   return out;
 }
 
-namespace {
-
-std::string g9(double v) {
-  char b[40];
-  std::snprintf(b, sizeof b, "%.9g", v);
-  std::string s = b;
-  if (s.find_first_of(".eE") == std::string::npos) s += ".0";
-  return s;
-}
-
-}  // namespace
-
 std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, bool layout_tiled2d,
                           const std::string& units_note) {
   const Sizes& s = m.sizes;
@@ -125,13 +114,13 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
     << " (x = r_index*NU*MU_S + nu_slice*MU_S + mu_s_index).\n"
     << "// Filtering: linear, clamp to edge, no mipmaps; texel (i, j) at ((i+0.5)/W, (j+0.5)/H), row j = 0 at v ~ 0.\n"
     << "#ifndef SPECBAKE_ATMOSPHERE_GLSL\n#define SPECBAKE_ATMOSPHERE_GLSL\n"
-    << "const float BOTTOM_RADIUS = " << g9(m.bottom_radius_km) << ";\n"
-    << "const float TOP_RADIUS = " << g9(m.top_radius_km) << ";\n"
-    << "const float MU_S_MIN = " << g9(m.mu_s_min) << ";\n"
-    << "const float SUN_ANGULAR_RADIUS = " << g9(m.sun_angular_radius_rad) << ";\n"
-    << "const float MIE_PHASE_G = " << g9(m.mie_g) << ";\n"
-    << "const vec3 SOLAR_IRRADIANCE = vec3(" << g9(rgb.solar_irradiance[0]) << ", " << g9(rgb.solar_irradiance[1])
-    << ", " << g9(rgb.solar_irradiance[2]) << ");\n"
+    << "const float BOTTOM_RADIUS = " << glsl_float(m.bottom_radius_km) << ";\n"
+    << "const float TOP_RADIUS = " << glsl_float(m.top_radius_km) << ";\n"
+    << "const float MU_S_MIN = " << glsl_float(m.mu_s_min) << ";\n"
+    << "const float SUN_ANGULAR_RADIUS = " << glsl_float(m.sun_angular_radius_rad) << ";\n"
+    << "const float MIE_PHASE_G = " << glsl_float(m.mie_g) << ";\n"
+    << "const vec3 SOLAR_IRRADIANCE = vec3(" << glsl_float(rgb.solar_irradiance[0]) << ", " << glsl_float(rgb.solar_irradiance[1])
+    << ", " << glsl_float(rgb.solar_irradiance[2]) << ");\n"
     << "const int TRANSMITTANCE_TEXTURE_WIDTH = " << s.transmittance_w << ";\n"
     << "const int TRANSMITTANCE_TEXTURE_HEIGHT = " << s.transmittance_h << ";\n"
     << "const int IRRADIANCE_TEXTURE_WIDTH = " << s.irradiance_w << ";\n"

@@ -1,22 +1,14 @@
 #include "kinds/diffraction/shader.hpp"
 
-#include <cstdio>
 #include <sstream>
 
 #include "core/colour_space.hpp"
 #include "core/resources.hpp"
+#include "core/text.hpp"
 
 namespace specbake::diffraction {
 
 namespace {
-std::string g9(double v) {
-  char b[40];
-  std::snprintf(b, sizeof b, "%.9g", v);
-  std::string s = b;
-  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
-  return s;
-}
-
 template <class T, class F>
 std::string array(const char* type, const std::vector<T>& v, F&& show) {
   std::string s = std::string(type) + "[" + std::to_string(v.size()) + "](";
@@ -40,7 +32,7 @@ std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, con
     first.push_back(b.first_term);
     count.push_back(b.terms);
   }
-  const auto real = [](double v) { return g9(v); };
+  const auto real = [](double v) { return glsl_float(v); };
   const auto integer = [](int v) { return std::to_string(v); };
   const Mat3 m = xyz_to_srgb();
   std::ostringstream o;
@@ -62,14 +54,14 @@ std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, con
     << "#define real float\n#define FN\n#define R(x) float(x)\n#define fabs abs\n#define fmax max\n\n"
     << "// ---- kernels/diffraction/brdf.cl, verbatim ----\n"
     << shared << "// ---- end of brdf.cl ----\n\n"
-    << "const float DIFFRACTION_TABLE_SIZE = " << g9(g.size) << ";\n"
-    << "const float DIFFRACTION_F_MAX = " << g9(g.f_max) << ";  // cycles/um\n"
-    << "const float DIFFRACTION_POWER = " << g9(g.power) << ";\n"
-    << "const float DIFFRACTION_SAMPLES = " << g9(static_cast<double>(f.count())) << ";  // W*H\n"
-    << "const float DIFFRACTION_CENTER_UM = " << g9(f.c) << ";\n"
-    << "const float DIFFRACTION_SCALE_UM = " << g9(f.s) << ";\n"
-    << "const float DIFFRACTION_WINDOW_SUM = " << g9(window_sum) << ";\n"
-    << "const float DIFFRACTION_IOR = " << g9(ior) << ";\n"
+    << "const float DIFFRACTION_TABLE_SIZE = " << glsl_float(g.size) << ";\n"
+    << "const float DIFFRACTION_F_MAX = " << glsl_float(g.f_max) << ";  // cycles/um\n"
+    << "const float DIFFRACTION_POWER = " << glsl_float(g.power) << ";\n"
+    << "const float DIFFRACTION_SAMPLES = " << glsl_float(static_cast<double>(f.count())) << ";  // W*H\n"
+    << "const float DIFFRACTION_CENTER_UM = " << glsl_float(f.c) << ";\n"
+    << "const float DIFFRACTION_SCALE_UM = " << glsl_float(f.s) << ";\n"
+    << "const float DIFFRACTION_WINDOW_SUM = " << glsl_float(window_sum) << ";\n"
+    << "const float DIFFRACTION_IOR = " << glsl_float(ior) << ";\n"
     << "const int DIFFRACTION_EXPANSION = " << (bands.front().expansion == Expansion::taylor ? 0 : 1)
     << ";  // 0 taylor, 1 chebyshev\n"
     << "const int DIFFRACTION_BANDS = " << bands.size() << ";\n"
@@ -80,8 +72,8 @@ std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, con
     << "const int DIFFRACTION_BAND_TERMS[" << bands.size() << "] = " << array("int", count, integer) << ";\n"
     << "const float DIFFRACTION_PI = 3.14159265358979;\n"
     << "// CIE XYZ -> linear sRGB (D65 white), column-major.\n"
-    << "const mat3 DIFFRACTION_XYZ_TO_SRGB = mat3(" << g9(m[0]) << ", " << g9(m[3]) << ", " << g9(m[6]) << ", "
-    << g9(m[1]) << ", " << g9(m[4]) << ", " << g9(m[7]) << ", " << g9(m[2]) << ", " << g9(m[5]) << ", " << g9(m[8])
+    << "const mat3 DIFFRACTION_XYZ_TO_SRGB = mat3(" << glsl_float(m[0]) << ", " << glsl_float(m[3]) << ", " << glsl_float(m[6]) << ", "
+    << glsl_float(m[1]) << ", " << glsl_float(m[4]) << ", " << glsl_float(m[7]) << ", " << glsl_float(m[2]) << ", " << glsl_float(m[5]) << ", " << glsl_float(m[8])
     << ");\n\n"
     << R"GLSL(// P(f; kappa) / sum(w) as (re, im): the band holding kappa (the first whose upper end is >= kappa),
 // its coefficients (taylor: ((kappa - kappa0)*s)^n/n!, chebyshev: T_n((kappa - kappa0)/delta)),

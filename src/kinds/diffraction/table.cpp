@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <tuple>
+#include <utility>
 
 #include "cl/fft.hpp"
 #include "core/parallel.hpp"
@@ -31,6 +33,16 @@ void axis_phasors(const std::vector<double>& freqs, int samples, double dx, std:
       re[k * samples + j] = std::cos(kTwoPi * cyc);
       im[k * samples + j] = -std::sin(kTwoPi * cyc);
     }
+}
+
+// Σ_j (ar + i·ai)_j·(er + i·ei)_j over n samples: one row against one frequency's phasors.
+std::pair<double, double> row_dot(const double* ar, const double* ai, const double* er, const double* ei, int n) {
+  double sr = 0, si = 0;
+  for (int j = 0; j < n; ++j) {
+    sr += ar[j] * er[j] - ai[j] * ei[j];
+    si += ar[j] * ei[j] + ai[j] * er[j];
+  }
+  return {sr, si};
 }
 
 double percentile99(std::vector<double> v) {
@@ -131,15 +143,8 @@ std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector
         const double* rr = ar.data() + iy * W;
         const double* ri = ai.data() + iy * W;
         for (int iu = 0; iu < n; ++iu) {
-          const double* er = eur.data() + static_cast<std::size_t>(iu) * W;
-          const double* ei = eui.data() + static_cast<std::size_t>(iu) * W;
-          double sr = 0, si = 0;
-          for (int ix = 0; ix < W; ++ix) {
-            sr += rr[ix] * er[ix] - ri[ix] * ei[ix];
-            si += rr[ix] * ei[ix] + ri[ix] * er[ix];
-          }
-          gr[iy * n + iu] = sr;
-          gi[iy * n + iu] = si;
+          const std::size_t at = static_cast<std::size_t>(iu) * W;
+          std::tie(gr[iy * n + iu], gi[iy * n + iu]) = row_dot(rr, ri, eur.data() + at, eui.data() + at, W);
         }
       });
       // Columns: F[iv][iu] = Σ_iy e^{−2πi f_v y}·G[iy][iu].
@@ -426,15 +431,8 @@ std::vector<cplx> direct_transform_grid(const Field& f, const Window& w, double 
       ai[ix] = wj * std::sin(ph);
     }
     for (int a = 0; a < nu; ++a) {
-      const double* er = eur.data() + static_cast<std::size_t>(a) * W;
-      const double* ei = eui.data() + static_cast<std::size_t>(a) * W;
-      double sr = 0, si = 0;
-      for (int ix = 0; ix < W; ++ix) {
-        sr += ar[ix] * er[ix] - ai[ix] * ei[ix];
-        si += ar[ix] * ei[ix] + ai[ix] * er[ix];
-      }
-      rr[iy * nu + a] = sr;
-      ri[iy * nu + a] = si;
+      const std::size_t at = static_cast<std::size_t>(a) * W;
+      std::tie(rr[iy * nu + a], ri[iy * nu + a]) = row_dot(ar.data(), ai.data(), eur.data() + at, eui.data() + at, W);
     }
   });
   std::vector<cplx> out(static_cast<std::size_t>(nu) * nv);
