@@ -14,7 +14,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev libfftw3-dev
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib libzstd-dev python3-venv
-  glslang-tools
+  glslang-tools libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri
 )
 
 if [ "${SPECBAKE_NO_INSTALL:-0}" != 1 ]; then

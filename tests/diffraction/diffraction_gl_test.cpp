@@ -1,0 +1,251 @@
+// The shipped diffraction shader (shader/diffraction_brdf.glsl) run on a real GL implementation:
+// Mesa's llvmpipe through EGL surfaceless (GLES 3.2), the table and spectrum uploaded as a shader
+// would, the outgoing hemisphere drawn for one light direction and every pixel compared with the
+// host's double evaluation of the same BRDF from the same float32 table (brdf_lobes, what the
+// bundle's preview draws). Skipped, with the reason, only when no EGL device can be opened.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "core/colour_space.hpp"
+#include "kinds/diffraction/brdf.hpp"
+#include "kinds/diffraction/diffraction_job.hpp"
+#include "kinds/diffraction/planning.hpp"
+#include "kinds/diffraction/reference.hpp"
+#include "kinds/diffraction/shader.hpp"
+#include "kinds/diffraction/table.hpp"
+#include "kinds/diffraction/terms.hpp"
+
+#ifdef SPECBAKE_HAVE_GL
+#include <EGL/egl.h>
+#include <EGL/eglext.h>
+#include <GLES3/gl32.h>
+#endif
+
+using namespace specbake;
+using namespace specbake::diffraction;
+
+#ifdef SPECBAKE_HAVE_GL
+namespace {
+
+struct Gl {
+  EGLDisplay dpy = EGL_NO_DISPLAY;
+  EGLContext ctx = EGL_NO_CONTEXT;
+  std::string why;  // empty when ready
+  Gl() {
+    auto get_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
+    if (!get_display) { why = "no eglGetPlatformDisplayEXT"; return; }
+    dpy = get_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
+    if (dpy == EGL_NO_DISPLAY || !eglInitialize(dpy, nullptr, nullptr)) { why = "no surfaceless EGL display"; return; }
+    if (!eglBindAPI(EGL_OPENGL_ES_API)) { why = "EGL cannot bind OpenGL ES"; return; }
+    const EGLint attrs[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 2, EGL_NONE};
+    ctx = eglCreateContext(dpy, EGL_NO_CONFIG_KHR, EGL_NO_CONTEXT, attrs);
+    if (ctx == EGL_NO_CONTEXT) { why = "no GLES 3.2 context without a config"; return; }
+    if (!eglMakeCurrent(dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, ctx)) why = "cannot make the context current";
+  }
+  ~Gl() {
+    if (ctx != EGL_NO_CONTEXT) eglDestroyContext(dpy, ctx);
+    if (dpy != EGL_NO_DISPLAY) eglTerminate(dpy);
+  }
+};
+
+bool has_extension(const char* name) {
+  GLint n = 0;
+  glGetIntegerv(GL_NUM_EXTENSIONS, &n);
+  for (GLint i = 0; i < n; ++i)
+    if (std::string(reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, i))) == name) return true;
+  return false;
+}
+
+GLuint compile(GLenum type, const std::string& src, std::string& log) {
+  const GLuint s = glCreateShader(type);
+  const char* p = src.c_str();
+  glShaderSource(s, 1, &p, nullptr);
+  glCompileShader(s);
+  GLint ok = 0;
+  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char buf[4096];
+    glGetShaderInfoLog(s, sizeof buf, nullptr, buf);
+    log += buf;
+  }
+  return s;
+}
+
+}  // namespace
+#endif
+
+TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
+#ifndef SPECBAKE_HAVE_GL
+  GTEST_SKIP() << "built without EGL/GLES headers (Debian: libegl-dev, libgles-dev)";
+#else
+  Gl gl;
+  if (!gl.why.empty()) GTEST_SKIP() << "no EGL device: " << gl.why;
+  ASSERT_TRUE(has_extension("GL_EXT_color_buffer_float")) << "float render targets";
+  ASSERT_TRUE(has_extension("GL_OES_texture_float_linear")) << "filtered float textures";
+
+  // A sawtooth (asymmetric, so a mirrored lookup would show) 48² field, window L = 3 µm, a 32²
+  // power-mapped table, the terms in double then stored as float32 as the bundle stores them.
+  DiffractionSpec spec;
+  spec.procedural = ProceduralField{ProceduralField::Type::blazed_grating, 48, 0.1, 1.2, 0.25};
+  TableSpec ts;
+  ts.size = 32;
+  ts.power = 3.0;
+  ts.power_mapping = true;
+  spec.table = ts;
+  spec.coherence.length_um = 3.0;
+  const Field f = make_field(spec);
+  const Plan p = make_plan(spec, f, spec.tolerance);
+  const Window w = make_window(f, coherence_length_um(spec) / std::sqrt(2.0));
+  const TableGeometry g = table_geometry(spec, 32);
+  std::vector<float> values;
+  for (const cplx& v : table_terms(f, w, p.bands, g)) {
+    values.push_back(static_cast<float>(v.real()));
+    values.push_back(static_cast<float>(v.imag()));
+  }
+  double y_norm = 0;
+  const auto spectrum = spectrum_rows(spec.range_nm, y_norm);
+  const int layers = p.total_terms, n = g.size, rows = static_cast<int>(spectrum.size() / 4);
+
+  // Textures as docs/diffraction.md ("Use it in an engine") tells an engine to upload them.
+  GLuint tex[3];
+  glGenTextures(3, tex);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, tex[0]);
+  glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RG32F, n, n, layers, 0, GL_RG, GL_FLOAT, values.data());
+  glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  const std::vector<float> spec_rgba(spectrum.begin(), spectrum.end());
+  glBindTexture(GL_TEXTURE_2D, tex[1]);
+  glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA32F, rows, 1, 0, GL_RGBA, GL_FLOAT, spec_rgba.data());
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  constexpr int kPanel = 64;
+  glBindTexture(GL_TEXTURE_2D, tex[2]);
+  glTexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA32F, kPanel, kPanel);
+  GLuint fbo = 0;
+  glGenFramebuffers(1, &fbo);
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, tex[2], 0);
+  ASSERT_EQ(glCheckFramebufferStatus(GL_FRAMEBUFFER), static_cast<GLenum>(GL_FRAMEBUFFER_COMPLETE));
+
+  // The light 30° from the normal in the x–z plane; pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²)).
+  const double light_deg = 30.0;
+  const std::string glsl = diffraction_glsl(f, p.bands, g, w.sum, 1.5);
+  const std::string vs = "#version 320 es\nvoid main() {\n  vec2 c = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);\n"
+                         "  gl_Position = vec4(c, 0.0, 1.0);\n}\n";
+  const std::string fs = "#version 320 es\nprecision highp float;\nprecision highp sampler2DArray;\n" + glsl +
+                         "uniform sampler2DArray terms;\nuniform sampler2D spectrum;\nout vec4 colour;\n"
+                         "void main() {\n"
+                         "  vec2 xy = -1.0 + gl_FragCoord.xy * (2.0 / " + std::to_string(kPanel) + ".0);\n"
+                         "  float r2 = dot(xy, xy);\n"
+                         "  if (r2 >= 1.0) { colour = vec4(0.0); return; }\n"
+                         "  float a = radians(" + std::to_string(light_deg) + ");\n"
+                         "  colour = vec4(diffraction_srgb(terms, spectrum, vec3(sin(a), 0.0, cos(a)), vec3(xy, sqrt(1.0 - r2)), 10), 1.0);\n"
+                         "}\n";
+  std::string log;
+  const GLuint prog = glCreateProgram();
+  glAttachShader(prog, compile(GL_VERTEX_SHADER, vs, log));
+  glAttachShader(prog, compile(GL_FRAGMENT_SHADER, fs, log));
+  glLinkProgram(prog);
+  GLint linked = 0;
+  glGetProgramiv(prog, GL_LINK_STATUS, &linked);
+  ASSERT_TRUE(linked) << log;
+  glUseProgram(prog);
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, tex[0]);
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D, tex[1]);
+  glUniform1i(glGetUniformLocation(prog, "terms"), 0);
+  glUniform1i(glGetUniformLocation(prog, "spectrum"), 1);
+  GLuint vao = 0;
+  glGenVertexArrays(1, &vao);
+  glBindVertexArray(vao);
+  glViewport(0, 0, kPanel, kPanel);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  std::vector<float> pixels(4 * kPanel * kPanel);
+  glReadPixels(0, 0, kPanel, kPanel, GL_RGBA, GL_FLOAT, pixels.data());
+  ASSERT_EQ(glGetError(), static_cast<GLenum>(GL_NO_ERROR));
+
+  // The host's evaluation: brdf_lobes' pixel centres match gl_FragCoord's, its row 0 at the top.
+  const BrdfTable t{f, p.bands, g, values, w.sum, 1.5};
+  const auto host = brdf_lobes(t, spectrum, 10, {light_deg}, kPanel);
+
+  // The bound, per pixel and channel, from the host's own lookups. Per wavelength, with P_i/Σw at
+  // the four texels the fetch blends: the filter's weights carry 8 fractional bits (D3D11's
+  // minimum, which GL implementations follow; the weight error is at most 2^-9 per axis), so the
+  // blend moves by at most δ_f = 2^-8·max|P_i − P_j|; float32 arithmetic (coefficient recurrence,
+  // the sum over T terms, the phase) adds at most δ_a = 16·T·u·Σ_n|coef_n·F_n|·W·H/Σw. Then
+  // |ρ_gl − ρ| ≤ C·(2A·δ + δ²) + 16u·C·A², A = max|P_i|/Σw, δ = δ_f + δ_a, and through the spectral
+  // sum and |XYZ → sRGB| to each channel, plus float32 accumulation over the 41 wavelengths.
+  const double u = std::ldexp(1.0, -24), kPi = 3.141592653589793;
+  double peak = 0;
+  for (float v : host) peak = std::max(peak, static_cast<double>(v));
+  ASSERT_GT(peak, 0.0);
+  const Mat3 m = xyz_to_srgb();
+  const double a = light_deg * kPi / 180.0;
+  const double wi[3] = {std::sin(a), 0.0, std::cos(a)};
+  double worst = 0, worst_ratio = 0;
+  int lit = 0;
+  for (int row = 0; row < kPanel; ++row)
+    for (int x = 0; x < kPanel; ++x) {
+      const double px = -1.0 + (x + 0.5) * 2.0 / kPanel, py = -1.0 + (row + 0.5) * 2.0 / kPanel, r2 = px * px + py * py;
+      double dxyz[3] = {0, 0, 0};
+      if (r2 < 1.0) {
+        const double wo[3] = {px, py, std::sqrt(1.0 - r2)};
+        double h[3] = {wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]};
+        const double hl = std::sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+        for (double& c : h) c /= hl;
+        const double gain = ref::stam_gain(wi[2], wo[2], wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2],
+                                           wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2], 1.5);
+        for (std::size_t i = 0; i < spectrum.size(); i += 40) {
+          const double lambda = spectrum[i] * 1e-3, fu = -(wi[0] + wo[0]) / lambda, fv = -(wi[1] + wo[1]) / lambda;
+          if (std::fabs(fu) > g.f_max || std::fabs(fv) > g.f_max) continue;
+          const double kappa = 2.0 * kPi * (wi[2] + wo[2]) / lambda;
+          const Band& band = band_for(p.bands, kappa);
+          const double tu = std::clamp(g.texel_of(fu), 0.0, n - 1.0), tv = std::clamp(g.texel_of(fv), 0.0, n - 1.0);
+          const int u0 = std::min(static_cast<int>(tu), n - 2), v0 = std::min(static_cast<int>(tv), n - 2);
+          cplx c[4];
+          double amp = 0, spread = 0, mass = 0;
+          std::vector<double> coef(band.terms);
+          ref::expansion_coefficients(band.expansion == Expansion::taylor ? 0 : 1, kappa, band.kappa0, band.delta, f.s,
+                                      band.terms, coef.data());
+          for (int k = 0; k < 4; ++k) {
+            const int iu = u0 + (k & 1), iv = v0 + (k >> 1);
+            c[k] = table_value(values, g, f, band, kappa, iu, iv) / w.sum;
+            amp = std::max(amp, std::abs(c[k]));
+            double sm = 0;
+            for (int n2 = 0; n2 < band.terms; ++n2) {
+              const std::size_t at = 2 * ((static_cast<std::size_t>(band.first_term + n2) * n + iv) * n + iu);
+              sm += std::fabs(coef[n2]) * std::hypot(values[at], values[at + 1]);
+            }
+            mass = std::max(mass, sm * static_cast<double>(f.count()) / w.sum);
+          }
+          for (int k = 0; k < 4; ++k)
+            for (int l = 0; l < 4; ++l) spread = std::max(spread, std::abs(c[k] - c[l]));
+          const double delta = std::ldexp(spread, -8) + 16.0 * band.terms * u * mass;
+          const double drho = gain * (2.0 * amp * delta + delta * delta) + 16.0 * u * gain * amp * amp;
+          for (int k = 0; k < 3; ++k) dxyz[k] += std::fabs(spectrum[i + 1 + k]) * 10.0 * drho;
+        }
+      }
+      for (int c = 0; c < 3; ++c) {
+        const double hv = host[3 * ((kPanel - 1 - row) * kPanel + x) + c], gv = pixels[4 * (row * kPanel + x) + c];
+        const double bound = std::fabs(m[3 * c]) * dxyz[0] + std::fabs(m[3 * c + 1]) * dxyz[1] +
+                             std::fabs(m[3 * c + 2]) * dxyz[2] + 64.0 * u * peak;
+        const double err = std::fabs(gv - hv);
+        worst = std::max(worst, err);
+        worst_ratio = std::max(worst_ratio, err / bound);
+        lit += hv > 1e-3 * peak;
+        EXPECT_LE(err, bound) << "pixel (" << x << ", " << row << ") channel " << c << ": GL " << gv << ", host " << hv;
+      }
+    }
+  EXPECT_GT(lit, 50) << "the view must show the pattern";
+  RecordProperty("worst_over_peak", std::to_string(worst / peak));
+  RecordProperty("worst_over_bound", std::to_string(worst_ratio));
+#endif
+}
