@@ -3,7 +3,6 @@
 // GL 4.50 core and a GLES 3.20 fragment shader that calls its entry points.
 #include <gtest/gtest.h>
 
-#include <cstdlib>
 #include <string>
 
 #include "core/resources.hpp"
@@ -13,16 +12,6 @@ namespace tst = specbake::testing;
 namespace fs = std::filesystem;
 
 namespace {
-
-bool have_glslang() { return std::system("command -v glslangValidator > /dev/null 2>&1") == 0; }
-
-// glslangValidator's exit status and output on `source` saved as `name` (.frag: fragment stage).
-std::pair<int, std::string> validate(const fs::path& dir, const std::string& name, const std::string& source) {
-  tst::write_file(dir / name, source);
-  const std::string log = (dir / (name + ".log")).string();
-  const int status = std::system(("glslangValidator " + (dir / name).string() + " > " + log + " 2>&1").c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, tst::read_file(log)};
-}
 
 const char* kMain =
     "void main() { colour = vec4(diffraction_srgb(terms, spectrum, normalize(wi), normalize(wo), 10), 1.0)"
@@ -48,7 +37,7 @@ TEST(DiffractionShader, ShipsTheSharedMathsAndCompilesForGlAndGles) {
                          "diffraction_srgb"})
     EXPECT_NE(glsl.find(fn), std::string::npos) << fn;
 
-  if (!have_glslang()) GTEST_SKIP() << "glslangValidator not found (Debian: glslang-tools; scripts/setup.sh installs it)";
+  if (!tst::have_glslang()) GTEST_SKIP() << "glslangValidator not found (Debian: glslang-tools; scripts/setup.sh installs it)";
   const std::string gl = std::string("#version 450\n") + glsl +
                          "layout(binding = 0) uniform sampler2DArray terms;\n"
                          "layout(binding = 1) uniform sampler2D spectrum;\n"
@@ -58,11 +47,11 @@ TEST(DiffractionShader, ShipsTheSharedMathsAndCompilesForGlAndGles) {
                          glsl + "uniform sampler2DArray terms;\nuniform sampler2D spectrum;\nin vec3 wi;\nin vec3 wo;\n"
                          "out vec4 colour;\n" + kMain;
   for (const auto& [name, source] : {std::pair<std::string, std::string>{"gl450.frag", gl}, {"es320.frag", es}}) {
-    const auto [status, log] = validate(dir.path(), name, source);
+    const auto [status, log] = tst::glslang_validate(dir.path(), name, source);
     EXPECT_EQ(status, 0) << name << ":\n" << log;
     EXPECT_EQ(log.find("ERROR"), std::string::npos) << name << ":\n" << log;
   }
   // The validator does catch a broken shader (so the checks above can fail).
-  const auto [status, log] = validate(dir.path(), "broken.frag", gl.substr(0, gl.size() / 2));
+  const auto [status, log] = tst::glslang_validate(dir.path(), "broken.frag", gl.substr(0, gl.size() / 2));
   EXPECT_NE(status, 0) << log;
 }

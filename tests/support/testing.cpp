@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <random>
@@ -28,6 +29,15 @@ Image read_png(const fs::path& p) {
   out.width = static_cast<int>(img.width);
   out.height = static_cast<int>(img.height);
   return out;
+}
+
+bool have_glslang() { return std::system("command -v glslangValidator > /dev/null 2>&1") == 0; }
+
+std::pair<int, std::string> glslang_validate(const fs::path& dir, const std::string& name, const std::string& source) {
+  write_file(dir / name, source);
+  const std::string log = (dir / (name + ".log")).string();
+  const int status = std::system(("glslangValidator '" + (dir / name).string() + "' > '" + log + "' 2>&1").c_str());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, read_file(log)};
 }
 
 cl_util::Device& shared_device() {

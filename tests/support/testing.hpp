@@ -31,6 +31,11 @@ struct Image {
   std::vector<unsigned char> rgba;
 };
 Image read_png(const fs::path& p);
+
+// glslangValidator (Debian glslang-tools): whether it is on PATH, and its exit status and output
+// for `source` written to dir/name (the extension names the stage: .frag, .vert).
+bool have_glslang();
+std::pair<int, std::string> glslang_validate(const fs::path& dir, const std::string& name, const std::string& source);
 void write_file(const fs::path& p, const std::string& text);
 
 // A fresh folder under the system temp dir, removed when the object dies.
