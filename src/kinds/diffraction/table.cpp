@@ -296,7 +296,8 @@ AxisExtent fft_extent(int m, double dx_um, double sigma_um) {
 }
 
 std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
-                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables) {
+                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
+                                               const std::function<void(double)>& progress) {
   const double beta = kb_beta();
   const Axis ax = make_axis(w.wx, beta), ay = make_axis(w.wy, beta);
   int total = 0;
@@ -346,6 +347,7 @@ std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field
           }
         });
         cl_util::fft_rows(dev, buf, ax.n, static_cast<std::size_t>(g) * c);
+        if (progress) progress((band.first_term + t0 + g * 0.8 * (r0 + c) / ay.count) / total);
         parallel_for(static_cast<long long>(g) * c, [&](long long idx) {
           const long long j = idx / c, r = idx % c;
           const float* b = buf.data() + static_cast<std::size_t>(idx) * ax.n * 2;
@@ -375,6 +377,7 @@ std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field
           }
         });
         cl_util::fft_rows(dev, col, ay.n, cn);
+        if (progress) progress((band.first_term + t0 + g * (0.8 + 0.2 * static_cast<double>(c0 + cn) / columns)) / total);
         parallel_for(static_cast<long long>(cn), [&](long long i) {
           const std::size_t ci = c0 + static_cast<std::size_t>(i), j = ci / sum_n, rest = ci % sum_n;
           std::size_t k = 0;

@@ -20,6 +20,7 @@
 // same sums directly in double (the reference the tests compare with).
 // The reconstruction is the one of the full-bin terms: P(f;κ) = W·H·e^{iκc}·Σ_n coef_n(κ)·F_n(f).
 #include <complex>
+#include <functional>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -71,8 +72,11 @@ std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector
 // (the header's method): out[k] is [T][iv][iu] for tables[k]. One pass over the field serves all
 // sizes; its error against table_terms is float32 FFT rounding (≈ 1e-7 of the window's sum) plus
 // the gridding's (below 1e-9; tests/diffraction/diffraction_table_test.cpp).
+// `progress` is called with the fraction done after every batch of transforms (a safe point: it
+// may throw to stop the bake).
 std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
-                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables);
+                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
+                                               const std::function<void(double)>& progress = {});
 
 // The window's samples the FFT path keeps: per axis, those with weight ≥ kWindowFloor, |x| ≤ 5.68σ
 // (a patch narrower than the window keeps every sample). What the rest hold, as a fraction of

@@ -200,9 +200,12 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
     for (std::size_t first = 0; first < sizes.size() && !met;) {
       std::size_t last = first, columns = 0;
       while (last < sizes.size() && (last == first || columns + sizes[last] <= kPhaseTexels)) columns += sizes[last++];
-      ctx.progress("table terms", 0.2 + 0.6 * static_cast<double>(first) / sizes.size());
       const std::vector<TableGeometry> phase(geoms.begin() + first, geoms.begin() + last);
-      const auto tables = tm.time("table terms", [&] { return table_terms_fft(ctx.device, f, win, p.bands, phase); });
+      const double at = static_cast<double>(first) / sizes.size(), span = static_cast<double>(last - first) / sizes.size();
+      const auto tables = tm.time("table terms", [&] {
+        return table_terms_fft(ctx.device, f, win, p.bands, phase,
+                               [&](double done) { ctx.progress("table terms", 0.2 + 0.6 * (at + span * done)); });
+      });
       for (std::size_t k = first; k < last && !met; ++k) {
         chosen = k;
         values = to_float32(tables[k - first]);
