@@ -183,6 +183,9 @@ TEST(DiffractionTable, FftPathMatchesDirectSums) {
   auto coarse = grating(ProceduralField::Type::eggcrate, 20, 0.25, 1.0, 0.3, 12, 1.0, 1e6);
   coarse.table->f_max_per_um = 3.5;
   expect_fft_matches_direct(coarse, {12}, "beyond Nyquist");
+  // An odd size: the patch centre falls on a sample.
+  expect_fft_matches_direct(grating(ProceduralField::Type::eggcrate, 75, 0.1, 0.9, 0.2, 12, 2.0, 1.2), {12, 14},
+                            "odd size");
   // Tall field across bands (y_max ≈ 40).
   expect_fft_matches_direct(grating(ProceduralField::Type::sine_grating, 20, 0.1, 0.4, 1.21, 12, 1.0, 1.5), {12},
                             "tall field");
