@@ -21,13 +21,12 @@ Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 
-// Σ_λ ρ·D65·x̄ȳz̄·Δλ → linear sRGB, for one pair of directions.
-std::array<float, 3> colour(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const std::vector<double>& spectrum,
-                            int step_nm, const Mat3& m) {
+// Σ_λ ρ·weight_λ → linear sRGB, for one pair of directions.
+std::array<float, 3> colour(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const Wavelengths& wl, const Mat3& m) {
   double xyz[3] = {0, 0, 0};
-  for (std::size_t row = 0; row < spectrum.size(); row += 4 * static_cast<std::size_t>(step_nm)) {
-    const double rho = brdf(t, wi, wo, spectrum[row] * 1e-3);
-    for (int c = 0; c < 3; ++c) xyz[c] += rho * spectrum[row + 1 + c] * step_nm;
+  for (std::size_t k = 0; k < wl.lambda_um.size(); ++k) {
+    const double rho = brdf(t, wi, wo, wl.lambda_um[k]);
+    for (int c = 0; c < 3; ++c) xyz[c] += rho * wl.xyz[k][c];
   }
   std::array<float, 3> rgb{};
   for (int r = 0; r < 3; ++r)
@@ -48,8 +47,32 @@ double brdf(const BrdfTable& t, const Vec3& wi, const Vec3& wo, double lambda_um
   return ref::stam_gain(ci, co, dot(wi, wo), dot(wi, h), t.ior) * std::norm(p);
 }
 
-std::vector<float> brdf_lobes(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
-                              const std::vector<double>& light_deg, int panel) {
+Wavelengths every_nm(const std::vector<double>& spectrum, int step_nm) {
+  Wavelengths wl;
+  for (std::size_t row = 0; row < spectrum.size(); row += 4 * static_cast<std::size_t>(step_nm)) {
+    wl.lambda_um.push_back(spectrum[row] * 1e-3);
+    wl.xyz.push_back({spectrum[row + 1] * step_nm, spectrum[row + 2] * step_nm, spectrum[row + 3] * step_nm});
+  }
+  return wl;
+}
+
+Wavelengths bins(const std::vector<double>& spectrum, int count) {
+  Wavelengths wl;
+  const std::size_t rows = spectrum.size() / 4;
+  for (int k = 0; k < count; ++k) {
+    std::array<double, 3> sum{0, 0, 0};
+    double centre = 0;
+    for (std::size_t r = rows * k / count; r < rows * (k + 1) / count; ++r) {
+      for (int c = 0; c < 3; ++c) sum[c] += spectrum[4 * r + 1 + c];
+      centre += spectrum[4 * r] * spectrum[4 * r + 2];
+    }
+    wl.lambda_um.push_back(sum[1] > 0 ? centre / sum[1] * 1e-3 : spectrum[4 * (rows * (2 * k + 1) / (2 * count))] * 1e-3);
+    wl.xyz.push_back(sum);
+  }
+  return wl;
+}
+
+std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel) {
   const int width = panel * static_cast<int>(light_deg.size());
   std::vector<float> rgb(3 * static_cast<std::size_t>(width) * panel, 0.0f);
   const Mat3 m = xyz_to_srgb();
@@ -61,7 +84,7 @@ std::vector<float> brdf_lobes(const BrdfTable& t, const std::vector<double>& spe
       for (int px = 0; px < panel; ++px) {
         const double x = -1.0 + (px + 0.5) * 2.0 / panel, r2 = x * x + y * y;
         if (r2 >= 1.0) continue;
-        const auto c = colour(t, wi, {x, y, std::sqrt(1.0 - r2)}, spectrum, step_nm, m);
+        const auto c = colour(t, wi, {x, y, std::sqrt(1.0 - r2)}, wl, m);
         float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * width + k * panel + px);
         for (int i = 0; i < 3; ++i) dst[i] = c[i];
       }
@@ -70,8 +93,7 @@ std::vector<float> brdf_lobes(const BrdfTable& t, const std::vector<double>& spe
   return rgb;
 }
 
-std::vector<float> brdf_sphere(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
-                               const Vec3& light, int size) {
+std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const Vec3& light, int size) {
   std::vector<float> rgb(3 * static_cast<std::size_t>(size) * size, 0.0f);
   const Mat3 m = xyz_to_srgb();
   const Vec3 view = {0.0, 0.0, 1.0};
@@ -86,7 +108,7 @@ std::vector<float> brdf_sphere(const BrdfTable& t, const std::vector<double>& sp
       const Vec3 ty = cross(n, tx);
       const Vec3 l = normalize({light[0] - n[0], light[1] - n[1], light[2] - n[2]});
       const Vec3 wi = {dot(l, tx), dot(l, ty), dot(l, n)}, wo = {dot(view, tx), dot(view, ty), dot(view, n)};
-      const auto c = colour(t, wi, wo, spectrum, step_nm, m);
+      const auto c = colour(t, wi, wo, wl, m);
       float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * size + px);
       for (int i = 0; i < 3; ++i) dst[i] = c[i];
     }

@@ -33,16 +33,24 @@ struct BrdfTable {
 // ρ_λ for unit vectors in the tangent frame (0 below the horizon on either side).
 double brdf(const BrdfTable& t, const std::array<double, 3>& wi, const std::array<double, 3>& wo, double lambda_um);
 
-// Linear sRGB images (row-major, 3 floats per pixel) of the radiance ρ·D65 summed against the CIE
-// 1931 functions (`spectrum`: rows λ nm, D65·x̄, D65·ȳ, D65·z̄ at 1 nm, as spectrum.bin) every
-// `step_nm`:
+// The wavelengths a spectral sum visits and each one's weight (D65·x̄ȳz̄ times the wavelengths
+// it stands for, CIE XYZ). `spectrum`: rows λ nm, D65·x̄, D65·ȳ, D65·z̄ at 1 nm (spectrum.bin).
+struct Wavelengths {
+  std::vector<double> lambda_um;
+  std::vector<std::array<double, 3>> xyz;
+};
+// Every step_nm-th row, weight row·step_nm (the previews and diffraction_srgb: 10 nm).
+Wavelengths every_nm(const std::vector<double>& spectrum, int step_nm);
+// `count` equal bins of the rows: the weight is the bin's sum, the wavelength its Y-weighted
+// centre (diffraction_srgb_fast: the fast variant's few wavelengths).
+Wavelengths bins(const std::vector<double>& spectrum, int count);
+
+// Linear sRGB images (row-major, 3 floats per pixel) of the radiance ρ·D65 summed over `wl`:
 //  - lobes: for each light angle (degrees from the normal, in the x–z plane), the outgoing
 //    hemisphere seen from above (pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²))), panels side by side;
 //  - sphere: a unit sphere seen along −z (orthographic), tangent x along the lines of latitude
 //    around the view axis, lit by a point light at `light` (sphere radii) of D65 spectrum.
-std::vector<float> brdf_lobes(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
-                              const std::vector<double>& light_deg, int panel);
-std::vector<float> brdf_sphere(const BrdfTable& t, const std::vector<double>& spectrum, int step_nm,
-                               const std::array<double, 3>& light, int size);
+std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel);
+std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const std::array<double, 3>& light, int size);
 
 }  // namespace specbake::diffraction

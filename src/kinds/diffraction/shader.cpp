@@ -18,7 +18,7 @@ std::string array(const char* type, const std::vector<T>& v, F&& show) {
 }  // namespace
 
 std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, const TableGeometry& g,
-                             double window_sum, double ior) {
+                             double window_sum, double ior, const Wavelengths& fast) {
   // The shared maths without its C/OpenCL include line.
   std::string shared(resource("kernels/diffraction/brdf.cl"));
   const std::string inc = "#include \"common/real.h\"\n";
@@ -71,6 +71,14 @@ std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, con
     << "const int DIFFRACTION_BAND_FIRST[" << bands.size() << "] = " << array("int", first, integer) << ";\n"
     << "const int DIFFRACTION_BAND_TERMS[" << bands.size() << "] = " << array("int", count, integer) << ";\n"
     << "const float DIFFRACTION_PI = 3.14159265358979;\n"
+    << "// diffraction_srgb_fast's wavelengths (um) and their CIE XYZ weights (D65 x CMF summed over each bin).\n"
+    << "const int DIFFRACTION_FAST_COUNT = " << fast.lambda_um.size() << ";\n"
+    << "const float DIFFRACTION_FAST_LAMBDA_UM[" << fast.lambda_um.size() << "] = "
+    << array("float", fast.lambda_um, real) << ";\n"
+    << "const vec3 DIFFRACTION_FAST_XYZ[" << fast.xyz.size() << "] = "
+    << array("vec3", fast.xyz, [](const std::array<double, 3>& v) {
+         return "vec3(" + glsl_float(v[0]) + ", " + glsl_float(v[1]) + ", " + glsl_float(v[2]) + ")";
+       }) << ";\n"
     << "// CIE XYZ -> linear sRGB (D65 white), column-major.\n"
     << "const mat3 DIFFRACTION_XYZ_TO_SRGB = mat3(" << glsl_float(m[0]) << ", " << glsl_float(m[3]) << ", " << glsl_float(m[6]) << ", "
     << glsl_float(m[1]) << ", " << glsl_float(m[4]) << ", " << glsl_float(m[7]) << ", " << glsl_float(m[2]) << ", " << glsl_float(m[5]) << ", " << glsl_float(m[8])
@@ -119,6 +127,16 @@ vec3 diffraction_srgb(sampler2DArray terms, sampler2D spectrum, vec3 wi, vec3 wo
     vec4 s = texelFetch(spectrum, ivec2(i, 0), 0);
     xyz += diffraction_brdf(terms, wi, wo, s.x * 1e-3) * s.yzw * float(step_nm);
   }
+  return DIFFRACTION_XYZ_TO_SRGB * xyz;
+}
+
+// The fast variant: DIFFRACTION_FAST_COUNT wavelengths, each standing for an equal share of the
+// range with its bin's summed weights (no spectrum texture). Its error against diffraction_srgb is
+// the manifest's shader_fast_vs_full record (the grating orders become that many coloured copies).
+vec3 diffraction_srgb_fast(sampler2DArray terms, vec3 wi, vec3 wo) {
+  vec3 xyz = vec3(0.0);
+  for (int k = 0; k < DIFFRACTION_FAST_COUNT; ++k)
+    xyz += diffraction_brdf(terms, wi, wo, DIFFRACTION_FAST_LAMBDA_UM[k]) * DIFFRACTION_FAST_XYZ[k];
   return DIFFRACTION_XYZ_TO_SRGB * xyz;
 }
 

@@ -6,12 +6,14 @@
 #include <string>
 #include <vector>
 
+#include "kinds/diffraction/brdf.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "kinds/diffraction/table.hpp"
 
 namespace specbake::diffraction {
 
+// `fast`: the wavelengths and XYZ weights of diffraction_srgb_fast.
 std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, const TableGeometry& g,
-                             double window_sum, double ior);
+                             double window_sum, double ior, const Wavelengths& fast);
 
 }  // namespace specbake::diffraction

@@ -31,7 +31,8 @@ constexpr int kAutoRefinements = 3;
 constexpr int kPhaseTexels = 1024;  // table columns per pass over the field (memory: table.cpp)
 constexpr double kMB = 1e6;
 constexpr double kPreviewIor = 1.5;  // the Fresnel term's dielectric index (shader and previews)
-constexpr int kBrdfStepNm = 10;     // wavelength step of the previews' spectral sums
+constexpr int kBrdfStepNm = 10;
+constexpr int kFastWavelengths = 8;  // the shader's fast variant     // wavelength step of the previews' spectral sums
 constexpr int kLobePanel = 256;     // pixels per side of each lobe panel
 constexpr int kSpherePixels = 512;  // the sphere preview's size
 constexpr std::array<double, 3> kSphereLight = {2.0, 1.5, 3.0};
@@ -72,10 +73,12 @@ float percentile_exposure(const std::vector<float>& rgb) {
   return static_cast<float>(hi > 0 ? 1.0 / hi : 1.0);
 }
 
-// The BRDF previews (brdf.hpp): lobes for three light angles, and a lit sphere.
-void add_brdf_previews(const BrdfTable& t, const std::vector<double>& spectrum, BakeResult& r) {
+// The BRDF previews (brdf.hpp): lobes for three light angles, and a lit sphere, over `wl`
+// (every 10 nm); and the fast shader variant's error: the lobes over `fast` against those, as
+// fractions of the picture's peak (max and rms over the pixels and channels).
+void add_brdf_previews(const BrdfTable& t, const Wavelengths& wl, const Wavelengths& fast, BakeResult& r) {
   const std::vector<double> angles = {0.0, 30.0, 60.0};
-  const auto lobes = brdf_lobes(t, spectrum, kBrdfStepNm, angles, kLobePanel);
+  const auto lobes = brdf_lobes(t, wl, angles, kLobePanel);
   const float el = percentile_exposure(lobes);
   const int width = kLobePanel * static_cast<int>(angles.size());
   r.files.push_back({"preview/brdf_lobes.png", png_from_linear(width, kLobePanel, lobes, el), "",
@@ -83,13 +86,28 @@ void add_brdf_previews(const BrdfTable& t, const std::vector<double>& spectrum, 
                      "Stam's diffraction BRDF from the table (Fresnel n = 1.5 and geometry factor, docs/diffraction.md) "
                      "times D65 over the outgoing hemisphere seen from above, light at 0, 30 and 60 degrees from the "
                      "normal in the x-z plane; exposure " + format_g(el) + " (99.5th percentile of the lit pixels)"});
-  const auto sphere = brdf_sphere(t, spectrum, kBrdfStepNm, kSphereLight, kSpherePixels);
+  const auto sphere = brdf_sphere(t, wl, kSphereLight, kSpherePixels);
   const float es = percentile_exposure(sphere);
   r.files.push_back({"preview/sphere.png", png_from_linear(kSpherePixels, kSpherePixels, sphere, es), "",
                      {kSpherePixels, kSpherePixels, 3}, "", "",
                      "a unit sphere covered by the surface (tangent x along circles about the view axis), seen along "
                      "-z, lit by a D65 point light at (2, 1.5, 3) radii; exposure " + format_g(es) +
                          " (99.5th percentile of the lit pixels)"});
+  const auto quick = brdf_lobes(t, fast, angles, kLobePanel);
+  double peak = 0, worst = 0, sq = 0;
+  for (float v : lobes) peak = std::max(peak, static_cast<double>(std::fabs(v)));
+  for (std::size_t i = 0; i < lobes.size(); ++i) {
+    const double d = std::fabs(static_cast<double>(quick[i]) - lobes[i]);
+    worst = std::max(worst, d);
+    sq += d * d;
+  }
+  const double scale = peak > 0 ? 1.0 / peak : 0.0;
+  r.accuracy.push_back(Accuracy::judged(
+      "shader_fast_vs_full",
+      "max |sRGB_fast - sRGB_full| / peak over the lobes picture (diffraction_srgb_fast, " +
+          std::to_string(fast.lambda_um.size()) + " wavelengths, against diffraction_srgb every 10 nm)",
+      worst * scale, std::nullopt, "the same BRDF every 10 nm",
+      {{"wavelengths", fast.lambda_um.size()}, {"rms_over_peak", std::sqrt(sq / lobes.size()) * scale}}));
 }
 
 json window_json(const DiffractionSpec& spec, const Window& w, double length_um) {
@@ -293,10 +311,13 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   const auto spectrum = add_spectrum_file(spec.range_nm, r);
   add_term_exrs(values, p.bands, n, n, spec.storage, "table", "table_terms.bin",
                 "rows iv (f_v), columns iu (f_u), table texels", tm, r);
-  r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win.sum, kPreviewIor), "", {}, "",
-                     "", "GLSL: the table's lookup and the BRDF the previews draw (Stam, relative form)"});
+  const Wavelengths fast = bins(spectrum, kFastWavelengths);
+  r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win.sum, kPreviewIor, fast), "", {},
+                     "", "", "GLSL: the table's lookup and the BRDF the previews draw (Stam, relative form)"});
   ctx.progress("preview", 0.95);
-  tm.time("preview", [&] { add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum, kPreviewIor}, spectrum, r); });
+  tm.time("preview", [&] {
+    add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum, kPreviewIor}, every_nm(spectrum, kBrdfStepNm), fast, r);
+  });
   block["timings_s"] = tm.json();
   r.manifest_blocks["diffraction"] = block;
   ctx.progress("done", 1.0);
