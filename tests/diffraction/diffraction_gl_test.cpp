@@ -20,73 +20,19 @@
 #include "kinds/diffraction/table.hpp"
 #include "kinds/diffraction/terms.hpp"
 
-#ifdef SPECBAKE_HAVE_GL
-#include <EGL/egl.h>
-#include <EGL/eglext.h>
-#include <GLES3/gl32.h>
-#endif
+#include "support/gl_context.hpp"
 
 using namespace specbake;
 using namespace specbake::diffraction;
-
-#ifdef SPECBAKE_HAVE_GL
-namespace {
-
-struct Gl {
-  EGLDisplay dpy = EGL_NO_DISPLAY;
-  EGLContext ctx = EGL_NO_CONTEXT;
-  std::string why;  // empty when ready
-  Gl() {
-    auto get_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
-    if (!get_display) { why = "no eglGetPlatformDisplayEXT"; return; }
-    dpy = get_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr);
-    if (dpy == EGL_NO_DISPLAY || !eglInitialize(dpy, nullptr, nullptr)) { why = "no surfaceless EGL display"; return; }
-    if (!eglBindAPI(EGL_OPENGL_ES_API)) { why = "EGL cannot bind OpenGL ES"; return; }
-    const EGLint attrs[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 2, EGL_NONE};
-    ctx = eglCreateContext(dpy, EGL_NO_CONFIG_KHR, EGL_NO_CONTEXT, attrs);
-    if (ctx == EGL_NO_CONTEXT) { why = "no GLES 3.2 context without a config"; return; }
-    if (!eglMakeCurrent(dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, ctx)) why = "cannot make the context current";
-  }
-  ~Gl() {
-    if (ctx != EGL_NO_CONTEXT) eglDestroyContext(dpy, ctx);
-    if (dpy != EGL_NO_DISPLAY) eglTerminate(dpy);
-  }
-};
-
-bool has_extension(const char* name) {
-  GLint n = 0;
-  glGetIntegerv(GL_NUM_EXTENSIONS, &n);
-  for (GLint i = 0; i < n; ++i)
-    if (std::string(reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, i))) == name) return true;
-  return false;
-}
-
-GLuint compile(GLenum type, const std::string& src, std::string& log) {
-  const GLuint s = glCreateShader(type);
-  const char* p = src.c_str();
-  glShaderSource(s, 1, &p, nullptr);
-  glCompileShader(s);
-  GLint ok = 0;
-  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-  if (!ok) {
-    char buf[4096];
-    glGetShaderInfoLog(s, sizeof buf, nullptr, buf);
-    log += buf;
-  }
-  return s;
-}
-
-}  // namespace
-#endif
 
 TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
 #ifndef SPECBAKE_HAVE_GL
   GTEST_SKIP() << "built without EGL/GLES headers (Debian: libegl-dev, libgles-dev)";
 #else
-  Gl gl;
+  specbake::testing::GlContext gl;
   if (!gl.why.empty()) GTEST_SKIP() << "no EGL device: " << gl.why;
-  ASSERT_TRUE(has_extension("GL_EXT_color_buffer_float")) << "float render targets";
-  ASSERT_TRUE(has_extension("GL_OES_texture_float_linear")) << "filtered float textures";
+  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_EXT_color_buffer_float")) << "float render targets";
+  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_OES_texture_float_linear")) << "filtered float textures";
 
   // A sawtooth (asymmetric, so a mirrored lookup would show) 48² field, window L = 3 µm, a 32²
   // power-mapped table, the terms in double then stored as float32 as the bundle stores them.
@@ -138,8 +84,6 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   const double light_deg = 30.0;
   const Wavelengths full = every_nm(spectrum, 10), fast = bins(spectrum, 8);
   const std::string glsl = diffraction_glsl(f, p.bands, g, w.sum, 1.5, fast);
-  const std::string vs = "#version 320 es\nvoid main() {\n  vec2 c = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);\n"
-                         "  gl_Position = vec4(c, 0.0, 1.0);\n}\n";
   const std::string fs = "#version 320 es\nprecision highp float;\nprecision highp sampler2DArray;\n" + glsl +
                          "uniform sampler2DArray terms;\nuniform sampler2D spectrum;\nuniform int fast;\nout vec4 colour;\n"
                          "void main() {\n"
@@ -151,13 +95,8 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
                          "  colour = vec4(fast == 1 ? diffraction_srgb_fast(terms, wi, wo) : diffraction_srgb(terms, spectrum, wi, wo, 10), 1.0);\n"
                          "}\n";
   std::string log;
-  const GLuint prog = glCreateProgram();
-  glAttachShader(prog, compile(GL_VERTEX_SHADER, vs, log));
-  glAttachShader(prog, compile(GL_FRAGMENT_SHADER, fs, log));
-  glLinkProgram(prog);
-  GLint linked = 0;
-  glGetProgramiv(prog, GL_LINK_STATUS, &linked);
-  ASSERT_TRUE(linked) << log;
+  const GLuint prog = specbake::testing::gl_program(specbake::testing::kGlFullScreenVertex, fs, log);
+  ASSERT_NE(prog, 0u) << log;
   glUseProgram(prog);
   glActiveTexture(GL_TEXTURE0);
   glBindTexture(GL_TEXTURE_2D_ARRAY, tex[0]);

@@ -354,6 +354,12 @@ std::string glsl_include(const Tables& t, const json& params) {
   o << ");\n";
   scalars("SPECBAKE_IOR_OFFSET", t.offset);
   scalars("SPECBAKE_IOR", t.ior);
+  o << "// The final linear sRGB colour from the per-sample colours rgb_n, layer n of `renders` (an RGBA\n"
+    << "// 2D array texture, one layer per sample, unclamped float): sum_n SPECBAKE_K[n] * rgb_n.\n"
+    << "vec3 specbake_dispersion_combine(sampler2DArray renders, ivec2 texel) {\n"
+    << "  vec3 sum = vec3(0.0);\n"
+    << "  for (int n = 0; n < SPECBAKE_SAMPLES; ++n) sum += SPECBAKE_K[n] * texelFetch(renders, ivec3(texel, n), 0).rgb;\n"
+    << "  return sum;\n}\n";
   o << "#endif\n";
   return o.str();
 }
