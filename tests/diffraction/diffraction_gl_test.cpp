@@ -58,8 +58,8 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   const int layers = p.total_terms, n = g.size, rows = static_cast<int>(spectrum.size() / 4);
 
   // Textures as docs/diffraction.md ("Use it in an engine") tells an engine to upload them.
-  GLuint tex[3];
-  glGenTextures(3, tex);
+  GLuint tex[2];
+  glGenTextures(2, tex);
   glBindTexture(GL_TEXTURE_2D_ARRAY, tex[0]);
   glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RG32F, n, n, layers, 0, GL_RG, GL_FLOAT, values.data());
   glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
@@ -72,13 +72,8 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
   constexpr int kPanel = 64;
-  glBindTexture(GL_TEXTURE_2D, tex[2]);
-  glTexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA32F, kPanel, kPanel);
-  GLuint fbo = 0;
-  glGenFramebuffers(1, &fbo);
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, tex[2], 0);
-  ASSERT_EQ(glCheckFramebufferStatus(GL_FRAMEBUFFER), static_cast<GLenum>(GL_FRAMEBUFFER_COMPLETE));
+  const specbake::testing::GlTarget target(kPanel, kPanel);
+  ASSERT_TRUE(target.complete);
 
   // The light 30° from the normal in the x–z plane; pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²)).
   const double light_deg = 30.0;
@@ -104,16 +99,9 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   glBindTexture(GL_TEXTURE_2D, tex[1]);
   glUniform1i(glGetUniformLocation(prog, "terms"), 0);
   glUniform1i(glGetUniformLocation(prog, "spectrum"), 1);
-  GLuint vao = 0;
-  glGenVertexArrays(1, &vao);
-  glBindVertexArray(vao);
-  glViewport(0, 0, kPanel, kPanel);
   const auto draw = [&](int which) {
     glUniform1i(glGetUniformLocation(prog, "fast"), which);
-    glDrawArrays(GL_TRIANGLES, 0, 3);
-    std::vector<float> px(4 * kPanel * kPanel);
-    glReadPixels(0, 0, kPanel, kPanel, GL_RGBA, GL_FLOAT, px.data());
-    return px;
+    return target.draw();
   };
   const std::vector<float> pixels_full = draw(0), pixels_fast = draw(1);
   ASSERT_EQ(glGetError(), static_cast<GLenum>(GL_NO_ERROR));

@@ -37,19 +37,14 @@ TEST(DispersionGl, ShippedCombineMatchesTheHostSum) {
   std::uniform_real_distribution<float> value(-0.5f, 1.5f);
   std::vector<float> renders(static_cast<std::size_t>(4) * kSide * kSide * n);
   for (float& v : renders) v = value(rng);
-  GLuint tex[2];
-  glGenTextures(2, tex);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, tex[0]);
+  GLuint tex = 0;
+  glGenTextures(1, &tex);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, tex);
   glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_RGBA32F, kSide, kSide, n, 0, GL_RGBA, GL_FLOAT, renders.data());
   glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
   glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-  glBindTexture(GL_TEXTURE_2D, tex[1]);
-  glTexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA32F, kSide, kSide);
-  GLuint fbo = 0;
-  glGenFramebuffers(1, &fbo);
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, tex[1], 0);
-  ASSERT_EQ(glCheckFramebufferStatus(GL_FRAMEBUFFER), static_cast<GLenum>(GL_FRAMEBUFFER_COMPLETE));
+  const t::GlTarget target(kSide, kSide);
+  ASSERT_TRUE(target.complete);
   const std::string fs = "#version 320 es\nprecision highp float;\nprecision highp sampler2DArray;\n" + glsl +
                          "uniform sampler2DArray renders;\nout vec4 colour;\n"
                          "void main() { colour = vec4(specbake_dispersion_combine(renders, ivec2(gl_FragCoord.xy)), 1.0); }\n";
@@ -58,15 +53,9 @@ TEST(DispersionGl, ShippedCombineMatchesTheHostSum) {
   ASSERT_NE(prog, 0u) << log;
   glUseProgram(prog);
   glActiveTexture(GL_TEXTURE0);
-  glBindTexture(GL_TEXTURE_2D_ARRAY, tex[0]);
+  glBindTexture(GL_TEXTURE_2D_ARRAY, tex);
   glUniform1i(glGetUniformLocation(prog, "renders"), 0);
-  GLuint vao = 0;
-  glGenVertexArrays(1, &vao);
-  glBindVertexArray(vao);
-  glViewport(0, 0, kSide, kSide);
-  glDrawArrays(GL_TRIANGLES, 0, 3);
-  std::vector<float> pixels(4 * kSide * kSide);
-  glReadPixels(0, 0, kSide, kSide, GL_RGBA, GL_FLOAT, pixels.data());
+  const std::vector<float> pixels = target.draw();
   ASSERT_EQ(glGetError(), static_cast<GLenum>(GL_NO_ERROR));
 
   // Host: Σ_n K_n·rgb_n in double from the same float32 numbers (the GLSL literals are the

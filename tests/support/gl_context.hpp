@@ -7,6 +7,7 @@
 #include <GLES3/gl32.h>
 
 #include <string>
+#include <vector>
 
 namespace specbake::testing {
 
@@ -43,6 +44,11 @@ inline bool gl_has_extension(const char* name) {
 
 // A program from a vertex and a fragment shader; 0 with the compile/link log in `log` on failure.
 inline GLuint gl_program(const std::string& vs, const std::string& fs, std::string& log) {
+  const auto append_log = [&](auto get_log, GLuint object) {
+    char buf[4096];
+    get_log(object, sizeof buf, nullptr, buf);
+    log += buf;
+  };
   const auto compile = [&](GLenum type, const std::string& src) {
     const GLuint s = glCreateShader(type);
     const char* p = src.c_str();
@@ -50,11 +56,7 @@ inline GLuint gl_program(const std::string& vs, const std::string& fs, std::stri
     glCompileShader(s);
     GLint ok = 0;
     glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-    if (!ok) {
-      char buf[4096];
-      glGetShaderInfoLog(s, sizeof buf, nullptr, buf);
-      log += buf;
-    }
+    if (!ok) append_log(glGetShaderInfoLog, s);
     return s;
   };
   const GLuint prog = glCreateProgram();
@@ -63,14 +65,38 @@ inline GLuint gl_program(const std::string& vs, const std::string& fs, std::stri
   glLinkProgram(prog);
   GLint linked = 0;
   glGetProgramiv(prog, GL_LINK_STATUS, &linked);
-  if (!linked) {
-    char buf[4096];
-    glGetProgramInfoLog(prog, sizeof buf, nullptr, buf);
-    log += buf;
-    return 0;
-  }
-  return prog;
+  if (linked) return prog;
+  append_log(glGetProgramInfoLog, prog);
+  return 0;
 }
+
+// An RGBA32F render target of w × h bound as the framebuffer, and the empty vertex array the
+// full-screen triangle draws with. draw() runs the current program over every pixel and reads
+// the floats back (row 0 at the bottom, 4 per pixel).
+struct GlTarget {
+  int width, height;
+  GLuint texture = 0, fbo = 0, vao = 0;
+  bool complete = false;
+  GlTarget(int w, int h) : width(w), height(h) {
+    glGenTextures(1, &texture);
+    glBindTexture(GL_TEXTURE_2D, texture);
+    glTexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA32F, w, h);
+    glGenFramebuffers(1, &fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, texture, 0);
+    complete = glCheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
+    glGenVertexArrays(1, &vao);
+  }
+  std::vector<float> draw() const {
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    glBindVertexArray(vao);
+    glViewport(0, 0, width, height);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    std::vector<float> px(4 * static_cast<std::size_t>(width) * height);
+    glReadPixels(0, 0, width, height, GL_RGBA, GL_FLOAT, px.data());
+    return px;
+  }
+};
 
 // A full-screen triangle (no vertex buffers: gl_VertexID).
 inline const char* kGlFullScreenVertex =
