@@ -10,38 +10,54 @@
 
 namespace specbake::diffraction {
 
+namespace {
+// What the estimates need of a job before its field is made: its size, and with a table the
+// samples the window keeps and the transform lengths per axis (table.hpp, fft_extent).
+struct Shape {
+  std::uint64_t w = 0, h = 0;
+  AxisExtent x, y;
+  double terms = 16;  // terms: auto counts 16
+};
+Shape shape_of(const DiffractionSpec& s) {
+  Shape sh;
+  sh.w = s.procedural ? s.procedural->size : (s.field ? s.field->width : 0);
+  sh.h = s.procedural ? s.procedural->size : (s.field ? s.field->height : 0);
+  if (s.terms) sh.terms = *s.terms;
+  if (s.table) {
+    const double dx = s.procedural ? s.procedural->dx_um : s.field->dx_um;
+    const double sigma = coherence_length_um(s) / std::sqrt(2.0);
+    sh.x = fft_extent(static_cast<int>(sh.w), dx, sigma);
+    sh.y = fft_extent(static_cast<int>(sh.h), dx, sigma);
+  }
+  return sh;
+}
+}  // namespace
+
 Kind kind() {
   Kind k = Kind::of<DiffractionSpec>("diffraction", "Taylor / Chebyshev FFT terms of a surface heightfield for a real-time diffraction BRDF", parse_spec, plan, bake);
   // Full bins, measured on PoCL (2 cores): 0.3-1 s for the bundled 256²-1024² fields; grows with
   // M² log M. With a table (docs/diffraction.md, the 8192² rows): previews ≈ 2.8 s, field, plan
   // and the direct sums of the error ≈ 1.5e-7 s per sample, the NUFFT ≈ 3.4e-8 s per term, kept
-  // row and padded point (T = 16 when terms: auto).
+  // row and padded point.
   k.cost_s = [](const JobSpec& j) {
-    const auto& s = j.as<DiffractionSpec>();
-    const int w = s.procedural ? s.procedural->size : (s.field ? s.field->width : 0);
-    const int h = s.procedural ? s.procedural->size : (s.field ? s.field->height : 0);
-    if (!s.table) return 0.3 + 2e-6 * w * h;
-    const double dx = s.procedural ? s.procedural->dx_um : s.field->dx_um;
-    const double sigma = coherence_length_um(s) / std::sqrt(2.0);
-    const AxisExtent ex = fft_extent(w, dx, sigma), ey = fft_extent(h, dx, sigma);
-    const double terms = s.terms ? *s.terms : 16;
-    return 2.8 + 1.5e-7 * w * h + 3.4e-8 * terms * (static_cast<double>(ex.n) * ey.kept + static_cast<double>(ey.n) * 1024);
+    const Shape sh = shape_of(j.as<DiffractionSpec>());
+    const double samples = static_cast<double>(sh.w) * static_cast<double>(sh.h);
+    if (!j.as<DiffractionSpec>().table) return 0.3 + 2e-6 * samples;
+    return 2.8 + 1.5e-7 * samples +
+           3.4e-8 * sh.terms * (static_cast<double>(sh.x.n) * sh.y.kept + static_cast<double>(sh.y.n) * 1024);
   };
   k.memory = [](const JobSpec& j) {
-    const auto& s = j.as<DiffractionSpec>();
-    const std::uint64_t w = s.procedural ? s.procedural->size : (s.field ? s.field->width : 0);
-    const std::uint64_t h = s.procedural ? s.procedural->size : (s.field ? s.field->height : 0);
-    if (s.table) {
+    const Shape sh = shape_of(j.as<DiffractionSpec>());
+    const std::uint64_t w = sh.w, h = sh.h;
+    if (j.as<DiffractionSpec>().table) {
       // Host: the heightfield in double; the row-stage results of a group of terms (float pairs,
       // at most 768 MiB); the batches of rows and columns being transformed (at most 128 MiB
       // each); every candidate table of a phase in double (T·ΣN²·16 bytes, ΣN² ≤ 768²). Device:
-      // one batch of rows. T = 16 when terms: auto.
-      const double dx = s.procedural ? s.procedural->dx_um : s.field->dx_um;
-      const double sigma = coherence_length_um(s) / std::sqrt(2.0);
-      const AxisExtent ex = fft_extent(static_cast<int>(w), dx, sigma), ey = fft_extent(static_cast<int>(h), dx, sigma);
-      const std::uint64_t terms = s.terms ? *s.terms : 16, mib = std::uint64_t{1} << 20;
-      const std::uint64_t rows = std::min<std::uint64_t>(768 * mib, terms * ey.kept * 1024 * 8);
-      const std::uint64_t batch = std::min<std::uint64_t>(128 * mib, terms * ey.kept * ex.n * 8);
+      // one batch of rows.
+      const auto terms = static_cast<std::uint64_t>(sh.terms), mib = std::uint64_t{1} << 20;
+      const std::uint64_t kept = static_cast<std::uint64_t>(sh.y.kept);
+      const std::uint64_t rows = std::min<std::uint64_t>(768 * mib, terms * kept * 1024 * 8);
+      const std::uint64_t batch = std::min<std::uint64_t>(128 * mib, terms * kept * static_cast<std::uint64_t>(sh.x.n) * 8);
       const std::uint64_t tables = terms * 768 * 768 * 16;
       return MemoryEstimate{batch, batch, w * h * 8 + rows + 2 * batch + tables};
     }
