@@ -65,6 +65,7 @@
  */
 #include "common/real.h"
 #include "atmosphere/limits.h"
+#include "atmosphere/lookup.cl"
 
 #ifndef NCH
 #  error "NCH (channels per texel) must be defined before including atmosphere.cl"
@@ -120,73 +121,31 @@ typedef struct {
   int r_size, mu_size, mu_s_size, nu_size;
 } AtmosphereParameters;
 
-/* ---- small helpers ------------------------------------------------------------------- */
-FN real clamp_real(real x, real lo, real hi) { return fmin(fmax(x, lo), hi); }
+/* ---- small helpers (the scalar geometry is in lookup.cl) ----------------------------- */
 FN int clamp_int(int x, int lo, int hi) { return x < lo ? lo : (x > hi ? hi : x); }
-FN real clamp_cosine(real mu) { return clamp_real(mu, R(-1.0), R(1.0)); }
-FN real clamp_distance(real d) { return fmax(d, R(0.0)); }
-FN real safe_sqrt(real x) { return sqrt(fmax(x, R(0.0))); }
-FN real smooth_step(real e0, real e1, real x) {
-  const real t = clamp_real((x - e0) / (e1 - e0), R(0.0), R(1.0));
-  return t * t * (R(3.0) - R(2.0) * t);
-}
 FN real dot3(const real* a, const real* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 /* t = rt − rb: the thickness of the atmosphere. */
 FN real thickness(const AtmosphereParameters* a) { return a->top_radius - a->bottom_radius; }
 FN real clamp_altitude(const AtmosphereParameters* a, real h) { return clamp_real(h, R(0.0), thickness(a)); }
 FN real radius_of(const AtmosphereParameters* a, real h) { return a->bottom_radius + h; }
-/* sqrt(rt² − rb²): the distance to the top boundary along the horizon at the ground. */
-FN real horizon_top(const AtmosphereParameters* a) {
-  return sqrt(thickness(a) * (a->top_radius + a->bottom_radius));
-}
-/* ρ² = r² − rb² = h (h + 2 rb), and ρ: the distance to the horizon from altitude h. */
-FN real horizon_distance2(const AtmosphereParameters* a, real h) { return h * (h + R(2.0) * a->bottom_radius); }
+FN real horizon_top(const AtmosphereParameters* a) { return horizon_top_of(a->bottom_radius, a->top_radius); }
+FN real horizon_distance2(const AtmosphereParameters* a, real h) { return rho2_of(a->bottom_radius, h); }
 FN real horizon_distance(const AtmosphereParameters* a, real h) { return safe_sqrt(horizon_distance2(a, h)); }
-/* rt² − r² = (t − h)(t + h + 2 rb). */
-FN real top_gap2(const AtmosphereParameters* a, real h) {
-  const real t = thickness(a);
-  return (t - h) * (t + h + R(2.0) * a->bottom_radius);
-}
-/* The altitude of the point at radius r_d² − rb² = rho2 (rho2 may be negative: below the ground). */
-FN real altitude_of_rho2(const AtmosphereParameters* a, real rho2) {
-  return rho2 / (sqrt(fmax(rho2 + a->bottom_radius * a->bottom_radius, R(0.0))) + a->bottom_radius);
-}
+FN real altitude_of_rho2(const AtmosphereParameters* a, real rho2) { return altitude_of_rho2_at(a->bottom_radius, rho2); }
 
-/* ---- distances ----------------------------------------------------------------------- */
-/* Distance from altitude h along mu to the top boundary (h ≤ t). */
+/* ---- distances (lookup.cl, bound to the parameters) ---------------------------------- */
 FN real distance_to_top(const AtmosphereParameters* a, real h, real mu) {
-  const real r_mu = radius_of(a, h) * mu;
-  const real gap2 = top_gap2(a, h);
-  const real s = safe_sqrt(r_mu * r_mu + gap2);
-  return clamp_distance(mu > R(0.0) ? gap2 / (s + r_mu) : s - r_mu);
+  return distance_to_top_at(a->bottom_radius, a->top_radius, h, mu);
 }
-/* Distance from altitude h ≥ 0 along mu to the ground (meaningful when the ray hits it). */
 FN real distance_to_bottom(const AtmosphereParameters* a, real h, real mu) {
-  const real r_mu = radius_of(a, h) * mu;
-  const real rho2 = horizon_distance2(a, h);
-  const real den = safe_sqrt(r_mu * r_mu - rho2) - r_mu;
-  return den > R(0.0) ? clamp_distance(rho2 / den) : R(0.0);
+  return distance_to_ground_at(a->bottom_radius, h, mu);
 }
-FN int ray_hits_ground(const AtmosphereParameters* a, real h, real mu) {
-  const real r_mu = radius_of(a, h) * mu;
-  return mu < R(0.0) && r_mu * r_mu - horizon_distance2(a, h) >= R(0.0);
-}
+FN int ray_hits_ground(const AtmosphereParameters* a, real h, real mu) { return ray_meets_ground(a->bottom_radius, h, mu); }
 FN real distance_to_nearest_boundary(const AtmosphereParameters* a, real h, real mu, int hits_ground) {
   return hits_ground ? distance_to_bottom(a, h, mu) : distance_to_top(a, h, mu);
 }
-/* Altitude after travelling d along (h, mu): |x + d ω| − rb, without cancellation. */
 FN real altitude_along(const AtmosphereParameters* a, real h, real mu, real d) {
-  return altitude_of_rho2(a, d * d + R(2.0) * radius_of(a, h) * mu * d + horizon_distance2(a, h));
-}
-/* The point a distance e before the ground along a ray (h, mu) that hits it: measured back
- * from the ground point, where the reversed ray rises with r_g μ_g = s = √(r²μ² − ρ²):
- * ρ_e² = e² + 2 s e (no cancellation near the ground, where the forward form d² + 2rμd + ρ²
- * cancels terms of size ρ²), and r_e μ_e = −(s + e). Returns the altitude and mu there. */
-FN void point_before_ground(const AtmosphereParameters* a, real h, real mu, real e, real* h_e, real* mu_e) {
-  const real r_mu = radius_of(a, h) * mu;
-  const real s = safe_sqrt(r_mu * r_mu - horizon_distance2(a, h));
-  *h_e = clamp_altitude(a, altitude_of_rho2(a, e * (e + R(2.0) * s)));
-  *mu_e = clamp_cosine(-(s + e) / radius_of(a, *h_e));
+  return altitude_after(a->bottom_radius, h, mu, d);
 }
 
 /* ---- density profiles ---------------------------------------------------------------- */
@@ -229,21 +188,14 @@ FN void transmittance_to_top_integral(const AtmosphereParameters* a, real h, rea
     t[c] = exp(-(a->rayleigh_scattering[c] * lr + a->mie_extinction[c] * lm + a->absorption_extinction[c] * la));
 }
 
-/* ---- texture coordinates ------------------------------------------------------------- */
-FN real coord_from_unit(real x, int n) { return R(0.5) / (real)n + x * (R(1.0) - R(1.0) / (real)n); }
+/* ---- texture coordinates (lookup.cl) and their inverses -------------------------------- */
 FN real unit_from_coord(real u, int n) {
   return n > 1 ? (u - R(0.5) / (real)n) / (R(1.0) - R(1.0) / (real)n) : R(0.5);
 }
 
 FN void transmittance_uv(const AtmosphereParameters* a, real h, real mu, real* u, real* v) {
-  REQUIRE(h >= R(0.0) && h <= thickness(a));
-  REQUIRE(mu >= R(-1.0) && mu <= R(1.0));
-  const real H = horizon_top(a);
-  const real rho = horizon_distance(a, h);
-  const real d = distance_to_top(a, h, mu);
-  const real d_min = thickness(a) - h, d_max = rho + H;
-  *u = coord_from_unit((d - d_min) / (d_max - d_min), a->transmittance_w);
-  *v = coord_from_unit(rho / H, a->transmittance_h);
+  *u = transmittance_u_at(a->bottom_radius, a->top_radius, h, mu, (real)a->transmittance_w);
+  *v = transmittance_v_at(a->bottom_radius, a->top_radius, h, (real)a->transmittance_h);
 }
 FN void h_mu_from_transmittance_uv(const AtmosphereParameters* a, real u, real v, real* h, real* mu) {
   const real x_mu = unit_from_coord(u, a->transmittance_w);
@@ -266,10 +218,8 @@ FN void transmittance_texel_params(const AtmosphereParameters* a, int id, real* 
 }
 
 FN void irradiance_uv(const AtmosphereParameters* a, real h, real mu_s, real* u, real* v) {
-  REQUIRE(h >= R(0.0) && h <= thickness(a));
-  REQUIRE(mu_s >= R(-1.0) && mu_s <= R(1.0));
-  *u = coord_from_unit(mu_s * R(0.5) + R(0.5), a->irradiance_w);
-  *v = coord_from_unit(h / thickness(a), a->irradiance_h);
+  *u = irradiance_u_at(mu_s, (real)a->irradiance_w);
+  *v = irradiance_v_at(a->bottom_radius, a->top_radius, h, (real)a->irradiance_h);
 }
 FN void h_mu_s_from_irradiance_uv(const AtmosphereParameters* a, real u, real v, real* h, real* mu_s) {
   const real x_mu_s = unit_from_coord(u, a->irradiance_w);
@@ -285,40 +235,23 @@ FN void irradiance_texel_params(const AtmosphereParameters* a, int id, real* h, 
                             h, mu_s);
 }
 
-/* The pieces of scattering_uvwz. u_r of altitude h: */
+/* The pieces of scattering_uvwz (lookup.cl). */
 FN real scattering_u_r(const AtmosphereParameters* a, real h) {
-  return coord_from_unit(horizon_distance(a, h) / horizon_top(a), a->r_size);
+  return scattering_u_r_at(a->bottom_radius, a->top_radius, h, (real)a->r_size);
 }
-/* u_mu of a ray at altitude h, with horizon distance rho, that reaches its boundary after d. */
 FN real scattering_u_mu_of_distance(const AtmosphereParameters* a, real h, real rho, real d, int hits_ground) {
-  const int half_mu = a->mu_size / 2;
-  if (hits_ground) {
-    const real d_min = h, d_max = rho;
-    return R(0.5) - R(0.5) * coord_from_unit(d_max == d_min ? R(0.0) : (d - d_min) / (d_max - d_min), half_mu);
-  }
-  const real d_min = thickness(a) - h, d_max = rho + horizon_top(a);
-  return R(0.5) + R(0.5) * coord_from_unit((d - d_min) / (d_max - d_min), half_mu);
+  return scattering_u_mu_at_distance(a->bottom_radius, a->top_radius, h, rho, d, hits_ground, (real)a->mu_size);
 }
-/* u_mu: rays that hit the ground map to u_mu < 0.5 (horizon at 0.5, straight down at 0),
- * the others to u_mu > 0.5 (zenith just above 0.5, horizon at 1). */
 FN real scattering_u_mu(const AtmosphereParameters* a, real h, real mu, int hits_ground) {
-  const real d = hits_ground ? distance_to_bottom(a, h, mu) : distance_to_top(a, h, mu);
-  return scattering_u_mu_of_distance(a, h, horizon_distance(a, h), d, hits_ground);
+  return scattering_u_mu_at(a->bottom_radius, a->top_radius, h, mu, hits_ground, (real)a->mu_size);
 }
-/* u_mu_s: 0 at mu_s_min, 1 at mu_s = 1, steep around the horizon. */
 FN real scattering_u_mu_s(const AtmosphereParameters* a, real mu_s) {
-  REQUIRE(mu_s >= R(-1.0) && mu_s <= R(1.0));
-  const real d_min = thickness(a), d_max = horizon_top(a);
-  const real d = distance_to_top(a, R(0.0), mu_s);
-  const real a_s = (d - d_min) / (d_max - d_min);
-  const real D = distance_to_top(a, R(0.0), a->mu_s_min);
-  const real A = (D - d_min) / (d_max - d_min);
-  return coord_from_unit(fmax(R(1.0) - a_s / A, R(0.0)) / (R(1.0) + a_s), a->mu_s_size);
+  return scattering_u_mu_s_at(a->bottom_radius, a->top_radius, mu_s, a->mu_s_min, (real)a->mu_s_size);
 }
 /* (h, mu, mu_s, nu) → (u_nu, u_mu_s, u_mu, u_r); the ground flag picks the half of mu. */
 FN void scattering_uvwz(const AtmosphereParameters* a, real h, real mu, real mu_s, real nu, int hits_ground,
                         real* uvwz) {
-  uvwz[0] = (nu + R(1.0)) * R(0.5);
+  uvwz[0] = scattering_u_nu_at(nu);
   uvwz[1] = scattering_u_mu_s(a, mu_s);
   uvwz[2] = scattering_u_mu(a, h, mu, hits_ground);
   uvwz[3] = scattering_u_r(a, h);
@@ -447,19 +380,13 @@ FN void transmittance_ratio(const AtmosphereParameters* a, GLOBAL const real* T,
   real moving[NCH];
   transmittance_to_top(a, T, h_d, hits_ground ? -mu_d : mu_d, moving);
   for (int c = 0; c < NCH; ++c) {
-    const real num = hits_ground ? moving[c] : fixed[c], den = hits_ground ? fixed[c] : moving[c];
-    out[c] = den > R(0.0) ? fmin(num / den, R(1.0)) : R(0.0);
+    out[c] = hits_ground ? ratio_or_zero(moving[c], fixed[c]) : ratio_or_zero(fixed[c], moving[c]);
   }
 }
-/* The point at distance d along (h, mu): altitude and mu there; rays that hit the ground are
- * measured back from the ground point (point_before_ground). */
+/* The point at distance d along (h, mu): altitude and mu there (lookup.cl). */
 FN void point_along(const AtmosphereParameters* a, real h, real mu, real d, int hits_ground, real* h_d, real* mu_d) {
-  if (hits_ground) {
-    point_before_ground(a, h, mu, fmax(distance_to_bottom(a, h, mu) - d, R(0.0)), h_d, mu_d);
-  } else {
-    *h_d = clamp_altitude(a, altitude_along(a, h, mu, d));
-    *mu_d = clamp_cosine((radius_of(a, h) * mu + d) / radius_of(a, *h_d));
-  }
+  *h_d = altitude_along_ray(a->bottom_radius, a->top_radius, h, mu, d, hits_ground);
+  *mu_d = cosine_along_ray(a->bottom_radius, h, mu, d, hits_ground, *h_d);
 }
 /* T between (h, mu) and the point at distance d along the ray. */
 FN void transmittance_along_from(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, real d,
@@ -474,33 +401,15 @@ FN void transmittance_along(const AtmosphereParameters* a, GLOBAL const real* T,
   transmittance_fixed_end(a, T, h, mu, hits_ground, fixed);
   transmittance_along_from(a, T, h, mu, d, hits_ground, fixed, out);
 }
-/* The visible fraction of the sun disc above the horizon at altitude h (smoothstep over the
- * disc's angular radius); the horizon's cosine −sqrt(1 − (rb/r)²) is written −ρ/r. */
+/* The visible fraction of the sun disc above the horizon at altitude h (lookup.cl). */
 FN real sun_visible_fraction(const AtmosphereParameters* a, real h, real mu_s) {
-  const real r = radius_of(a, h);
-  const real sin_h = a->bottom_radius / r;
-  const real cos_h = -horizon_distance(a, h) / r;
-  const real alpha = a->sun_angular_radius;
-  return smooth_step(-sin_h * alpha, sin_h * alpha, mu_s - cos_h);
+  return sun_visible_at(a->bottom_radius, a->sun_angular_radius, h, mu_s);
 }
 /* T to the sun times the visible fraction of the sun disc above the horizon. */
 FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu_s, real* out) {
   const real visible = sun_visible_fraction(a, h, mu_s);
   transmittance_to_top(a, T, h, mu_s, out);
   for (int c = 0; c < NCH; ++c) out[c] *= visible;
-}
-
-/* ---- phase functions (sr⁻¹) ---------------------------------------------------------- */
-FN real rayleigh_phase(real nu) {
-  REQUIRE(nu >= R(-1.0) && nu <= R(1.0));
-  return R(3.0) / (R(16.0) * ATM_PI) * (R(1.0) + nu * nu);
-}
-FN real mie_phase(real g, real nu) {
-  REQUIRE(g > R(-1.0) && g < R(1.0));
-  REQUIRE(nu >= R(-1.0) && nu <= R(1.0));
-  const real k = R(3.0) / (R(8.0) * ATM_PI) * (R(1.0) - g * g) / (R(2.0) + g * g);
-  const real x = R(1.0) + g * g - R(2.0) * g * nu;
-  return k * (R(1.0) + nu * nu) / (x * sqrt(x));
 }
 
 /* ---- scattering lookups -------------------------------------------------------------- */
@@ -647,7 +556,7 @@ FN void single_scattering(const AtmosphereParameters* a, GLOBAL const real* T, r
 FN void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const real* J, const real* s, real mu_s, real nu,
                                 real* out) {
   real uvwz[4], j[NCH];
-  uvwz[0] = (nu + R(1.0)) * R(0.5);
+  uvwz[0] = scattering_u_nu_at(nu);
   uvwz[1] = scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s, nu));
   uvwz[2] = s[RAY_U_MU];
   uvwz[3] = s[RAY_U_R];
@@ -817,128 +726,4 @@ FN void indirect_irradiance(const AtmosphereParameters* a, GLOBAL const real* de
       for (int c = 0; c < NCH; ++c) out[c] += l[c] * w;
     }
   }
-}
-
-/* ---- rendering from the final textures (the reference's GetSkyRadiance & co.) ----------
- * scattering: single Rayleigh + Σ multiple / P_R (no phase); single_mie: single Mie.
- * These take camera positions as vectors from the planet centre and derive h = |x| − rb:
- * they are used on the host in double only. */
-FN void combined_scattering(const AtmosphereParameters* a, GLOBAL const real* S, GLOBAL const real* M, real h,
-                            real mu, real mu_s, real nu, int hits_ground, real* scattering, real* single_mie) {
-  get_scattering(a, S, h, mu, mu_s, nu, hits_ground, scattering);
-  get_scattering(a, M, h, mu, mu_s, nu, hits_ground, single_mie);
-}
-
-/* A camera outside the atmosphere looking into it moves along `view` to where the ray enters
- * the top; r = |camera| and rmu = camera·view after the move. Returns 0 for a camera outside
- * the atmosphere whose ray misses it (camera left where it was). */
-FN int enter_atmosphere(const AtmosphereParameters* a, real* camera, const real* view, real* r, real* rmu) {
-  *r = sqrt(dot3(camera, camera));
-  *rmu = dot3(camera, view);
-  const real d_top = -*rmu - sqrt(*rmu * *rmu - *r * *r + a->top_radius * a->top_radius);
-  if (d_top > R(0.0)) {
-    for (int k = 0; k < 3; ++k) camera[k] += view[k] * d_top;
-    *r = a->top_radius;
-    *rmu += d_top;
-    return 1;
-  }
-  return *r <= a->top_radius;
-}
-
-/* Sky radiance seen from `camera` (km, planet centre at the origin) along the unit vector
- * `view`, sun along the unit vector `sun`; also the transmittance to the top (0 for rays
- * that hit the ground). Light shafts: `shadow_length` km of the ray nearest the camera
- * are left out. */
-FN void sky_radiance(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* S, GLOBAL const real* M,
-                     const real* camera_in, const real* view, real shadow_length, const real* sun, real* radiance,
-                     real* transmittance) {
-  real camera[3] = {camera_in[0], camera_in[1], camera_in[2]};
-  real r, rmu;
-  if (!enter_atmosphere(a, camera, view, &r, &rmu)) {
-    for (int c = 0; c < NCH; ++c) {
-      transmittance[c] = R(1.0);
-      radiance[c] = R(0.0);
-    }
-    return;
-  }
-  const real h = r - a->bottom_radius;
-  const real mu = rmu / r, mu_s = dot3(camera, sun) / r, nu = dot3(view, sun);
-  const int ground = ray_hits_ground(a, h, mu);
-  if (ground) {
-    for (int c = 0; c < NCH; ++c) transmittance[c] = R(0.0);
-  } else {
-    transmittance_to_top(a, T, h, mu, transmittance);
-  }
-  real s[NCH], m[NCH];
-  if (shadow_length == R(0.0)) {
-    combined_scattering(a, S, M, h, mu, mu_s, nu, ground, s, m);
-  } else {
-    const real d = shadow_length;
-    const real h_p = clamp_altitude(a, altitude_along(a, h, mu, d));
-    const real r_p = radius_of(a, h_p);
-    combined_scattering(a, S, M, h_p, (r * mu + d) / r_p, (r * mu_s + d * nu) / r_p, nu, ground, s, m);
-    real t[NCH];
-    transmittance_along(a, T, h, mu, shadow_length, ground, t);
-    for (int c = 0; c < NCH; ++c) {
-      s[c] *= t[c];
-      m[c] *= t[c];
-    }
-  }
-  const real pr = rayleigh_phase(nu), pm = mie_phase(a->mie_g, nu);
-  for (int c = 0; c < NCH; ++c) radiance[c] = s[c] * pr + m[c] * pm;
-}
-
-/* Sky radiance between `camera` and `point` (both inside or on the atmosphere, km). */
-FN void sky_radiance_to_point(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* S,
-                              GLOBAL const real* M, const real* camera_in, const real* point, real shadow_length,
-                              const real* sun, real* radiance, real* transmittance) {
-  real camera[3] = {camera_in[0], camera_in[1], camera_in[2]};
-  real view[3] = {point[0] - camera[0], point[1] - camera[1], point[2] - camera[2]};
-  const real len = sqrt(dot3(view, view));
-  for (int k = 0; k < 3; ++k) view[k] /= len;
-  real r, rmu;
-  enter_atmosphere(a, camera, view, &r, &rmu);
-  const real h = r - a->bottom_radius;
-  const real mu = rmu / r, mu_s = dot3(camera, sun) / r, nu = dot3(view, sun);
-  const real to_point[3] = {point[0] - camera[0], point[1] - camera[1], point[2] - camera[2]};
-  real d = sqrt(dot3(to_point, to_point));
-  const int ground = ray_hits_ground(a, h, mu);
-  transmittance_along(a, T, h, mu, d, ground, transmittance);
-  real s[NCH], m[NCH], s_p[NCH], m_p[NCH], shadow_t[NCH];
-  combined_scattering(a, S, M, h, mu, mu_s, nu, ground, s, m);
-  d = fmax(d - shadow_length, R(0.0));
-  const real h_p = clamp_altitude(a, altitude_along(a, h, mu, d));
-  const real r_p = radius_of(a, h_p);
-  combined_scattering(a, S, M, h_p, (r * mu + d) / r_p, (r * mu_s + d * nu) / r_p, nu, ground, s_p, m_p);
-  if (shadow_length > R(0.0)) {
-    transmittance_along(a, T, h, mu, d, ground, shadow_t);
-  } else {
-    for (int c = 0; c < NCH; ++c) shadow_t[c] = transmittance[c];
-  }
-  /* the reference fades single Mie out as the sun sets, to hide artefacts */
-  const real fade = smooth_step(R(0.0), R(0.01), mu_s);
-  const real pr = rayleigh_phase(nu), pm = mie_phase(a->mie_g, nu);
-  for (int c = 0; c < NCH; ++c) {
-    const real sc = s[c] - shadow_t[c] * s_p[c];
-    const real mc = (m[c] - shadow_t[c] * m_p[c]) * fade;
-    radiance[c] = sc * pr + mc * pm;
-  }
-}
-
-/* Sun and sky irradiance on a surface at `point` with unit `normal`; returns the sun part
- * in sun_irradiance and the sky part (from the irradiance texture, scaled by the fraction
- * of the sky the tilted surface sees) in sky_irradiance. */
-FN void sun_and_sky_irradiance(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* E,
-                               const real* point, const real* normal, const real* sun, real* sun_irradiance,
-                               real* sky_irradiance) {
-  const real r = sqrt(dot3(point, point));
-  /* point is on the ground: its computed radius is off by rounding (either side) */
-  const real h = clamp_altitude(a, r - a->bottom_radius);
-  const real mu_s = clamp_cosine(dot3(point, sun) / r);
-  get_irradiance(a, E, h, mu_s, sky_irradiance);
-  const real tilt = (R(1.0) + dot3(normal, point) / r) * R(0.5);
-  for (int c = 0; c < NCH; ++c) sky_irradiance[c] *= tilt;
-  transmittance_to_sun(a, T, h, mu_s, sun_irradiance);
-  const real cos_n = fmax(dot3(normal, sun), R(0.0));
-  for (int c = 0; c < NCH; ++c) sun_irradiance[c] *= a->solar_irradiance[c] * cos_n;
 }

@@ -50,8 +50,10 @@ TEST(AtmosphereCli, BakesABundleWithEveryFile) {
     EXPECT_TRUE(img.attributes.count("specbake.layout")) << f;
   }
   const std::string glsl = read_file(b / "sampling.glsl");
-  for (const char* fn : {"GetScatteringTextureUvwzFromRMuMuSNu", "GetScattering3D", "GetScatteringTiled2D",
-                         "GetTransmittanceTextureUvFromRMu", "GetIrradianceTextureUvFromRMuS"})
+  for (const char* fn : {"vec3 GetSkyRadiance(", "vec3 GetSkyRadianceToPoint(", "vec3 GetSunAndSkyIrradiance(",
+                         "vec3 GetScattering3D(", "vec3 GetScatteringTiled2D(", "vec3 GetTransmittance(",
+                         "vec3 GetTransmittanceToTopAtmosphereBoundary(", "vec3 GetIrradiance(",
+                         "const SpecbakeAtmosphere SPECBAKE_ATMOSPHERE = SpecbakeAtmosphere("})
     EXPECT_NE(glsl.find(fn), std::string::npos) << fn;
   EXPECT_TRUE(fs::exists(b / "preview" / "planet_from_space.png"));
   EXPECT_TRUE(fs::exists(b / "preview" / "sky_fisheye_sun_+20deg.png"));

@@ -78,9 +78,14 @@ struct GlTarget {
   GLuint texture = 0, fbo = 0, vao = 0;
   bool complete = false;
   GlTarget(int w, int h) : width(w), height(h) {
+    // The texture is made on the active unit: leave that unit's binding as it was, so that a
+    // target made after a test bound its textures does not replace one of them.
+    GLint bound = 0;
+    glGetIntegerv(GL_TEXTURE_BINDING_2D, &bound);
     glGenTextures(1, &texture);
     glBindTexture(GL_TEXTURE_2D, texture);
     glTexStorage2D(GL_TEXTURE_2D, 1, GL_RGBA32F, w, h);
+    glBindTexture(GL_TEXTURE_2D, static_cast<GLuint>(bound));
     glGenFramebuffers(1, &fbo);
     glBindFramebuffer(GL_FRAMEBUFFER, fbo);
     glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, texture, 0);

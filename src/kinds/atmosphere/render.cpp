@@ -5,62 +5,87 @@
 #include <cstdio>
 #include <sstream>
 
+#include "core/glsl.hpp"
+#include "core/parallel.hpp"
 #include "core/text.hpp"
 #include "io/png.hpp"
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/shader_host.hpp"
 
 namespace specbake::atmosphere {
 
 struct Renderer::Impl {
-  ref3::AtmosphereParameters a;
-  const Luts* luts;
+  glsl::SpecbakeAtmosphere atm;
+  glsl::sampler2D transmittance, irradiance;
+  glsl::sampler3D scattering, single_mie;
 };
 
 Renderer::Renderer(const Luts& luts) : impl_(std::make_unique<Impl>()) {
-  impl_->a = ref3::make_parameters(luts.model, luts.rgb);
-  impl_->luts = &luts;
+  const Sizes& s = luts.model.sizes;
+  impl_->atm = glsl::atmosphere_of(luts.model, luts.rgb);
+  impl_->transmittance = {luts.transmittance.data(), s.transmittance_w, s.transmittance_h};
+  impl_->irradiance = {luts.irradiance.data(), s.irradiance_w, s.irradiance_h};
+  impl_->scattering = {luts.scattering.data(), s.scattering_width(), s.mu, s.r};
+  impl_->single_mie = {luts.single_mie.data(), s.scattering_width(), s.mu, s.r};
 }
 Renderer::~Renderer() = default;
 
+namespace {
+glsl::vec3 to_glm(const Vec3& v) { return {v[0], v[1], v[2]}; }
+Vec3 to_array(const glsl::vec3& v) { return {v.x, v.y, v.z}; }
+// A planet-centred position (km) as the shared code takes it: the unit vertical and the altitude.
+void up_and_altitude(const Vec3& x, double rb, glsl::vec3& up, double& h) {
+  const glsl::vec3 v = to_glm(x);
+  const double r = glm::length(v);
+  up = v / r;
+  h = r - rb;
+}
+}  // namespace
+
 Vec3 Renderer::sky_radiance(const Vec3& camera, const Vec3& view, const Vec3& sun, Vec3* transmittance) const {
-  Vec3 l{}, t{};
-  ref3::sky_radiance(&impl_->a, impl_->luts->transmittance.data(), impl_->luts->scattering.data(),
-                     impl_->luts->single_mie.data(), camera.data(), view.data(), 0.0, sun.data(), l.data(), t.data());
-  if (transmittance) *transmittance = t;
-  return l;
+  const Impl& i = *impl_;
+  glsl::vec3 up, t;
+  double h;
+  up_and_altitude(camera, i.atm.bottom_radius, up, h);
+  const glsl::vec3 l = glsl::GetSkyRadiance(i.atm, i.transmittance, i.scattering, i.single_mie, up, h, to_glm(view),
+                                            0.0, to_glm(sun), t);
+  if (transmittance) *transmittance = to_array(t);
+  return to_array(l);
 }
 Vec3 Renderer::sky_radiance_to_point(const Vec3& camera, const Vec3& point, const Vec3& sun,
                                      Vec3* transmittance) const {
-  Vec3 l{}, t{};
-  ref3::sky_radiance_to_point(&impl_->a, impl_->luts->transmittance.data(), impl_->luts->scattering.data(),
-                              impl_->luts->single_mie.data(), camera.data(), point.data(), 0.0, sun.data(), l.data(),
-                              t.data());
-  if (transmittance) *transmittance = t;
-  return l;
+  const Impl& i = *impl_;
+  glsl::vec3 up, t;
+  double h;
+  up_and_altitude(camera, i.atm.bottom_radius, up, h);
+  const glsl::vec3 l =
+      glsl::GetSkyRadianceToPoint(i.atm, i.transmittance, i.scattering, i.single_mie, up, h,
+                                  to_glm(point) - to_glm(camera), 0.0, to_glm(sun), t);
+  if (transmittance) *transmittance = to_array(t);
+  return to_array(l);
 }
 Vec3 Renderer::sun_and_sky_irradiance(const Vec3& point, const Vec3& normal, const Vec3& sun, Vec3* sky) const {
-  Vec3 e_sun{}, e_sky{};
-  ref3::sun_and_sky_irradiance(&impl_->a, impl_->luts->transmittance.data(), impl_->luts->irradiance.data(),
-                               point.data(), normal.data(), sun.data(), e_sun.data(), e_sky.data());
-  if (sky) *sky = e_sky;
-  return e_sun;
+  const Impl& i = *impl_;
+  glsl::vec3 up, e_sky;
+  double h;
+  up_and_altitude(point, i.atm.bottom_radius, up, h);
+  const glsl::vec3 e_sun = glsl::GetSunAndSkyIrradiance(i.atm, i.transmittance, i.irradiance, up, h,
+                                                        to_glm(normal), to_glm(sun), e_sky);
+  if (sky) *sky = to_array(e_sky);
+  return to_array(e_sun);
 }
 Vec3 Renderer::scattering_3d(double r, double mu, double mu_s, double nu, bool ground, bool mie) const {
-  Vec3 v{};
-  ref3::get_scattering(&impl_->a, mie ? impl_->luts->single_mie.data() : impl_->luts->scattering.data(),
-                       r - impl_->a.bottom_radius, mu, mu_s,
-                       nu, ground ? 1 : 0, v.data());
-  return v;
+  const Impl& i = *impl_;
+  return to_array(glsl::GetScattering3D(i.atm, mie ? i.single_mie : i.scattering, r - i.atm.bottom_radius, mu,
+                                              mu_s, nu, ground ? 1 : 0));
 }
 Vec3 Renderer::transmittance_to_top(double r, double mu) const {
-  Vec3 v{};
-  ref3::transmittance_to_top(&impl_->a, impl_->luts->transmittance.data(), r - impl_->a.bottom_radius, mu, v.data());
-  return v;
+  const Impl& i = *impl_;
+  return to_array(
+      glsl::GetTransmittanceToTopAtmosphereBoundary(i.atm, i.transmittance, r - i.atm.bottom_radius, mu));
 }
 Vec3 Renderer::irradiance(double r, double mu_s) const {
-  Vec3 v{};
-  ref3::get_irradiance(&impl_->a, impl_->luts->irradiance.data(), r - impl_->a.bottom_radius, mu_s, v.data());
-  return v;
+  const Impl& i = *impl_;
+  return to_array(glsl::GetIrradiance(i.atm, i.irradiance, r - i.atm.bottom_radius, mu_s));
 }
 
 std::vector<double> to_tiled2d(const std::vector<double>& tex3d, const Sizes& s) {
@@ -76,151 +101,52 @@ std::vector<double> to_tiled2d(const std::vector<double>& tex3d, const Sizes& s)
 
 Vec3 sample_tiled2d(const Model& m, const std::vector<double>& tiled, double r, double mu, double mu_s, double nu,
                     bool ground) {
-  const auto a = ref3::make_parameters(m, Channels{});
   const Sizes& s = m.sizes;
-  double uvwz[4];
-  ref3::scattering_uvwz(&a, r - a.bottom_radius, mu, mu_s, nu, ground ? 1 : 0, uvwz);
-  // the lines below mirror GetScatteringTiled2D in sampling_glsl()
-  const double x = std::clamp(uvwz[0], 0.0, 1.0) * (s.nu - 1);
-  const double s0 = std::floor(x), f = x - s0;
-  const double s1 = std::min(s0 + 1.0, double(s.nu - 1));
-  const double z = uvwz[3] * s.r - 0.5;
-  const double k0f = std::floor(z), g = z - k0f;
-  const double k0 = std::clamp(k0f, 0.0, double(s.r - 1)), k1 = std::clamp(k0f + 1.0, 0.0, double(s.r - 1));
-  const int width = s.r * s.nu * s.mu_s;
-  auto fetch = [&](double k, double slice) {
-    Vec3 v{};
-    ref3::texture_2d(tiled.data(), width, s.mu, (k * s.nu + slice + uvwz[1]) / double(s.r * s.nu), uvwz[2], v.data());
-    return v;
-  };
-  const Vec3 a00 = fetch(k0, s0), a01 = fetch(k0, s1), a10 = fetch(k1, s0), a11 = fetch(k1, s1);
-  Vec3 out{};
-  for (int c = 0; c < 3; ++c)
-    out[c] = (a00[c] * (1.0 - f) + a01[c] * f) * (1.0 - g) + (a10[c] * (1.0 - f) + a11[c] * f) * g;
-  return out;
+  const glsl::SpecbakeAtmosphere atm = glsl::atmosphere_of(m, Channels{});
+  const glsl::sampler2D tex{tiled.data(), s.r * s.scattering_width(), s.mu};
+  return to_array(glsl::GetScatteringTiled2D(atm, tex, r - m.bottom_radius_km, mu, mu_s, nu, ground ? 1 : 0));
 }
 
 std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, bool layout_tiled2d,
                           const std::string& units_note) {
   const Sizes& s = m.sizes;
+  const auto f = [](double v) { return glsl_float(v); };
   std::ostringstream o;
-  o << "// specbake atmosphere LUT sampling (Bruneton 2017 parameterisation). Lengths in km.\n"
+  o << "// specbake atmosphere: sampling the baked textures (Bruneton 2017's GetSkyRadiance & co., in\n"
+    << "// the altitude-based form that stays accurate in float32 near the ground). Lengths in km.\n"
     << "// " << units_note << "\n"
-    << "// Textures: transmittance " << s.transmittance_w << "x" << s.transmittance_h << " (u: mu, v: r); irradiance "
-    << s.irradiance_w << "x" << s.irradiance_h << " (u: mu_s, v: r), sky (indirect) only;\n"
-    << "// scattering 3D: width NU*MU_S = " << s.scattering_width() << ", height MU = " << s.mu << ", depth R = " << s.r
-    << " (x = nu_slice*MU_S + mu_s_index);\n"
-    << "// scattering tiled 2D: width R*NU*MU_S = " << s.r * s.scattering_width() << ", height MU = " << s.mu
-    << " (x = r_index*NU*MU_S + nu_slice*MU_S + mu_s_index).\n"
-    << "// Filtering: linear, clamp to edge, no mipmaps; texel (i, j) at ((i+0.5)/W, (j+0.5)/H), row j = 0 at v ~ 0.\n"
-    << "#ifndef SPECBAKE_ATMOSPHERE_GLSL\n#define SPECBAKE_ATMOSPHERE_GLSL\n"
-    << "const float BOTTOM_RADIUS = " << glsl_float(m.bottom_radius_km) << ";\n"
-    << "const float TOP_RADIUS = " << glsl_float(m.top_radius_km) << ";\n"
-    << "const float MU_S_MIN = " << glsl_float(m.mu_s_min) << ";\n"
-    << "const float SUN_ANGULAR_RADIUS = " << glsl_float(m.sun_angular_radius_rad) << ";\n"
-    << "const float MIE_PHASE_G = " << glsl_float(m.mie_g) << ";\n"
-    << "const vec3 SOLAR_IRRADIANCE = vec3(" << glsl_float(rgb.solar_irradiance[0]) << ", " << glsl_float(rgb.solar_irradiance[1])
-    << ", " << glsl_float(rgb.solar_irradiance[2]) << ");\n"
-    << "const int TRANSMITTANCE_TEXTURE_WIDTH = " << s.transmittance_w << ";\n"
-    << "const int TRANSMITTANCE_TEXTURE_HEIGHT = " << s.transmittance_h << ";\n"
-    << "const int IRRADIANCE_TEXTURE_WIDTH = " << s.irradiance_w << ";\n"
-    << "const int IRRADIANCE_TEXTURE_HEIGHT = " << s.irradiance_h << ";\n"
-    << "const int SCATTERING_TEXTURE_R_SIZE = " << s.r << ";\n"
-    << "const int SCATTERING_TEXTURE_MU_SIZE = " << s.mu << ";\n"
-    << "const int SCATTERING_TEXTURE_MU_S_SIZE = " << s.mu_s << ";\n"
-    << "const int SCATTERING_TEXTURE_NU_SIZE = " << s.nu << ";\n";
-  o << R"GLSL(
-float SpecbakeCoord(float x, int n) { return 0.5 / float(n) + x * (1.0 - 1.0 / float(n)); }
-float SpecbakeSafeSqrt(float a) { return sqrt(max(a, 0.0)); }
-float SpecbakeDistanceToTop(float r, float mu) {
-  float disc = (r * mu) * (r * mu) + (TOP_RADIUS - r) * (TOP_RADIUS + r);
-  return max(-r * mu + SpecbakeSafeSqrt(disc), 0.0);
-}
-bool RayIntersectsGround(float r, float mu) {
-  return mu < 0.0 && (r * mu) * (r * mu) - (r - BOTTOM_RADIUS) * (r + BOTTOM_RADIUS) >= 0.0;
-}
-float RayleighPhaseFunction(float nu) { return 3.0 / (16.0 * 3.14159265) * (1.0 + nu * nu); }
-float MiePhaseFunction(float g, float nu) {
-  float k = 3.0 / (8.0 * 3.14159265) * (1.0 - g * g) / (2.0 + g * g);
-  float x = 1.0 + g * g - 2.0 * g * nu;
-  return k * (1.0 + nu * nu) / (x * sqrt(x));
-}
-vec2 GetTransmittanceTextureUvFromRMu(float r, float mu) {
-  float H = sqrt((TOP_RADIUS - BOTTOM_RADIUS) * (TOP_RADIUS + BOTTOM_RADIUS));
-  float rho = SpecbakeSafeSqrt((r - BOTTOM_RADIUS) * (r + BOTTOM_RADIUS));
-  float d = SpecbakeDistanceToTop(r, mu);
-  float d_min = TOP_RADIUS - r, d_max = rho + H;
-  return vec2(SpecbakeCoord((d - d_min) / (d_max - d_min), TRANSMITTANCE_TEXTURE_WIDTH),
-              SpecbakeCoord(rho / H, TRANSMITTANCE_TEXTURE_HEIGHT));
-}
-vec2 GetIrradianceTextureUvFromRMuS(float r, float mu_s) {
-  return vec2(SpecbakeCoord(mu_s * 0.5 + 0.5, IRRADIANCE_TEXTURE_WIDTH),
-              SpecbakeCoord((r - BOTTOM_RADIUS) / (TOP_RADIUS - BOTTOM_RADIUS), IRRADIANCE_TEXTURE_HEIGHT));
-}
-// (u_nu, u_mu_s, u_mu, u_r); the ground flag picks the half of the mu axis.
-vec4 GetScatteringTextureUvwzFromRMuMuSNu(float r, float mu, float mu_s, float nu, bool ray_r_mu_intersects_ground) {
-  float H = sqrt((TOP_RADIUS - BOTTOM_RADIUS) * (TOP_RADIUS + BOTTOM_RADIUS));
-  float rho = SpecbakeSafeSqrt((r - BOTTOM_RADIUS) * (r + BOTTOM_RADIUS));
-  float u_r = SpecbakeCoord(rho / H, SCATTERING_TEXTURE_R_SIZE);
-  float r_mu = r * mu;
-  float disc = r_mu * r_mu - (r - BOTTOM_RADIUS) * (r + BOTTOM_RADIUS);
-  float u_mu;
-  if (ray_r_mu_intersects_ground) {
-    float d = -r_mu - SpecbakeSafeSqrt(disc);
-    float d_min = rho * rho / (r + BOTTOM_RADIUS), d_max = rho;
-    u_mu = 0.5 - 0.5 * SpecbakeCoord(d_max == d_min ? 0.0 : (d - d_min) / (d_max - d_min),
-                                     SCATTERING_TEXTURE_MU_SIZE / 2);
-  } else {
-    float d = -r_mu + SpecbakeSafeSqrt(disc + H * H);
-    float d_min = TOP_RADIUS - r, d_max = rho + H;
-    u_mu = 0.5 + 0.5 * SpecbakeCoord((d - d_min) / (d_max - d_min), SCATTERING_TEXTURE_MU_SIZE / 2);
-  }
-  float d_min = TOP_RADIUS - BOTTOM_RADIUS, d_max = H;
-  float a = (SpecbakeDistanceToTop(BOTTOM_RADIUS, mu_s) - d_min) / (d_max - d_min);
-  float A = (SpecbakeDistanceToTop(BOTTOM_RADIUS, MU_S_MIN) - d_min) / (d_max - d_min);
-  float u_mu_s = SpecbakeCoord(max(1.0 - a / A, 0.0) / (1.0 + a), SCATTERING_TEXTURE_MU_S_SIZE);
-  return vec4((nu + 1.0) / 2.0, u_mu_s, u_mu, u_r);
-}
-)GLSL";
+    << "// GLSL 4.50 core or ES 3.20, without #version: include it after yours (ES: precision highp float,\n"
+    << "// sampler2D and sampler3D). The functions take the atmosphere as SPECBAKE_ATMOSPHERE below.\n"
+    << "// Textures (filtering LINEAR, wrap CLAMP_TO_EDGE, no mipmaps; texel (i, j) at ((i+0.5)/W, (j+0.5)/H),\n"
+    << "// row j = 0 at v ~ 0):\n"
+    << "//   transmittance " << s.transmittance_w << "x" << s.transmittance_h << " (u: mu, v: altitude); irradiance "
+    << s.irradiance_w << "x" << s.irradiance_h << " (u: mu_s, v: altitude), sky (indirect) only;\n";
   if (layout_3d)
-    o << R"GLSL(
-// Layout 3d: sampler3D of width NU*MU_S, height MU, depth R; two lookups around nu.
-vec3 GetScattering3D(sampler3D tex, float r, float mu, float mu_s, float nu, bool ray_r_mu_intersects_ground) {
-  vec4 uvwz = GetScatteringTextureUvwzFromRMuMuSNu(r, mu, mu_s, nu, ray_r_mu_intersects_ground);
-  float x = clamp(uvwz.x, 0.0, 1.0) * float(SCATTERING_TEXTURE_NU_SIZE - 1);
-  float s0 = floor(x);
-  float f = x - s0;
-  vec3 uvw0 = vec3((s0 + uvwz.y) / float(SCATTERING_TEXTURE_NU_SIZE), uvwz.z, uvwz.w);
-  vec3 uvw1 = vec3((s0 + 1.0 + uvwz.y) / float(SCATTERING_TEXTURE_NU_SIZE), uvwz.z, uvwz.w);
-  return texture(tex, uvw0).rgb * (1.0 - f) + texture(tex, uvw1).rgb * f;
-}
-)GLSL";
+    o << "//   scattering, single_mie_scattering 3D: width NU*MU_S = " << s.scattering_width() << ", height MU = "
+      << s.mu << ", depth R = " << s.r << " (x = nu_slice*MU_S + mu_s_index);\n";
   if (layout_tiled2d)
-    o << R"GLSL(
-// Layout tiled2d: sampler2D of width R*NU*MU_S, height MU. Bilinear filtering covers mu_s
-// and mu (u_mu_s keeps half a texel from each slice edge, so no two slices or r layers are
-// blended); r and nu are interpolated here: 4 fetches.
-vec3 GetScatteringTiled2D(sampler2D tex, float r, float mu, float mu_s, float nu, bool ray_r_mu_intersects_ground) {
-  vec4 uvwz = GetScatteringTextureUvwzFromRMuMuSNu(r, mu, mu_s, nu, ray_r_mu_intersects_ground);
-  float x = clamp(uvwz.x, 0.0, 1.0) * float(SCATTERING_TEXTURE_NU_SIZE - 1);
-  float s0 = floor(x);
-  float f = x - s0;
-  float s1 = min(s0 + 1.0, float(SCATTERING_TEXTURE_NU_SIZE - 1));
-  float z = uvwz.w * float(SCATTERING_TEXTURE_R_SIZE) - 0.5;
-  float k0f = floor(z);
-  float g = z - k0f;
-  float k0 = clamp(k0f, 0.0, float(SCATTERING_TEXTURE_R_SIZE - 1));
-  float k1 = clamp(k0f + 1.0, 0.0, float(SCATTERING_TEXTURE_R_SIZE - 1));
-  float tiles = float(SCATTERING_TEXTURE_R_SIZE * SCATTERING_TEXTURE_NU_SIZE);
-  float n = float(SCATTERING_TEXTURE_NU_SIZE);
-  vec3 a00 = texture(tex, vec2((k0 * n + s0 + uvwz.y) / tiles, uvwz.z)).rgb;
-  vec3 a01 = texture(tex, vec2((k0 * n + s1 + uvwz.y) / tiles, uvwz.z)).rgb;
-  vec3 a10 = texture(tex, vec2((k1 * n + s0 + uvwz.y) / tiles, uvwz.z)).rgb;
-  vec3 a11 = texture(tex, vec2((k1 * n + s1 + uvwz.y) / tiles, uvwz.z)).rgb;
-  return mix(mix(a00, a01, f), mix(a10, a11, f), g);
-}
-)GLSL";
-  o << "#endif\n";
+    o << "//   scattering, single_mie_scattering tiled 2D: width R*NU*MU_S = " << s.r * s.scattering_width()
+      << ", height MU = " << s.mu << " (x = r_index*NU*MU_S + nu_slice*MU_S + mu_s_index);\n";
+  o << "// GetSkyRadiance, GetSkyRadianceToPoint and GetSunAndSkyIrradiance take GetScattering's layout:\n"
+    << "// 3D, or tiled 2D where SPECBAKE_SCATTERING_TILED2D is defined before this file"
+    << (layout_3d ? "" : " (this bundle has no 3D layout, so it is defined here)") << ".\n"
+    << "#ifndef SPECBAKE_ATMOSPHERE_GLSL\n#define SPECBAKE_ATMOSPHERE_GLSL\n";
+  if (!layout_3d) o << "#ifndef SPECBAKE_SCATTERING_TILED2D\n#define SPECBAKE_SCATTERING_TILED2D\n#endif\n";
+  o << "\n" << glsl_subset_prelude()
+    << "#define TEXTURE_RGB(s, uv) texture(s, uv).rgb\n#define OUT(T) out T\n\n"
+    << glsl_shared_source("kernels/atmosphere/lookup.cl") << "\n"
+    << glsl_shared_source("kernels/atmosphere/render.glsl") << "\n"
+    << "const SpecbakeAtmosphere SPECBAKE_ATMOSPHERE = SpecbakeAtmosphere(\n"
+    << "    " << f(m.bottom_radius_km) << ", " << f(m.top_radius_km) << ",  // bottom_radius, top_radius (km)\n"
+    << "    " << f(m.mu_s_min) << ", " << f(m.sun_angular_radius_rad) << ", " << f(m.mie_g)
+    << ",  // mu_s_min, sun_angular_radius (rad), mie_g\n"
+    << "    vec3(" << f(rgb.solar_irradiance[0]) << ", " << f(rgb.solar_irradiance[1]) << ", "
+    << f(rgb.solar_irradiance[2]) << "),  // solar_irradiance\n"
+    << "    " << f(s.transmittance_w) << ", " << f(s.transmittance_h) << ", " << f(s.irradiance_w) << ", "
+    << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
+    << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ");  // R, MU, MU_S, NU\n"
+    << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef OUT\n"
+    << "#endif\n";
   return o.str();
 }
 

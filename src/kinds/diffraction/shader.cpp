@@ -3,7 +3,7 @@
 #include <sstream>
 
 #include "core/colour_space.hpp"
-#include "core/resources.hpp"
+#include "core/glsl.hpp"
 #include "core/text.hpp"
 
 namespace specbake::diffraction {
@@ -19,10 +19,6 @@ std::string array(const char* type, const std::vector<T>& v, F&& show) {
 
 std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, const TableGeometry& g,
                              double window_sum, double ior, const Wavelengths& fast) {
-  // The shared maths without its C/OpenCL include line.
-  std::string shared(resource("kernels/diffraction/brdf.cl"));
-  const std::string inc = "#include \"common/real.h\"\n";
-  if (const auto at = shared.find(inc); at != std::string::npos) shared.erase(at, inc.size());
   std::vector<double> hi, k0, delta;
   std::vector<int> first, count;
   for (const auto& b : bands) {
@@ -50,10 +46,8 @@ std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, con
     << "// Directions: unit vectors in the surface's tangent frame (x along the heightfield's x, z the\n"
     << "// normal); wi towards the light, wo towards the viewer.\n"
     << "#ifndef SPECBAKE_DIFFRACTION_GLSL\n#define SPECBAKE_DIFFRACTION_GLSL\n\n"
-    << "// The prelude that lets brdf.cl's C/GLSL common subset compile as GLSL.\n"
-    << "#define real float\n#define FN\n#define R(x) float(x)\n#define fabs abs\n#define fmax max\n\n"
-    << "// ---- kernels/diffraction/brdf.cl, verbatim ----\n"
-    << shared << "// ---- end of brdf.cl ----\n\n"
+    << glsl_subset_prelude() << "\n"
+    << glsl_shared_source("kernels/diffraction/brdf.cl") << "\n"
     << "const float DIFFRACTION_TABLE_SIZE = " << glsl_float(g.size) << ";\n"
     << "const float DIFFRACTION_F_MAX = " << glsl_float(g.f_max) << ";  // cycles/um\n"
     << "const float DIFFRACTION_POWER = " << glsl_float(g.power) << ";\n"
@@ -140,8 +134,7 @@ vec3 diffraction_srgb_fast(sampler2DArray terms, vec3 wi, vec3 wo) {
   return DIFFRACTION_XYZ_TO_SRGB * xyz;
 }
 
-#endif  // SPECBAKE_DIFFRACTION_GLSL
-)GLSL";
+)GLSL" << glsl_subset_epilogue() << "#endif  // SPECBAKE_DIFFRACTION_GLSL\n";
   return o.str();
 }
 

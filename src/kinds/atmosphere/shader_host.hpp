@@ -1,0 +1,118 @@
+#pragma once
+// The host side of the shipped atmosphere shader: kernels/atmosphere/lookup.cl and render.glsl,
+// the text sampling.glsl carries, compiled in double with GLM's vector types over textures
+// filtered as a GPU filters them (texel centres at (i + 0.5)/n, clamp to edge, bilinear and
+// trilinear). Renderer (render.hpp) is built on it; the GL test uses it directly, with a
+// FilterProbe to measure how the result depends on each fetch's texel coordinates.
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <glm/glm.hpp>
+
+#include "kinds/atmosphere/model.hpp"
+
+namespace specbake::atmosphere::glsl {
+
+using real = double;
+using vec2 = glm::dvec2;
+using vec3 = glm::dvec3;
+using glm::dot, glm::length, glm::normalize;
+using std::exp, std::fabs, std::floor, std::fmax, std::fmin, std::pow, std::sqrt;
+
+// Counts a shader evaluation's filtered fetches in call order and moves the texel coordinate of
+// one of them: fetch `target`, axis `axis` (0 x, 1 y, 2 z), by `delta` texels. A GPU resolves
+// texel coordinates to its subtexel precision; this shows what that can do to a result.
+struct FilterProbe {
+  int fetches = 0;
+  int target = -1, axis = 0;
+  double delta = 0.0;
+};
+
+struct sampler2D {  // [h][w][3]
+  const double* texels;
+  int w, h;
+  FilterProbe* probe = nullptr;
+};
+struct sampler3D {  // [d][h][w][3]
+  const double* texels;
+  int w, h, d;
+  FilterProbe* probe = nullptr;
+};
+
+namespace detail {
+// The two texels around coordinate u on n texels (moved by `shift` texels) and the weight of the
+// second.
+struct Taps {
+  int i0, i1;
+  double f;
+};
+inline Taps taps(double u, int n, double shift = 0.0) {
+  const double x = u * n - 0.5 + shift, x0 = std::floor(x);
+  const int i = static_cast<int>(x0);
+  return {std::clamp(i, 0, n - 1), std::clamp(i + 1, 0, n - 1), x - x0};
+}
+inline vec3 texel(const double* t, long long index) { return {t[3 * index], t[3 * index + 1], t[3 * index + 2]}; }
+// The probe's shift (if any) for this fetch along `axis`.
+inline double shift(FilterProbe* p, int fetch, int axis) {
+  return p && fetch == p->target && axis == p->axis ? p->delta : 0.0;
+}
+}  // namespace detail
+
+inline vec3 texture_rgb(const sampler2D& s, vec2 uv) {
+  const int n = s.probe ? s.probe->fetches++ : 0;
+  const detail::Taps a[2] = {detail::taps(uv.x, s.w, detail::shift(s.probe, n, 0)),
+                             detail::taps(uv.y, s.h, detail::shift(s.probe, n, 1))};
+  const auto at = [&](int i, int j) { return detail::texel(s.texels, 1LL * j * s.w + i); };
+  return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0) + a[0].f * at(a[0].i1, a[1].i0)) +
+         a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1) + a[0].f * at(a[0].i1, a[1].i1));
+}
+inline vec3 texture_rgb(const sampler3D& s, vec3 uvw) {
+  const int n = s.probe ? s.probe->fetches++ : 0;
+  const detail::Taps a[3] = {detail::taps(uvw.x, s.w, detail::shift(s.probe, n, 0)),
+                             detail::taps(uvw.y, s.h, detail::shift(s.probe, n, 1)),
+                             detail::taps(uvw.z, s.d, detail::shift(s.probe, n, 2))};
+  const auto at = [&](int i, int j, int k) { return detail::texel(s.texels, (1LL * k * s.h + j) * s.w + i); };
+  const auto plane = [&](int k) {
+    return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0, k) + a[0].f * at(a[0].i1, a[1].i0, k)) +
+           a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1, k) + a[0].f * at(a[0].i1, a[1].i1, k));
+  };
+  return (1.0 - a[2].f) * plane(a[2].i0) + a[2].f * plane(a[2].i1);
+}
+
+// The shared text. Internal linkage: each includer gets its own copy of these inline-sized
+// functions (render.glsl's are not marked inline, as GLSL has no such word).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wunused-function"
+namespace {
+#define TEXTURE_RGB(s, uv) texture_rgb(s, uv)
+#define OUT(T) T&
+#include "atmosphere/lookup.cl"
+#include "atmosphere/render.glsl"
+#undef TEXTURE_RGB
+#undef OUT
+
+inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
+  const Sizes& s = m.sizes;
+  SpecbakeAtmosphere a{};
+  a.bottom_radius = m.bottom_radius_km;
+  a.top_radius = m.top_radius_km;
+  a.mu_s_min = m.mu_s_min;
+  a.sun_angular_radius = m.sun_angular_radius_rad;
+  a.mie_g = m.mie_g;
+  if (rgb.solar_irradiance.size() == 3)
+    a.solar_irradiance = {rgb.solar_irradiance[0], rgb.solar_irradiance[1], rgb.solar_irradiance[2]};
+  a.transmittance_w = s.transmittance_w;
+  a.transmittance_h = s.transmittance_h;
+  a.irradiance_w = s.irradiance_w;
+  a.irradiance_h = s.irradiance_h;
+  a.r_size = s.r;
+  a.mu_size = s.mu;
+  a.mu_s_size = s.mu_s;
+  a.nu_size = s.nu;
+  return a;
+}
+}  // namespace
+#pragma GCC diagnostic pop
+
+}  // namespace specbake::atmosphere::glsl

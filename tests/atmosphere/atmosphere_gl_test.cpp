@@ -1,0 +1,444 @@
+// The shipped atmosphere shader (sampling.glsl) run on a real GL implementation: Mesa's llvmpipe
+// through EGL surfaceless (GLES 3.2). Bruneton's reference Earth textures are uploaded as an
+// engine would (RGBA32F, LINEAR, CLAMP_TO_EDGE; the scattering textures both as 3D textures and
+// in the tiled 2D layout), the preview views are drawn with GetSkyRadiance,
+// GetSkyRadianceToPoint and GetSunAndSkyIrradiance, and every pixel is compared with the host's
+// double evaluation of the same shared source (kernels/atmosphere/lookup.cl and render.glsl)
+// from the same float32 texels and the same float32 inputs, within a per-pixel bound.
+// Skipped, with the reason, only when no EGL device can be opened.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "atmosphere/npy.hpp"
+#include "core/parallel.hpp"
+#include "core/resources.hpp"
+#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/render.hpp"
+#include "kinds/atmosphere/shader_host.hpp"
+#include "support/gl_context.hpp"
+#include "support/testing.hpp"
+
+using namespace specbake;
+using namespace specbake::atmosphere;
+using dvec3 = glm::dvec3;
+
+namespace {
+
+std::string ref(const std::string& name) { return (specbake::testing::refdata_dir() / "atmosphere" / name).string(); }
+
+// Bruneton's demo Earth (the reference textures' atmosphere).
+Luts reference_earth() {
+  AtmosphereSpec spec;
+  spec.rayleigh_density[1] = DensityLayer{0, 1, -1.0 / 8.0, 0, 0};
+  spec.mie_density[1] = DensityLayer{0, 1, -1.0 / 1.2, 0, 0};
+  spec.ozone_density[0] = DensityLayer{25.0, 0, 0, 1.0 / 15.0, -2.0 / 3.0};
+  spec.ozone_density[1] = DensityLayer{0, 0, 0, -1.0 / 15.0, 8.0 / 3.0};
+  Luts luts;
+  luts.model = model_of(spec);
+  luts.rgb = channels_at(spec, {kLambdaR, kLambdaG, kLambdaB});
+  // Stored as float32 (as a bundle and the GL textures hold them): the host reads the same texels.
+  const auto as_float = [](std::vector<double> v) {
+    for (double& x : v) x = static_cast<float>(x);
+    return v;
+  };
+  luts.transmittance = as_float(specbake::testing::read_npy(ref("textures/transmittance.npy")).data);
+  luts.irradiance = as_float(specbake::testing::read_npy(ref("textures/irradiance.npy")).data);
+  luts.scattering = as_float(specbake::testing::read_npy(ref("textures/scattering.npy")).data);
+  luts.single_mie = as_float(specbake::testing::read_npy(ref("textures/single_mie_scattering.npy")).data);
+  return luts;
+}
+
+double f32(double x) { return static_cast<float>(x); }
+dvec3 f32(const dvec3& v) { return {f32(v.x), f32(v.y), f32(v.z)}; }
+
+// One pixel's inputs, as the GL side gets them (float32): kind 0 a sky ray along `dir`, kind 1 a
+// ground point `dir` km from the camera with its local vertical p_up at altitude p_h, kind −1
+// nothing (outside a fisheye's circle).
+struct Pixel {
+  dvec3 dir{0.0};
+  double kind = -1;
+  dvec3 p_up{0.0};
+  double p_h = 0;
+};
+struct View {
+  std::string name;
+  dvec3 up, sun;
+  double h;
+  int n;
+  std::vector<Pixel> pixels;  // row 0 at the bottom, as glReadPixels returns them
+};
+
+// The preview views (render.cpp's preview_files): equidistant fisheyes from 1 m above the ground
+// with the sun at 20°, 5°, 0° and −4°, and the planet from 3.2 radii with its ground points.
+std::vector<View> preview_views(const Model& m, int n) {
+  std::vector<View> views;
+  for (double elevation : {20.0, 5.0, 0.0, -4.0}) {
+    const double e = elevation * M_PI / 180.0;
+    View v{"fisheye sun " + std::to_string(static_cast<int>(elevation)) + " deg", {0, 0, 1},
+           f32(dvec3{std::cos(e), 0, std::sin(e)}), f32(0.001), n, {}};
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const double dx = (2.0 * x + 1.0) / n - 1.0, dy = (2.0 * y + 1.0) / n - 1.0, rho = std::hypot(dx, dy);
+        Pixel p;
+        if (rho < 1.0) {
+          const double theta = rho * M_PI / 2.0, phi = std::atan2(dy, dx);
+          p.dir = f32(dvec3{std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)});
+          p.kind = 0;
+        }
+        v.pixels.push_back(p);
+      }
+    views.push_back(v);
+  }
+  const double rb = m.bottom_radius_km;
+  const dvec3 camera{0.0, -3.2 * rb, 0.6 * rb};
+  const dvec3 fwd = glm::normalize(-camera), right = glm::normalize(dvec3{fwd.y, -fwd.x, 0.0});
+  const dvec3 up_img = glm::cross(right, fwd);
+  const double dist = glm::length(camera), half = std::tan(std::asin(m.top_radius_km / dist)) * 1.08;
+  View v{"planet from space", f32(camera / dist), f32(glm::normalize(dvec3{1.0, -0.6, 0.45})), f32(dist - rb), n, {}};
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const double sx = ((2.0 * x + 1.0) / n - 1.0) * half, sy = ((2.0 * y + 1.0) / n - 1.0) * half;
+      const dvec3 view = glm::normalize(fwd + sx * right + sy * up_img);
+      const double b = glm::dot(camera, view), disc = b * b - (dist * dist - rb * rb);
+      Pixel p;
+      p.kind = 0;
+      p.dir = f32(view);
+      if (disc >= 0.0 && -b - std::sqrt(disc) > 0.0) {
+        const dvec3 point = camera + (-b - std::sqrt(disc)) * view;
+        p.kind = 1;
+        p.dir = f32(point - camera);
+        p.p_up = f32(glm::normalize(point));
+        p.p_h = f32(std::max(0.0, glm::length(point) - rb));
+      }
+      v.pixels.push_back(p);
+    }
+  views.push_back(v);
+  return views;
+}
+
+// The four outputs a pixel is checked on: radiance, transmittance, and at ground points the sun
+// and sky irradiance (what the planet preview shades the ground with).
+struct Out {
+  dvec3 v[4] = {dvec3(0.0), dvec3(0.0), dvec3(0.0), dvec3(0.0)};
+};
+struct Host {
+  glsl::SpecbakeAtmosphere atm;
+  glsl::sampler2D transmittance, irradiance;
+  glsl::sampler3D scattering, single_mie;
+  Out eval(const dvec3& up, double h, const dvec3& sun, const Pixel& p) const {
+    Out o;
+    if (p.kind == 0) {
+      o.v[0] = glsl::GetSkyRadiance(atm, transmittance, scattering, single_mie, up, h, p.dir, 0.0, sun, o.v[1]);
+    } else if (p.kind == 1) {
+      o.v[0] = glsl::GetSkyRadianceToPoint(atm, transmittance, scattering, single_mie, up, h, p.dir, 0.0, sun, o.v[1]);
+      o.v[2] = glsl::GetSunAndSkyIrradiance(atm, transmittance, irradiance, p.p_up, p.p_h, p.p_up, sun, o.v[3]);
+    }
+    return o;
+  }
+  Host with(glsl::FilterProbe* probe) const {
+    Host h = *this;
+    h.transmittance.probe = h.irradiance.probe = h.scattering.probe = h.single_mie.probe = probe;
+    return h;
+  }
+};
+
+// A unit vector turned by angle e towards each of two directions orthogonal to it.
+std::vector<dvec3> turned(const dvec3& v, double e) {
+  const dvec3 a = glm::normalize(glm::cross(v, std::fabs(v.z) < 0.9 ? dvec3{0, 0, 1} : dvec3{1, 0, 0}));
+  const dvec3 b = glm::cross(v, a);
+  return {glm::normalize(v + e * a), glm::normalize(v - e * a), glm::normalize(v + e * b), glm::normalize(v - e * b)};
+}
+
+// The per-pixel bound on |GL − host|, per output and channel, as three terms:
+//  - filtering: GL implementations resolve texel coordinates to 8 fractional bits (D3D11's
+//    minimum, which GL implementations follow), so each fetch may blend as if its coordinate were
+//    off by up to 2^-9 texel along each axis. The host moves each coordinate of each fetch by
+//    ±2^-9 texel, one at a time, and adds the larger change of each (first order: each fetch is
+//    piecewise linear in its coordinate). Where a fetch sits on a texel centre at the edge of a
+//    nu slice or r layer, this includes the neighbouring slice's texel, which may be far brighter.
+//  - float32 arithmetic on the geometry: every mu, mu_s, nu, altitude and texture coordinate the
+//    shader derives comes from dot products, square roots and the altitude-based forms of
+//    lookup.cl, each within ~10 ulps (lookup.cl's header; GLSL's sqrt and division are within
+//    3 ulps); the host turns each input direction by 16 ulps (2^-20 rad) both ways about two axes,
+//    scales each altitude and distance by 1 ± 2^-20, and adds the largest change per input. This
+//    also covers rays the float32 ground test may classify either way (the change is then the
+//    jump between the two halves of the texture).
+//  - float32 arithmetic on the values: ~20 operations from texel to result, each within 3 ulps:
+//    64·2^-24 relative.
+Out bound_of(const Host& host, const dvec3& up, double h, const dvec3& sun, const Pixel& p, const Out& value) {
+  Out b;
+  // adds the largest change among `outs` (one input moved each way) to the bound
+  const auto add_max = [&](const std::vector<Out>& outs) {
+    Out m;
+    for (const Out& o : outs)
+      for (int k = 0; k < 4; ++k) m.v[k] = glm::max(m.v[k], glm::abs(o.v[k] - value.v[k]));
+    for (int k = 0; k < 4; ++k) b.v[k] += m.v[k];
+  };
+  // filtering
+  glsl::FilterProbe count;
+  host.with(&count).eval(up, h, sun, p);
+  for (int fetch = 0; fetch < count.fetches; ++fetch)
+    for (int axis = 0; axis < 3; ++axis) {
+      std::vector<Out> moved;
+      for (double shift : {std::ldexp(1.0, -9), -std::ldexp(1.0, -9)}) {
+        glsl::FilterProbe probe{0, fetch, axis, shift};
+        moved.push_back(host.with(&probe).eval(up, h, sun, p));
+      }
+      add_max(moved);
+    }
+  // geometry
+  const double e = std::ldexp(1.0, -20);
+  std::vector<Out> outs;
+  for (const dvec3& u2 : turned(up, e)) outs.push_back(host.eval(u2, h, sun, p));
+  add_max(outs);
+  outs.clear();
+  for (double s : {1.0 + e, 1.0 - e}) outs.push_back(host.eval(up, h * s, sun, p));
+  add_max(outs);
+  outs.clear();
+  for (const dvec3& s2 : turned(sun, e)) outs.push_back(host.eval(up, h, s2, p));
+  add_max(outs);
+  outs.clear();
+  const double len = glm::length(p.dir);
+  for (const dvec3& d2 : turned(p.dir / len, e)) {
+    Pixel q = p;
+    q.dir = d2 * len;
+    outs.push_back(host.eval(up, h, sun, q));
+  }
+  for (double s : {1.0 + e, 1.0 - e}) {
+    Pixel q = p;
+    q.dir = p.dir * s;
+    outs.push_back(host.eval(up, h, sun, q));
+  }
+  add_max(outs);
+  if (p.kind == 1) {
+    outs.clear();
+    for (const dvec3& u2 : turned(p.p_up, e)) {
+      Pixel q = p;
+      q.p_up = u2;
+      outs.push_back(host.eval(up, h, sun, q));
+    }
+    for (double s : {1.0 + e, 1.0 - e}) {
+      Pixel q = p;
+      q.p_h = p.p_h * s;
+      outs.push_back(host.eval(up, h, sun, q));
+    }
+    add_max(outs);
+  }
+  // values
+  for (int k = 0; k < 4; ++k) b.v[k] += 64.0 * std::ldexp(1.0, -24) * glm::abs(value.v[k]);
+  return b;
+}
+
+#ifdef SPECBAKE_HAVE_GL
+GLuint texture_2d(int w, int h, const std::vector<double>& rgb, GLenum filter) {
+  std::vector<float> rgba(4 * static_cast<std::size_t>(w) * h, 0.0f);
+  for (std::size_t i = 0; i < rgba.size() / 4; ++i)
+    for (int c = 0; c < 3; ++c) rgba[4 * i + c] = static_cast<float>(rgb[3 * i + c]);
+  GLuint t;
+  glGenTextures(1, &t);
+  glBindTexture(GL_TEXTURE_2D, t);
+  glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA32F, w, h, 0, GL_RGBA, GL_FLOAT, rgba.data());
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, filter);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, filter);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  return t;
+}
+GLuint texture_3d(int w, int h, int d, const std::vector<double>& rgb) {
+  std::vector<float> rgba(4 * static_cast<std::size_t>(w) * h * d, 0.0f);
+  for (std::size_t i = 0; i < rgba.size() / 4; ++i)
+    for (int c = 0; c < 3; ++c) rgba[4 * i + c] = static_cast<float>(rgb[3 * i + c]);
+  GLuint t;
+  glGenTextures(1, &t);
+  glBindTexture(GL_TEXTURE_3D, t);
+  glTexImage3D(GL_TEXTURE_3D, 0, GL_RGBA32F, w, h, d, 0, GL_RGBA, GL_FLOAT, rgba.data());
+  glTexParameteri(GL_TEXTURE_3D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+  glTexParameteri(GL_TEXTURE_3D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  for (GLenum wrap : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
+    glTexParameteri(GL_TEXTURE_3D, wrap, GL_CLAMP_TO_EDGE);
+  return t;
+}
+#endif
+
+}  // namespace
+
+// The shader carries the shared source as written: the host's evaluation is the shader's code.
+TEST(AtmosphereGl, SamplingGlslCarriesTheSharedSourceVerbatim) {
+  const Luts luts = reference_earth();
+  const std::string glsl = sampling_glsl(luts.model, luts.rgb, true, true, "test");
+  for (const char* path : {"kernels/atmosphere/lookup.cl", "kernels/atmosphere/render.glsl"}) {
+    std::string text(specbake::resource(path)), body;
+    std::size_t at = 0;
+    while (at < text.size()) {  // its lines but the #include ones
+      const std::size_t end = text.find('\n', at);
+      const std::string line = text.substr(at, end - at + 1);
+      if (line.rfind("#include ", 0) != 0) body += line;
+      at = end == std::string::npos ? text.size() : end + 1;
+    }
+    EXPECT_NE(glsl.find(body), std::string::npos) << path << " is not in sampling.glsl verbatim";
+  }
+}
+
+TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
+#ifndef SPECBAKE_HAVE_GL
+  GTEST_SKIP() << "built without EGL/GLES headers (Debian: libegl-dev, libgles-dev)";
+#else
+  specbake::testing::GlContext gl;
+  if (!gl.why.empty()) GTEST_SKIP() << "no EGL device: " << gl.why;
+  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_EXT_color_buffer_float")) << "float render targets";
+  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_OES_texture_float_linear")) << "filtered float textures";
+
+  const Luts luts = reference_earth();
+  const Model& m = luts.model;
+  const Sizes& s = m.sizes;
+  GLint max_2d = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_2d);
+  ASSERT_GE(max_2d, s.r * s.scattering_width()) << "the tiled 2D layout's width";
+
+  constexpr int kN = 48;
+  const std::vector<View> views = preview_views(m, kN);
+  const Host host{glsl::atmosphere_of(m, luts.rgb),
+                  {luts.transmittance.data(), s.transmittance_w, s.transmittance_h},
+                  {luts.irradiance.data(), s.irradiance_w, s.irradiance_h},
+                  {luts.scattering.data(), s.scattering_width(), s.mu, s.r},
+                  {luts.single_mie.data(), s.scattering_width(), s.mu, s.r}};
+
+  // Textures: units 0 transmittance, 1 irradiance, 2/3 scattering and single Mie 3D, 4/5 the same
+  // tiled 2D, 6 the pixels' inputs (dir, kind), 7 the ground points (p_up, p_h).
+  const GLuint t_tex = texture_2d(s.transmittance_w, s.transmittance_h, luts.transmittance, GL_LINEAR);
+  const GLuint e_tex = texture_2d(s.irradiance_w, s.irradiance_h, luts.irradiance, GL_LINEAR);
+  const GLuint s_tex = texture_3d(s.scattering_width(), s.mu, s.r, luts.scattering);
+  const GLuint m_tex = texture_3d(s.scattering_width(), s.mu, s.r, luts.single_mie);
+  const GLuint s_tiled =
+      texture_2d(s.r * s.scattering_width(), s.mu, to_tiled2d(luts.scattering, s), GL_LINEAR);
+  const GLuint m_tiled =
+      texture_2d(s.r * s.scattering_width(), s.mu, to_tiled2d(luts.single_mie, s), GL_LINEAR);
+  const GLuint units[] = {t_tex, e_tex};
+  for (int u = 0; u < 2; ++u) {
+    glActiveTexture(GL_TEXTURE0 + u);
+    glBindTexture(GL_TEXTURE_2D, units[u]);
+  }
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_3D, s_tex);
+  glActiveTexture(GL_TEXTURE3);
+  glBindTexture(GL_TEXTURE_3D, m_tex);
+  glActiveTexture(GL_TEXTURE4);
+  glBindTexture(GL_TEXTURE_2D, s_tiled);
+  glActiveTexture(GL_TEXTURE5);
+  glBindTexture(GL_TEXTURE_2D, m_tiled);
+
+  const std::string glsl = sampling_glsl(m, luts.rgb, true, true, "test");
+  const auto program = [&](bool tiled) {
+    const std::string fs =
+        std::string("#version 320 es\nprecision highp float;\nprecision highp sampler2D;\nprecision highp sampler3D;\n") +
+        (tiled ? "#define SPECBAKE_SCATTERING_TILED2D\n" : "") + glsl +
+        "uniform sampler2D transmittance_texture, irradiance_texture, inputs, points;\n"
+        "uniform SpecbakeScatteringSampler scattering_texture, single_mie_texture;\n"
+        "uniform vec3 camera_up, sun;\nuniform float camera_h;\nuniform int part;\nout vec4 colour;\n"
+        "void main() {\n"
+        "  ivec2 p = ivec2(gl_FragCoord.xy);\n"
+        "  vec4 d = texelFetch(inputs, p, 0);\n"
+        "  vec3 v[4] = vec3[4](vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));\n"
+        "  if (d.w == 0.0) {\n"
+        "    v[0] = GetSkyRadiance(SPECBAKE_ATMOSPHERE, transmittance_texture, scattering_texture, single_mie_texture,\n"
+        "                          camera_up, camera_h, d.xyz, 0.0, sun, v[1]);\n"
+        "  } else if (d.w == 1.0) {\n"
+        "    v[0] = GetSkyRadianceToPoint(SPECBAKE_ATMOSPHERE, transmittance_texture, scattering_texture,\n"
+        "                                 single_mie_texture, camera_up, camera_h, d.xyz, 0.0, sun, v[1]);\n"
+        "    vec4 q = texelFetch(points, p, 0);\n"
+        "    v[2] = GetSunAndSkyIrradiance(SPECBAKE_ATMOSPHERE, transmittance_texture, irradiance_texture, q.xyz, q.w,\n"
+        "                                  q.xyz, sun, v[3]);\n"
+        "  }\n"
+        "  colour = vec4(v[part], 1.0);\n"
+        "}\n";
+    std::string log;
+    const GLuint prog = specbake::testing::gl_program(specbake::testing::kGlFullScreenVertex, fs, log);
+    EXPECT_NE(prog, 0u) << log;
+    glUseProgram(prog);
+    const std::pair<const char*, int> samplers[] = {{"transmittance_texture", 0}, {"irradiance_texture", 1},
+                                                    {"scattering_texture", tiled ? 4 : 2},
+                                                    {"single_mie_texture", tiled ? 5 : 3}, {"inputs", 6}, {"points", 7}};
+    for (const auto& [name, unit] : samplers) glUniform1i(glGetUniformLocation(prog, name), unit);
+    return prog;
+  };
+  const GLuint progs[2] = {program(false), program(true)};
+  ASSERT_NE(progs[0], 0u);
+  ASSERT_NE(progs[1], 0u);
+  const specbake::testing::GlTarget target(kN, kN);
+  ASSERT_TRUE(target.complete);
+
+  const char* part_names[4] = {"radiance", "transmittance", "sun irradiance", "sky irradiance"};
+  double worst_ratio[2] = {0, 0};
+  std::vector<Out> previous_host;  // the previous view's host values: a wrong reference must fail
+  double wrong_view_ratio = 0;
+  for (const View& view : views) {
+    std::vector<double> in(4 * view.pixels.size()), pts(4 * view.pixels.size());
+    for (std::size_t i = 0; i < view.pixels.size(); ++i) {
+      const Pixel& p = view.pixels[i];
+      for (int c = 0; c < 3; ++c) {
+        in[4 * i + c] = p.dir[c];
+        pts[4 * i + c] = p.p_up[c];
+      }
+      in[4 * i + 3] = p.kind;
+      pts[4 * i + 3] = p.p_h;
+    }
+    const auto rgba_texture = [&](const std::vector<double>& v, int unit) {
+      std::vector<float> f(v.begin(), v.end());
+      GLuint t;
+      glGenTextures(1, &t);
+      glActiveTexture(GL_TEXTURE0 + unit);
+      glBindTexture(GL_TEXTURE_2D, t);
+      glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA32F, kN, kN, 0, GL_RGBA, GL_FLOAT, f.data());
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+      return t;
+    };
+    const GLuint in_tex = rgba_texture(in, 6), pts_tex = rgba_texture(pts, 7);
+
+    // The host: value and bound per pixel.
+    std::vector<Out> value(view.pixels.size()), bound(view.pixels.size());
+    parallel_for(static_cast<long long>(view.pixels.size()), [&](long long i) {
+      value[i] = host.eval(view.up, view.h, view.sun, view.pixels[i]);
+      bound[i] = bound_of(host, view.up, view.h, view.sun, view.pixels[i], value[i]);
+    });
+
+    for (int tiled = 0; tiled < 2; ++tiled) {
+      glUseProgram(progs[tiled]);
+      glUniform3f(glGetUniformLocation(progs[tiled], "camera_up"), view.up.x, view.up.y, view.up.z);
+      glUniform3f(glGetUniformLocation(progs[tiled], "sun"), view.sun.x, view.sun.y, view.sun.z);
+      glUniform1f(glGetUniformLocation(progs[tiled], "camera_h"), view.h);
+      for (int part = 0; part < 4; ++part) {
+        glUniform1i(glGetUniformLocation(progs[tiled], "part"), part);
+        const std::vector<float> px = target.draw();
+        ASSERT_EQ(glGetError(), static_cast<GLenum>(GL_NO_ERROR));
+        int failures = 0;
+        for (std::size_t i = 0; i < view.pixels.size(); ++i)
+          for (int c = 0; c < 3; ++c) {
+            const double got = px[4 * i + c], want = value[i].v[part][c], b = bound[i].v[part][c];
+            ASSERT_TRUE(std::isfinite(got)) << view.name << " pixel " << i;
+            const double ratio = std::fabs(got - want) / std::max(b, 1e-30);
+            if (got != want) worst_ratio[tiled] = std::max(worst_ratio[tiled], ratio);
+            if (std::fabs(got - want) > b && failures++ < 5)
+              ADD_FAILURE() << view.name << (tiled ? " (tiled 2D)" : " (3D)") << ", " << part_names[part] << ", pixel ("
+                            << i % kN << ", " << i / kN << ") channel " << c << ": GL " << got << ", host " << want
+                            << ", bound " << b;
+            if (!tiled && part == 0 && !previous_host.empty() && want > 0)
+              wrong_view_ratio =
+                  std::max(wrong_view_ratio, std::fabs(got - previous_host[i].v[0][c]) / std::max(b, 1e-30));
+          }
+      }
+    }
+    previous_host = value;
+    glDeleteTextures(1, &in_tex);
+    glDeleteTextures(1, &pts_tex);
+  }
+  std::printf("worst |GL - host| / bound: 3D %.3g, tiled 2D %.3g; against the previous view's host values %.3g\n",
+              worst_ratio[0], worst_ratio[1], wrong_view_ratio);
+  // The comparison can fail: the host values of another view (another sun) are far outside it.
+  EXPECT_GT(wrong_view_ratio, 100.0);
+#endif
+}
