@@ -2,7 +2,9 @@
  * Atmospheric Scattering: a New Implementation" (2017), itself an update of Bruneton &
  * Neyret, "Precomputed Atmospheric Scattering", EGSR 2008. Shared by the OpenCL kernels
  * (kernels/atmosphere/kernels.cl, real = float) and the C++ double reference
- * (src/kinds/atmosphere/reference.hpp, real = double).
+ * (src/kinds/atmosphere/reference.hpp, real = double). The geometry and texture coordinates
+ * are in lookup.cl, the rendering functions (GetSkyRadiance & co.) in render.glsl; both are also
+ * the shipped sampling.glsl.
  *
  * Model. A spherical planet of radius rb (bottom) under an atmosphere ending at rt (top).
  * A point is described by its altitude h = r − rb above the ground (r: distance to the planet
@@ -29,7 +31,8 @@
  * Units: lengths in km, coefficients in km⁻¹, irradiance in the unit of solar_irradiance
  * (W m⁻² nm⁻¹), radiance in that unit per sr, the density J per km.
  *
- * Texture parameterisations (the reference's, texel centres at (i + 0.5)/n):
+ * Texture parameterisations (the reference's, texel centres at (i + 0.5)/n; written once in
+ * lookup.cl, which the shipped sampling.glsl carries too):
  *   coord(x, n) = 0.5/n + x (1 − 1/n),  unit(u, n) = (u − 0.5/n)/(1 − 1/n)
  *   transmittance [H][W]: u = coord((d − d_min)/(d_max − d_min), W), v = coord(ρ/H_, H)
  *   irradiance [H][W]:    u = coord(0.5 μ_s + 0.5, W), v = coord(h/(rt − rb), H)

@@ -55,8 +55,48 @@ TEST(AtmosphereCli, BakesABundleWithEveryFile) {
                          "vec3 GetTransmittanceToTopAtmosphereBoundary(", "vec3 GetIrradiance(",
                          "const SpecbakeAtmosphere SPECBAKE_ATMOSPHERE = SpecbakeAtmosphere("})
     EXPECT_NE(glsl.find(fn), std::string::npos) << fn;
-  EXPECT_TRUE(fs::exists(b / "preview" / "planet_from_space.png"));
-  EXPECT_TRUE(fs::exists(b / "preview" / "sky_fisheye_sun_+20deg.png"));
+  for (const char* png : {"planet_from_space.png", "sky_fisheye_sun_+60deg.png", "sky_fisheye_sun_+20deg.png",
+                          "sky_fisheye_sun_+05deg.png", "sky_fisheye_sun_+00deg.png", "sky_fisheye_sun_-04deg.png"}) {
+    const Image img = read_png(b / "preview" / png);
+    EXPECT_EQ(img.width, 512) << png;  // the default `previews: {size: 512}`
+    EXPECT_EQ(img.height, 512) << png;
+  }
+  const Image sheet = read_png(b / "preview" / "contact_sheet.png");
+  EXPECT_EQ(sheet.width, 3 * 256);
+  EXPECT_EQ(sheet.height, 2 * 256);
+}
+
+// The previews' exposure is fixed per view (docs/atmosphere.md, "Previews"): a sun half as bright
+// gives darker pictures (an exposure adapted to each image would hide it), and `previews: none`
+// writes none.
+TEST(AtmosphereCli, PreviewsHaveAFixedExposure) {
+  TempDir dir;
+  const std::string base = "specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 2\n    scene: none\n"
+                           "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+                           "    previews: {size: 64}\n";
+  write_file(dir / "a.yaml", base);
+  write_file(dir / "b.yaml", base + "    solar_irradiance_scale: 0.5\n");
+  write_file(dir / "c.yaml", "specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 2\n    scene: none\n"
+                             "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+                             "    previews: none\n");
+  for (const char* c : {"a", "b", "c"}) {
+    const auto r = run_cli({"run", (dir / (std::string(c) + ".yaml")).string(), "--out", (dir / c).string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  const auto mean = [](const Image& img) {
+    double s = 0;
+    for (std::size_t i = 0; i < img.rgba.size(); i += 4) s += img.rgba[i] + img.rgba[i + 1] + img.rgba[i + 2];
+    return s / static_cast<double>(img.rgba.size());
+  };
+  for (const char* png : {"sky_fisheye_sun_+20deg.png", "planet_from_space.png"}) {
+    const Image full = read_png(dir / "a" / "sky" / "latest" / "preview" / png);
+    const Image half = read_png(dir / "b" / "sky" / "latest" / "preview" / png);
+    EXPECT_EQ(full.width, 64);
+    // at the same exposure half the light reads darker: sRGB codes of 1 − e^{−x} against
+    // 1 − e^{−x/2}, lower wherever the pixel is lit and not black
+    EXPECT_LT(mean(half), 0.9 * mean(full)) << png;
+  }
+  EXPECT_FALSE(fs::exists(dir / "c" / "sky" / "latest" / "preview"));
 }
 
 TEST(AtmosphereCli, BadConfigsAreInputErrors) {
@@ -64,6 +104,8 @@ TEST(AtmosphereCli, BadConfigsAreInputErrors) {
   const std::string base = "specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n";
   const std::pair<const char*, const char*> cases[] = {
       {"    colour: blue\n", "unknown key 'colour'"},
+      {"    previews: {size: 31}\n", "even number of pixels in [32, 2048]"},
+      {"    previews: big\n", "previews: none, or {size: N}"},
       {"    sizes: {scattering: {mu: 7}}\n", "even mu"},
       {"    sizes: {scattering: {nu: 65}}\n", "at most 64"},
       {"    orders: 0\n", "orders"},

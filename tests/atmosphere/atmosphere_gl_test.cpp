@@ -73,10 +73,10 @@ struct View {
 };
 
 // The preview views (render.cpp's preview_files): equidistant fisheyes from 1 m above the ground
-// with the sun at 20°, 5°, 0° and −4°, and the planet from 3.2 radii with its ground points.
+// with the sun at 60°, 20°, 5°, 0° and −4°, and the planet from 3.2 radii with its ground points.
 std::vector<View> preview_views(const Model& m, int n) {
   std::vector<View> views;
-  for (double elevation : {20.0, 5.0, 0.0, -4.0}) {
+  for (double elevation : {60.0, 20.0, 5.0, 0.0, -4.0}) {
     const double e = elevation * M_PI / 180.0;
     View v{"fisheye sun " + std::to_string(static_cast<int>(elevation)) + " deg", {0, 0, 1},
            f32(dvec3{std::cos(e), 0, std::sin(e)}), f32(0.001), n, {}};
@@ -97,7 +97,7 @@ std::vector<View> preview_views(const Model& m, int n) {
   const dvec3 camera{0.0, -3.2 * rb, 0.6 * rb};
   const dvec3 fwd = glm::normalize(-camera), right = glm::normalize(dvec3{fwd.y, -fwd.x, 0.0});
   const dvec3 up_img = glm::cross(right, fwd);
-  const double dist = glm::length(camera), half = std::tan(std::asin(m.top_radius_km / dist)) * 1.08;
+  const double dist = glm::length(camera), half = std::tan(std::asin(m.top_radius_km / dist)) * 1.15;
   View v{"planet from space", f32(camera / dist), f32(glm::normalize(dvec3{1.0, -0.6, 0.45})), f32(dist - rb), n, {}};
   for (int y = 0; y < n; ++y)
     for (int x = 0; x < n; ++x) {

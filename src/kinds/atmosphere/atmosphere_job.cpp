@@ -588,8 +588,10 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                      {}, "", "", "GLSL lookup functions for the shipped layouts"});
   const auto t_previews = std::chrono::steady_clock::now();
   ctx.progress("previews", 0.95);
-  for (auto& f : preview_files(L, b.spectrum.sky_radiance_to_luminance, b.spectrum.sun_radiance_to_luminance))
-    r.files.push_back(std::move(f));
+  if (spec.preview_size > 0)
+    for (auto& f : preview_files(L, b.spectrum.sky_radiance_to_luminance, b.spectrum.sun_radiance_to_luminance,
+                                 spec.preview_size))
+      r.files.push_back(std::move(f));
   const auto t_done = std::chrono::steady_clock::now();
   json timings = b.timings;
   const auto host_only = [](double s) { return json{{"device_s", 0.0}, {"host_s", s}, {"wall_s", s}}; };

@@ -203,7 +203,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   job.allow_keys({"name", "kind", "preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
                   "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
                   "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
-                  "ktx2", "scene"});
+                  "ktx2", "scene", "previews"});
   AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
   if (job.has("preset")) job.child("preset").choice<int>({{"earth", 0}});
   set_earth_profiles(s);
@@ -318,6 +318,22 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
     job.child("spectrum").fail(std::string("spectrum: auto") + no_tolerance +
                                " (the spectral part of the error is a colour difference)");
 
+  if (job.has("previews")) {  // `previews: none` or `previews: {size: N}`
+    const At p = job.child("previews");
+    if (p.node.IsScalar() && p.node.Scalar() == "none") {
+      s.preview_size = 0;
+    } else {
+      p.expect_map("previews: none, or {size: N} (pixels per view, an even number in [32, 2048])");
+      p.allow_keys({"size"});
+      if (p.has("size")) {
+        const At n = p.child("size");
+        const long long v = n.integer();
+        if (v < 32 || v > 2048 || v % 2) n.fail("expected an even number of pixels in [32, 2048], got " + n.shown());
+        s.preview_size = static_cast<int>(v);
+      }
+    }
+  }
+
   // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
   const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
   inputs.emplace_back(cmf.resource, sha256_hex(resource(cmf.resource)));
@@ -353,6 +369,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   }
   if (s.auto_sizes) norm["sizes"] = "auto";
   norm["scene"] = scene_json(s.scene);
+  norm["previews"] = s.preview_size ? json{{"size", s.preview_size}} : json("none");
   norm.update(media_json(s));
   return s;
 }

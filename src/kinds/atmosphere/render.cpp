@@ -157,70 +157,86 @@ Vec3 normalize(Vec3 v) {
   return {v[0] / l, v[1] / l, v[2] / l};
 }
 
-// Tone map (1 − exp(−x)) after an exposure that puts the image's mean luminance at 0.6.
-std::string tone_mapped_png(int w, int h, std::vector<double> lum_rgb) {
-  double mean_y = 0.0;
-  long n = 0;
-  for (std::size_t i = 0; i < lum_rgb.size(); i += 3) {
-    const double y = 0.2126 * lum_rgb[i] + 0.7152 * lum_rgb[i + 1] + 0.0722 * lum_rgb[i + 2];
-    if (y > 0.0 && std::isfinite(y)) {
-      mean_y += y;
-      ++n;
-    }
-  }
-  mean_y = n ? mean_y / n : 1.0;
-  const double exposure = mean_y > 0.0 ? 0.6 / mean_y : 1.0;
-  std::vector<float> rgb(lum_rgb.size());
-  for (std::size_t i = 0; i < rgb.size(); ++i)
-    rgb[i] = static_cast<float>(1.0 - std::exp(-std::max(0.0, lum_rgb[i]) * exposure));
-  return png_from_linear(w, h, rgb, 1.0f);
+// A rendered view: linear sRGB luminance (cd/m²), n × n, RGB innermost, row 0 at the top.
+struct Image {
+  int n = 0;
+  std::vector<double> rgb;
+};
+
+// Exposure as a camera's (ISO 100 exposure value): the luminance 1.2·2^EV100 cd/m² maps to 1,
+// then 1 − exp(−x) and the sRGB curve.
+std::vector<float> exposed(const Image& img, double ev100) {
+  const double k = 1.0 / (1.2 * std::exp2(ev100));
+  std::vector<float> out(img.rgb.size());
+  for (std::size_t i = 0; i < out.size(); ++i)
+    out[i] = static_cast<float>(1.0 - std::exp(-std::max(0.0, img.rgb[i]) * k));
+  return out;
 }
 
-// An n × n image, RGB innermost: shade(x, y) at every pixel centre, x right and y up, both in
-// (−1, 1); rows on the hardware threads.
+// An n × n image: shade(x, y) at every pixel centre, x right and y up, both in (−1, 1); pixels on
+// the hardware threads.
 template <class Shade>
-std::vector<double> render_image(int n, Shade shade) {
-  std::vector<double> img(3 * n * n, 0.0);
+Image render_image(int n, Shade shade) {
+  Image img{n, std::vector<double>(3 * static_cast<std::size_t>(n) * n, 0.0)};
   parallel_for(1LL * n * n, [&](long long p) {
     const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
-    for (int c = 0; c < 3; ++c) img[3 * p + c] = v[c];
+    for (int c = 0; c < 3; ++c) img.rgb[3 * p + c] = v[c];
   });
   return img;
 }
 
+// The views, their fixed exposures (EV100, docs/atmosphere.md "Previews") and descriptions.
+struct PreviewView {
+  std::string file;
+  double ev100;
+  std::string what;
+  Image image;
+};
+
 }  // namespace
 
 std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
-                                      const std::array<double, 3>& k_sun) {
+                                      const std::array<double, 3>& k_sun, int n) {
   const Renderer render(luts);
   const Model& m = luts.model;
-  std::vector<OutputFile> files;
-  const int n = 160;
-  // Fisheye (equidistant, zenith at the centre) from 1 m above the ground, sun at azimuth 0.
-  for (double elevation_deg : {60.0, 20.0, 5.0, 0.0, -4.0}) {
+  const double alpha = m.sun_angular_radius_rad;
+  // The sun's disc: radiance E_sun/(π α²) through the atmosphere, drawn at least one pixel wide.
+  Vec3 sun_radiance{};
+  for (int c = 0; c < 3; ++c)
+    sun_radiance[c] = (luts.rgb.solar_irradiance.size() == 3 ? luts.rgb.solar_irradiance[c] : 0.0) /
+                      (M_PI * alpha * alpha) * k_sun[c];
+  std::vector<PreviewView> views;
+  // Fisheye (equidistant, zenith at the centre) from 1 m above the ground, sun at azimuth 0
+  // (the right of the picture); exposures for a clear sky at each sun elevation.
+  const std::pair<double, double> fisheyes[] = {{60.0, 12.0}, {20.0, 11.5}, {5.0, 10.5}, {0.0, 9.0}, {-4.0, 4.5}};
+  for (const auto& [elevation_deg, ev] : fisheyes) {
     const double e = elevation_deg * M_PI / 180.0;
     const Vec3 sun{std::cos(e), 0.0, std::sin(e)};
     const Vec3 camera{0.0, 0.0, m.bottom_radius_km + 0.001};
-    const auto img = render_image(n, [&](double dx, double dy) {
+    const double disc = std::cos(std::max(alpha, M_PI / n));  // a pixel spans π/n of zenith angle
+    Image img = render_image(n, [&](double dx, double dy) {
       Vec3 lum{};
       const double rho = std::sqrt(dx * dx + dy * dy);
       if (rho > 1.0) return lum;
       const double theta = rho * M_PI / 2.0, phi = std::atan2(dy, dx);
       const Vec3 view{std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
-      const Vec3 l = render.sky_radiance(camera, view, sun, nullptr);
-      for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c];
+      Vec3 t{};
+      const Vec3 l = render.sky_radiance(camera, view, sun, &t);
+      const bool on_sun = view[0] * sun[0] + view[1] * sun[1] + view[2] * sun[2] > disc;
+      for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c] + (on_sun ? t[c] * sun_radiance[c] : 0.0);
       return lum;
     });
     char name[64];
     std::snprintf(name, sizeof name, "preview/sky_fisheye_sun_%+03.0fdeg.png", elevation_deg);
-    files.push_back({name, tone_mapped_png(n, n, img), "", {n, n, 3}, "8-bit sRGB", "",
-                     "sky seen from the ground (equidistant fisheye, zenith at the centre, sun at the right, "
-                     "elevation " + std::to_string(static_cast<int>(elevation_deg)) + " deg), from the baked LUTs"});
+    views.push_back({name, ev,
+                     "sky and sun seen from 1 m above the ground (equidistant fisheye, zenith at the centre, sun at "
+                     "the right, elevation " + std::to_string(static_cast<int>(elevation_deg)) + " deg), EV100 " +
+                         format_g(ev) + ", from the baked LUTs through sampling.glsl's functions",
+                     std::move(img)});
   }
-  // The planet from space: Lambertian ground of the bake's albedo lit by sun and sky, seen
-  // through the atmosphere; the limb from sky_radiance.
+  // The planet from space: Lambertian ground of the bake's albedo lit by sun and sky, seen through
+  // the atmosphere; the limb from GetSkyRadiance. The whole planet and its atmosphere in frame.
   {
-    const int w = 192;
     const double rb = m.bottom_radius_km;
     const Vec3 camera{0.0, -3.2 * rb, 0.6 * rb};
     const Vec3 sun = normalize({1.0, -0.6, 0.45});
@@ -229,9 +245,9 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     const Vec3 up{right[1] * fwd[2] - right[2] * fwd[1], right[2] * fwd[0] - right[0] * fwd[2],
                   right[0] * fwd[1] - right[1] * fwd[0]};
     const double dist = std::sqrt(camera[0] * camera[0] + camera[1] * camera[1] + camera[2] * camera[2]);
-    const double half = std::tan(std::asin(m.top_radius_km / dist)) * 1.08;
+    const double half = std::tan(std::asin(m.top_radius_km / dist)) * 1.15;
     const double albedo = luts.rgb.ground_albedo.empty() ? 0.1 : luts.rgb.ground_albedo[0];
-    const auto img = render_image(w, [&](double x, double y) {
+    Image img = render_image(n, [&](double x, double y) {
       const double sx = x * half, sy = y * half;
       const Vec3 view = normalize({fwd[0] + sx * right[0] + sy * up[0], fwd[1] + sx * right[1] + sy * up[1],
                                    fwd[2] + sx * right[2] + sy * up[2]});
@@ -253,10 +269,35 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       }
       return lum;
     });
-    files.push_back({"preview/planet_from_space.png", tone_mapped_png(w, w, img), "", {w, w, 3}, "8-bit sRGB", "",
-                     "the planet seen from 3.2 radii away: ground (albedo " + std::to_string(albedo) +
-                         ") lit by sun and sky through the atmosphere, and the limb, from the baked LUTs"});
+    views.push_back({"preview/planet_from_space.png", 12.0,
+                     "the planet seen from 3.2 radii away: ground (albedo " + format_g(albedo) +
+                         ") lit by sun and sky through the atmosphere, and the limb, EV100 12, from the baked LUTs "
+                         "through sampling.glsl's functions",
+                     std::move(img)});
   }
+
+  std::vector<OutputFile> files;
+  // The contact sheet: every view at half size (2 × 2 box filter of the exposed values), three
+  // to a row in the order above.
+  const int tile = n / 2, cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
+  std::vector<float> sheet(3 * static_cast<std::size_t>(cols * tile) * rows * tile, 0.0f);
+  std::string order;
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    const std::vector<float> px = exposed(views[v].image, views[v].ev100);
+    files.push_back({views[v].file, png_from_linear(n, n, px, 1.0f), "", {n, n, 3}, "8-bit sRGB", "", views[v].what});
+    const int x0 = static_cast<int>(v % cols) * tile, y0 = static_cast<int>(v / cols) * tile;
+    for (int y = 0; y < tile; ++y)
+      for (int x = 0; x < tile; ++x)
+        for (int c = 0; c < 3; ++c) {
+          const auto at = [&](int i, int j) { return px[(static_cast<std::size_t>(j) * n + i) * 3 + c]; };
+          sheet[(static_cast<std::size_t>(y0 + y) * cols * tile + x0 + x) * 3 + c] =
+              0.25f * (at(2 * x, 2 * y) + at(2 * x + 1, 2 * y) + at(2 * x, 2 * y + 1) + at(2 * x + 1, 2 * y + 1));
+        }
+    order += (v ? ", " : "") + views[v].file.substr(8);
+  }
+  files.push_back({"preview/contact_sheet.png", png_from_linear(cols * tile, rows * tile, sheet, 1.0f), "",
+                   {rows * tile, cols * tile, 3}, "8-bit sRGB", "",
+                   "every preview at half size, left to right and top to bottom: " + order});
   return files;
 }
 

@@ -52,9 +52,11 @@ Vec3 sample_tiled2d(const Model& m, const std::vector<double>& tiled, double r, 
 std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, bool layout_tiled2d,
                           const std::string& units_note);
 
-// Fisheye skies from the ground at several sun elevations and the planet seen from space.
-// k_sky, k_sun: radiance → luminance factors (lm/W per channel).
+// Fisheye skies (with the sun's disc) from the ground at several sun elevations and the planet
+// seen from space, n × n pixels each at a fixed exposure per view, and a contact sheet of all;
+// rendered through the shipped shader's functions (shader_host.hpp). k_sky, k_sun: radiance →
+// luminance factors (lm/W per channel).
 std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
-                                      const std::array<double, 3>& k_sun);
+                                      const std::array<double, 3>& k_sun, int n);
 
 }  // namespace specbake::atmosphere

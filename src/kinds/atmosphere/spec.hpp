@@ -46,6 +46,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool ktx2_zstd = false;  // Zstandard supercompression
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
   AtmosphereScene scene;
+  int preview_size = 512;  // pixels per preview view; 0: `previews: none`
   // `sizes: auto` / `spectrum: auto`: the cheapest sizes / channel count whose bake meets the
   // scene's tolerance against the path-traced truth (auto_settings.hpp).
   bool auto_sizes = false, auto_spectrum = false;
