@@ -21,6 +21,7 @@
 #include "kinds/diffraction/terms.hpp"
 
 #include "support/gl_context.hpp"
+#include "support/testing.hpp"
 
 using namespace specbake;
 using namespace specbake::diffraction;
@@ -127,6 +128,7 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   const double wi[3] = {std::sin(a), 0.0, std::cos(a)};
   double worst = 0, worst_ratio = 0;
   int lit = 0;
+  std::vector<float> gl_rgb(3 * kPanel * kPanel), host_rgb(3 * kPanel * kPanel), over_bound(kPanel * kPanel, 0.0f);
   for (int row = 0; row < kPanel; ++row)
     for (int x = 0; x < kPanel; ++x) {
       const double px = -1.0 + (x + 0.5) * 2.0 / kPanel, py = -1.0 + (row + 0.5) * 2.0 / kPanel, r2 = px * px + py * py;
@@ -175,11 +177,22 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
         const double err = std::fabs(gv - hv);
         worst = std::max(worst, err);
         worst_ratio = std::max(worst_ratio, err / bound);
+        const std::size_t at = static_cast<std::size_t>(row) * kPanel + x;
+        gl_rgb[3 * at + c] = static_cast<float>(gv);
+        host_rgb[3 * at + c] = static_cast<float>(hv);
+        over_bound[at] = std::max(over_bound[at], static_cast<float>(err / bound));
         lit += hv > 1e-3 * peak;
         EXPECT_LE(err, bound) << what << " pixel (" << x << ", " << row << ") channel " << c << ": GL " << gv << ", host " << hv;
       }
     }
   EXPECT_GT(lit, 50) << what << ": the view must show the pattern";
+  specbake::testing::write_gl_figure(
+      std::string("diffraction-") + (std::string(what) == "diffraction_srgb" ? "full" : "fast"), kPanel, kPanel, gl_rgb,
+      host_rgb, over_bound,
+      {{"title", std::string(what) + ", light at 30 deg"},
+       {"gl", "llvmpipe, GLES 3.2"},
+       {"host", "brdf_lobes in double"},
+       {"bound", "|GL - host| / bound, worst channel"}});
   RecordProperty(std::string(what) + "_worst_over_peak", std::to_string(worst / peak));
   RecordProperty(std::string(what) + "_worst_over_bound", std::to_string(worst_ratio));
   };

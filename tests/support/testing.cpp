@@ -178,4 +178,23 @@ std::string line_col(const std::string& text, const std::string& needle, int occ
 
 bool running_as_root() { return ::geteuid() == 0; }
 
+void write_gl_figure(const std::string& name, int w, int h, const std::vector<float>& gl_rgb,
+                     const std::vector<float>& host_rgb, const std::vector<float>& over_bound,
+                     const nlohmann::json& meta) {
+  const char* dir = std::getenv("SPECBAKE_GL_FIGURES");
+  if (!dir || !*dir) return;
+  const std::size_t n = static_cast<std::size_t>(w) * h;
+  ASSERT_EQ(gl_rgb.size(), 3 * n);
+  ASSERT_EQ(host_rgb.size(), 3 * n);
+  ASSERT_EQ(over_bound.size(), n);
+  fs::create_directories(dir);
+  nlohmann::json j = meta;
+  j["width"] = w;
+  j["height"] = h;
+  std::ofstream(fs::path(dir) / (name + ".json")) << j.dump(2) << "\n";
+  std::ofstream out(fs::path(dir) / (name + ".f32"), std::ios::binary);
+  for (const auto* v : {&gl_rgb, &host_rgb, &over_bound})
+    out.write(reinterpret_cast<const char*>(v->data()), static_cast<std::streamsize>(v->size() * sizeof(float)));
+}
+
 }  // namespace specbake::testing

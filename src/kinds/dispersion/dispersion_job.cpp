@@ -10,8 +10,12 @@
 #include <sstream>
 
 #include "cl/buffers.hpp"
+#include "core/glsl.hpp"
+#include "core/text.hpp"
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
+#include "io/png.hpp"
+#include "kinds/dispersion/combine.hpp"
 #include "kinds/dispersion/reference.hpp"
 
 namespace specbake::dispersion {
@@ -307,13 +311,8 @@ json material_json(const DispersionSpec& spec, const MaterialModel& m, Lines lin
   return j;
 }
 
-std::string fmt9(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.9g", static_cast<double>(static_cast<float>(v)));
-  std::string s = buf;
-  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
-  return s;
-}
+// A GLSL literal of v's float32 value (the value the bundle's .bin files hold).
+std::string f32_literal(double v) { return glsl_float(static_cast<float>(v)); }
 
 std::vector<double> as_float(const std::vector<double>& v) {
   std::vector<double> out(v.size());
@@ -334,32 +333,31 @@ std::string glsl_include(const Tables& t, const json& params) {
     << "const int SPECBAKE_SAMPLES = " << n << ";\n";
   auto scalars = [&](const char* name, const std::vector<double>& v) {
     o << "const float " << name << "[" << n << "] = float[" << n << "](";
-    for (std::size_t i = 0; i < n; ++i) o << (i ? ", " : "") << fmt9(v[i]);
+    for (std::size_t i = 0; i < n; ++i) o << (i ? ", " : "") << f32_literal(v[i]);
     o << ");\n";
   };
   scalars("SPECBAKE_WAVELENGTH_NM", t.samples.lambda_nm);
   o << "const vec3 SPECBAKE_WEIGHT[" << n << "] = vec3[" << n << "](";
   for (std::size_t i = 0; i < n; ++i)
-    o << (i ? ",\n    " : "\n    ") << "vec3(" << fmt9(t.w_norm[3 * i]) << ", " << fmt9(t.w_norm[3 * i + 1]) << ", "
-      << fmt9(t.w_norm[3 * i + 2]) << ")";
+    o << (i ? ",\n    " : "\n    ") << "vec3(" << f32_literal(t.w_norm[3 * i]) << ", " << f32_literal(t.w_norm[3 * i + 1]) << ", "
+      << f32_literal(t.w_norm[3 * i + 2]) << ")";
   o << ");\n";
   o << "// mat3 takes columns: column c = (K[0][c], K[1][c], K[2][c]), so K * rgb is the row-major product.\n";
   o << "const mat3 SPECBAKE_K[" << n << "] = mat3[" << n << "](";
   for (std::size_t i = 0; i < n; ++i) {
     o << (i ? ",\n    " : "\n    ") << "mat3(";
     for (int c = 0; c < 3; ++c)
-      for (int r = 0; r < 3; ++r) o << fmt9(t.K[9 * i + 3 * r + c]) << (c == 2 && r == 2 ? "" : ", ");
+      for (int r = 0; r < 3; ++r) o << f32_literal(t.K[9 * i + 3 * r + c]) << (c == 2 && r == 2 ? "" : ", ");
     o << ")";
   }
   o << ");\n";
   scalars("SPECBAKE_IOR_OFFSET", t.offset);
   scalars("SPECBAKE_IOR", t.ior);
-  o << "// The final linear sRGB colour from the per-sample colours rgb_n, layer n of `renders` (an RGBA\n"
-    << "// 2D array texture, one layer per sample, unclamped float): sum_n SPECBAKE_K[n] * rgb_n.\n"
-    << "vec3 specbake_dispersion_combine(sampler2DArray renders, ivec2 texel) {\n"
-    << "  vec3 sum = vec3(0.0);\n"
-    << "  for (int n = 0; n < SPECBAKE_SAMPLES; ++n) sum += SPECBAKE_K[n] * texelFetch(renders, ivec3(texel, n), 0).rgb;\n"
-    << "  return sum;\n}\n";
+  o << "// specbake_dispersion_combine(renders, texel): the final linear sRGB colour from the per-sample\n"
+    << "// colours rgb_n, layer n of `renders` (an RGBA 2D array texture, one layer per sample, unclamped\n"
+    << "// float, NEAREST): sum_n SPECBAKE_K[n] * rgb_n.\n"
+    << "#define TEXEL_RGB(renders, texel, n) texelFetch(renders, ivec3(texel, n), 0).rgb\n"
+    << glsl_shared_source("kernels/dispersion/combine.glsl") << "#undef TEXEL_RGB\n";
   o << "#endif\n";
   return o.str();
 }
@@ -523,7 +521,48 @@ void check_step(const DispersionSpec& spec, const Planned& p, const Tables& t, J
   }
 }
 
-void files_step(const Planned& p, const Tables& t, JobContext& ctx, BakeResult& r) {
+// preview/prism.png: the thin-prism picture `samples: auto` judges (a white beam one unit wide,
+// sample n landing at spread·Offset(λ_n), 32 pixels per beam width): the top band through the
+// shipped shader's sum (combine.glsl, on the host), the bottom band from the dense 0.1 nm spectrum.
+OutputFile prism_preview(const DispersionSpec& spec, const Tables& t) {
+  const PrismGeometry g = prism_geometry(spec);
+  const int w = g.pixels, band = 48, gap = 4, h = 2 * band + gap;
+  // Per-sample renders, [n][1][w][3]: the beam's coverage of each pixel, white.
+  const auto x = landing_x(spec, t);
+  const int n = static_cast<int>(x.size());
+  std::vector<double> renders(3 * static_cast<std::size_t>(n) * w);
+  for (int s = 0; s < n; ++s)
+    for (int px = 0; px < w; ++px) {
+      const double x0 = g.x0 + g.dx * px, cover = ref::overlap(x[s] - 0.5, x[s] + 0.5, x0, x0 + g.dx) / g.dx;
+      for (int c = 0; c < 3; ++c) renders[3 * (static_cast<std::size_t>(s) * w + px) + c] = cover;
+    }
+  Combiner combiner(t.K);
+  const Tables dense = compute_reference(spec, dense_samples(spec), MaterialModel{1.5, 50.0, std::nullopt});
+  const auto xd = landing_x(spec, dense);
+  const auto white = white_xyz();
+  const Mat3 m = xyz_to_srgb();
+  std::vector<float> rgb(3 * static_cast<std::size_t>(w) * h, 0.0f);
+  for (int px = 0; px < w; ++px) {
+    const auto sampled = combiner.combine({renders.data(), w, 1}, px, 0);
+    double xyz[3];
+    ref::prism_pixel(xd.data(), dense.w_norm.data(), static_cast<int>(xd.size()), g.x0 + g.dx * px, g.dx, white.data(),
+                     xyz);
+    for (int c = 0; c < 3; ++c) {
+      const float truth = static_cast<float>(m[3 * c] * xyz[0] + m[3 * c + 1] * xyz[1] + m[3 * c + 2] * xyz[2]);
+      for (int y = 0; y < band; ++y) {
+        rgb[3 * (static_cast<std::size_t>(y) * w + px) + c] = static_cast<float>(sampled[c]);
+        rgb[3 * (static_cast<std::size_t>(band + gap + y) * w + px) + c] = truth;
+      }
+    }
+  }
+  return {"preview/prism.png", png_from_linear(w, h, rgb, 1.0f), "", {h, w, 3}, "8-bit sRGB", "",
+          "a white beam through a thin prism of this glass (spread " + format_g(spec.spread) +
+              " beam widths between the range's ends): top, the " + std::to_string(n) +
+              " samples summed with K_n as dispersion.glsl sums them; bottom, the dense 0.1 nm spectrum; "
+              "linear sRGB clamped to [0, 1]"};
+}
+
+void files_step(const DispersionSpec& spec, const Planned& p, const Tables& t, JobContext& ctx, BakeResult& r) {
   ctx.enter(Stage::files);
   const int n = p.n;
   const auto Kf = as_float(t.K);
@@ -558,7 +597,9 @@ void files_step(const Planned& p, const Tables& t, JobContext& ctx, BakeResult& 
     tables["matrices"].push_back(m);
   }
   r.files.push_back({"dispersion.json", tables.dump(1) + "\n", "", {}, "", "", "the same tables as JSON"});
-  r.files.push_back({"dispersion.glsl", glsl_include(t, r.parameters), "", {}, "", "", "GLSL const arrays"});
+  r.files.push_back({"dispersion.glsl", glsl_include(t, r.parameters), "", {}, "", "",
+                     "GLSL: the tables as const arrays and specbake_dispersion_combine"});
+  r.files.push_back(prism_preview(spec, t));
 }
 
 }  // namespace
@@ -568,7 +609,7 @@ BakeResult bake(const DispersionSpec& spec, JobContext& ctx) {
   const Planned p = plan_step(spec, ctx, r);
   const Tables t = compute_step(spec, p, ctx, r);
   check_step(spec, p, t, ctx, r);
-  files_step(p, t, ctx, r);
+  files_step(spec, p, t, ctx, r);
   ctx.progress("done", 1.0);
   return r;
 }
