@@ -116,9 +116,14 @@ std::string write_ktx2(const Ktx2Image& image, const Ktx2Options& options) {
   if (image.width == 0 || image.height == 0)
     throw JobError("KTX2: texture size " + std::to_string(image.width) + "x" + std::to_string(image.height) +
                    ": width and height must be at least 1");
-  if (image.channels != 3 && image.channels != 4)
-    throw JobError("KTX2: " + std::to_string(image.channels) + " channels; expected 3 (RGB, alpha 1) or 4 (RGBA)");
-  const std::uint64_t texels = std::uint64_t{image.width} * image.height * std::max<std::uint32_t>(image.depth, 1);
+  if (image.channels < 2 || image.channels > 4)
+    throw JobError("KTX2: " + std::to_string(image.channels) +
+                   " channels; expected 2 (RG, blue 0, alpha 1), 3 (RGB, alpha 1) or 4 (RGBA)");
+  if (image.layers > 0 && image.depth > 0)
+    throw JobError("KTX2: an array of 3D textures (layers " + std::to_string(image.layers) + ", depth " +
+                   std::to_string(image.depth) + ") is not written");
+  const std::uint64_t texels = std::uint64_t{image.width} * image.height * std::max<std::uint32_t>(image.depth, 1) *
+                               std::max<std::uint32_t>(image.layers, 1);
   if (image.texels.size() != texels * static_cast<std::uint64_t>(image.channels))
     throw JobError("KTX2: " + std::to_string(image.texels.size()) + " values for " + std::to_string(texels) +
                    " texels of " + std::to_string(image.channels) + " channels");
@@ -140,7 +145,7 @@ std::string write_ktx2(const Ktx2Image& image, const Ktx2Options& options) {
   for (std::uint64_t t = 0; t < texels; ++t) {
     for (int c = 0; c < 4; ++c) {
       const std::uint64_t i = t * image.channels + c;
-      const float x = c < image.channels ? image.texels[i] : 1.0f;
+      const float x = c < image.channels ? image.texels[i] : c == 3 ? 1.0f : 0.0f;
       if (!std::isfinite(x))
         throw JobError("KTX2: value " + std::to_string(x) + " at index " + std::to_string(i) + " is not finite");
       if (half) {
@@ -192,7 +197,7 @@ std::string write_ktx2(const Ktx2Image& image, const Ktx2Options& options) {
   put32(f, image.width);
   put32(f, image.height);
   put32(f, image.depth);
-  put32(f, 0);  // layerCount: not an array
+  put32(f, image.layers);  // layerCount: 0 unless an array
   put32(f, 1);  // faceCount
   put32(f, 1);  // levelCount
   put32(f, options.zstd ? kKtx2SupercompressionZstd : kKtx2SupercompressionNone);
@@ -252,8 +257,8 @@ Ktx2File read_ktx2(std::string_view b, const std::string& name) {
     bad_file(name, "vkFormat " + std::to_string(k.vk_format) + " with typeSize " + std::to_string(k.type_size) +
                        "; expected 97 (R16G16B16A16_SFLOAT, 2) or 109 (R32G32B32A32_SFLOAT, 4)");
   if (k.width == 0 || k.height == 0) bad_file(name, "pixelWidth and pixelHeight must be at least 1");
-  if (k.layer_count != 0 || k.face_count != 1 || k.level_count != 1)
-    bad_file(name, "expected layerCount 0, faceCount 1, levelCount 1");
+  if (k.face_count != 1 || k.level_count != 1) bad_file(name, "expected faceCount 1, levelCount 1");
+  if (k.layer_count != 0 && k.depth != 0) bad_file(name, "an array of 3D textures is not expected");
   if (k.supercompression != kKtx2SupercompressionNone && k.supercompression != kKtx2SupercompressionZstd)
     bad_file(name, "supercompressionScheme " + std::to_string(k.supercompression) + "; expected 0 or 2 (Zstandard)");
   if (k.sgd_length != 0) bad_file(name, "supercompression global data is not expected");
@@ -282,9 +287,11 @@ Ktx2File read_ktx2(std::string_view b, const std::string& name) {
   }
 
   // At most 2^36 bytes (64 GiB) of texels; keeps the products below from overflowing.
-  const long double claimed = static_cast<long double>(k.width) * k.height * std::max<std::uint32_t>(k.depth, 1) * tb;
+  const long double claimed = static_cast<long double>(k.width) * k.height * std::max<std::uint32_t>(k.depth, 1) *
+                              std::max<std::uint32_t>(k.layer_count, 1) * tb;
   if (claimed > 68719476736.0L) bad_file(name, "texture size past 64 GiB");
-  const std::uint64_t texels = std::uint64_t{k.width} * k.height * std::max<std::uint32_t>(k.depth, 1);
+  const std::uint64_t texels = std::uint64_t{k.width} * k.height * std::max<std::uint32_t>(k.depth, 1) *
+                               std::max<std::uint32_t>(k.layer_count, 1);
   const std::uint64_t want = texels * tb;
   if (k.level_uncompressed_length != want)
     bad_file(name, "uncompressedByteLength " + std::to_string(k.level_uncompressed_length) + ", expected " +

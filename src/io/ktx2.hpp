@@ -4,9 +4,11 @@
 // Zstandard), Bevy, Vulkan and WebGPU loaders.
 //
 // What the writer emits, and nothing else:
-//   - one 2D (depth 0) or 3D texture, one mip level (levelCount 1), layerCount 0, faceCount 1;
+//   - one 2D (depth 0) or 3D texture, or a 2D array texture (layerCount >= 1, depth 0), one mip
+//     level (levelCount 1), faceCount 1;
 //   - vkFormat VK_FORMAT_R16G16B16A16_SFLOAT (97, typeSize 2) or VK_FORMAT_R32G32B32A32_SFLOAT
-//     (109, typeSize 4); three-channel data is padded to RGBA with alpha 1;
+//     (109, typeSize 4); three-channel data is padded to RGBA with alpha 1, two-channel data
+//     with blue 0 and alpha 1;
 //   - a Khronos basic Data Format Descriptor (model RGBSDA, primaries BT.709, transfer linear,
 //     1x1x1 texel block, four samples R, G, B, A with the FLOAT and SIGNED qualifiers,
 //     sampleLower -1.0f and sampleUpper 1.0f as the Khronos Data Format Specification gives for
@@ -14,8 +16,8 @@
 //     supercompressed data, which the KTX 2.0 specification calls "unsized";
 //   - key/value data sorted by key bytes: KTXwriter, KTXorientation and the caller's own keys;
 //   - optionally Zstandard supercompression (supercompressionScheme 2) of the level.
-// Texels are stored x fastest, then y, then z, channels interleaved, row 0 first: the same
-// order as the bundle's .bin files.
+// Texels are stored x fastest, then y, then z (or the layer), channels interleaved, row 0 first:
+// the same order as the bundle's .bin files.
 //
 // Every function works on bytes in memory: a job hands the returned string to an OutputFile.
 #include <cstddef>
@@ -41,13 +43,14 @@ inline constexpr std::uint32_t kVkFormatR32G32B32A32Sfloat = 109;
 inline constexpr std::uint32_t kKtx2SupercompressionNone = 0;
 inline constexpr std::uint32_t kKtx2SupercompressionZstd = 2;
 
-// The texture to write. `texels` holds width*height*max(depth,1)*channels floats.
+// The texture to write. `texels` holds width*height*max(depth,1)*max(layers,1)*channels floats.
 struct Ktx2Image {
   std::uint32_t width = 0;
   std::uint32_t height = 0;
   std::uint32_t depth = 0;  // 0: a 2D texture; >= 1: a 3D texture of that many slices
-  int channels = 4;         // 3 (alpha written as 1) or 4
+  int channels = 4;         // 2 (blue 0, alpha 1), 3 (alpha 1) or 4
   std::span<const float> texels;
+  std::uint32_t layers = 0;  // 0: not an array; >= 1: a 2D array texture of that many layers (depth 0)
 };
 
 struct Ktx2Options {
@@ -62,7 +65,7 @@ struct Ktx2Options {
 };
 
 // Encodes a KTX2 file. Throws JobError (naming what is wrong) when: a size is 0 or the texel
-// count does not match; channels is not 3 or 4; a value is NaN or infinite (first index
+// count does not match; channels is not 2, 3 or 4; an array has depth; a value is NaN or infinite (first index
 // named); in rgba16f, a finite value overflows half precision (|x| > 65504 rounds to inf);
 // the writer string is empty; a key is empty, reserved, contains NUL or repeats KTXwriter.
 std::string write_ktx2(const Ktx2Image& image, const Ktx2Options& options);
@@ -84,8 +87,8 @@ struct Ktx2File {
   const std::string* value(const std::string& key) const;  // nullptr if absent
 };
 
-// Parses a KTX2 file that holds one of the two formats above (one level, one face, no layers,
-// no supercompression or Zstandard), checks the index against the file size, decompresses and
+// Parses a KTX2 file that holds one of the two formats above (one level, one face, a 2D, 3D or
+// 2D array texture, no supercompression or Zstandard), checks the index against the file size, decompresses and
 // widens the level to floats. Throws InputError naming `name` on anything malformed or
 // unsupported.
 Ktx2File read_ktx2(std::string_view bytes, const std::string& name = "<ktx2>");

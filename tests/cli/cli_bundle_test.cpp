@@ -34,7 +34,7 @@ std::string config(int samples, const std::string& output = "out", const std::st
 }
 
 const std::set<std::string> kDataFiles = {"wavelengths.bin", "weights.bin",     "matrices.bin",   "ior_offsets.bin",
-                                          "ior.bin",         "dispersion.json", "dispersion.glsl"};
+                                          "ior.bin",         "dispersion.json", "dispersion.glsl", "preview/prism.png"};
 
 // The files of a bundle without the manifest (whose timestamps and timings differ per run).
 std::map<std::string, std::string> data_files(const fs::path& bundle) {
@@ -143,7 +143,8 @@ TEST_F(Cli, ManifestDescribesTheBundle) {
   EXPECT_EQ(listed, kDataFiles);
   // Nothing in the folder that the manifest does not list.
   std::set<std::string> present;
-  for (const auto& e : fs::directory_iterator(b)) present.insert(e.path().filename().string());
+  for (const auto& e : fs::recursive_directory_iterator(b))
+    if (e.is_regular_file()) present.insert(fs::relative(e.path(), b).generic_string());
   present.erase("manifest.json");
   EXPECT_EQ(present, kDataFiles);
 }
@@ -152,7 +153,7 @@ TEST_F(Cli, InspectChecksEveryFile) {
   const fs::path b = build();
   auto r = run({"inspect", (tmp_ / "out" / "prism" / "latest").string()});
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
-  EXPECT_NE(r.out.find("all 7 files match their sha256"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("all 8 files match their sha256"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("prism_de2000"), std::string::npos) << r.out;  // accuracy figures shown
   // One flipped byte (same size) is found.
   {

@@ -46,8 +46,9 @@ std::string config(int samples) {
   } catch (const std::exception& e) {
     return ::testing::AssertionFailure() << bundle << ": no readable manifest (" << e.what() << ")";
   }
-  std::set<std::string> present;
-  for (const auto& e : fs::directory_iterator(bundle)) present.insert(e.path().filename().string());
+  std::set<std::string> present;  // every file, previews in their folder too
+  for (const auto& e : fs::recursive_directory_iterator(bundle))
+    if (e.is_regular_file()) present.insert(fs::relative(e.path(), bundle).generic_string());
   present.erase("manifest.json");
   std::set<std::string> listed;
   for (const auto& f : m.at("files")) {

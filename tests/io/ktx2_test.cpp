@@ -307,6 +307,28 @@ TEST(Ktx2, HalfMeasurementCatchesFloatDataPassedOffAsHalf) {
   EXPECT_THROW(measure_half(v, std::span<const float>(r.rgba).first(10)), JobError);
 }
 
+// A 2D array texture (the diffraction table's terms): layerCount is the layer count, the level
+// holds the layers one after the other, RG data gets blue 0 and alpha 1.
+TEST(Ktx2, ArrayOfTwoChannelLayers) {
+  const std::uint32_t w = 5, h = 3, layers = 4;
+  const std::vector<float> data = test_values(std::size_t{w} * h * layers * 2, 3);
+  Ktx2Options o;
+  o.format = Ktx2Format::rgba32f;
+  o.writer = "w";
+  const std::string f = write_ktx2(Ktx2Image{w, h, 0, 2, data, layers}, o);
+  EXPECT_EQ(u32(f, 28), 0u);      // pixelDepth
+  EXPECT_EQ(u32(f, 32), layers);  // layerCount
+  const Ktx2File r = read_ktx2(f);
+  EXPECT_EQ(r.layer_count, layers);
+  ASSERT_EQ(r.rgba.size(), std::size_t{w} * h * layers * 4);
+  for (std::size_t t = 0; t < r.rgba.size() / 4; ++t) {
+    EXPECT_EQ(r.rgba[4 * t], data[2 * t]);
+    EXPECT_EQ(r.rgba[4 * t + 1], data[2 * t + 1]);
+    EXPECT_EQ(r.rgba[4 * t + 2], 0.0f);
+    EXPECT_EQ(r.rgba[4 * t + 3], 1.0f);
+  }
+}
+
 TEST(Ktx2, RefusesBadInput) {
   const std::vector<float> d(12, 0.25f);
   Ktx2Options o;
@@ -315,7 +337,9 @@ TEST(Ktx2, RefusesBadInput) {
   EXPECT_THROW(write_ktx2(Ktx2Image{3, 0, 0, 4, d}, o), JobError);
   EXPECT_THROW(write_ktx2(Ktx2Image{4, 1, 0, 4, d}, o), JobError);   // 12 values for 4 texels x 4
   EXPECT_NO_THROW(write_ktx2(Ktx2Image{3, 1, 0, 4, d}, o));
-  EXPECT_THROW(write_ktx2(Ktx2Image{6, 1, 0, 2, d}, o), JobError);   // 2 channels
+  EXPECT_THROW(write_ktx2(Ktx2Image{12, 1, 0, 1, d}, o), JobError);  // 1 channel
+  EXPECT_NO_THROW(write_ktx2(Ktx2Image{6, 1, 0, 2, d}, o));           // RG
+  EXPECT_THROW(write_ktx2(Ktx2Image{1, 1, 3, 2, std::span<const float>(d).first(6), 1}, o), JobError);  // 3D array
   EXPECT_THROW(write_ktx2(Ktx2Image{2, 1, 0, 5, std::span<const float>(d).first(10)}, o), JobError);
   std::vector<float> bad = d;
   bad[7] = std::numeric_limits<float>::quiet_NaN();

@@ -40,17 +40,20 @@ int main(int argc, char** argv) {
     std::uint32_t w, h, d;
     int channels;
     bool zstd;
+    std::uint32_t layers = 0;
   };
   const Case cases[] = {
       {"f16_2d", Ktx2Format::rgba16f, 33, 7, 0, 4, false}, {"f16_2d_rgb_zstd", Ktx2Format::rgba16f, 33, 7, 0, 3, true},
       {"f32_2d_rgb", Ktx2Format::rgba32f, 19, 11, 0, 3, false}, {"f32_2d_zstd", Ktx2Format::rgba32f, 19, 11, 0, 4, true},
       {"f16_3d", Ktx2Format::rgba16f, 8, 4, 5, 4, false},   {"f16_3d_zstd", Ktx2Format::rgba16f, 8, 4, 5, 3, true},
       {"f32_3d_rgb", Ktx2Format::rgba32f, 6, 5, 3, 3, false}, {"f32_3d_zstd", Ktx2Format::rgba32f, 6, 5, 3, 4, true},
+      {"f32_array_rg", Ktx2Format::rgba32f, 9, 6, 0, 2, false, 5}, {"f16_array_rg_zstd", Ktx2Format::rgba16f, 9, 6, 0, 2, true, 4},
   };
   nlohmann::json claims = nlohmann::json::array();
   try {
     for (const Case& c : cases) {
-      const std::size_t n = std::size_t{c.w} * c.h * std::max<std::uint32_t>(c.d, 1) * c.channels;
+      const std::size_t n =
+          std::size_t{c.w} * c.h * std::max<std::uint32_t>(c.d, 1) * std::max<std::uint32_t>(c.layers, 1) * c.channels;
       std::vector<float> v(n);
       // Smooth values with a wide range (about 1e-6 to 3e4) and both signs.
       for (std::size_t i = 0; i < n; ++i)
@@ -60,7 +63,7 @@ int main(int argc, char** argv) {
       o.zstd = c.zstd;
       o.writer = "specbake samples";
       o.metadata = {{"specbake.case", c.name}, {"specbake.layout", "[z][y][x][rgba], row 0 first"}};
-      const std::string bytes = specbake::write_ktx2(specbake::Ktx2Image{c.w, c.h, c.d, c.channels, v}, o);
+      const std::string bytes = specbake::write_ktx2(specbake::Ktx2Image{c.w, c.h, c.d, c.channels, v, c.layers}, o);
       write(out / (std::string(c.name) + ".ktx2"), bytes);
       std::string src(n * 4, '\0');
       std::memcpy(src.data(), v.data(), src.size());

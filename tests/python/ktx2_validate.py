@@ -79,6 +79,7 @@ def patch_pyktx2():
 
 def expected_level(src, channels, vk_format):
     rgba = np.ones((src.size // channels, 4), dtype=np.float32)
+    rgba[:, 2] = 0.0  # two channels: blue 0 (then overwritten where given), alpha 1
     rgba[:, :channels] = src.reshape(-1, channels)
     if vk_format == 97:
         return rgba.astype("<f2").tobytes()  # numpy: IEEE 754 round to nearest even
@@ -100,15 +101,17 @@ def validate(folder, claim):
                   "dfdByteOffset", "dfdByteLength", "kvdByteOffset", "kvdByteLength"):
         check(getattr(k, field) == claim[field], f"{where} {field} {getattr(k, field)} vs claimed {claim[field]}")
     check(k.supercompressionScheme.value == claim["supercompressionScheme"], f"{where} supercompressionScheme")
-    check(k.layerCount == 0 and k.faceCount == 1 and k.levelCount == 1, f"{where} layers 0, faces 1, levels 1")
+    check(k.faceCount == 1 and k.levelCount == 1, f"{where} faces 1, levels 1")
+    check(k.layerCount == 0 or k.pixelDepth == 0, f"{where} an array is of 2D textures")
     check(k.sgdByteOffset == 0 and k.sgdByteLength == 0, f"{where} no supercompression global data")
     check(k.supercompressionGlobalData == b"", f"{where} empty global data")
     check(len(k.levelIndices) == 1, f"{where} one level index entry")
     lvl = k.levelIndices[0]
     check(list(lvl) == claim["level"], f"{where} level index {tuple(lvl)} vs claimed {claim['level']}")
     texel = {97: 8, 109: 16}[k.vkFormat.value]
-    texels = k.pixelWidth * k.pixelHeight * max(1, k.pixelDepth)
-    check(lvl.uncompressedByteLength == texels * texel, f"{where} uncompressedByteLength = w*h*max(d,1)*{texel}")
+    texels = k.pixelWidth * k.pixelHeight * max(1, k.pixelDepth) * max(1, k.layerCount)
+    check(lvl.uncompressedByteLength == texels * texel,
+          f"{where} uncompressedByteLength = w*h*max(d,1)*max(layers,1)*{texel}")
     check(lvl.byteOffset + lvl.byteLength == len(data), f"{where} the level ends the file")
     check(lvl.byteOffset >= k.kvdByteOffset + k.kvdByteLength, f"{where} level after the key/value data")
     zstd = k.supercompressionScheme == P.SupercompressionScheme.Zstandard
@@ -152,7 +155,8 @@ def validate(folder, claim):
     if zstd:
         level = zstandard.ZstdDecompressor().decompress(raw, max_output_size=lvl.uncompressedByteLength)
     else:
-        check(len(k.levelImages) == max(1, k.pixelDepth), f"{where} pyktx2 gives one image per slice")
+        check(len(k.levelImages) == max(1, k.pixelDepth) * max(1, k.layerCount),
+              f"{where} pyktx2 gives one image per slice or layer")
         level = b"".join(img.data for img in k.levelImages)
         check(all(img.width == k.pixelWidth and img.height == k.pixelHeight for img in k.levelImages),
               f"{where} image sizes")
@@ -178,7 +182,7 @@ def main():
         folder = pathlib.Path(tmp)
         subprocess.run([sys.argv[1], str(folder)], check=True)
         claims = json.loads((folder / "claims.json").read_text())
-        check(len(claims) == 8, f"{len(claims)} sample files, expected 8")
+        check(len(claims) == 10, f"{len(claims)} sample files, expected 10")
         for claim in claims:
             print(f"{claim['name']}: pyktx2 as published: "
                   f"{unpatched_probe((folder / (claim['name'] + '.ktx2')).read_bytes())}")

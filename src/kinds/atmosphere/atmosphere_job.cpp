@@ -10,7 +10,6 @@
 #include "core/text.hpp"
 #include "core/version.hpp"
 #include "io/exr.hpp"
-#include "io/ktx2.hpp"
 #include "kinds/atmosphere/auto_settings.hpp"
 #include "kinds/atmosphere/scene_check.hpp"
 
@@ -470,42 +469,16 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
        "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"},
       {spec.out_single_mie, "single_mie_scattering", &L.single_mie, wd, std::uint32_t(s.mu), std::uint32_t(s.r),
        "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"}};
+  const std::string sizes = "r=" + std::to_string(s.r) + " mu=" + std::to_string(s.mu) +
+                            " mu_s=" + std::to_string(s.mu_s) + " nu=" + std::to_string(s.nu);
   for (const Texture& t : textures) {
     if (!t.wanted) continue;
     const std::vector<float> f(t.data->begin(), t.data->end());
-    Ktx2Image img;
-    img.width = t.width;
-    img.height = t.height;
-    img.depth = t.depth;
-    img.channels = 3;
-    img.texels = f;
-    Ktx2Options o;
-    o.format = spec.ktx2_half ? Ktx2Format::rgba16f : Ktx2Format::rgba32f;
-    o.zstd = spec.ktx2_zstd;
-    o.writer = std::string("specbake ") + kVersion;
-    o.metadata = {{"specbake.layout", t.layout},
-                  {"specbake.parameterisation", param},
-                  {"specbake.units", units},
-                  {"specbake.sizes", "r=" + std::to_string(s.r) + " mu=" + std::to_string(s.mu) + " mu_s=" +
-                                         std::to_string(s.mu_s) + " nu=" + std::to_string(s.nu)}};
-    const std::string file = std::string(t.name) + ".ktx2";
-    r.files.push_back({file, write_ktx2(img, o), spec.ktx2_half ? "half" : "float32",
-                       t.depth ? std::vector<std::int64_t>{t.depth, t.height, t.width, 4}
-                               : std::vector<std::int64_t>{t.height, t.width, 4},
-                       std::string("KTX2 ") + (spec.ktx2_half ? "R16G16B16A16_SFLOAT" : "R32G32B32A32_SFLOAT") +
-                           (spec.ktx2_zstd ? ", Zstandard" : "") + "; " + t.layout + "; alpha = 1",
-                       units, std::string(t.name) + " (KTX2 copy)"});
-    if (spec.ktx2_half) {
-      const HalfPrecision h = measure_half(f);
-      // Round to nearest even: |h - x| <= 2^-11 |x| for normal halfs (values >= 2^-14).
-      Accuracy a = Accuracy::judged("half:" + file, "max relative error of the half values (|x| >= 2^-14)",
-                                    h.max_rel_error, std::ldexp(1.0, -11), "the float32 texture (.bin)", h.to_json());
-      if (h.overflow_to_inf > 0) a.passed = false;
-      r.accuracy.push_back(a);
-      if (!a.passed)
-        r.warnings.push_back(file + ": half precision cannot hold these values (" + std::to_string(h.overflow_to_inf) +
-                             " overflow); use ktx2: {format: rgba32f}");
-    }
+    add_ktx2_file(spec.ktx2,
+                  {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, units,
+                   std::string(t.name) + " (KTX2 copy)",
+                   {{"specbake.parameterisation", param}, {"specbake.sizes", sizes}}},
+                  r);
   }
 }
 
@@ -582,7 +555,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                          {s.mu, s.r * wd, 3}, "EXR float32 ZIP", units, std::string(t.what) + " (tiled 2D, EXR)"});
     }
   }
-  if (spec.format_ktx2) ktx2_files(spec, L, units, param, r);
+  if (spec.ktx2.enabled) ktx2_files(spec, L, units, param, r);
   r.files.push_back({"sampling.glsl",
                      sampling_glsl(L.model, L.rgb, spec.layout_3d, spec.layout_tiled2d, "Values: " + units + "."), "",
                      {}, "", "", "GLSL lookup functions for the shipped layouts"});

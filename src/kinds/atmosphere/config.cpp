@@ -286,26 +286,6 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   }
   if (job.has("precision"))
     s.double_precision = job.child("precision").choice<int>({{"float", 0}, {"double", 1}}) == 1;
-  if (job.has("formats")) {
-    bool bin = false, exr = false;
-    parse_list(job.child("formats"), "formats (bin, exr, ktx2)", [&](const At& it) {
-      switch (it.choice<int>({{"bin", 0}, {"exr", 1}, {"ktx2", 2}})) {
-        case 0: bin = true; break;
-        case 1: exr = true; break;
-        default: s.format_ktx2 = true; break;
-      }
-    });
-    if (!bin || !exr)
-      job.child("formats").fail("expected bin and exr in formats (every bundle has them; ktx2 is added on request)");
-  }
-  if (job.has("ktx2")) {
-    const At k = job.child("ktx2");
-    if (!s.format_ktx2) k.fail("expected ktx2 settings only with ktx2 in formats");
-    k.expect_map("KTX2 settings {format: rgba16f | rgba32f, zstd: true | false}");
-    k.allow_keys({"format", "zstd"});
-    if (k.has("format")) s.ktx2_half = k.child("format").choice<int>({{"rgba16f", 1}, {"rgba32f", 0}}) == 1;
-    if (k.has("zstd")) s.ktx2_zstd = k.child("zstd").choice<int>({{"true", 1}, {"false", 0}}) == 1;
-  }
   // after max_sun_zenith_deg: the scene's lowest sun defaults to what the textures hold
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);
@@ -363,10 +343,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
           {"layout", layouts},
           {"outputs", outputs},
           {"precision", s.double_precision ? "double" : "float"}};
-  if (s.format_ktx2) {
-    norm["formats"] = {"bin", "exr", "ktx2"};
-    norm["ktx2"] = {{"format", s.ktx2_half ? "rgba16f" : "rgba32f"}, {"zstd", s.ktx2_zstd}};
-  }
+  s.ktx2 = parse_ktx2_settings(job, norm);
   if (s.auto_sizes) norm["sizes"] = "auto";
   norm["scene"] = scene_json(s.scene);
   norm["previews"] = s.preview_size ? json{{"size", s.preview_size}} : json("none");

@@ -4,6 +4,7 @@
 #include <optional>
 
 #include "core/config.hpp"
+#include "job/ktx2_output.hpp"
 #include "media/media.hpp"
 
 namespace specbake {
@@ -41,9 +42,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool layout_3d = true, layout_tiled2d = false;
   bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
   // File formats of the textures: .bin and .exr always; KTX2 (2D/3D RGBA textures engines load) on request.
-  bool format_ktx2 = false;
-  bool ktx2_half = true;   // rgba16f (measured half error in the manifest) or rgba32f
-  bool ktx2_zstd = false;  // Zstandard supercompression
+  Ktx2Settings ktx2;
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
   AtmosphereScene scene;
   int preview_size = 512;  // pixels per preview view; 0: `previews: none`

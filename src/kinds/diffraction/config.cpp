@@ -176,7 +176,7 @@ void parse_table_keys(const At& job, DiffractionSpec& d) {
 
 DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   job.allow_keys({"name", "kind", "heightfield", "procedural", "range_nm", "w_max", "expansion", "terms", "tolerance",
-                  "center", "crop", "storage", "coherence", "table", "max_bundle_mb"});
+                  "center", "crop", "storage", "coherence", "table", "max_bundle_mb", "formats", "ktx2"});
   DiffractionSpec d;
   nlohmann::json field_norm;
   if (job.has("heightfield") == job.has("procedural"))
@@ -254,6 +254,7 @@ DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) 
                             : nlohmann::json{{"source_angular_diameter_deg", d.coherence.source_angular_diameter_deg}};
   }
   if (job.has("max_bundle_mb")) norm["max_bundle_mb"] = d.max_bundle_mb;
+  d.ktx2 = parse_ktx2_settings(job, norm);
   return d;
 }
 

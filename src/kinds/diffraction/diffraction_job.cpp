@@ -453,6 +453,16 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
   });
   const auto spectrum = add_spectrum_file(spec.range_nm, r);
   add_term_exrs(terms.values, p.bands, ku, kv, spec.storage, "terms", "terms.bin", "rows kv, columns ku (fftshifted)", tm, r);
+  if (spec.ktx2.enabled)
+    tm.time("terms.ktx2", [&] {
+      add_ktx2_file(spec.ktx2,
+                    {"terms.ktx2", static_cast<std::uint32_t>(ku), static_cast<std::uint32_t>(kv), 0,
+                     static_cast<std::uint32_t>(p.total_terms), 2, terms.values,
+                     "2D array: layer n = F_n (the manifest's bands name each band's first layer), x = ku, y = kv "
+                     "(fftshifted); R = Re, G = Im",
+                     "1", "F_n on the FFT grid (KTX2 copy of terms.bin)", {}},
+                    r);
+    });
 
   ctx.progress("preview", 0.95);
   if (spec.w_max >= 1.0) {

@@ -4,6 +4,7 @@
 #include <optional>
 #include <string>
 
+#include "job/ktx2_output.hpp"
 #include "core/config.hpp"
 #include "core/spectral_data.hpp"
 #include "io/heightfield.hpp"
@@ -54,6 +55,7 @@ struct DiffractionSpec : KindSpec {
   Centre center = Centre::mid_range;
   bool crop = true;  // crop: auto
   Storage storage = Storage::float32;
+  Ktx2Settings ktx2;  // `formats: [bin, exr, ktx2]`: the terms also as a KTX2 2D array texture
   std::optional<TableSpec> table;  // nullopt: `table: none`, the full-bin terms.bin
   CoherenceSpec coherence;         // applies with a table
   double max_bundle_mb = 256.0;    // planned bundle size limit (MB = 1e6 bytes)

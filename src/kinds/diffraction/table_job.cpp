@@ -39,7 +39,8 @@ constexpr std::array<double, 3> kSphereLight = {2.0, 1.5, 3.0};
 
 // Bytes of the data files: the float32 terms (.bin) and their EXR copies (float32 or half).
 double term_bytes(const DiffractionSpec& spec, double terms, double texels) {
-  return terms * texels * (8.0 + (spec.storage == Storage::half ? 4.0 : 8.0));
+  const double ktx2 = spec.ktx2.enabled ? (spec.ktx2.half ? 8.0 : 16.0) : 0.0;  // RGBA per texel
+  return terms * texels * (8.0 + (spec.storage == Storage::half ? 4.0 : 8.0) + ktx2);
 }
 
 // The table sizes a bake may use: the fixed size, or the ladder's sizes within the budget.
@@ -154,7 +155,8 @@ double check_bundle_budget(const DiffractionSpec& spec, const Field& f, const Pl
                            std::to_string(p.bins.ku_count()) + " x " + std::to_string(p.bins.kv_count()) +
                            " bins (field " + std::to_string(f.width) + " x " + std::to_string(f.height) + ", dx_um " +
                            format_g(f.dx_um) + ", range_nm lower end " + format_g(spec.range_nm.lo) +
-                           ") x 16 bytes; use a table (table: {size: 256}) or raise max_bundle_mb");
+                           ") x " + format_g(term_bytes(spec, 1.0, 1.0)) +
+                           " bytes; use a table (table: {size: 256}) or raise max_bundle_mb");
     return bytes / kMB;
   }
   const int n = spec.table->size ? *spec.table->size : kTableLadder[0];
@@ -311,6 +313,16 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   const auto spectrum = add_spectrum_file(spec.range_nm, r);
   add_term_exrs(values, p.bands, n, n, spec.storage, "table", "table_terms.bin",
                 "rows iv (f_v), columns iu (f_u), table texels", tm, r);
+  if (spec.ktx2.enabled)
+    tm.time("table_terms.ktx2", [&] {
+      add_ktx2_file(spec.ktx2,
+                    {"table_terms.ktx2", static_cast<std::uint32_t>(n), static_cast<std::uint32_t>(n), 0,
+                     static_cast<std::uint32_t>(p.total_terms), 2, values,
+                     "2D array: layer n = F_n (the manifest's bands name each band's first layer), x = iu (f_u), "
+                     "y = iv (f_v), table texels; R = Re, G = Im",
+                     "1", "F_n at the table texels (KTX2 copy of table_terms.bin; sampler2DArray of the shader)", {}},
+                    r);
+    });
   const Wavelengths fast = bins(spectrum, kFastWavelengths);
   r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win.sum, kPreviewIor, fast), "", {},
                      "", "", "GLSL: the table's lookup and the BRDF the previews draw (Stam, relative form)"});

@@ -1,0 +1,74 @@
+#include "job/ktx2_output.hpp"
+
+#include <cmath>
+
+#include "core/version.hpp"
+#include "io/ktx2.hpp"
+
+namespace specbake {
+
+Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm) {
+  Ktx2Settings s;
+  if (job.has("formats")) {
+    const yaml::At f = job.child("formats");
+    if (!f.node.IsSequence() || f.node.size() == 0) f.fail("expected a non-empty list of formats (bin, exr, ktx2)");
+    bool bin = false, exr = false;
+    for (std::size_t i = 0; i < f.node.size(); ++i) switch (f.item(i).choice<int>({{"bin", 0}, {"exr", 1}, {"ktx2", 2}})) {
+        case 0: bin = true; break;
+        case 1: exr = true; break;
+        default: s.enabled = true; break;
+      }
+    if (!bin || !exr) f.fail("expected bin and exr in formats (every bundle has them; ktx2 is added on request)");
+  }
+  if (job.has("ktx2")) {
+    const yaml::At k = job.child("ktx2");
+    if (!s.enabled) k.fail("expected ktx2 settings only with ktx2 in formats");
+    k.expect_map("KTX2 settings {format: rgba16f | rgba32f, zstd: true | false}");
+    k.allow_keys({"format", "zstd"});
+    if (k.has("format")) s.half = k.child("format").choice<int>({{"rgba16f", 1}, {"rgba32f", 0}}) == 1;
+    if (k.has("zstd")) s.zstd = k.child("zstd").choice<int>({{"true", 1}, {"false", 0}}) == 1;
+  }
+  if (s.enabled) {
+    norm["formats"] = {"bin", "exr", "ktx2"};
+    norm["ktx2"] = {{"format", s.half ? "rgba16f" : "rgba32f"}, {"zstd", s.zstd}};
+  }
+  return s;
+}
+
+void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, BakeResult& r) {
+  Ktx2Image img;
+  img.width = t.width;
+  img.height = t.height;
+  img.depth = t.depth;
+  img.layers = t.layers;
+  img.channels = t.channels;
+  img.texels = t.texels;
+  Ktx2Options o;
+  o.format = settings.half ? Ktx2Format::rgba16f : Ktx2Format::rgba32f;
+  o.zstd = settings.zstd;
+  o.writer = std::string("specbake ") + kVersion;
+  o.metadata = t.metadata;
+  o.metadata["specbake.layout"] = t.layout;
+  o.metadata["specbake.units"] = t.units;
+  std::vector<std::int64_t> shape;
+  if (t.depth) shape.push_back(t.depth);
+  if (t.layers) shape.push_back(t.layers);
+  shape.insert(shape.end(), {t.height, t.width, 4});
+  const char* fill = t.channels == 2 ? "; blue = 0, alpha = 1" : t.channels == 3 ? "; alpha = 1" : "";
+  r.files.push_back({t.file, write_ktx2(img, o), settings.half ? "half" : "float32", shape,
+                     std::string("KTX2 ") + (settings.half ? "R16G16B16A16_SFLOAT" : "R32G32B32A32_SFLOAT") +
+                         (settings.zstd ? ", Zstandard" : "") + "; " + t.layout + fill,
+                     t.units, t.description});
+  if (!settings.half) return;
+  const HalfPrecision h = measure_half(t.texels);
+  // Round to nearest even: |h - x| <= 2^-11 |x| for normal halfs (values >= 2^-14).
+  Accuracy a = Accuracy::judged("half:" + t.file, "max relative error of the half values (|x| >= 2^-14)",
+                                h.max_rel_error, std::ldexp(1.0, -11), "the float32 data (.bin)", h.to_json());
+  if (h.overflow_to_inf > 0) a.passed = false;
+  r.accuracy.push_back(a);
+  if (!a.passed)
+    r.warnings.push_back(t.file + ": half precision cannot hold these values (" + std::to_string(h.overflow_to_inf) +
+                         " overflow); use ktx2: {format: rgba32f}");
+}
+
+}  // namespace specbake

@@ -1,0 +1,46 @@
+#pragma once
+// KTX2 copies of a bundle's textures, for every kind (docs/ktx2.md): the config keys
+// `formats: [bin, exr, ktx2]` and `ktx2: {format: rgba16f | rgba32f, zstd: true | false}`, and
+// the file with its half-precision record.
+#include <cstdint>
+#include <map>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/config.hpp"
+#include "job/kind.hpp"
+
+namespace specbake {
+
+struct Ktx2Settings {
+  bool enabled = false;  // ktx2 in formats
+  bool half = true;      // rgba16f (measured half error in the manifest) or rgba32f
+  bool zstd = false;     // Zstandard supercompression
+};
+
+// Reads `formats` (bin and exr are always there; ktx2 adds the KTX2 copies) and `ktx2` from a
+// job entry, failing at the key with what was expected. `norm` gets the normalised keys when
+// KTX2 is on (they enter the bundle hash).
+Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm);
+
+// One texture to write as KTX2: a 2D, 3D or 2D array texture of 2, 3 or 4 channels.
+struct Ktx2Texture {
+  std::string file;         // e.g. "scattering.ktx2"
+  std::uint32_t width = 0, height = 0, depth = 0, layers = 0;
+  int channels = 3;
+  std::span<const float> texels;
+  std::string layout;       // what each axis and channel holds (also the specbake.layout key)
+  std::string units;
+  std::string description;
+  std::map<std::string, std::string> metadata;  // further specbake.* keys
+};
+
+// Appends the KTX2 file to r.files and, for rgba16f, the accuracy record `half:<file>` (the
+// half values' max relative error against the float32 data, judged against 2^-11; overflow
+// fails it with a warning naming the file).
+void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, BakeResult& r);
+
+}  // namespace specbake
