@@ -130,6 +130,18 @@ FN real mie_phase(real g, real nu) {
   return k * (R(1.0) + nu * nu) / (x * sqrt(x));
 }
 
+/* Single Mie scattering of channel c rebuilt from a combined texel (Bruneton 2017, § "Combined
+ * scattering textures", GetExtrapolatedSingleMieScattering): the scattering texture's channel
+ * s_c and red s_r, the single Mie red m_r held in its alpha, and the Rayleigh and Mie scattering
+ * coefficients of red and of channel c. Exact where single Mie and single Rayleigh have the same
+ * spectral shape as their coefficients; the bake measures what it costs (rgba-combined). */
+FN real extrapolated_single_mie(real s_c, real s_r, real m_r, real beta_rayleigh_r, real beta_mie_r,
+                                real beta_rayleigh_c, real beta_mie_c) {
+  return s_r > R(0.0) && beta_mie_r > R(0.0) && beta_rayleigh_c > R(0.0)
+             ? s_c * m_r / s_r * (beta_rayleigh_r / beta_mie_r) * (beta_mie_c / beta_rayleigh_c)
+             : R(0.0);
+}
+
 /* ---- texture coordinates ------------------------------------------------------------- */
 /* Transmittance texture of w × rows texels (u: mu, v: altitude). */
 FN real transmittance_u_at(real rb, real rt, real h, real mu, real w) {

@@ -30,6 +30,8 @@ struct SpecbakeAtmosphere {
   real sun_angular_radius;  /* rad */
   real mie_g;               /* Cornette–Shanks asymmetry */
   vec3 solar_irradiance;    /* at the top of the atmosphere */
+  vec3 rayleigh_scattering; /* km⁻¹ at density 1, per channel (combined textures' extrapolation) */
+  vec3 mie_scattering;      /* km⁻¹ */
   real transmittance_w;
   real transmittance_h;
   real irradiance_w;
@@ -104,6 +106,28 @@ vec3 GetScatteringTiled2D(SpecbakeAtmosphere atm, sampler2D scattering_texture, 
   vec3 a10 = TEXTURE_RGB(scattering_texture, vec2((k1 * atm.nu_size + s0 + u_mu_s) / tiles, u_mu));
   vec3 a11 = TEXTURE_RGB(scattering_texture, vec2((k1 * atm.nu_size + s1 + u_mu_s) / tiles, u_mu));
   return (a00 * (R(1.0) - f) + a01 * f) * (R(1.0) - g) + (a10 * (R(1.0) - f) + a11 * f) * g;
+}
+
+/* The 3D layout of `ktx2: {scattering: rgba-combined}` (scattering.ktx2): RGB the scattering
+ * texture, alpha single Mie's red channel; returns the scattering and rebuilds single Mie in
+ * `single_mie` (extrapolated_single_mie, lookup.cl). Two RGBA lookups around nu, as GetScattering3D. */
+vec3 GetCombinedScattering3D(SpecbakeAtmosphere atm, sampler3D combined_texture, real h, real mu, real mu_s, real nu,
+                             int meets_ground, OUT(vec3) single_mie) {
+  real u_mu_s = scattering_u_mu_s_at(atm.bottom_radius, atm.top_radius, mu_s, atm.mu_s_min, atm.mu_s_size);
+  real u_mu = scattering_u_mu_at(atm.bottom_radius, atm.top_radius, h, mu, meets_ground, atm.mu_size);
+  real u_r = scattering_u_r_at(atm.bottom_radius, atm.top_radius, h, atm.r_size);
+  real x = clamp_real(scattering_u_nu_at(nu), R(0.0), R(1.0)) * (atm.nu_size - R(1.0));
+  real x0 = floor(x);
+  real f = x - x0;
+  vec4 v0 = TEXTURE_RGBA(combined_texture, vec3((x0 + u_mu_s) / atm.nu_size, u_mu, u_r));
+  vec4 v1 = TEXTURE_RGBA(combined_texture, vec3((x0 + R(1.0) + u_mu_s) / atm.nu_size, u_mu, u_r));
+  vec4 c = v0 * (R(1.0) - f) + v1 * f;
+  vec3 b_r = atm.rayleigh_scattering;
+  vec3 b_m = atm.mie_scattering;
+  single_mie = vec3(extrapolated_single_mie(c.x, c.x, c.w, b_r.x, b_m.x, b_r.x, b_m.x),
+                    extrapolated_single_mie(c.y, c.x, c.w, b_r.x, b_m.x, b_r.y, b_m.y),
+                    extrapolated_single_mie(c.z, c.x, c.w, b_r.x, b_m.x, b_r.z, b_m.z));
+  return vec3(c.x, c.y, c.z);
 }
 
 /* GetScattering is the layout the includer picks: tiled 2D where SPECBAKE_SCATTERING_TILED2D is

@@ -56,6 +56,9 @@ struct At {
   }
   // Rejects unknown and duplicate keys.
   void allow_keys(std::initializer_list<const char*> allowed) const {
+    allow_keys(std::vector<std::string>(allowed.begin(), allowed.end()));
+  }
+  void allow_keys(const std::vector<std::string>& names) const {
     std::set<std::string> seen;
     for (auto it = node.begin(); it != node.end(); ++it) {
       const std::string k = it->first.Scalar();
@@ -63,11 +66,9 @@ struct At {
       if (!seen.insert(k).second) key_at.fail("duplicate key '" + k + "'");
       bool ok = false;
       std::string list;
-      std::vector<std::string> names;
-      for (const char* a : allowed) {
+      for (const std::string& a : names) {
         ok = ok || k == a;
-        list += std::string(list.empty() ? "" : ", ") + a;
-        names.emplace_back(a);
+        list += (list.empty() ? "" : ", ") + a;
       }
       if (!ok) {
         const std::string near = closest_word(k, names);

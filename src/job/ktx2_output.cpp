@@ -7,7 +7,7 @@
 
 namespace specbake {
 
-Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm) {
+Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm, const std::vector<std::string>& kind_keys) {
   Ktx2Settings s;
   if (job.has("formats")) {
     const yaml::At f = job.child("formats");
@@ -24,7 +24,9 @@ Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm) {
     const yaml::At k = job.child("ktx2");
     if (!s.enabled) k.fail("expected ktx2 settings only with ktx2 in formats");
     k.expect_map("KTX2 settings {format: rgba16f | rgba32f, zstd: true | false}");
-    k.allow_keys({"format", "zstd"});
+    std::vector<std::string> keys = {"format", "zstd"};
+    keys.insert(keys.end(), kind_keys.begin(), kind_keys.end());
+    k.allow_keys(keys);
     if (k.has("format")) s.half = k.child("format").choice<int>({{"rgba16f", 1}, {"rgba32f", 0}}) == 1;
     if (k.has("zstd")) s.zstd = k.child("zstd").choice<int>({{"true", 1}, {"false", 0}}) == 1;
   }

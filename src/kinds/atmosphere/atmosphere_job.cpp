@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -11,6 +12,7 @@
 #include "core/version.hpp"
 #include "io/exr.hpp"
 #include "kinds/atmosphere/auto_settings.hpp"
+#include "kinds/atmosphere/reference.hpp"
 #include "kinds/atmosphere/scene_check.hpp"
 
 namespace specbake::atmosphere {
@@ -446,6 +448,65 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   }
 }
 
+// `ktx2: {scattering: rgba-combined}`: scattering.ktx2 holds the scattering texture's RGB and
+// single Mie's red in alpha (Bruneton's combined textures), and single Mie's other channels are
+// rebuilt in the shader (GetCombinedScattering3D). What that rebuild costs is measured at every
+// texel from the float32 data and recorded (reported, not judged: it is the model's choice).
+// The q-quantile of v (nearest rank; 0 when empty).
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+void combined_ktx2_file(const AtmosphereSpec& spec, const Luts& L, const std::string& units, const std::string& param,
+                        const std::string& sizes, BakeResult& r) {
+  const Sizes& s = L.model.sizes;
+  const std::size_t texels = L.scattering.size() / 3;
+  std::vector<float> rgba(4 * texels);
+  double m_max = 0.0;
+  for (double v : L.single_mie) m_max = std::max(m_max, std::fabs(static_cast<double>(static_cast<float>(v))));
+  const auto& br = L.rgb.rayleigh_scattering;
+  const auto& bm = L.rgb.mie_scattering;
+  double worst = 0.0;
+  std::vector<double> errors;
+  std::size_t worst_at = 0;
+  for (std::size_t i = 0; i < texels; ++i) {
+    for (int c = 0; c < 3; ++c) rgba[4 * i + c] = static_cast<float>(L.scattering[3 * i + c]);
+    rgba[4 * i + 3] = static_cast<float>(L.single_mie[3 * i]);
+    for (int c = 1; c < 3; ++c) {  // red is stored as it is
+      const double truth = static_cast<float>(L.single_mie[3 * i + c]);
+      if (std::fabs(truth) < 1e-3 * m_max) continue;
+      const double rebuilt =
+          ref3::extrapolated_single_mie(rgba[4 * i + c], rgba[4 * i], rgba[4 * i + 3], br[0], bm[0], br[c], bm[c]);
+      const double e = std::fabs(rebuilt - truth) / std::fabs(truth);
+      errors.push_back(e);
+      if (e > worst) {
+        worst = e;
+        worst_at = i;
+      }
+    }
+  }
+  const std::uint32_t wd = static_cast<std::uint32_t>(s.scattering_width());
+  const std::string layout = "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r; RGB = scattering, A = single Mie red";
+  add_ktx2_file(spec.ktx2,
+                {"scattering.ktx2", wd, std::uint32_t(s.mu), std::uint32_t(s.r), 0, 4, rgba, layout, units,
+                 "scattering with single Mie's red in alpha (rgba-combined; GetCombinedScattering3D rebuilds single "
+                 "Mie's green and blue)",
+                 {{"specbake.parameterisation", param}, {"specbake.sizes", sizes}}},
+                r);
+  r.accuracy.push_back(Accuracy::judged(
+      "rgba_combined:single_mie", "max relative error of single Mie's green and blue rebuilt from the combined texture",
+      worst, std::nullopt, "single_mie_scattering.bin (float32)",
+      {{"values_counted", errors.size()},
+       {"floor", "green and blue values of single Mie at least 1e-3 of its largest value"},
+       {"median_relative_error", quantile(errors, 0.5)},
+       {"p99_relative_error", quantile(errors, 0.99)},
+       {"worst_texel", worst_at},
+       {"formula", "s_c * m_r / s_r * (beta_R,r / beta_M,r) * (beta_M,c / beta_R,c) (lookup.cl, extrapolated_single_mie)"}}));
+}
+
 // KTX2 copies of the textures: 2D transmittance [r][mu] and irradiance [r][mu_s], 3D
 // scattering and single Mie (x = nu*mu_s, y = mu, z = r), RGB padded to RGBA with alpha 1. Half
 // files carry an accuracy record of their rounding against the float32 data (.bin).
@@ -473,6 +534,11 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
                             " mu_s=" + std::to_string(s.mu_s) + " nu=" + std::to_string(s.nu);
   for (const Texture& t : textures) {
     if (!t.wanted) continue;
+    if (spec.ktx2_combined && std::string(t.name) == "single_mie_scattering") continue;  // in scattering's alpha
+    if (spec.ktx2_combined && std::string(t.name) == "scattering") {
+      combined_ktx2_file(spec, L, units, param, sizes, r);
+      continue;
+    }
     const std::vector<float> f(t.data->begin(), t.data->end());
     add_ktx2_file(spec.ktx2,
                   {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, units,

@@ -343,7 +343,15 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
           {"layout", layouts},
           {"outputs", outputs},
           {"precision", s.double_precision ? "double" : "float"}};
-  s.ktx2 = parse_ktx2_settings(job, norm);
+  s.ktx2 = parse_ktx2_settings(job, norm, {"scattering"});
+  if (s.ktx2.enabled && job.child("ktx2").has("scattering")) {
+    const At k = job.child("ktx2").child("scattering");
+    s.ktx2_combined = k.choice<int>({{"rgb", 0}, {"rgba-combined", 1}}) == 1;
+    if (s.ktx2_combined && !(s.out_scattering && s.out_single_mie))
+      k.fail("expected rgba-combined only with both scattering and single_mie_scattering in outputs (it packs "
+             "single Mie's red into the scattering texture's alpha)");
+    norm["ktx2"]["scattering"] = s.ktx2_combined ? "rgba-combined" : "rgb";
+  }
   if (s.auto_sizes) norm["sizes"] = "auto";
   norm["scene"] = scene_json(s.scene);
   norm["previews"] = s.preview_size ? json{{"size", s.preview_size}} : json("none");

@@ -133,7 +133,8 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
     << "#ifndef SPECBAKE_ATMOSPHERE_GLSL\n#define SPECBAKE_ATMOSPHERE_GLSL\n";
   if (!layout_3d) o << "#ifndef SPECBAKE_SCATTERING_TILED2D\n#define SPECBAKE_SCATTERING_TILED2D\n#endif\n";
   o << "\n" << glsl_subset_prelude()
-    << "#define TEXTURE_RGB(s, uv) texture(s, uv).rgb\n#define OUT(T) out T\n\n"
+    << "#define TEXTURE_RGB(s, uv) texture(s, uv).rgb\n#define TEXTURE_RGBA(s, uv) texture(s, uv)\n"
+    << "#define OUT(T) out T\n\n"
     << glsl_shared_source("kernels/atmosphere/lookup.cl") << "\n"
     << glsl_shared_source("kernels/atmosphere/render.glsl") << "\n"
     << "const SpecbakeAtmosphere SPECBAKE_ATMOSPHERE = SpecbakeAtmosphere(\n"
@@ -142,10 +143,14 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
     << ",  // mu_s_min, sun_angular_radius (rad), mie_g\n"
     << "    vec3(" << f(rgb.solar_irradiance[0]) << ", " << f(rgb.solar_irradiance[1]) << ", "
     << f(rgb.solar_irradiance[2]) << "),  // solar_irradiance\n"
+    << "    vec3(" << f(rgb.rayleigh_scattering[0]) << ", " << f(rgb.rayleigh_scattering[1]) << ", "
+    << f(rgb.rayleigh_scattering[2]) << "),  // rayleigh_scattering (km^-1)\n"
+    << "    vec3(" << f(rgb.mie_scattering[0]) << ", " << f(rgb.mie_scattering[1]) << ", "
+    << f(rgb.mie_scattering[2]) << "),  // mie_scattering (km^-1)\n"
     << "    " << f(s.transmittance_w) << ", " << f(s.transmittance_h) << ", " << f(s.irradiance_w) << ", "
     << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
     << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ");  // R, MU, MU_S, NU\n"
-    << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef OUT\n"
+    << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef TEXTURE_RGBA\n#undef OUT\n"
     << "#endif\n";
   return o.str();
 }

@@ -17,6 +17,7 @@ namespace specbake::atmosphere::glsl {
 using real = double;
 using vec2 = glm::dvec2;
 using vec3 = glm::dvec3;
+using vec4 = glm::dvec4;
 using glm::dot, glm::length, glm::normalize;
 using std::exp, std::fabs, std::floor, std::fmax, std::fmin, std::pow, std::sqrt;
 
@@ -29,15 +30,17 @@ struct FilterProbe {
   double delta = 0.0;
 };
 
-struct sampler2D {  // [h][w][3]
+struct sampler2D {  // [h][w][channels]
   const double* texels;
   int w, h;
   FilterProbe* probe = nullptr;
+  int channels = 3;  // 3 (a fetch's alpha reads 1) or 4
 };
-struct sampler3D {  // [d][h][w][3]
+struct sampler3D {  // [d][h][w][channels]
   const double* texels;
   int w, h, d;
   FilterProbe* probe = nullptr;
+  int channels = 3;
 };
 
 namespace detail {
@@ -52,32 +55,42 @@ inline Taps taps(double u, int n, double shift = 0.0) {
   const int i = static_cast<int>(x0);
   return {std::clamp(i, 0, n - 1), std::clamp(i + 1, 0, n - 1), x - x0};
 }
-inline vec3 texel(const double* t, long long index) { return {t[3 * index], t[3 * index + 1], t[3 * index + 2]}; }
+inline vec4 texel(const double* t, int channels, long long index) {
+  const double* v = t + channels * index;
+  return {v[0], v[1], v[2], channels == 4 ? v[3] : 1.0};
+}
 // The probe's shift (if any) for this fetch along `axis`.
 inline double shift(FilterProbe* p, int fetch, int axis) {
   return p && fetch == p->target && axis == p->axis ? p->delta : 0.0;
 }
 }  // namespace detail
 
-inline vec3 texture_rgb(const sampler2D& s, vec2 uv) {
+inline vec4 texture_rgba(const sampler2D& s, vec2 uv) {
   const int n = s.probe ? s.probe->fetches++ : 0;
   const detail::Taps a[2] = {detail::taps(uv.x, s.w, detail::shift(s.probe, n, 0)),
                              detail::taps(uv.y, s.h, detail::shift(s.probe, n, 1))};
-  const auto at = [&](int i, int j) { return detail::texel(s.texels, 1LL * j * s.w + i); };
+  const auto at = [&](int i, int j) { return detail::texel(s.texels, s.channels, 1LL * j * s.w + i); };
   return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0) + a[0].f * at(a[0].i1, a[1].i0)) +
          a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1) + a[0].f * at(a[0].i1, a[1].i1));
 }
-inline vec3 texture_rgb(const sampler3D& s, vec3 uvw) {
+inline vec4 texture_rgba(const sampler3D& s, vec3 uvw) {
   const int n = s.probe ? s.probe->fetches++ : 0;
   const detail::Taps a[3] = {detail::taps(uvw.x, s.w, detail::shift(s.probe, n, 0)),
                              detail::taps(uvw.y, s.h, detail::shift(s.probe, n, 1)),
                              detail::taps(uvw.z, s.d, detail::shift(s.probe, n, 2))};
-  const auto at = [&](int i, int j, int k) { return detail::texel(s.texels, (1LL * k * s.h + j) * s.w + i); };
+  const auto at = [&](int i, int j, int k) {
+    return detail::texel(s.texels, s.channels, (1LL * k * s.h + j) * s.w + i);
+  };
   const auto plane = [&](int k) {
     return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0, k) + a[0].f * at(a[0].i1, a[1].i0, k)) +
            a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1, k) + a[0].f * at(a[0].i1, a[1].i1, k));
   };
   return (1.0 - a[2].f) * plane(a[2].i0) + a[2].f * plane(a[2].i1);
+}
+template <class Sampler, class Uv>
+vec3 texture_rgb(const Sampler& s, Uv uv) {
+  const vec4 v = texture_rgba(s, uv);
+  return {v.x, v.y, v.z};
 }
 
 // The shared text. Internal linkage: each includer gets its own copy of these inline-sized
@@ -86,10 +99,12 @@ inline vec3 texture_rgb(const sampler3D& s, vec3 uvw) {
 #pragma GCC diagnostic ignored "-Wunused-function"
 namespace {
 #define TEXTURE_RGB(s, uv) texture_rgb(s, uv)
+#define TEXTURE_RGBA(s, uv) texture_rgba(s, uv)
 #define OUT(T) T&
 #include "atmosphere/lookup.cl"
 #include "atmosphere/render.glsl"
 #undef TEXTURE_RGB
+#undef TEXTURE_RGBA
 #undef OUT
 
 inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
@@ -100,8 +115,10 @@ inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
   a.mu_s_min = m.mu_s_min;
   a.sun_angular_radius = m.sun_angular_radius_rad;
   a.mie_g = m.mie_g;
-  if (rgb.solar_irradiance.size() == 3)
-    a.solar_irradiance = {rgb.solar_irradiance[0], rgb.solar_irradiance[1], rgb.solar_irradiance[2]};
+  const auto v3 = [](const std::vector<double>& v) { return v.size() == 3 ? vec3(v[0], v[1], v[2]) : vec3(0.0); };
+  a.solar_irradiance = v3(rgb.solar_irradiance);
+  a.rayleigh_scattering = v3(rgb.rayleigh_scattering);
+  a.mie_scattering = v3(rgb.mie_scattering);
   a.transmittance_w = s.transmittance_w;
   a.transmittance_h = s.transmittance_h;
   a.irradiance_w = s.irradiance_w;

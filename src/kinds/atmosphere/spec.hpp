@@ -43,6 +43,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
   // File formats of the textures: .bin and .exr always; KTX2 (2D/3D RGBA textures engines load) on request.
   Ktx2Settings ktx2;
+  bool ktx2_combined = false;  // ktx2: {scattering: rgba-combined}: single Mie red in scattering.ktx2's alpha
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
   AtmosphereScene scene;
   int preview_size = 512;  // pixels per preview view; 0: `previews: none`
