@@ -120,19 +120,27 @@ std::vector<View> preview_views(const Model& m, int n) {
   return views;
 }
 
-// The four outputs a pixel is checked on: radiance, transmittance, and at ground points the sun
-// and sky irradiance (what the planet preview shades the ground with).
+// The outputs a pixel is checked on: radiance, transmittance, at ground points the sun and sky
+// irradiance (what the planet preview shades the ground with), and for sky rays the combined
+// texture's lookup (`rgba-combined`): its scattering and the rebuilt single Mie.
+constexpr int kParts = 6;
 struct Out {
-  dvec3 v[4] = {dvec3(0.0), dvec3(0.0), dvec3(0.0), dvec3(0.0)};
+  dvec3 v[kParts] = {dvec3(0.0), dvec3(0.0), dvec3(0.0), dvec3(0.0), dvec3(0.0), dvec3(0.0)};
 };
 struct Host {
   glsl::SpecbakeAtmosphere atm;
   glsl::sampler2D transmittance, irradiance;
-  glsl::sampler3D scattering, single_mie;
+  glsl::sampler3D scattering, single_mie, combined;
   Out eval(const dvec3& up, double h, const dvec3& sun, const Pixel& p) const {
     Out o;
     if (p.kind == 0) {
       o.v[0] = glsl::GetSkyRadiance(atm, transmittance, scattering, single_mie, up, h, p.dir, 0.0, sun, o.v[1]);
+      if (h < atm.top_radius - atm.bottom_radius) {  // the ray as GetSkyRadiance sees it from inside
+        const double mu = glsl::clamp_cosine(glm::dot(up, p.dir));
+        o.v[4] = glsl::GetCombinedScattering3D(atm, combined, h, mu, glsl::clamp_cosine(glm::dot(up, sun)),
+                                               glsl::clamp_cosine(glm::dot(p.dir, sun)),
+                                               glsl::ray_meets_ground(atm.bottom_radius, h, mu), o.v[5]);
+      }
     } else if (p.kind == 1) {
       o.v[0] = glsl::GetSkyRadianceToPoint(atm, transmittance, scattering, single_mie, up, h, p.dir, 0.0, sun, o.v[1]);
       o.v[2] = glsl::GetSunAndSkyIrradiance(atm, transmittance, irradiance, p.p_up, p.p_h, p.p_up, sun, o.v[3]);
@@ -141,7 +149,7 @@ struct Host {
   }
   Host with(glsl::FilterProbe* probe) const {
     Host h = *this;
-    h.transmittance.probe = h.irradiance.probe = h.scattering.probe = h.single_mie.probe = probe;
+    h.transmittance.probe = h.irradiance.probe = h.scattering.probe = h.single_mie.probe = h.combined.probe = probe;
     return h;
   }
 };
@@ -175,8 +183,8 @@ Out bound_of(const Host& host, const dvec3& up, double h, const dvec3& sun, cons
   const auto add_max = [&](const std::vector<Out>& outs) {
     Out m;
     for (const Out& o : outs)
-      for (int k = 0; k < 4; ++k) m.v[k] = glm::max(m.v[k], glm::abs(o.v[k] - value.v[k]));
-    for (int k = 0; k < 4; ++k) b.v[k] += m.v[k];
+      for (int k = 0; k < kParts; ++k) m.v[k] = glm::max(m.v[k], glm::abs(o.v[k] - value.v[k]));
+    for (int k = 0; k < kParts; ++k) b.v[k] += m.v[k];
   };
   // filtering
   glsl::FilterProbe count;
@@ -229,7 +237,7 @@ Out bound_of(const Host& host, const dvec3& up, double h, const dvec3& sun, cons
     add_max(outs);
   }
   // values
-  for (int k = 0; k < 4; ++k) b.v[k] += 64.0 * std::ldexp(1.0, -24) * glm::abs(value.v[k]);
+  for (int k = 0; k < kParts; ++k) b.v[k] += 64.0 * std::ldexp(1.0, -24) * glm::abs(value.v[k]);
   return b;
 }
 
@@ -248,10 +256,10 @@ GLuint texture_2d(int w, int h, const std::vector<double>& rgb, GLenum filter) {
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
   return t;
 }
-GLuint texture_3d(int w, int h, int d, const std::vector<double>& rgb) {
-  std::vector<float> rgba(4 * static_cast<std::size_t>(w) * h * d, 0.0f);
+GLuint texture_3d(int w, int h, int d, const std::vector<double>& values, int channels = 3) {
+  std::vector<float> rgba(4 * static_cast<std::size_t>(w) * h * d, 1.0f);
   for (std::size_t i = 0; i < rgba.size() / 4; ++i)
-    for (int c = 0; c < 3; ++c) rgba[4 * i + c] = static_cast<float>(rgb[3 * i + c]);
+    for (int c = 0; c < channels; ++c) rgba[4 * i + c] = static_cast<float>(values[channels * i + c]);
   GLuint t;
   glGenTextures(1, &t);
   glBindTexture(GL_TEXTURE_3D, t);
@@ -301,14 +309,21 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
 
   constexpr int kN = 48;
   const std::vector<View> views = preview_views(m, kN);
+  // The combined texture (RGB scattering, alpha single Mie red), as scattering.ktx2 holds it.
+  std::vector<double> combined(luts.scattering.size() / 3 * 4);
+  for (std::size_t i = 0; i < luts.scattering.size() / 3; ++i) {
+    for (int c = 0; c < 3; ++c) combined[4 * i + c] = luts.scattering[3 * i + c];
+    combined[4 * i + 3] = luts.single_mie[3 * i];
+  }
   const Host host{glsl::atmosphere_of(m, luts.rgb),
                   {luts.transmittance.data(), s.transmittance_w, s.transmittance_h},
                   {luts.irradiance.data(), s.irradiance_w, s.irradiance_h},
                   {luts.scattering.data(), s.scattering_width(), s.mu, s.r},
-                  {luts.single_mie.data(), s.scattering_width(), s.mu, s.r}};
+                  {luts.single_mie.data(), s.scattering_width(), s.mu, s.r},
+                  {combined.data(), s.scattering_width(), s.mu, s.r, nullptr, 4}};
 
   // Textures: units 0 transmittance, 1 irradiance, 2/3 scattering and single Mie 3D, 4/5 the same
-  // tiled 2D, 6 the pixels' inputs (dir, kind), 7 the ground points (p_up, p_h).
+  // tiled 2D, 6 the pixels' inputs (dir, kind), 7 the ground points (p_up, p_h), 8 the combined 3D.
   const GLuint t_tex = texture_2d(s.transmittance_w, s.transmittance_h, luts.transmittance, GL_LINEAR);
   const GLuint e_tex = texture_2d(s.irradiance_w, s.irradiance_h, luts.irradiance, GL_LINEAR);
   const GLuint s_tex = texture_3d(s.scattering_width(), s.mu, s.r, luts.scattering);
@@ -330,6 +345,9 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
   glBindTexture(GL_TEXTURE_2D, s_tiled);
   glActiveTexture(GL_TEXTURE5);
   glBindTexture(GL_TEXTURE_2D, m_tiled);
+  const GLuint c_tex = texture_3d(s.scattering_width(), s.mu, s.r, combined, 4);
+  glActiveTexture(GL_TEXTURE8);
+  glBindTexture(GL_TEXTURE_3D, c_tex);
 
   const std::string glsl = sampling_glsl(m, luts.rgb, true, true, "test");
   const auto program = [&](bool tiled) {
@@ -338,14 +356,21 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
         (tiled ? "#define SPECBAKE_SCATTERING_TILED2D\n" : "") + glsl +
         "uniform sampler2D transmittance_texture, irradiance_texture, inputs, points;\n"
         "uniform SpecbakeScatteringSampler scattering_texture, single_mie_texture;\n"
+        "uniform sampler3D combined_texture;\n"
         "uniform vec3 camera_up, sun;\nuniform float camera_h;\nuniform int part;\nout vec4 colour;\n"
         "void main() {\n"
         "  ivec2 p = ivec2(gl_FragCoord.xy);\n"
         "  vec4 d = texelFetch(inputs, p, 0);\n"
-        "  vec3 v[4] = vec3[4](vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));\n"
+        "  vec3 v[6] = vec3[6](vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));\n"
         "  if (d.w == 0.0) {\n"
         "    v[0] = GetSkyRadiance(SPECBAKE_ATMOSPHERE, transmittance_texture, scattering_texture, single_mie_texture,\n"
         "                          camera_up, camera_h, d.xyz, 0.0, sun, v[1]);\n"
+        "    if (camera_h < SPECBAKE_ATMOSPHERE.top_radius - SPECBAKE_ATMOSPHERE.bottom_radius) {\n"
+        "      float mu = clamp(dot(camera_up, d.xyz), -1.0, 1.0);\n"
+        "      v[4] = GetCombinedScattering3D(SPECBAKE_ATMOSPHERE, combined_texture, camera_h, mu,\n"
+        "                                     clamp(dot(camera_up, sun), -1.0, 1.0), clamp(dot(d.xyz, sun), -1.0, 1.0),\n"
+        "                                     ray_meets_ground(SPECBAKE_ATMOSPHERE.bottom_radius, camera_h, mu), v[5]);\n"
+        "    }\n"
         "  } else if (d.w == 1.0) {\n"
         "    v[0] = GetSkyRadianceToPoint(SPECBAKE_ATMOSPHERE, transmittance_texture, scattering_texture,\n"
         "                                 single_mie_texture, camera_up, camera_h, d.xyz, 0.0, sun, v[1]);\n"
@@ -361,7 +386,8 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
     glUseProgram(prog);
     const std::pair<const char*, int> samplers[] = {{"transmittance_texture", 0}, {"irradiance_texture", 1},
                                                     {"scattering_texture", tiled ? 4 : 2},
-                                                    {"single_mie_texture", tiled ? 5 : 3}, {"inputs", 6}, {"points", 7}};
+                                                    {"single_mie_texture", tiled ? 5 : 3}, {"inputs", 6}, {"points", 7},
+                                                    {"combined_texture", 8}};
     for (const auto& [name, unit] : samplers) glUniform1i(glGetUniformLocation(prog, name), unit);
     return prog;
   };
@@ -371,7 +397,8 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
   const specbake::testing::GlTarget target(kN, kN);
   ASSERT_TRUE(target.complete);
 
-  const char* part_names[4] = {"radiance", "transmittance", "sun irradiance", "sky irradiance"};
+  const char* part_names[kParts] = {"radiance",       "transmittance",       "sun irradiance",
+                                   "sky irradiance", "combined scattering", "combined single Mie"};
   double worst_ratio[2] = {0, 0};
   std::vector<Out> previous_host;  // the previous view's host values: a wrong reference must fail
   double wrong_view_ratio = 0;
@@ -406,14 +433,14 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
       bound[i] = bound_of(host, view.up, view.h, view.sun, view.pixels[i], value[i]);
     });
 
-    std::vector<float> gl_parts[4];  // the 3D program's outputs, for the docs' figure
+    std::vector<float> gl_parts[kParts];  // the 3D program's outputs, for the docs' figure
     std::vector<float> over_bound(view.pixels.size(), 0.0f);
     for (int tiled = 0; tiled < 2; ++tiled) {
       glUseProgram(progs[tiled]);
       glUniform3f(glGetUniformLocation(progs[tiled], "camera_up"), view.up.x, view.up.y, view.up.z);
       glUniform3f(glGetUniformLocation(progs[tiled], "sun"), view.sun.x, view.sun.y, view.sun.z);
       glUniform1f(glGetUniformLocation(progs[tiled], "camera_h"), view.h);
-      for (int part = 0; part < 4; ++part) {
+      for (int part = 0; part < kParts; ++part) {
         glUniform1i(glGetUniformLocation(progs[tiled], "part"), part);
         const std::vector<float> px = target.draw();
         ASSERT_EQ(glGetError(), static_cast<GLenum>(GL_NO_ERROR));
