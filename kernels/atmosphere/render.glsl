@@ -5,9 +5,9 @@
  *
  * Written once in the common subset of GLSL and C++: the bundle's sampling.glsl carries this
  * text verbatim (after lookup.cl and a prelude that defines real, FN, R, REQUIRE, fmax, fmin,
- * fabs, TEXTURE_RGB and OUT), and the host compiles the same text in double with GLM's vector
- * types and a bilinear/trilinear filter with the GPU's texel-centre and clamp-to-edge rules
- * (src/kinds/atmosphere/render.cpp): the previews, the scene check and the GL test's reference
+ * fabs, TEXTURE_RGB, TEXTURE_RGBA and OUT; src/kinds/atmosphere/render.cpp), and the host
+ * compiles the same text in double with GLM's vector types and a bilinear/trilinear filter with
+ * the GPU's texel-centre and clamp-to-edge rules (src/kinds/atmosphere/shader_host.hpp): the previews, the scene check and the GL test's reference
  * are this code. Hence: vec2/vec3, scalars as real, sizes as real, no swizzles (.x .y .z only),
  * no `const` locals, flags as int, out-parameters as OUT(type).
  *
@@ -157,7 +157,7 @@ vec3 GetSkyRadiance(SpecbakeAtmosphere atm, sampler2D transmittance_texture,
   real d_top = disc >= R(0.0) ? -r_mu - sqrt(disc) : R(-1.0);
   if (d_top > R(0.0)) {
     up = normalize(up * r + view * d_top);
-    r_mu = r_mu + d_top;
+    r_mu = -sqrt(disc);  /* = r_mu + d_top, without the cancellation near the limb */
     r = atm.top_radius;
     h = t;
   } else if (h > t) {
@@ -205,10 +205,13 @@ vec3 GetSkyRadianceToPoint(SpecbakeAtmosphere atm, sampler2D transmittance_textu
   real d_top = disc >= R(0.0) ? -r_mu - sqrt(disc) : R(-1.0);
   if (d_top > R(0.0)) {
     up = normalize(up * r + view * d_top);
-    r_mu = r_mu + d_top;
+    r_mu = -sqrt(disc);  /* = r_mu + d_top, without the cancellation near the limb */
     r = atm.top_radius;
     h = t;
     d = fmax(d - d_top, R(0.0));
+  } else if (h > t) {  /* from space, a ray that misses the atmosphere */
+    transmittance = vec3(R(1.0));
+    return vec3(R(0.0));
   }
   h = clamp_real(h, R(0.0), t);
   real mu = clamp_cosine(r_mu / r);

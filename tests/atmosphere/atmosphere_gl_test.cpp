@@ -72,37 +72,34 @@ struct View {
   std::vector<Pixel> pixels;  // row 0 at the bottom, as glReadPixels returns them
 };
 
-// The preview views (render.cpp's preview_files): equidistant fisheyes from 1 m above the ground
-// with the sun at 60°, 20°, 5°, 0° and −4°, and the planet from 3.2 radii with its ground points.
+// The preview views (render.hpp: kFisheyeViews, planet_view), the rays rounded to float32 as the
+// GL side gets them.
 std::vector<View> preview_views(const Model& m, int n) {
+  const auto g = [](const Vec3& v) { return dvec3{v[0], v[1], v[2]}; };
   std::vector<View> views;
-  for (double elevation : {60.0, 20.0, 5.0, 0.0, -4.0}) {
-    const double e = elevation * M_PI / 180.0;
-    View v{"fisheye sun " + std::to_string(static_cast<int>(elevation)) + " deg", {0, 0, 1},
-           f32(dvec3{std::cos(e), 0, std::sin(e)}), f32(0.001), n, {}};
+  for (const FisheyeView& fv : kFisheyeViews) {
+    View v{"fisheye sun " + std::to_string(static_cast<int>(fv.sun_elevation_deg)) + " deg", {0, 0, 1},
+           f32(g(fisheye_sun(fv))), f32(kFisheyeAltitudeKm), n, {}};
     for (int y = 0; y < n; ++y)
       for (int x = 0; x < n; ++x) {
-        const double dx = (2.0 * x + 1.0) / n - 1.0, dy = (2.0 * y + 1.0) / n - 1.0, rho = std::hypot(dx, dy);
         Pixel p;
-        if (rho < 1.0) {
-          const double theta = rho * M_PI / 2.0, phi = std::atan2(dy, dx);
-          p.dir = f32(dvec3{std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)});
+        Vec3 dir{};
+        if (fisheye_direction((2.0 * x + 1.0) / n - 1.0, (2.0 * y + 1.0) / n - 1.0, dir)) {
+          p.dir = f32(g(dir));
           p.kind = 0;
         }
         v.pixels.push_back(p);
       }
     views.push_back(v);
   }
+  const PlanetView pv = planet_view(m);
   const double rb = m.bottom_radius_km;
-  const dvec3 camera{0.0, -3.2 * rb, 0.6 * rb};
-  const dvec3 fwd = glm::normalize(-camera), right = glm::normalize(dvec3{fwd.y, -fwd.x, 0.0});
-  const dvec3 up_img = glm::cross(right, fwd);
-  const double dist = glm::length(camera), half = std::tan(std::asin(m.top_radius_km / dist)) * 1.15;
-  View v{"planet from space", f32(camera / dist), f32(glm::normalize(dvec3{1.0, -0.6, 0.45})), f32(dist - rb), n, {}};
+  const dvec3 camera = g(pv.camera);
+  const double dist = glm::length(camera);
+  View v{"planet from space", f32(camera / dist), f32(g(pv.sun)), f32(dist - rb), n, {}};
   for (int y = 0; y < n; ++y)
     for (int x = 0; x < n; ++x) {
-      const double sx = ((2.0 * x + 1.0) / n - 1.0) * half, sy = ((2.0 * y + 1.0) / n - 1.0) * half;
-      const dvec3 view = glm::normalize(fwd + sx * right + sy * up_img);
+      const dvec3 view = g(pv.direction((2.0 * x + 1.0) / n - 1.0, (2.0 * y + 1.0) / n - 1.0));
       const double b = glm::dot(camera, view), disc = b * b - (dist * dist - rb * rb);
       Pixel p;
       p.kind = 0;
@@ -169,14 +166,20 @@ std::vector<dvec3> turned(const dvec3& v, double e) {
 //    piecewise linear in its coordinate). Where a fetch sits on a texel centre at the edge of a
 //    nu slice or r layer, this includes the neighbouring slice's texel, which may be far brighter.
 //  - float32 arithmetic on the geometry: every mu, mu_s, nu, altitude and texture coordinate the
-//    shader derives comes from dot products, square roots and the altitude-based forms of
-//    lookup.cl, each within ~10 ulps (lookup.cl's header; GLSL's sqrt and division are within
-//    3 ulps); the host turns each input direction by 16 ulps (2^-20 rad) both ways about two axes,
-//    scales each altitude and distance by 1 ± 2^-20, and adds the largest change per input. This
-//    also covers rays the float32 ground test may classify either way (the change is then the
-//    jump between the two halves of the texture).
+//    shader derives comes from dot products, square roots, divisions and the altitude-based
+//    forms of lookup.cl (no cancelling differences: its header), a chain of ≤ 5 operations per
+//    quantity from the inputs, each within 3 ulps (GLSL ES 3.20's highp bounds for sqrt and
+//    division; the others are correctly rounded), so within 15 ulps of its double value. The host
+//    turns each input direction by 16 ulps (2^-20 rad) both ways about two axes, scales each
+//    altitude and distance by 1 ± 2^-20, and adds the largest change per input: the first-order
+//    effect of an error of that size on each. This also covers rays the float32 ground test may
+//    classify either way (the change is then the jump between the two halves of the texture).
 //  - float32 arithmetic on the values: ~20 operations from texel to result, each within 3 ulps:
-//    64·2^-24 relative.
+//    60 ulps, taken as 64·2^-24 relative.
+// The tiled 2D program is held to the same bound: it fetches the same texels with the same x and
+// y coordinates (2D bilinear, whose coordinate rounding the 3D probe's x and y shifts cover) and
+// interpolates r and nu in shader arithmetic (the 64-ulp term) instead of the filter; the two
+// layouts' values agree to 1e-12 of the texture's scale in double (AtmosphereDevice.Tiled2dSamplesEqual3d).
 Out bound_of(const Host& host, const dvec3& up, double h, const dvec3& sun, const Pixel& p, const Out& value) {
   Out b;
   // adds the largest change among `outs` (one input moved each way) to the bound
@@ -288,6 +291,42 @@ TEST(AtmosphereGl, SamplingGlslCarriesTheSharedSourceVerbatim) {
       at = end == std::string::npos ? text.size() : end + 1;
     }
     EXPECT_NE(glsl.find(body), std::string::npos) << path << " is not in sampling.glsl verbatim";
+  }
+}
+
+// The light-shaft parameter (shadow_length: the first km of the ray left out), on the host's
+// evaluation of the shared text: continuous with the no-shadow branch, more shadow means less
+// light, and a shadow over the whole segment leaves none.
+TEST(AtmosphereGl, ShadowLengthLeavesOutTheNearestScattering) {
+  const Luts luts = reference_earth();
+  const Model& m = luts.model;
+  const Sizes& s = m.sizes;
+  const auto atm = glsl::atmosphere_of(m, luts.rgb);
+  const glsl::sampler2D T{luts.transmittance.data(), s.transmittance_w, s.transmittance_h};
+  const glsl::sampler3D S{luts.scattering.data(), s.scattering_width(), s.mu, s.r};
+  const glsl::sampler3D M{luts.single_mie.data(), s.scattering_width(), s.mu, s.r};
+  const dvec3 up{0, 0, 1}, sun = glm::normalize(dvec3{1, 0, 0.5});
+  for (const dvec3 view : {glm::normalize(dvec3{0.2, 0.1, 1.0}), glm::normalize(dvec3{1.0, 0.3, 0.05})}) {
+    dvec3 t;
+    const dvec3 l0 = glsl::GetSkyRadiance(atm, T, S, M, up, 0.5, view, 0.0, sun, t);
+    // 1 mm of shadow: the shadowed branch (a lookup a distance along the ray, times T) agrees with
+    // the plain one to the light scattered in that millimetre and the lookups' rounding
+    const dvec3 l_eps = glsl::GetSkyRadiance(atm, T, S, M, up, 0.5, view, 1e-6, sun, t);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(l_eps[c], l0[c], 1e-6 * l0[c]) << c;
+    dvec3 previous = l0;
+    for (double shadow : {1.0, 5.0, 20.0}) {
+      const dvec3 l = glsl::GetSkyRadiance(atm, T, S, M, up, 0.5, view, shadow, sun, t);
+      for (int c = 0; c < 3; ++c) EXPECT_LT(l[c], previous[c]) << "shadow " << shadow << " km, channel " << c;
+      previous = l;
+    }
+    // to a point 10 km away with all 10 km in shadow: S − T·S at the camera itself, nothing left
+    const dvec3 to_point = 10.0 * view;
+    const dvec3 lp0 = glsl::GetSkyRadianceToPoint(atm, T, S, M, up, 0.5, to_point, 0.0, sun, t);
+    const dvec3 lp = glsl::GetSkyRadianceToPoint(atm, T, S, M, up, 0.5, to_point, 10.0, sun, t);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_GT(lp0[c], 0.0);
+      EXPECT_LE(std::fabs(lp[c]), 1e-12 * l0[c]) << c;
+    }
   }
 }
 
@@ -483,7 +522,7 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
           {{"title", view.name},
            {"gl", "llvmpipe, GLES 3.2, 3D textures"},
            {"host", "render.glsl in double"},
-           {"bound", "|GL - host| / bound, worst of radiance, transmittance and irradiance, worst channel"}});
+           {"bound", "|GL - host| / bound, worst of every output checked, worst channel"}});
     }
     previous_host = value;
     glDeleteTextures(1, &in_tex);

@@ -80,10 +80,15 @@ TEST(DispersionGl, ShippedCombineMatchesTheHostSum) {
       for (int x = 0; x < w; ++x)
         for (int row = 0; row < 3; ++row) {
           const double sum = host.combine({rgb.data(), w, h}, x, y)[row];
-          double mag = 0;
+          double mag = 0, direct = 0;  // direct: the row-major sum written out, independent of combine.glsl
           for (int s = 0; s < n; ++s)
-            for (int c = 0; c < 3; ++c)
-              mag += std::fabs(K[9 * s + 3 * row + c] * renders[4 * ((static_cast<std::size_t>(s) * h + y) * w + x) + c]);
+            for (int c = 0; c < 3; ++c) {
+              const double kv = double(K[9 * s + 3 * row + c]) * renders[4 * ((static_cast<std::size_t>(s) * h + y) * w + x) + c];
+              mag += std::fabs(kv);
+              direct += kv;
+            }
+          // the host's GLM evaluation of the shared text is that sum (double rounding only)
+          EXPECT_NEAR(sum, direct, 1e-13 * mag + 1e-300) << figure << " host, pixel (" << x << ", " << y << ")";
           const std::size_t at = static_cast<std::size_t>(y) * w + x;
           const double got = pixels[4 * at + row], bound = gamma * mag + 1e-30;
           EXPECT_NEAR(got, sum, bound) << figure << " pixel (" << x << ", " << y << ") channel " << row;

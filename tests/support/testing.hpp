@@ -33,8 +33,8 @@ struct Image {
 Image read_png(const fs::path& p);
 
 // For the docs' GL-against-host figures (scripts/docs_gl_figures.sh): where the environment
-// variable SPECBAKE_GL_FIGURES names a folder, a GL test writes there <name>.json (the note, the
-// size, the exposure) and <name>.f32 (float32: the GL image, the host image, each w·h·3 with row 0
+// variable SPECBAKE_GL_FIGURES names a folder, a GL test writes there <name>.json (its notes and
+// the size) and <name>.f32 (float32: the GL image, the host image, each w·h·3 with row 0
 // at the bottom, then w·h values of |GL − host| / bound, the worst channel). Otherwise nothing.
 void write_gl_figure(const std::string& name, int w, int h, const std::vector<float>& gl_rgb,
                      const std::vector<float>& host_rgb, const std::vector<float>& over_bound,

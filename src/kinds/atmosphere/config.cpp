@@ -350,7 +350,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
     if (s.ktx2_combined && !(s.out_scattering && s.out_single_mie))
       k.fail("expected rgba-combined only with both scattering and single_mie_scattering in outputs (it packs "
              "single Mie's red into the scattering texture's alpha)");
-    norm["ktx2"]["scattering"] = s.ktx2_combined ? "rgba-combined" : "rgb";
+    if (s.ktx2_combined) norm["ktx2"]["scattering"] = "rgba-combined";  // rgb, the default, stays implicit
   }
   if (s.auto_sizes) norm["sizes"] = "auto";
   norm["scene"] = scene_json(s.scene);

@@ -200,6 +200,39 @@ struct PreviewView {
 
 }  // namespace
 
+Vec3 fisheye_sun(const FisheyeView& v) {
+  const double e = v.sun_elevation_deg * M_PI / 180.0;
+  return {std::cos(e), 0.0, std::sin(e)};
+}
+
+bool fisheye_direction(double x, double y, Vec3& view) {
+  const double rho = std::sqrt(x * x + y * y);
+  if (rho > 1.0) return false;
+  const double theta = rho * M_PI / 2.0, phi = std::atan2(y, x);
+  view = {std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
+  return true;
+}
+
+PlanetView planet_view(const Model& m) {
+  PlanetView v;
+  const double rb = m.bottom_radius_km;
+  v.camera = {0.0, -3.2 * rb, 0.6 * rb};
+  v.sun = normalize({1.0, -0.6, 0.45});
+  v.fwd = normalize({-v.camera[0], -v.camera[1], -v.camera[2]});
+  v.right = normalize({v.fwd[1], -v.fwd[0], 0.0});
+  v.up = {v.right[1] * v.fwd[2] - v.right[2] * v.fwd[1], v.right[2] * v.fwd[0] - v.right[0] * v.fwd[2],
+          v.right[0] * v.fwd[1] - v.right[1] * v.fwd[0]};
+  const double dist = std::sqrt(v.camera[0] * v.camera[0] + v.camera[1] * v.camera[1] + v.camera[2] * v.camera[2]);
+  v.half = std::tan(std::asin(m.top_radius_km / dist)) * 1.15;
+  return v;
+}
+
+Vec3 PlanetView::direction(double x, double y) const {
+  const double sx = x * half, sy = y * half;
+  return normalize({fwd[0] + sx * right[0] + sy * up[0], fwd[1] + sx * right[1] + sy * up[1],
+                    fwd[2] + sx * right[2] + sy * up[2]});
+}
+
 std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
                                       const std::array<double, 3>& k_sun, int n) {
   const Renderer render(luts);
@@ -211,20 +244,13 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     sun_radiance[c] = (luts.rgb.solar_irradiance.size() == 3 ? luts.rgb.solar_irradiance[c] : 0.0) /
                       (M_PI * alpha * alpha) * k_sun[c];
   std::vector<PreviewView> views;
-  // Fisheye (equidistant, zenith at the centre) from 1 m above the ground, sun at azimuth 0
-  // (the right of the picture); exposures for a clear sky at each sun elevation.
-  const std::pair<double, double> fisheyes[] = {{60.0, 12.0}, {20.0, 11.5}, {5.0, 10.5}, {0.0, 9.0}, {-4.0, 4.5}};
-  for (const auto& [elevation_deg, ev] : fisheyes) {
-    const double e = elevation_deg * M_PI / 180.0;
-    const Vec3 sun{std::cos(e), 0.0, std::sin(e)};
-    const Vec3 camera{0.0, 0.0, m.bottom_radius_km + 0.001};
+  for (const FisheyeView& fv : kFisheyeViews) {
+    const Vec3 sun = fisheye_sun(fv);
+    const Vec3 camera{0.0, 0.0, m.bottom_radius_km + kFisheyeAltitudeKm};
     const double disc = std::cos(std::max(alpha, M_PI / n));  // a pixel spans π/n of zenith angle
     Image img = render_image(n, [&](double dx, double dy) {
-      Vec3 lum{};
-      const double rho = std::sqrt(dx * dx + dy * dy);
-      if (rho > 1.0) return lum;
-      const double theta = rho * M_PI / 2.0, phi = std::atan2(dy, dx);
-      const Vec3 view{std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
+      Vec3 lum{}, view{};
+      if (!fisheye_direction(dx, dy, view)) return lum;
       Vec3 t{};
       const Vec3 l = render.sky_radiance(camera, view, sun, &t);
       const bool on_sun = view[0] * sun[0] + view[1] * sun[1] + view[2] * sun[2] > disc;
@@ -232,30 +258,24 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       return lum;
     });
     char name[64];
-    std::snprintf(name, sizeof name, "preview/sky_fisheye_sun_%+03.0fdeg.png", elevation_deg);
-    views.push_back({name, ev,
+    std::snprintf(name, sizeof name, "preview/sky_fisheye_sun_%+03.0fdeg.png", fv.sun_elevation_deg);
+    views.push_back({name, fv.ev100,
                      "sky and sun seen from 1 m above the ground (equidistant fisheye, zenith at the centre, sun at "
-                     "the right, elevation " + std::to_string(static_cast<int>(elevation_deg)) + " deg), EV100 " +
-                         format_g(ev) + ", from the baked LUTs through sampling.glsl's functions",
+                     "the right, elevation " + std::to_string(static_cast<int>(fv.sun_elevation_deg)) + " deg), EV100 " +
+                         format_g(fv.ev100) + ", from the baked LUTs through sampling.glsl's functions",
                      std::move(img)});
   }
   // The planet from space: Lambertian ground of the bake's albedo lit by sun and sky, seen through
   // the atmosphere; the limb from GetSkyRadiance. The whole planet and its atmosphere in frame.
   {
     const double rb = m.bottom_radius_km;
-    const Vec3 camera{0.0, -3.2 * rb, 0.6 * rb};
-    const Vec3 sun = normalize({1.0, -0.6, 0.45});
-    const Vec3 fwd = normalize({-camera[0], -camera[1], -camera[2]});
-    const Vec3 right = normalize({fwd[1], -fwd[0], 0.0});
-    const Vec3 up{right[1] * fwd[2] - right[2] * fwd[1], right[2] * fwd[0] - right[0] * fwd[2],
-                  right[0] * fwd[1] - right[1] * fwd[0]};
+    const PlanetView pv = planet_view(m);
+    const Vec3& camera = pv.camera;
+    const Vec3& sun = pv.sun;
     const double dist = std::sqrt(camera[0] * camera[0] + camera[1] * camera[1] + camera[2] * camera[2]);
-    const double half = std::tan(std::asin(m.top_radius_km / dist)) * 1.15;
     const double albedo = luts.rgb.ground_albedo.empty() ? 0.1 : luts.rgb.ground_albedo[0];
     Image img = render_image(n, [&](double x, double y) {
-      const double sx = x * half, sy = y * half;
-      const Vec3 view = normalize({fwd[0] + sx * right[0] + sy * up[0], fwd[1] + sx * right[1] + sy * up[1],
-                                   fwd[2] + sx * right[2] + sy * up[2]});
+      const Vec3 view = pv.direction(x, y);
       const double b = camera[0] * view[0] + camera[1] * view[1] + camera[2] * view[2];
       const double disc = b * b - (dist * dist - rb * rb);
       Vec3 lum{};
@@ -274,9 +294,10 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       }
       return lum;
     });
-    views.push_back({"preview/planet_from_space.png", 12.0,
+    views.push_back({"preview/planet_from_space.png", pv.ev100,
                      "the planet seen from 3.2 radii away: ground (albedo " + format_g(albedo) +
-                         ") lit by sun and sky through the atmosphere, and the limb, EV100 12, from the baked LUTs "
+                         ") lit by sun and sky through the atmosphere, and the limb, EV100 " + format_g(pv.ev100) +
+                         ", from the baked LUTs "
                          "through sampling.glsl's functions",
                      std::move(img)});
   }

@@ -52,6 +52,28 @@ Vec3 sample_tiled2d(const Model& m, const std::vector<double>& tiled, double r, 
 std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, bool layout_tiled2d,
                           const std::string& units_note);
 
+// The preview views' geometry, shared by the previews and the GL test that draws them with the
+// shipped shader. Fisheyes: from kFisheyeAltitudeKm above the ground, equidistant, zenith at the
+// centre, sun at azimuth 0 (the picture's right) at each elevation, with a fixed exposure.
+struct FisheyeView {
+  double sun_elevation_deg, ev100;
+};
+inline constexpr FisheyeView kFisheyeViews[] = {{60.0, 12.0}, {20.0, 11.5}, {5.0, 10.5}, {0.0, 9.0}, {-4.0, 4.5}};
+inline constexpr double kFisheyeAltitudeKm = 0.001;
+Vec3 fisheye_sun(const FisheyeView& v);
+// The view direction of picture point (x, y) ∈ (−1, 1)² (x right, y up); false outside the circle.
+bool fisheye_direction(double x, double y, Vec3& view);
+// The planet from 3.2 radii: camera (km, planet centre at 0), sun, and the view direction of
+// picture point (x, y) ∈ (−1, 1)²; the whole atmosphere in frame with a 15 % margin.
+struct PlanetView {
+  Vec3 camera, sun;
+  double ev100 = 12.0;
+  Vec3 direction(double x, double y) const;
+  Vec3 fwd, right, up;
+  double half = 0.0;
+};
+PlanetView planet_view(const Model& m);
+
 // Fisheye skies (with the sun's disc) from the ground at several sun elevations and the planet
 // seen from space, n × n pixels each at a fixed exposure per view, and a contact sheet of all;
 // rendered through the shipped shader's functions (shader_host.hpp). k_sky, k_sun: radiance →

@@ -106,6 +106,8 @@ namespace {
 #undef TEXTURE_RGB
 #undef TEXTURE_RGBA
 #undef OUT
+#undef GetScattering
+#undef SpecbakeScatteringSampler
 
 inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
   const Sizes& s = m.sizes;
