@@ -217,9 +217,18 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
       if (!r.hash.empty()) std::cout << "  hash:       " << r.hash.substr(0, 12) << "\n";
       if (!r.bundle.empty()) std::cout << "  bundle:     " << r.bundle.string() << "\n";
       if (!r.reason.empty() && !bad) std::cout << "  status:     " << r.status << " — " << r.reason << "\n";
-      if (!r.parameters.is_null()) std::cout << "  parameters: " << r.parameters.dump() << "\n";
-      if (!r.accuracy.is_null()) std::cout << "  accuracy:   " << r.accuracy.dump() << "\n";
-      if (!r.timings.is_null()) std::cout << "  timings:    " << r.timings.dump() << "\n";
+      // one line per key (its whole value as JSON) or accuracy record
+      const auto per_key = [](const char* label, const json& block) {
+        if (!block.is_object()) return;
+        std::cout << "  " << label << ":\n";
+        for (const auto& [k, v] : block.items()) std::cout << "    " << k << ": " << v.dump() << "\n";
+      };
+      per_key("parameters", r.parameters);
+      if (r.accuracy.is_array() && !r.accuracy.empty()) {
+        std::cout << "  accuracy:\n";
+        for (const auto& a : r.accuracy) std::cout << "    " << headline(json::array({a})) << "\n";
+      }
+      per_key("timings", r.timings);
     }
   }
   std::cout << summary_line(reports, plan) << "\n";

@@ -177,7 +177,8 @@ TEST_F(CliUser, QuietVerboseAndWarnings) {
   EXPECT_NE(r.out.find("0 built, 1 up to date, 0 failed, 1 warning"), std::string::npos) << r.out;
   EXPECT_LT(r.out.size(), 2000u) << "the default output is a summary, not a dump";
   const auto v = run({"run", c.string(), "-v"});
-  EXPECT_NE(v.out.find("\"quadrature_weights_nm\""), std::string::npos);
+  EXPECT_NE(v.out.find("\n    quadrature_weights_nm: ["), std::string::npos) << v.out;  // a line per parameter
+  EXPECT_NE(v.out.find("\n    prism_de2000 "), std::string::npos) << v.out;              // a line per accuracy record
   const auto vv = run({"run", c.string(), "-vv"});
   EXPECT_NE(vv.err.find("[trace]"), std::string::npos) << vv.err;
   EXPECT_EQ(v.err.find("[trace]"), std::string::npos) << v.err;

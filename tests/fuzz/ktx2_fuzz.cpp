@@ -12,7 +12,8 @@
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   try {
     const specbake::Ktx2File k = specbake::read_ktx2(std::string_view(reinterpret_cast<const char*>(data), size), "fuzz.ktx2");
-    const std::uint64_t texels = std::uint64_t{k.width} * k.height * (k.depth ? k.depth : 1);
+    const std::uint64_t texels =
+        std::uint64_t{k.width} * k.height * (k.depth ? k.depth : 1) * (k.layer_count ? k.layer_count : 1);
     if (k.rgba.size() != texels * 4) std::abort();
   } catch (const specbake::Error&) {
   }

@@ -25,6 +25,9 @@ using nlohmann::json;
 
 namespace {
 constexpr double kFloat32Ulp = 5.9604644775390625e-08;  // 2^-24, unit roundoff of float32
+// The thin-prism picture (samples: auto, the preview) depends on the sample positions and weights
+// only, not on the glass's index: its tables are computed with this stand-in material.
+const MaterialModel kPictureMaterial{1.5, 50.0, std::nullopt};
 
 std::array<double, 3> white_xyz() {
   const Mat3 M = srgb_to_xyz();
@@ -217,8 +220,7 @@ cl::Buffer PrismJudge::render(const Tables& t) {
 }
 
 PrismJudge::PrismJudge(Device& dev, const DispersionSpec& spec) : dev_(dev), spec_(spec), geo_(prism_geometry(spec)) {
-  const MaterialModel none{1.5, 50.0, std::nullopt};  // the picture does not depend on the index
-  ref_xyz_ = render(compute_device(dev, spec, dense_samples(spec), none));
+  ref_xyz_ = render(compute_device(dev, spec, dense_samples(spec), kPictureMaterial));
 }
 
 double PrismJudge::mean_delta_e(const Tables& t) {
@@ -241,7 +243,7 @@ double PrismJudge::mean_delta_e(const Tables& t) {
 
 double prism_mean_delta_e_reference(const DispersionSpec& spec, const Tables& t) {
   const PrismGeometry g = prism_geometry(spec);
-  const Tables dense = compute_reference(spec, dense_samples(spec), MaterialModel{1.5, 50.0, std::nullopt});
+  const Tables dense = compute_reference(spec, dense_samples(spec), kPictureMaterial);
   const auto white = white_xyz();
   const auto xt = landing_x(spec, t), xr = landing_x(spec, dense);
   std::vector<double> de(g.pixels);
@@ -263,10 +265,9 @@ double prism_mean_delta_e_reference(const DispersionSpec& spec, const Tables& t)
 
 AutoChoice choose_samples(Device& dev, const DispersionSpec& spec, const Progress& progress) {
   PrismJudge judge(dev, spec);
-  const MaterialModel none{1.5, 50.0, std::nullopt};
   AutoChoice choice;
   auto error_at = [&](int n) {
-    const double e = judge.mean_delta_e(compute_device(dev, spec, make_samples(spec.sampling, spec.range_nm, n), none));
+    const double e = judge.mean_delta_e(compute_device(dev, spec, make_samples(spec.sampling, spec.range_nm, n), kPictureMaterial));
     choice.tried.emplace_back(n, e);
     spdlog::debug("samples: auto: N = {} gives mean CIEDE2000 {:.4f}", n, e);
     return e;
@@ -537,7 +538,7 @@ OutputFile prism_preview(const DispersionSpec& spec, const Tables& t) {
       for (int c = 0; c < 3; ++c) renders[3 * (static_cast<std::size_t>(s) * w + px) + c] = cover;
     }
   Combiner combiner(t.K);
-  const Tables dense = compute_reference(spec, dense_samples(spec), MaterialModel{1.5, 50.0, std::nullopt});
+  const Tables dense = compute_reference(spec, dense_samples(spec), kPictureMaterial);
   const auto xd = landing_x(spec, dense);
   const auto white = white_xyz();
   const Mat3 m = xyz_to_srgb();
