@@ -5,11 +5,11 @@
  *
  * Written once in the common subset of GLSL and C++: the bundle's sampling.glsl carries this
  * text verbatim (after lookup.cl and a prelude that defines real, FN, R, REQUIRE, fmax, fmin,
- * fabs, TEXTURE_RGB, TEXTURE_RGBA and OUT; src/kinds/atmosphere/render.cpp), and the host
+ * fabs, TEXTURE_RGB, TEXTURE_RGBA, OUT and INOUT; src/kinds/atmosphere/render.cpp), and the host
  * compiles the same text in double with GLM's vector types and a bilinear/trilinear filter with
  * the GPU's texel-centre and clamp-to-edge rules (src/kinds/atmosphere/shader_host.hpp): the previews, the scene check and the GL test's reference
  * are this code. Hence: vec2/vec3, scalars as real, sizes as real, no swizzles (.x .y .z only),
- * no `const` locals, flags as int, out-parameters as OUT(type).
+ * no `const` locals, flags as int, out-parameters as OUT(type), in-out ones as INOUT(type).
  *
  * Float32 safety. A camera is given by its altitude h above the ground (km) and the unit
  * vector `up` from the planet centre through it, not by a planet-centred position: at 6360 km
@@ -141,6 +141,44 @@ vec3 GetCombinedScattering3D(SpecbakeAtmosphere atm, sampler3D combined_texture,
 #endif
 
 /* ---- rendering ------------------------------------------------------------------------- */
+/* The camera at altitude h looking along `view`, as the functions below start: a camera in space
+ * moves along `view` to where the ray enters the top (up and h follow it, d_top is the distance
+ * moved, else 0). r is the camera's radius and mu the ray's cosine there; h is clamped to
+ * [0, t] after mu is taken. Returns 0 for a camera in space whose ray misses the atmosphere. */
+int SpecbakeEnterAtmosphere(SpecbakeAtmosphere atm, INOUT(vec3) up, INOUT(real) h, vec3 view, OUT(real) r,
+                            OUT(real) mu, OUT(real) d_top) {
+  real rb = atm.bottom_radius;
+  real t = atm.top_radius - rb;
+  r = rb + h;
+  real r_mu = r * dot(up, view);
+  real disc = r_mu * r_mu + top_gap2_of(rb, atm.top_radius, h);
+  d_top = disc >= R(0.0) ? -r_mu - sqrt(disc) : R(-1.0);
+  if (d_top > R(0.0)) {
+    up = normalize(up * r + view * d_top);
+    r_mu = -sqrt(disc);  /* = r_mu + d_top, without the cancellation near the limb */
+    r = atm.top_radius;
+    h = t;
+  } else {
+    d_top = R(0.0);
+    if (h > t) return 0;
+  }
+  mu = clamp_cosine(r_mu / r);
+  h = clamp_real(h, R(0.0), t);
+  return 1;
+}
+/* The scattering and (in single_mie) single Mie lookups at the point a distance d along the ray
+ * that starts at altitude h, radius r, with cosines mu, mu_s and nu. */
+vec3 SpecbakeScatteringAlong(SpecbakeAtmosphere atm, SpecbakeScatteringSampler scattering_texture,
+                             SpecbakeScatteringSampler single_mie_scattering_texture, real h, real r, real mu,
+                             real mu_s, real nu, real d, int ground, OUT(vec3) single_mie) {
+  real h_p = clamp_real(altitude_after(atm.bottom_radius, h, mu, d), R(0.0), atm.top_radius - atm.bottom_radius);
+  real r_p = atm.bottom_radius + h_p;
+  real mu_p = clamp_cosine((r * mu + d) / r_p);
+  real mu_s_p = clamp_cosine((r * mu_s + d * nu) / r_p);
+  single_mie = GetScattering(atm, single_mie_scattering_texture, h_p, mu_p, mu_s_p, nu, ground);
+  return GetScattering(atm, scattering_texture, h_p, mu_p, mu_s_p, nu, ground);
+}
+
 /* Sky radiance seen by a camera at altitude h (above the top: a camera in space) along the unit
  * vector `view`, sun along the unit vector `sun`; `transmittance` to the top of the atmosphere
  * (0 for rays that meet the ground, 1 for rays from space that miss the atmosphere). Light
@@ -148,27 +186,16 @@ vec3 GetCombinedScattering3D(SpecbakeAtmosphere atm, sampler3D combined_texture,
 vec3 GetSkyRadiance(SpecbakeAtmosphere atm, sampler2D transmittance_texture,
                     SpecbakeScatteringSampler scattering_texture, SpecbakeScatteringSampler single_mie_scattering_texture,
                     vec3 up, real h, vec3 view, real shadow_length, vec3 sun, OUT(vec3) transmittance) {
-  real rb = atm.bottom_radius;
-  real t = atm.top_radius - rb;
-  real r = rb + h;
-  real r_mu = r * dot(up, view);
-  /* a camera in space moves along `view` to where the ray enters the top */
-  real disc = r_mu * r_mu + top_gap2_of(rb, atm.top_radius, h);
-  real d_top = disc >= R(0.0) ? -r_mu - sqrt(disc) : R(-1.0);
-  if (d_top > R(0.0)) {
-    up = normalize(up * r + view * d_top);
-    r_mu = -sqrt(disc);  /* = r_mu + d_top, without the cancellation near the limb */
-    r = atm.top_radius;
-    h = t;
-  } else if (h > t) {
+  real r;
+  real mu;
+  real d_top;
+  if (SpecbakeEnterAtmosphere(atm, up, h, view, r, mu, d_top) == 0) {
     transmittance = vec3(R(1.0));
     return vec3(R(0.0));
   }
-  h = clamp_real(h, R(0.0), t);
-  real mu = clamp_cosine(r_mu / r);
   real mu_s = clamp_cosine(dot(up, sun));
   real nu = clamp_cosine(dot(view, sun));
-  int ground = ray_meets_ground(rb, h, mu);
+  int ground = ray_meets_ground(atm.bottom_radius, h, mu);
   transmittance = ground != 0 ? vec3(R(0.0)) : GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h, mu);
   vec3 s;
   vec3 m;
@@ -176,14 +203,10 @@ vec3 GetSkyRadiance(SpecbakeAtmosphere atm, sampler2D transmittance_texture,
     s = GetScattering(atm, scattering_texture, h, mu, mu_s, nu, ground);
     m = GetScattering(atm, single_mie_scattering_texture, h, mu, mu_s, nu, ground);
   } else {
-    real d = shadow_length;
-    real h_p = clamp_real(altitude_after(rb, h, mu, d), R(0.0), t);
-    real r_p = rb + h_p;
-    real mu_p = clamp_cosine((r * mu + d) / r_p);
-    real mu_s_p = clamp_cosine((r * mu_s + d * nu) / r_p);
-    vec3 t_shadow = GetTransmittance(atm, transmittance_texture, h, mu, d, ground);
-    s = GetScattering(atm, scattering_texture, h_p, mu_p, mu_s_p, nu, ground) * t_shadow;
-    m = GetScattering(atm, single_mie_scattering_texture, h_p, mu_p, mu_s_p, nu, ground) * t_shadow;
+    vec3 t_shadow = GetTransmittance(atm, transmittance_texture, h, mu, shadow_length, ground);
+    s = SpecbakeScatteringAlong(atm, scattering_texture, single_mie_scattering_texture, h, r, mu, mu_s, nu,
+                                shadow_length, ground, m) * t_shadow;
+    m = m * t_shadow;
   }
   return s * rayleigh_phase(nu) + m * mie_phase(atm.mie_g, nu);
 }
@@ -195,39 +218,26 @@ vec3 GetSkyRadianceToPoint(SpecbakeAtmosphere atm, sampler2D transmittance_textu
                            SpecbakeScatteringSampler scattering_texture,
                            SpecbakeScatteringSampler single_mie_scattering_texture, vec3 up, real h, vec3 to_point,
                            real shadow_length, vec3 sun, OUT(vec3) transmittance) {
-  real rb = atm.bottom_radius;
-  real t = atm.top_radius - rb;
   real d = length(to_point);
   vec3 view = to_point / d;
-  real r = rb + h;
-  real r_mu = r * dot(up, view);
-  real disc = r_mu * r_mu + top_gap2_of(rb, atm.top_radius, h);
-  real d_top = disc >= R(0.0) ? -r_mu - sqrt(disc) : R(-1.0);
-  if (d_top > R(0.0)) {
-    up = normalize(up * r + view * d_top);
-    r_mu = -sqrt(disc);  /* = r_mu + d_top, without the cancellation near the limb */
-    r = atm.top_radius;
-    h = t;
-    d = fmax(d - d_top, R(0.0));
-  } else if (h > t) {  /* from space, a ray that misses the atmosphere */
+  real r;
+  real mu;
+  real d_top;
+  if (SpecbakeEnterAtmosphere(atm, up, h, view, r, mu, d_top) == 0) {  /* from space, past the atmosphere */
     transmittance = vec3(R(1.0));
     return vec3(R(0.0));
   }
-  h = clamp_real(h, R(0.0), t);
-  real mu = clamp_cosine(r_mu / r);
+  d = fmax(d - d_top, R(0.0));
   real mu_s = clamp_cosine(dot(up, sun));
   real nu = clamp_cosine(dot(view, sun));
-  int ground = ray_meets_ground(rb, h, mu);
+  int ground = ray_meets_ground(atm.bottom_radius, h, mu);
   transmittance = GetTransmittance(atm, transmittance_texture, h, mu, d, ground);
   vec3 s = GetScattering(atm, scattering_texture, h, mu, mu_s, nu, ground);
   vec3 m = GetScattering(atm, single_mie_scattering_texture, h, mu, mu_s, nu, ground);
   d = fmax(d - shadow_length, R(0.0));
-  real h_p = clamp_real(altitude_after(rb, h, mu, d), R(0.0), t);
-  real r_p = rb + h_p;
-  real mu_p = clamp_cosine((r * mu + d) / r_p);
-  real mu_s_p = clamp_cosine((r * mu_s + d * nu) / r_p);
-  vec3 s_p = GetScattering(atm, scattering_texture, h_p, mu_p, mu_s_p, nu, ground);
-  vec3 m_p = GetScattering(atm, single_mie_scattering_texture, h_p, mu_p, mu_s_p, nu, ground);
+  vec3 m_p;
+  vec3 s_p = SpecbakeScatteringAlong(atm, scattering_texture, single_mie_scattering_texture, h, r, mu, mu_s, nu, d,
+                                     ground, m_p);
   vec3 t_shadow = shadow_length > R(0.0) ? GetTransmittance(atm, transmittance_texture, h, mu, d, ground) : transmittance;
   real fade = smooth_step(R(0.0), R(0.01), mu_s);
   s = s - t_shadow * s_p;

@@ -452,14 +452,6 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
 // single Mie's red in alpha (Bruneton's combined textures), and single Mie's other channels are
 // rebuilt in the shader (GetCombinedScattering3D). What that rebuild costs is measured at every
 // texel from the float32 data and recorded (reported, not judged: it is the model's choice).
-// The q-quantile of v (nearest rank; 0 when empty).
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size())));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
-}
-
 void combined_ktx2_file(const AtmosphereSpec& spec, const Luts& L, const std::string& units, const std::string& param,
                         const std::string& sizes, BakeResult& r) {
   const Sizes& s = L.model.sizes;
@@ -488,6 +480,7 @@ void combined_ktx2_file(const AtmosphereSpec& spec, const Luts& L, const std::st
       }
     }
   }
+  const ErrorSummary summary = summarize_errors(errors);
   const std::uint32_t wd = static_cast<std::uint32_t>(s.scattering_width());
   const std::string layout = "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r; RGB = scattering, A = single Mie red";
   add_ktx2_file(spec.ktx2,
@@ -499,10 +492,10 @@ void combined_ktx2_file(const AtmosphereSpec& spec, const Luts& L, const std::st
   r.accuracy.push_back(Accuracy::judged(
       "rgba_combined:single_mie", "max relative error of single Mie's green and blue rebuilt from the combined texture",
       worst, std::nullopt, "single_mie_scattering.bin (float32)",
-      {{"values_counted", errors.size()},
+      {{"values_counted", summary.count},
        {"floor", "green and blue values of single Mie at least 1e-3 of its largest value"},
-       {"median_relative_error", quantile(errors, 0.5)},
-       {"p99_relative_error", quantile(errors, 0.99)},
+       {"median_relative_error", summary.median},
+       {"p99_relative_error", summary.p99},
        {"worst_texel", worst_at},
        {"formula", "s_c * m_r / s_r * (beta_R,r / beta_M,r) * (beta_M,c / beta_R,c) (lookup.cl, extrapolated_single_mie)"}}));
 }

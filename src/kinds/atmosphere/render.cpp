@@ -134,7 +134,7 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
   if (!layout_3d) o << "#ifndef SPECBAKE_SCATTERING_TILED2D\n#define SPECBAKE_SCATTERING_TILED2D\n#endif\n";
   o << "\n" << glsl_subset_prelude()
     << "#define TEXTURE_RGB(s, uv) texture(s, uv).rgb\n#define TEXTURE_RGBA(s, uv) texture(s, uv)\n"
-    << "#define OUT(T) out T\n\n"
+    << "#define OUT(T) out T\n#define INOUT(T) inout T\n\n"
     << glsl_shared_source("kernels/atmosphere/lookup.cl") << "\n"
     << glsl_shared_source("kernels/atmosphere/render.glsl") << "\n"
     << "const SpecbakeAtmosphere SPECBAKE_ATMOSPHERE = SpecbakeAtmosphere(\n"
@@ -150,7 +150,7 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
     << "    " << f(s.transmittance_w) << ", " << f(s.transmittance_h) << ", " << f(s.irradiance_w) << ", "
     << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
     << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ");  // R, MU, MU_S, NU\n"
-    << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef TEXTURE_RGBA\n#undef OUT\n"
+    << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef TEXTURE_RGBA\n#undef OUT\n#undef INOUT\n"
     << "#endif\n";
   return o.str();
 }

@@ -150,7 +150,9 @@ ErrorSummary summarize_errors(std::vector<double> v) {
   if (v.empty()) return s;
   std::sort(v.begin(), v.end());
   s.max = v.back();
-  s.p99 = v[static_cast<std::size_t>(std::ceil(0.99 * static_cast<double>(v.size()))) - 1];
+  const auto rank = [&](double q) { return v[static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size()))) - 1]; };
+  s.median = rank(0.5);
+  s.p99 = rank(0.99);
   double sum = 0.0;
   for (double x : v) sum += x;
   s.mean = sum / static_cast<double>(v.size());

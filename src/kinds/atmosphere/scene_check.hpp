@@ -35,9 +35,9 @@ namespace specbake::atmosphere {
 // that glows where the truth is dark counts); NaN when that is not > 0.
 double displayed_de2000(const Vec3& test_luminance_rgb, const Vec3& reference_luminance_rgb, double y_floor = 0.0);
 
-// max, 99th percentile (nearest rank) and mean of the finite values; count of them.
+// max, median and 99th percentile (nearest rank) and mean of the finite values; count of them.
 struct ErrorSummary {
-  double max = 0.0, p99 = 0.0, mean = 0.0;
+  double max = 0.0, median = 0.0, p99 = 0.0, mean = 0.0;
   std::size_t count = 0;
 };
 ErrorSummary summarize_errors(std::vector<double> values);

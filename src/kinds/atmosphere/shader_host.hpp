@@ -101,11 +101,13 @@ namespace {
 #define TEXTURE_RGB(s, uv) texture_rgb(s, uv)
 #define TEXTURE_RGBA(s, uv) texture_rgba(s, uv)
 #define OUT(T) T&
+#define INOUT(T) T&
 #include "atmosphere/lookup.cl"
 #include "atmosphere/render.glsl"
 #undef TEXTURE_RGB
 #undef TEXTURE_RGBA
 #undef OUT
+#undef INOUT
 #undef GetScattering
 #undef SpecbakeScatteringSampler
 
