@@ -70,14 +70,23 @@ vec3 GetIrradiance(SpecbakeAtmosphere atm, sampler2D irradiance_texture, real h,
                  irradiance_v_at(atm.bottom_radius, atm.top_radius, h, atm.irradiance_h));
   return TEXTURE_RGB(irradiance_texture, uv);
 }
+/* The scattering textures' coordinates of (h, mu, mu_s, nu): x the continuous nu slice in
+ * [0, NU − 1] (corner-sampled), then u_mu_s, u_mu and u_r (lookup.cl). */
+vec4 SpecbakeScatteringUvwz(SpecbakeAtmosphere atm, real h, real mu, real mu_s, real nu, int meets_ground) {
+  return vec4(clamp_real(scattering_u_nu_at(nu), R(0.0), R(1.0)) * (atm.nu_size - R(1.0)),
+              scattering_u_mu_s_at(atm.bottom_radius, atm.top_radius, mu_s, atm.mu_s_min, atm.mu_s_size),
+              scattering_u_mu_at(atm.bottom_radius, atm.top_radius, h, mu, meets_ground, atm.mu_size),
+              scattering_u_r_at(atm.bottom_radius, atm.top_radius, h, atm.r_size));
+}
 /* The 3D layout: two trilinear lookups around nu (corner-sampled, divisor NU − 1); u_mu_s keeps
  * half a texel from each slice's edges, so the filter never mixes two nu slices. */
 vec3 GetScattering3D(SpecbakeAtmosphere atm, sampler3D scattering_texture, real h, real mu, real mu_s, real nu,
                      int meets_ground) {
-  real u_mu_s = scattering_u_mu_s_at(atm.bottom_radius, atm.top_radius, mu_s, atm.mu_s_min, atm.mu_s_size);
-  real u_mu = scattering_u_mu_at(atm.bottom_radius, atm.top_radius, h, mu, meets_ground, atm.mu_size);
-  real u_r = scattering_u_r_at(atm.bottom_radius, atm.top_radius, h, atm.r_size);
-  real x = clamp_real(scattering_u_nu_at(nu), R(0.0), R(1.0)) * (atm.nu_size - R(1.0));
+  vec4 uvwz = SpecbakeScatteringUvwz(atm, h, mu, mu_s, nu, meets_ground);
+  real u_mu_s = uvwz.y;
+  real u_mu = uvwz.z;
+  real u_r = uvwz.w;
+  real x = uvwz.x;
   real x0 = floor(x);
   real f = x - x0;
   vec3 v0 = TEXTURE_RGB(scattering_texture, vec3((x0 + u_mu_s) / atm.nu_size, u_mu, u_r));
@@ -88,10 +97,11 @@ vec3 GetScattering3D(SpecbakeAtmosphere atm, sampler3D scattering_texture, real 
  * filtering covers mu_s and mu; r and nu are interpolated here, from 4 fetches. */
 vec3 GetScatteringTiled2D(SpecbakeAtmosphere atm, sampler2D scattering_texture, real h, real mu, real mu_s, real nu,
                           int meets_ground) {
-  real u_mu_s = scattering_u_mu_s_at(atm.bottom_radius, atm.top_radius, mu_s, atm.mu_s_min, atm.mu_s_size);
-  real u_mu = scattering_u_mu_at(atm.bottom_radius, atm.top_radius, h, mu, meets_ground, atm.mu_size);
-  real u_r = scattering_u_r_at(atm.bottom_radius, atm.top_radius, h, atm.r_size);
-  real x = clamp_real(scattering_u_nu_at(nu), R(0.0), R(1.0)) * (atm.nu_size - R(1.0));
+  vec4 uvwz = SpecbakeScatteringUvwz(atm, h, mu, mu_s, nu, meets_ground);
+  real u_mu_s = uvwz.y;
+  real u_mu = uvwz.z;
+  real u_r = uvwz.w;
+  real x = uvwz.x;
   real s0 = floor(x);
   real f = x - s0;
   real s1 = fmin(s0 + R(1.0), atm.nu_size - R(1.0));
@@ -113,10 +123,11 @@ vec3 GetScatteringTiled2D(SpecbakeAtmosphere atm, sampler2D scattering_texture, 
  * `single_mie` (extrapolated_single_mie, lookup.cl). Two RGBA lookups around nu, as GetScattering3D. */
 vec3 GetCombinedScattering3D(SpecbakeAtmosphere atm, sampler3D combined_texture, real h, real mu, real mu_s, real nu,
                              int meets_ground, OUT(vec3) single_mie) {
-  real u_mu_s = scattering_u_mu_s_at(atm.bottom_radius, atm.top_radius, mu_s, atm.mu_s_min, atm.mu_s_size);
-  real u_mu = scattering_u_mu_at(atm.bottom_radius, atm.top_radius, h, mu, meets_ground, atm.mu_size);
-  real u_r = scattering_u_r_at(atm.bottom_radius, atm.top_radius, h, atm.r_size);
-  real x = clamp_real(scattering_u_nu_at(nu), R(0.0), R(1.0)) * (atm.nu_size - R(1.0));
+  vec4 uvwz = SpecbakeScatteringUvwz(atm, h, mu, mu_s, nu, meets_ground);
+  real u_mu_s = uvwz.y;
+  real u_mu = uvwz.z;
+  real u_r = uvwz.w;
+  real x = uvwz.x;
   real x0 = floor(x);
   real f = x - x0;
   vec4 v0 = TEXTURE_RGBA(combined_texture, vec3((x0 + u_mu_s) / atm.nu_size, u_mu, u_r));
