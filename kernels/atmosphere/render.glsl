@@ -23,15 +23,47 @@
  * 3D (width NU·MU_S, height MU, depth R) or tiled 2D (width R·NU·MU_S, height MU).
  */
 
+/* Two builds of this text. Default: the RGB textures (R, G, B at three wavelengths or
+ * luminance), vec3 values, scattering in the 3D or tiled 2D layout. SPECBAKE_SPECTRAL (defined
+ * with SPECBAKE_WAVELENGTH_SETS by sampling_spectral.glsl, `spectrum: {store: radiance}`):
+ * radiance at stored wavelengths, four per RGBA texel (a wavelength set), each set a layer of
+ * 2D array textures (scattering in the tiled 2D layout: GL and Vulkan have no 3D arrays); the
+ * same functions return the vec4 of the set atm.layer, and the ...AtWavelength functions at the
+ * end interpolate one wavelength between sets. */
+#ifdef SPECBAKE_SPECTRAL
+#define SpecbakeRadiance vec4
+#define SpecbakeSampler2D sampler2DArray
+#define SPECBAKE_CHANNELS 4
+#define SPECBAKE_FETCH(s, uv) TEXTURE_LAYER(s, uv, atm.layer)
+#define SPECBAKE_SOLAR_IRRADIANCE(atm) atm.solar_irradiance[int(atm.layer)]
+#ifndef SPECBAKE_SCATTERING_TILED2D
+#define SPECBAKE_SCATTERING_TILED2D
+#endif
+#else
+#define SpecbakeRadiance vec3
+#define SpecbakeSampler2D sampler2D
+#define SPECBAKE_CHANNELS 3
+#define SPECBAKE_FETCH(s, uv) TEXTURE_RGB(s, uv)
+#define SPECBAKE_SOLAR_IRRADIANCE(atm) atm.solar_irradiance
+#endif
+
 struct SpecbakeAtmosphere {
   real bottom_radius;       /* rb, km */
   real top_radius;          /* rt, km */
   real mu_s_min;            /* the scattering texture's lowest sun cosine */
   real sun_angular_radius;  /* rad */
   real mie_g;               /* Cornette–Shanks asymmetry */
+#ifdef SPECBAKE_SPECTRAL
+  real layer;               /* the wavelength set the lookups read: layer of the array textures */
+  real lambda_first;        /* nm: stored wavelength i is lambda_first + i lambda_step, i < lambda_count */
+  real lambda_step;
+  real lambda_count;
+  SpecbakeRadiance solar_irradiance[SPECBAKE_WAVELENGTH_SETS]; /* per set, at the top of the atmosphere */
+#else
   vec3 solar_irradiance;    /* at the top of the atmosphere */
   vec3 rayleigh_scattering; /* km⁻¹ at density 1, per channel (combined textures' extrapolation) */
   vec3 mie_scattering;      /* km⁻¹ */
+#endif
   real transmittance_w;
   real transmittance_h;
   real irradiance_w;
@@ -43,32 +75,39 @@ struct SpecbakeAtmosphere {
 };
 
 /* ---- texture lookups ------------------------------------------------------------------- */
-vec3 GetTransmittanceToTopAtmosphereBoundary(SpecbakeAtmosphere atm, sampler2D transmittance_texture, real h, real mu) {
+SpecbakeRadiance GetTransmittanceToTopAtmosphereBoundary(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture,
+                                                        real h, real mu) {
   vec2 uv = vec2(transmittance_u_at(atm.bottom_radius, atm.top_radius, h, mu, atm.transmittance_w),
                  transmittance_v_at(atm.bottom_radius, atm.top_radius, h, atm.transmittance_h));
-  return TEXTURE_RGB(transmittance_texture, uv);
+  return SPECBAKE_FETCH(transmittance_texture, uv);
 }
 /* Transmittance between altitude h and the point a distance d along mu, from two lookups; rays
  * that meet the ground use the reversed (upward) segments so that no lookup crosses it. */
-vec3 GetTransmittance(SpecbakeAtmosphere atm, sampler2D transmittance_texture, real h, real mu, real d, int meets_ground) {
+SpecbakeRadiance GetTransmittance(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture, real h, real mu, real d,
+                                  int meets_ground) {
   real h_d = altitude_along_ray(atm.bottom_radius, atm.top_radius, h, mu, d, meets_ground);
   real mu_d = cosine_along_ray(atm.bottom_radius, h, mu, d, meets_ground, h_d);
-  vec3 start_end = GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h, meets_ground != 0 ? -mu : mu);
-  vec3 far_end = GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h_d, meets_ground != 0 ? -mu_d : mu_d);
-  vec3 num = meets_ground != 0 ? far_end : start_end;
-  vec3 den = meets_ground != 0 ? start_end : far_end;
-  return vec3(ratio_or_zero(num.x, den.x), ratio_or_zero(num.y, den.y), ratio_or_zero(num.z, den.z));
+  SpecbakeRadiance start_end =
+      GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h, meets_ground != 0 ? -mu : mu);
+  SpecbakeRadiance far_end =
+      GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h_d, meets_ground != 0 ? -mu_d : mu_d);
+  SpecbakeRadiance num = meets_ground != 0 ? far_end : start_end;
+  SpecbakeRadiance den = meets_ground != 0 ? start_end : far_end;
+  SpecbakeRadiance ratio = num;
+  for (int c = 0; c < SPECBAKE_CHANNELS; ++c) ratio[c] = ratio_or_zero(num[c], den[c]);
+  return ratio;
 }
 /* Transmittance to the sun times the fraction of its disc above the horizon. */
-vec3 GetTransmittanceToSun(SpecbakeAtmosphere atm, sampler2D transmittance_texture, real h, real mu_s) {
+SpecbakeRadiance GetTransmittanceToSun(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture, real h,
+                                       real mu_s) {
   return GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h, mu_s) *
          sun_visible_at(atm.bottom_radius, atm.sun_angular_radius, h, mu_s);
 }
 /* The sky part of the irradiance on a horizontal surface at altitude h. */
-vec3 GetIrradiance(SpecbakeAtmosphere atm, sampler2D irradiance_texture, real h, real mu_s) {
+SpecbakeRadiance GetIrradiance(SpecbakeAtmosphere atm, SpecbakeSampler2D irradiance_texture, real h, real mu_s) {
   vec2 uv = vec2(irradiance_u_at(mu_s, atm.irradiance_w),
                  irradiance_v_at(atm.bottom_radius, atm.top_radius, h, atm.irradiance_h));
-  return TEXTURE_RGB(irradiance_texture, uv);
+  return SPECBAKE_FETCH(irradiance_texture, uv);
 }
 /* The scattering textures' coordinates of (h, mu, mu_s, nu): x the continuous nu slice in
  * [0, NU − 1] (corner-sampled), then u_mu_s, u_mu and u_r (lookup.cl). */
@@ -78,6 +117,7 @@ vec4 SpecbakeScatteringUvwz(SpecbakeAtmosphere atm, real h, real mu, real mu_s, 
               scattering_u_mu_at(atm.bottom_radius, atm.top_radius, h, mu, meets_ground, atm.mu_size),
               scattering_u_r_at(atm.bottom_radius, atm.top_radius, h, atm.r_size));
 }
+#ifndef SPECBAKE_SPECTRAL
 /* The 3D layout: two trilinear lookups around nu (corner-sampled, divisor NU − 1); u_mu_s keeps
  * half a texel from each slice's edges, so the filter never mixes two nu slices. */
 vec3 GetScattering3D(SpecbakeAtmosphere atm, sampler3D scattering_texture, real h, real mu, real mu_s, real nu,
@@ -93,10 +133,11 @@ vec3 GetScattering3D(SpecbakeAtmosphere atm, sampler3D scattering_texture, real 
   vec3 v1 = TEXTURE_RGB(scattering_texture, vec3((x0 + R(1.0) + u_mu_s) / atm.nu_size, u_mu, u_r));
   return v0 * (R(1.0) - f) + v1 * f;
 }
+#endif
 /* The tiled 2D layout (column = r_index·NU·MU_S + nu_slice·MU_S + mu_s_index): bilinear
  * filtering covers mu_s and mu; r and nu are interpolated here, from 4 fetches. */
-vec3 GetScatteringTiled2D(SpecbakeAtmosphere atm, sampler2D scattering_texture, real h, real mu, real mu_s, real nu,
-                          int meets_ground) {
+SpecbakeRadiance GetScatteringTiled2D(SpecbakeAtmosphere atm, SpecbakeSampler2D scattering_texture, real h, real mu,
+                                      real mu_s, real nu, int meets_ground) {
   vec4 uvwz = SpecbakeScatteringUvwz(atm, h, mu, mu_s, nu, meets_ground);
   real u_mu_s = uvwz.y;
   real u_mu = uvwz.z;
@@ -111,13 +152,14 @@ vec3 GetScatteringTiled2D(SpecbakeAtmosphere atm, sampler2D scattering_texture, 
   real k0 = clamp_real(k0f, R(0.0), atm.r_size - R(1.0));
   real k1 = clamp_real(k0f + R(1.0), R(0.0), atm.r_size - R(1.0));
   real tiles = atm.r_size * atm.nu_size;
-  vec3 a00 = TEXTURE_RGB(scattering_texture, vec2((k0 * atm.nu_size + s0 + u_mu_s) / tiles, u_mu));
-  vec3 a01 = TEXTURE_RGB(scattering_texture, vec2((k0 * atm.nu_size + s1 + u_mu_s) / tiles, u_mu));
-  vec3 a10 = TEXTURE_RGB(scattering_texture, vec2((k1 * atm.nu_size + s0 + u_mu_s) / tiles, u_mu));
-  vec3 a11 = TEXTURE_RGB(scattering_texture, vec2((k1 * atm.nu_size + s1 + u_mu_s) / tiles, u_mu));
+  SpecbakeRadiance a00 = SPECBAKE_FETCH(scattering_texture, vec2((k0 * atm.nu_size + s0 + u_mu_s) / tiles, u_mu));
+  SpecbakeRadiance a01 = SPECBAKE_FETCH(scattering_texture, vec2((k0 * atm.nu_size + s1 + u_mu_s) / tiles, u_mu));
+  SpecbakeRadiance a10 = SPECBAKE_FETCH(scattering_texture, vec2((k1 * atm.nu_size + s0 + u_mu_s) / tiles, u_mu));
+  SpecbakeRadiance a11 = SPECBAKE_FETCH(scattering_texture, vec2((k1 * atm.nu_size + s1 + u_mu_s) / tiles, u_mu));
   return (a00 * (R(1.0) - f) + a01 * f) * (R(1.0) - g) + (a10 * (R(1.0) - f) + a11 * f) * g;
 }
 
+#ifndef SPECBAKE_SPECTRAL
 /* The 3D layout of `ktx2: {scattering: rgba-combined}` (scattering.ktx2): RGB the scattering
  * texture, alpha single Mie's red channel; returns the scattering and rebuilds single Mie in
  * `single_mie` (extrapolated_single_mie, lookup.cl). Two RGBA lookups around nu, as GetScattering3D. */
@@ -140,11 +182,12 @@ vec3 GetCombinedScattering3D(SpecbakeAtmosphere atm, sampler3D combined_texture,
                     extrapolated_single_mie(c.z, c.x, c.w, b_r.x, b_m.x, b_r.z, b_m.z));
   return vec3(c.x, c.y, c.z);
 }
+#endif
 
 /* GetScattering is the layout the includer picks: tiled 2D where SPECBAKE_SCATTERING_TILED2D is
  * defined, else 3D. */
 #ifdef SPECBAKE_SCATTERING_TILED2D
-#define SpecbakeScatteringSampler sampler2D
+#define SpecbakeScatteringSampler SpecbakeSampler2D
 #define GetScattering GetScatteringTiled2D
 #else
 #define SpecbakeScatteringSampler sampler3D
@@ -179,9 +222,10 @@ int SpecbakeEnterAtmosphere(SpecbakeAtmosphere atm, INOUT(vec3) up, INOUT(real) 
 }
 /* The scattering and (in single_mie) single Mie lookups at the point a distance d along the ray
  * that starts at altitude h, radius r, with cosines mu, mu_s and nu. */
-vec3 SpecbakeScatteringAlong(SpecbakeAtmosphere atm, SpecbakeScatteringSampler scattering_texture,
-                             SpecbakeScatteringSampler single_mie_scattering_texture, real h, real r, real mu,
-                             real mu_s, real nu, real d, int ground, OUT(vec3) single_mie) {
+SpecbakeRadiance SpecbakeScatteringAlong(SpecbakeAtmosphere atm, SpecbakeScatteringSampler scattering_texture,
+                                         SpecbakeScatteringSampler single_mie_scattering_texture, real h, real r,
+                                         real mu, real mu_s, real nu, real d, int ground,
+                                         OUT(SpecbakeRadiance) single_mie) {
   real h_p = clamp_real(altitude_after(atm.bottom_radius, h, mu, d), R(0.0), atm.top_radius - atm.bottom_radius);
   real r_p = atm.bottom_radius + h_p;
   real mu_p = clamp_cosine((r * mu + d) / r_p);
@@ -194,27 +238,28 @@ vec3 SpecbakeScatteringAlong(SpecbakeAtmosphere atm, SpecbakeScatteringSampler s
  * vector `view`, sun along the unit vector `sun`; `transmittance` to the top of the atmosphere
  * (0 for rays that meet the ground, 1 for rays from space that miss the atmosphere). Light
  * shafts: `shadow_length` km of the ray nearest the camera are left out. */
-vec3 GetSkyRadiance(SpecbakeAtmosphere atm, sampler2D transmittance_texture,
-                    SpecbakeScatteringSampler scattering_texture, SpecbakeScatteringSampler single_mie_scattering_texture,
-                    vec3 up, real h, vec3 view, real shadow_length, vec3 sun, OUT(vec3) transmittance) {
+SpecbakeRadiance GetSkyRadiance(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture,
+                                SpecbakeScatteringSampler scattering_texture,
+                                SpecbakeScatteringSampler single_mie_scattering_texture, vec3 up, real h, vec3 view,
+                                real shadow_length, vec3 sun, OUT(SpecbakeRadiance) transmittance) {
   real r;
   real mu;
   real d_top;
   if (SpecbakeEnterAtmosphere(atm, up, h, view, r, mu, d_top) == 0) {
-    transmittance = vec3(R(1.0));
-    return vec3(R(0.0));
+    transmittance = SpecbakeRadiance(R(1.0));
+    return SpecbakeRadiance(R(0.0));
   }
   real mu_s = clamp_cosine(dot(up, sun));
   real nu = clamp_cosine(dot(view, sun));
   int ground = ray_meets_ground(atm.bottom_radius, h, mu);
-  transmittance = ground != 0 ? vec3(R(0.0)) : GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h, mu);
-  vec3 s;
-  vec3 m;
+  transmittance = ground != 0 ? SpecbakeRadiance(R(0.0)) : GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, h, mu);
+  SpecbakeRadiance s;
+  SpecbakeRadiance m;
   if (shadow_length == R(0.0)) {
     s = GetScattering(atm, scattering_texture, h, mu, mu_s, nu, ground);
     m = GetScattering(atm, single_mie_scattering_texture, h, mu, mu_s, nu, ground);
   } else {
-    vec3 t_shadow = GetTransmittance(atm, transmittance_texture, h, mu, shadow_length, ground);
+    SpecbakeRadiance t_shadow = GetTransmittance(atm, transmittance_texture, h, mu, shadow_length, ground);
     s = SpecbakeScatteringAlong(atm, scattering_texture, single_mie_scattering_texture, h, r, mu, mu_s, nu,
                                 shadow_length, ground, m) * t_shadow;
     m = m * t_shadow;
@@ -225,31 +270,32 @@ vec3 GetSkyRadiance(SpecbakeAtmosphere atm, sampler2D transmittance_texture,
 /* Sky radiance between a camera at altitude h and a point `to_point` km away from it (both in
  * or on the atmosphere), and the transmittance between them. Single Mie fades out as the sun
  * sets, as in the reference, to hide its artefacts there. */
-vec3 GetSkyRadianceToPoint(SpecbakeAtmosphere atm, sampler2D transmittance_texture,
-                           SpecbakeScatteringSampler scattering_texture,
-                           SpecbakeScatteringSampler single_mie_scattering_texture, vec3 up, real h, vec3 to_point,
-                           real shadow_length, vec3 sun, OUT(vec3) transmittance) {
+SpecbakeRadiance GetSkyRadianceToPoint(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture,
+                                       SpecbakeScatteringSampler scattering_texture,
+                                       SpecbakeScatteringSampler single_mie_scattering_texture, vec3 up, real h,
+                                       vec3 to_point, real shadow_length, vec3 sun,
+                                       OUT(SpecbakeRadiance) transmittance) {
   real d = length(to_point);
   vec3 view = to_point / d;
   real r;
   real mu;
   real d_top;
   if (SpecbakeEnterAtmosphere(atm, up, h, view, r, mu, d_top) == 0) {  /* from space, past the atmosphere */
-    transmittance = vec3(R(1.0));
-    return vec3(R(0.0));
+    transmittance = SpecbakeRadiance(R(1.0));
+    return SpecbakeRadiance(R(0.0));
   }
   d = fmax(d - d_top, R(0.0));
   real mu_s = clamp_cosine(dot(up, sun));
   real nu = clamp_cosine(dot(view, sun));
   int ground = ray_meets_ground(atm.bottom_radius, h, mu);
   transmittance = GetTransmittance(atm, transmittance_texture, h, mu, d, ground);
-  vec3 s = GetScattering(atm, scattering_texture, h, mu, mu_s, nu, ground);
-  vec3 m = GetScattering(atm, single_mie_scattering_texture, h, mu, mu_s, nu, ground);
+  SpecbakeRadiance s = GetScattering(atm, scattering_texture, h, mu, mu_s, nu, ground);
+  SpecbakeRadiance m = GetScattering(atm, single_mie_scattering_texture, h, mu, mu_s, nu, ground);
   d = fmax(d - shadow_length, R(0.0));
-  vec3 m_p;
-  vec3 s_p = SpecbakeScatteringAlong(atm, scattering_texture, single_mie_scattering_texture, h, r, mu, mu_s, nu, d,
+  SpecbakeRadiance m_p;
+  SpecbakeRadiance s_p = SpecbakeScatteringAlong(atm, scattering_texture, single_mie_scattering_texture, h, r, mu, mu_s, nu, d,
                                      ground, m_p);
-  vec3 t_shadow = shadow_length > R(0.0) ? GetTransmittance(atm, transmittance_texture, h, mu, d, ground) : transmittance;
+  SpecbakeRadiance t_shadow = shadow_length > R(0.0) ? GetTransmittance(atm, transmittance_texture, h, mu, d, ground) : transmittance;
   real fade = smooth_step(R(0.0), R(0.01), mu_s);
   s = s - t_shadow * s_p;
   m = (m - t_shadow * m_p) * fade;
@@ -259,11 +305,99 @@ vec3 GetSkyRadianceToPoint(SpecbakeAtmosphere atm, sampler2D transmittance_textu
 /* Sun and sky irradiance on a surface at altitude h (up: the local vertical) with unit `normal`:
  * returns the sun's part; `sky_irradiance` gets the sky's, from the irradiance texture scaled by
  * the fraction of the sky the tilted surface sees. */
-vec3 GetSunAndSkyIrradiance(SpecbakeAtmosphere atm, sampler2D transmittance_texture, sampler2D irradiance_texture,
-                            vec3 up, real h, vec3 normal, vec3 sun, OUT(vec3) sky_irradiance) {
+SpecbakeRadiance GetSunAndSkyIrradiance(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture,
+                                        SpecbakeSampler2D irradiance_texture, vec3 up, real h, vec3 normal, vec3 sun,
+                                        OUT(SpecbakeRadiance) sky_irradiance) {
   h = clamp_real(h, R(0.0), atm.top_radius - atm.bottom_radius);
   real mu_s = clamp_cosine(dot(up, sun));
   sky_irradiance = GetIrradiance(atm, irradiance_texture, h, mu_s) * ((R(1.0) + dot(normal, up)) * R(0.5));
-  return atm.solar_irradiance * GetTransmittanceToSun(atm, transmittance_texture, h, mu_s) *
+  return SPECBAKE_SOLAR_IRRADIANCE(atm) * GetTransmittanceToSun(atm, transmittance_texture, h, mu_s) *
          fmax(dot(normal, sun), R(0.0));
 }
+
+#ifdef SPECBAKE_SPECTRAL
+/* ---- one wavelength -------------------------------------------------------------------- */
+/* A spectral renderer's lookups at any wavelength lambda (nm): the functions above at the sets
+ * holding the two stored wavelengths around lambda, interpolated linearly between them (outside
+ * the stored range: the nearest stored wavelength). The bundle's manifest records what this
+ * interpolation costs against a bake at wavelengths between the stored ones. */
+
+/* Where lambda (nm) falls among the stored wavelengths lambda_first + i lambda_step: x, y the
+ * stored indices around it (y = x at the end), z the weight of y, w 1 when y is in another set. */
+vec4 SpecbakeWavelengthTaps(SpecbakeAtmosphere atm, real lambda) {
+  real x = clamp_real((lambda - atm.lambda_first) / atm.lambda_step, R(0.0), atm.lambda_count - R(1.0));
+  real i0 = floor(x);
+  real i1 = fmin(i0 + R(1.0), atm.lambda_count - R(1.0));
+  return vec4(i0, i1, x - i0, floor(i0 / R(4.0)) != floor(i1 / R(4.0)) ? R(1.0) : R(0.0));
+}
+/* atm reading the set (array layer) that holds stored wavelength i. */
+SpecbakeAtmosphere SpecbakeAtmosphereOfWavelength(SpecbakeAtmosphere atm, real i) {
+  SpecbakeAtmosphere a = atm;
+  a.layer = floor(i / R(4.0));
+  return a;
+}
+/* The value at the taps' wavelength from v0 (the set of taps.x) and v1 (the set of taps.y). */
+real SpecbakeMixWavelengths(SpecbakeRadiance v0, SpecbakeRadiance v1, vec4 taps) {
+  return v0[int(taps.x - R(4.0) * floor(taps.x / R(4.0)))] * (R(1.0) - taps.z) +
+         v1[int(taps.y - R(4.0) * floor(taps.y / R(4.0)))] * taps.z;
+}
+
+real GetSolarIrradianceAtWavelength(SpecbakeAtmosphere atm, real lambda) {
+  vec4 k = SpecbakeWavelengthTaps(atm, lambda);
+  return SpecbakeMixWavelengths(atm.solar_irradiance[int(floor(k.x / R(4.0)))],
+                                atm.solar_irradiance[int(floor(k.y / R(4.0)))], k);
+}
+
+real GetSkyRadianceAtWavelength(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture,
+                                SpecbakeSampler2D scattering_texture, SpecbakeSampler2D single_mie_scattering_texture,
+                                vec3 up, real h, vec3 view, real shadow_length, vec3 sun, real lambda,
+                                OUT(real) transmittance) {
+  vec4 k = SpecbakeWavelengthTaps(atm, lambda);
+  SpecbakeRadiance t0;
+  SpecbakeRadiance l0 = GetSkyRadiance(SpecbakeAtmosphereOfWavelength(atm, k.x), transmittance_texture,
+                                       scattering_texture, single_mie_scattering_texture, up, h, view, shadow_length,
+                                       sun, t0);
+  SpecbakeRadiance t1 = t0;
+  SpecbakeRadiance l1 = l0;
+  if (k.w != R(0.0))
+    l1 = GetSkyRadiance(SpecbakeAtmosphereOfWavelength(atm, k.y), transmittance_texture, scattering_texture,
+                        single_mie_scattering_texture, up, h, view, shadow_length, sun, t1);
+  transmittance = SpecbakeMixWavelengths(t0, t1, k);
+  return SpecbakeMixWavelengths(l0, l1, k);
+}
+
+real GetSkyRadianceToPointAtWavelength(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture,
+                                       SpecbakeSampler2D scattering_texture,
+                                       SpecbakeSampler2D single_mie_scattering_texture, vec3 up, real h,
+                                       vec3 to_point, real shadow_length, vec3 sun, real lambda,
+                                       OUT(real) transmittance) {
+  vec4 k = SpecbakeWavelengthTaps(atm, lambda);
+  SpecbakeRadiance t0;
+  SpecbakeRadiance l0 = GetSkyRadianceToPoint(SpecbakeAtmosphereOfWavelength(atm, k.x), transmittance_texture,
+                                              scattering_texture, single_mie_scattering_texture, up, h, to_point,
+                                              shadow_length, sun, t0);
+  SpecbakeRadiance t1 = t0;
+  SpecbakeRadiance l1 = l0;
+  if (k.w != R(0.0))
+    l1 = GetSkyRadianceToPoint(SpecbakeAtmosphereOfWavelength(atm, k.y), transmittance_texture, scattering_texture,
+                               single_mie_scattering_texture, up, h, to_point, shadow_length, sun, t1);
+  transmittance = SpecbakeMixWavelengths(t0, t1, k);
+  return SpecbakeMixWavelengths(l0, l1, k);
+}
+
+real GetSunAndSkyIrradianceAtWavelength(SpecbakeAtmosphere atm, SpecbakeSampler2D transmittance_texture,
+                                        SpecbakeSampler2D irradiance_texture, vec3 up, real h, vec3 normal, vec3 sun,
+                                        real lambda, OUT(real) sky_irradiance) {
+  vec4 k = SpecbakeWavelengthTaps(atm, lambda);
+  SpecbakeRadiance e0;
+  SpecbakeRadiance s0 = GetSunAndSkyIrradiance(SpecbakeAtmosphereOfWavelength(atm, k.x), transmittance_texture,
+                                               irradiance_texture, up, h, normal, sun, e0);
+  SpecbakeRadiance e1 = e0;
+  SpecbakeRadiance s1 = s0;
+  if (k.w != R(0.0))
+    s1 = GetSunAndSkyIrradiance(SpecbakeAtmosphereOfWavelength(atm, k.y), transmittance_texture, irradiance_texture,
+                                up, h, normal, sun, e1);
+  sky_irradiance = SpecbakeMixWavelengths(e0, e1, k);
+  return SpecbakeMixWavelengths(s0, s1, k);
+}
+#endif

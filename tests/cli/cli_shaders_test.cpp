@@ -1,4 +1,5 @@
-// Every GLSL file a bundle ships — the atmosphere's sampling.glsl, the dispersion's
+// Every GLSL file a bundle ships — the atmosphere's sampling.glsl (and sampling_spectral.glsl of
+// `store: radiance`), the dispersion's
 // dispersion.glsl, a diffraction table's shader/diffraction_brdf.glsl — compiles with
 // glslangValidator as a GL 4.50 core and a GLES 3.20 fragment shader (each is a library without
 // #version or main: the includer adds both).
@@ -20,6 +21,9 @@ TEST(CliShaders, EveryEmittedShaderCompilesForGlAndGles) {
                 "  - name: prism\n    kind: dispersion\n    samples: 6\n    material: {glass: N-BK7}\n"
                 "  - name: sky\n    kind: atmosphere\n    orders: 2\n    scene: none\n"
                 "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+                "  - name: sky-radiance\n    kind: atmosphere\n    orders: 2\n    scene: none\n    previews: none\n"
+                "    spectrum: {min_nm: 400, max_nm: 700, count: 8, store: radiance}\n"
+                "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
                 "  - name: grating\n    kind: diffraction\n"
                 "    procedural: {type: sine-grating, size: 32, dx_um: 0.125, period_um: 1.0, amplitude_um: 0.2}\n"
                 "    table: {size: 16}\n    coherence: {length_um: 3}\n");
@@ -28,7 +32,7 @@ TEST(CliShaders, EveryEmittedShaderCompilesForGlAndGles) {
   std::vector<fs::path> shaders;
   for (const auto& e : fs::recursive_directory_iterator(dir / "out"))
     if (e.is_regular_file() && e.path().extension() == ".glsl") shaders.push_back(e.path());
-  ASSERT_EQ(shaders.size(), 3u) << "one shader per kind";
+  ASSERT_EQ(shaders.size(), 5u) << "one shader per kind, and the radiance bundle's spectral one";
   const std::string es = "#version 320 es\nprecision highp float;\nprecision highp sampler2D;\n"
                          "precision highp sampler3D;\nprecision highp sampler2DArray;\n";
   int k = 0;

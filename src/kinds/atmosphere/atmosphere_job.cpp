@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <map>
 #include <optional>
 
@@ -88,6 +89,33 @@ struct OrderAccumulator {
   }
 };
 
+// Channels [first, first + count) of a pass's textures ([texels][width]) into the spectral store
+// (`store: radiance`): set g / 4, channel g % 4 of wavelength g; scattering and single Mie from the
+// 3D texel order [r][mu][x] to the tiled 2D one [mu][r][x].
+void keep_radiance(SpectralLuts& L, const Sizes& s, int first, int count, int width, const PassResult& r) {
+  const std::size_t sets = static_cast<std::size_t>(L.sets());
+  const std::size_t n_t = 1ULL * s.transmittance_w * s.transmittance_h, n_e = 1ULL * s.irradiance_w * s.irradiance_h,
+                    n_s = s.scattering_texels(), wd = static_cast<std::size_t>(s.scattering_width());
+  const auto put = [&](std::vector<float>& dst, const std::vector<double>& src, std::size_t texels, bool tiled) {
+    if (dst.empty()) dst.assign(4 * sets * texels, 0.0f);
+    for (std::size_t t = 0; t < texels; ++t) {
+      std::size_t at = t;
+      if (tiled) {
+        const std::size_t x = t % wd, j = (t / wd) % s.mu, k = t / (wd * s.mu);
+        at = (j * s.r + k) * wd + x;
+      }
+      for (int i = 0; i < count; ++i) {
+        const std::size_t g = static_cast<std::size_t>(first + i);
+        dst[4 * ((g / 4) * texels + at) + g % 4] = static_cast<float>(src[t * width + i]);
+      }
+    }
+  };
+  put(L.transmittance, r.transmittance, n_t, false);
+  put(L.irradiance, r.irradiance, n_e, false);
+  put(L.scattering, r.scattering, n_s, true);
+  put(L.single_mie, r.single_mie, n_s, true);
+}
+
 Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progress& progress, int check_texels) {
   Baked out;
   const Model m = model_of(spec);
@@ -125,6 +153,10 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
         }
     return o;
   };
+  if (spec.store_radiance) {
+    out.radiance.lambda_nm = all.lambda_nm;
+    out.radiance.solar_irradiance = all.solar_irradiance;
+  }
   for (int p = 0; p < passes; ++p) {
     const int first = p * width, count = std::min(width, n - first);
     const Channels ch = all.slice(first, count);
@@ -156,6 +188,7 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     add_into(out.luts.scattering, r.scattering, n_s);
     add_into(out.luts.single_mie, r.single_mie, n_s);
     if (!sp.spectral) out.luts.transmittance = r.transmittance;
+    if (spec.store_radiance) keep_radiance(out.radiance, s, first, count, width, r);
     out.orders_used = std::max(out.orders_used, r.orders_used);
     out.converged = out.converged && r.converged;
     out.passes.push_back({{"wavelengths_nm", ch.lambda_nm}, {"orders_used", r.orders_used}, {"converged", r.converged}});
@@ -335,6 +368,65 @@ json parameters_json(const AtmosphereSpec& spec) {
   return p;
 }
 
+std::vector<double> interpolation_test_wavelengths(const std::vector<double>& stored) {
+  std::vector<double> out;
+  const int gaps = static_cast<int>(stored.size()) - 1;
+  if (gaps < 1) return out;
+  const int n = std::min(gaps, kInterpolationTests);
+  for (int k = 0; k < n; ++k) {
+    const int i = n == 1 ? 0 : static_cast<int>(std::lround(double(k) * (gaps - 1) / (n - 1)));
+    out.push_back(0.5 * (stored[i] + stored[i + 1]));
+  }
+  return out;
+}
+
+InterpolationError interpolation_error(const Model& m, const SpectralLuts& stored, const SpectralLuts& exact) {
+  const SpectralRenderer at(m, stored), ref(m, exact);
+  const Vec3 camera{0.0, 0.0, m.bottom_radius_km + kFisheyeAltitudeKm}, ground{0.0, 0.0, m.bottom_radius_km},
+      up{0.0, 0.0, 1.0};
+  constexpr int kGrid = 32;
+  // one wavelength's values, interpolated and exact, then their relative errors (floor: 1e-3 of
+  // the largest exact value at that wavelength)
+  struct Pairs {
+    std::vector<double> test, truth;
+    void errors_into(std::vector<double>& out) const {
+      double top = 0.0;
+      for (double v : truth) top = std::max(top, std::fabs(v));
+      for (std::size_t i = 0; i < truth.size(); ++i)
+        out.push_back(std::fabs(test[i] - truth[i]) / std::max(std::fabs(truth[i]), 1e-3 * top));
+    }
+  };
+  std::vector<double> radiance, transmittance, irradiance;
+  for (std::size_t w = 0; w < exact.lambda_nm.size(); ++w) {
+    const double lambda = exact.lambda_nm[w];
+    Pairs l, t, e;
+    for (const FisheyeView& v : kFisheyeViews) {
+      const Vec3 sun = fisheye_sun(v);
+      for (int p = 0; p < kGrid * kGrid; ++p) {
+        Vec3 view;
+        if (!fisheye_direction((2.0 * (p % kGrid) + 1.0) / kGrid - 1.0, (2.0 * (p / kGrid) + 1.0) / kGrid - 1.0, view))
+          continue;
+        double t_test = 0.0, t_truth = 0.0;
+        l.test.push_back(at.sky_radiance(camera, view, sun, lambda, &t_test));
+        l.truth.push_back(ref.sky_radiance_stored(camera, view, sun, static_cast<int>(w), &t_truth));
+        if (t_truth > 0.0) {  // rays that meet the ground have none
+          t.test.push_back(t_test);
+          t.truth.push_back(t_truth);
+        }
+      }
+      double sky_test = 0.0, sky_truth = 0.0;
+      e.test.push_back(at.sun_and_sky_irradiance(ground, up, sun, lambda, &sky_test));
+      e.truth.push_back(ref.sun_and_sky_irradiance_stored(ground, up, sun, static_cast<int>(w), &sky_truth));
+      e.test.push_back(sky_test);
+      e.truth.push_back(sky_truth);
+    }
+    l.errors_into(radiance);
+    t.errors_into(transmittance);
+    e.errors_into(irradiance);
+  }
+  return {summarize_errors(radiance), summarize_errors(transmittance), summarize_errors(irradiance)};
+}
+
 // With sizes: auto / spectrum: auto the plan runs the search (it bakes its tries on the device
 // and writes nothing) and shows the chosen settings and their predicted bake time.
 json plan(const AtmosphereSpec& spec, JobContext& ctx) {
@@ -413,6 +505,44 @@ void held_out_step(const AtmosphereSpec& use, const Baked& b, JobContext& ctx, B
                          " met at the scene's points: more scene.points pin the p99 better");
   // after the headline (vs_path_traced) and before the self-check
   r.accuracy.insert(r.accuracy.begin() + 1, a);
+}
+
+// `store: radiance`: the interpolation between stored wavelengths measured against a bake at
+// wavelengths halfway between them (same model, sizes and orders; one more pass on the device),
+// recorded as reported accuracy (not judged: the wavelength count is the user's choice).
+void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
+  ctx.enter(Stage::check);
+  const std::vector<double> lambdas = interpolation_test_wavelengths(b.radiance.lambda_nm);
+  if (lambdas.empty()) return;
+  ctx.progress("spectral interpolation check", 0.94);
+  const Model& m = b.luts.model;
+  const Channels ch = channels_at(spec, lambdas);
+  const int width = pass_width_for(lambdas.size());
+  auto backend = make_device_backend(ctx.device, m, ch, width, spec.double_precision);
+  const PassResult pass = run_pass(*backend, m, PassPlan{b.orders_used, false, spec.tolerance},
+                                   [](std::string_view, double) {}, 0.0, 1.0);
+  SpectralLuts exact;
+  exact.lambda_nm = ch.lambda_nm;
+  exact.solar_irradiance = ch.solar_irradiance;
+  keep_radiance(exact, m.sizes, 0, static_cast<int>(lambdas.size()), width, pass);
+  const InterpolationError e = interpolation_error(m, b.radiance, exact);
+  const auto summary = [](const ErrorSummary& s) {
+    return json{{"max", s.max}, {"p99", s.p99}, {"median", s.median}, {"count", s.count}};
+  };
+  r.accuracy.push_back(Accuracy::judged(
+      "spectral_interpolation", "max relative error of the sky radiance interpolated between stored wavelengths",
+      e.radiance.max, std::nullopt,
+      "a bake at wavelengths halfway between stored ones (same model, sizes and " + std::to_string(b.orders_used) +
+          " orders)",
+      {{"test_wavelengths_nm", lambdas},
+       {"stored_step_nm", b.radiance.lambda_nm.size() > 1 ? b.radiance.lambda_nm[1] - b.radiance.lambda_nm[0] : 0.0},
+       {"sky_radiance", summary(e.radiance)},
+       {"transmittance", summary(e.transmittance)},
+       {"sun_and_sky_irradiance", summary(e.irradiance)},
+       {"points", "the preview fisheyes (sun at 60, 20, 5, 0, -4 deg; 32 x 32 directions each, 1 m above the "
+                  "ground) and each sun's sun and sky irradiance on the ground"},
+       {"floor", "errors relative to max(|exact|, 1e-3 x the largest exact value at that wavelength)"},
+       {"functions", "GetSkyRadianceAtWavelength, GetSunAndSkyIrradianceAtWavelength (sampling_spectral.glsl)"}}));
 }
 
 // `checked`: the scene check already made of these LUTs (an auto search's), not made again.
@@ -541,6 +671,100 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
   }
 }
 
+// Spectral OpenEXR channel names (Fichet et al. 2021): "S0.<nm>nm" for emitted (radiance-like)
+// values, "T.<nm>nm" for transmittance, the wavelength with a comma for its decimal point.
+std::string spectral_channel(const char* prefix, double nm) {
+  char v[32];
+  std::snprintf(v, sizeof v, "%.6f", nm);
+  std::string d = v;
+  std::replace(d.begin(), d.end(), '.', ',');
+  return std::string(prefix) + "." + d + "nm";
+}
+
+// `spectrum: {store: radiance}`: the radiance at every stored wavelength, four per RGBA texel and
+// the sets outermost (.bin; KTX2 2D array textures of one layer per set), one Spectral OpenEXR per
+// texture with a channel per wavelength, sampling_spectral.glsl, and the wavelengths in the
+// manifest's parameters.
+void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Model& m, BakeResult& r) {
+  const Sizes& s = m.sizes;
+  const int sets = L.sets(), n = static_cast<int>(L.lambda_nm.size());
+  std::string lambdas;
+  for (int i = 0; i < n; ++i) lambdas += (i ? "," : "") + format_g(L.lambda_nm[i]);
+  const std::string le = "little-endian float32, C order; texel channels R, G, B, A = wavelengths 4k..4k+3 of set k";
+  struct Texture {
+    bool wanted;
+    std::string name;
+    const std::vector<float>* data;
+    int width, height;
+    const char* exr_prefix;
+    std::string units, axes, what;
+  };
+  const int tiled_w = s.r * s.scattering_width();
+  const std::string tiled_axes = "x = r_index*NU*MU_S + nu_slice*MU_S + mu_s_index, y = mu";
+  const Texture textures[] = {
+      {spec.out_transmittance, "spectral_transmittance", &L.transmittance, s.transmittance_w, s.transmittance_h, "T",
+       "1", "x = mu coordinate, y = r coordinate", "transmittance to the top of the atmosphere per wavelength"},
+      {spec.out_irradiance, "spectral_irradiance", &L.irradiance, s.irradiance_w, s.irradiance_h, "S0",
+       "W m^-2 nm^-1", "x = mu_s coordinate, y = r coordinate",
+       "sky (indirect) irradiance on a horizontal surface per wavelength (the direct sun not included)"},
+      {spec.out_scattering, "spectral_scattering_tiled2d", &L.scattering, tiled_w, s.mu, "S0", "W m^-2 sr^-1 nm^-1",
+       tiled_axes, "single Rayleigh (no phase function) + sum over orders n >= 2 of deltaS_n / P_R(nu), per wavelength"},
+      {spec.out_single_mie, "spectral_single_mie_scattering_tiled2d", &L.single_mie, tiled_w, s.mu, "S0",
+       "W m^-2 sr^-1 nm^-1", tiled_axes, "single Mie scattering (no phase function) per wavelength"}};
+  json files = json::array();
+  for (const Texture& t : textures) {
+    if (!t.wanted) continue;
+    const std::size_t texels = 1ULL * t.width * t.height;
+    const std::string lay = "[set=" + std::to_string(sets) + "][" + std::to_string(t.height) + "][" +
+                            std::to_string(t.width) + "][4]; " + t.axes;
+    r.files.push_back({t.name + ".bin", float32_le(*t.data, t.name), "float32", {sets, t.height, t.width, 4},
+                       le + "; " + lay, t.units, t.what});
+    ExrImage img;
+    img.width = t.width;
+    img.height = t.height;
+    for (int i = 0; i < n; ++i) img.channels.push_back(spectral_channel(t.exr_prefix, L.lambda_nm[i]));
+    img.pixels.resize(texels * n);
+    for (std::size_t p = 0; p < texels; ++p)
+      for (int i = 0; i < n; ++i) img.pixels[p * n + i] = (*t.data)[4 * ((i / 4) * texels + p) + i % 4];
+    img.attributes = {{"specbake.layout", std::string("channel per wavelength (Spectral OpenEXR names); ") + t.axes},
+                      {"specbake.content", t.what},
+                      {"specbake.units", t.units},
+                      {"specbake.wavelengths_nm", lambdas}};
+    r.files.push_back({t.name + ".exr", exr_bytes(img), "", {t.height, t.width, n},
+                       "EXR float32 ZIP, one channel per wavelength", t.units, t.what + " (Spectral OpenEXR)"});
+    files.push_back(t.name + ".bin");
+    files.push_back(t.name + ".exr");
+    if (spec.ktx2.enabled) {
+      add_ktx2_file(spec.ktx2,
+                    {t.name + ".ktx2", std::uint32_t(t.width), std::uint32_t(t.height), 0, std::uint32_t(sets), 4,
+                     *t.data, "2D array: layer k = wavelength set k (RGBA = wavelengths 4k..4k+3); " + t.axes, t.units,
+                     t.what,
+                     {{"specbake.wavelengths_nm", lambdas},
+                      {"specbake.sizes", "r=" + std::to_string(s.r) + " mu=" + std::to_string(s.mu) + " mu_s=" +
+                                             std::to_string(s.mu_s) + " nu=" + std::to_string(s.nu)}}},
+                    r);
+      files.push_back(t.name + ".ktx2");
+    }
+  }
+  r.files.push_back({"sampling_spectral.glsl",
+                     sampling_spectral_glsl(m, L, "Values: transmittance 1, irradiance W m^-2 nm^-1, radiance "
+                                                  "W m^-2 sr^-1 nm^-1."),
+                     "", {}, "", "", "GLSL lookup functions at any wavelength, for spectral renderers"});
+  files.push_back("sampling_spectral.glsl");
+  json set_list = json::array();
+  for (int k = 0; k < sets; ++k)
+    set_list.push_back(std::vector<double>(L.lambda_nm.begin() + 4 * k, L.lambda_nm.begin() + std::min(n, 4 * k + 4)));
+  r.parameters["spectral_radiance"] = {
+      {"wavelengths_nm", L.lambda_nm},
+      {"sets", set_list},
+      {"lambda_first_nm", L.lambda_nm.front()},
+      {"lambda_step_nm", n > 1 ? L.lambda_nm[1] - L.lambda_nm[0] : 0.0},
+      {"solar_irradiance_W_m2_nm", L.solar_irradiance},
+      {"files", files},
+      {"interpolation", "linear between the stored wavelengths (sampling_spectral.glsl, ...AtWavelength); its "
+                        "error: the spectral_interpolation accuracy record"}};
+}
+
 void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
   ctx.enter(Stage::files);
   const Luts& L = b.luts;
@@ -615,6 +839,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     }
   }
   if (spec.ktx2.enabled) ktx2_files(spec, L, units, param, r);
+  if (!b.radiance.lambda_nm.empty()) spectral_files(spec, b.radiance, L.model, r);
   r.files.push_back({"sampling.glsl",
                      sampling_glsl(L.model, L.rgb, spec.layout_3d, spec.layout_tiled2d, "Values: " + units + "."), "",
                      {}, "", "", "GLSL lookup functions for the shipped layouts"});
@@ -660,11 +885,13 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx) {
     const AtmosphereSpec use = search_step(spec, ctx, r, b, checked);
     check_step(use, b, ctx, r, std::move(checked));
     held_out_step(use, b, ctx, r);
+    if (use.store_radiance) interpolation_step(use, b, ctx, r);
     files_step(use, b, ctx, r);
   } else {
     r.parameters = parameters_json(spec);
     compute_step(spec, ctx, r, b);
     check_step(spec, b, ctx, r);
+    if (spec.store_radiance) interpolation_step(spec, b, ctx, r);
     files_step(spec, b, ctx, r);
   }
   ctx.progress("done", 1.0);

@@ -2,6 +2,7 @@
 #include "kinds/atmosphere/pass.hpp"
 #include "job/kind.hpp"
 #include "kinds/atmosphere/render.hpp"
+#include "kinds/atmosphere/scene_check.hpp"
 #include "kinds/atmosphere/spec.hpp"
 
 namespace specbake::atmosphere {
@@ -34,6 +35,8 @@ struct Baked {
   nlohmann::json passes;       // wavelengths of each pass, orders used
   nlohmann::json self_checks;  // device vs double reference, per stage
   double self_check_worst = 0.0;
+  // `spectrum: {store: radiance}`: the radiance at every wavelength (else empty)
+  SpectralLuts radiance;
   // Seconds per stage summed over passes ("total" by stage name, "per_order" by order), each
   // {"device_s", "host_s", "wall_s"} as cl_util::StageSeconds defines them.
   nlohmann::json timings;
@@ -44,5 +47,19 @@ Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress
                 int self_check_texels = 0);
 // The same bake on the host in double (small sizes: tests).
 Baked bake_luts_reference(const AtmosphereSpec& spec);
+
+// `spectrum: {store: radiance}`: what the linear interpolation between stored wavelengths of
+// sampling_spectral.glsl (GetSkyRadianceAtWavelength & co.) costs. Measured at wavelengths halfway
+// between stored ones (where it errs most): at most kInterpolationTests of them, spread evenly.
+inline constexpr int kInterpolationTests = 8;
+std::vector<double> interpolation_test_wavelengths(const std::vector<double>& stored_nm);
+// Relative errors |interpolated − exact| / max(|exact|, 1e-3 · max |exact| at that wavelength) of
+// the sky radiance and its transmittance (the preview fisheyes: kFisheyeViews, a 32 × 32 grid of
+// directions each) and of the sun and sky irradiance on the ground (each view's sun), where
+// `exact` holds a bake at exactly `exact.lambda_nm`, read at its stored wavelengths.
+struct InterpolationError {
+  ErrorSummary radiance, transmittance, irradiance;
+};
+InterpolationError interpolation_error(const Model& m, const SpectralLuts& stored, const SpectralLuts& exact);
 
 }  // namespace specbake::atmosphere

@@ -229,8 +229,8 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
     if (sp.node.IsScalar()) {
       s.auto_spectrum = sp.choice<int>({{"rgb", 0}, {"auto", 1}}) == 1;
     } else {
-      sp.expect_map("rgb or {min_nm, max_nm, count}");
-      sp.allow_keys({"min_nm", "max_nm", "count"});
+      sp.expect_map("rgb or {min_nm, max_nm, count, store}");
+      sp.allow_keys({"min_nm", "max_nm", "count", "store"});
       s.spectral = true;
       if (sp.has("min_nm")) s.min_nm = sp.child("min_nm").number_in(360.0, 830.0, "in [360, 830] nm");
       if (sp.has("max_nm")) s.max_nm = sp.child("max_nm").number_in(360.0, 830.0, "in [360, 830] nm");
@@ -240,6 +240,12 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
         if (n < 3 || n > 256) sp.child("count").fail("expected an integer in [3, 256], got " + sp.child("count").shown());
         s.count = static_cast<int>(n);
       }
+      if (sp.has("store"))
+        s.store_radiance = sp.child("store").choice<int>({{"luminance", 0}, {"radiance", 1}}) == 1;
+      if (s.store_radiance && s.count % 4 != 0)
+        (sp.has("count") ? sp.child("count") : sp.child("store"))
+            .fail("expected a count that is a multiple of 4 with store: radiance (four wavelengths per RGBA "
+                  "texel), got " + std::to_string(s.count));
     }
   }
   if (job.has("orders")) {
@@ -344,7 +350,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
           {"outputs", outputs},
           {"precision", s.double_precision ? "double" : "float"}};
   s.ktx2 = parse_ktx2_settings(job, norm, {"scattering"});
-  if (s.ktx2.enabled && job.child("ktx2").has("scattering")) {
+  if (s.ktx2.enabled && job.has("ktx2") && job.child("ktx2").has("scattering")) {
     const At k = job.child("ktx2").child("scattering");
     s.ktx2_combined = k.choice<int>({{"rgb", 0}, {"rgba-combined", 1}}) == 1;
     if (s.ktx2_combined && !(s.out_scattering && s.out_single_mie))
@@ -353,6 +359,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
     if (s.ktx2_combined) norm["ktx2"]["scattering"] = "rgba-combined";  // rgb, the default, stays implicit
   }
   if (s.auto_sizes) norm["sizes"] = "auto";
+  if (s.store_radiance) norm["spectrum"]["store"] = "radiance";  // luminance, the default, stays implicit
   norm["scene"] = scene_json(s.scene);
   norm["previews"] = s.preview_size ? json{{"size", s.preview_size}} : json("none");
   norm.update(media_json(s));

@@ -88,6 +88,71 @@ Vec3 Renderer::irradiance(double r, double mu_s) const {
   return to_array(glsl::GetIrradiance(i.atm, i.irradiance, r - i.atm.bottom_radius, mu_s));
 }
 
+struct SpectralRenderer::Impl {
+  glsl::spectral::SpecbakeAtmosphere atm;
+  glsl::sampler2DArray transmittance, irradiance, scattering, single_mie;
+};
+
+SpectralRenderer::SpectralRenderer(const Model& m, const SpectralLuts& l) : impl_(std::make_unique<Impl>()) {
+  const Sizes& s = m.sizes;
+  const int sets = l.sets();
+  impl_->atm = glsl::spectral::atmosphere_of(m, l.lambda_nm, l.solar_irradiance);
+  impl_->transmittance = {l.transmittance.data(), s.transmittance_w, s.transmittance_h, sets};
+  impl_->irradiance = {l.irradiance.data(), s.irradiance_w, s.irradiance_h, sets};
+  impl_->scattering = {l.scattering.data(), s.r * s.scattering_width(), s.mu, sets};
+  impl_->single_mie = {l.single_mie.data(), s.r * s.scattering_width(), s.mu, sets};
+}
+SpectralRenderer::~SpectralRenderer() = default;
+
+double SpectralRenderer::sky_radiance(const Vec3& camera, const Vec3& view, const Vec3& sun, double lambda_nm,
+                                      double* transmittance) const {
+  const Impl& i = *impl_;
+  glsl::vec3 up;
+  double h, t;
+  up_and_altitude(camera, i.atm.bottom_radius, up, h);
+  const double l = glsl::spectral::GetSkyRadianceAtWavelength(i.atm, i.transmittance, i.scattering, i.single_mie, up,
+                                                               h, to_glm(view), 0.0, to_glm(sun), lambda_nm, t);
+  if (transmittance) *transmittance = t;
+  return l;
+}
+double SpectralRenderer::sky_radiance_stored(const Vec3& camera, const Vec3& view, const Vec3& sun, int k,
+                                             double* transmittance) const {
+  const Impl& i = *impl_;
+  glsl::vec3 up;
+  glsl::vec4 t;
+  double h;
+  up_and_altitude(camera, i.atm.bottom_radius, up, h);
+  const glsl::vec4 l = glsl::spectral::GetSkyRadiance(glsl::spectral::SpecbakeAtmosphereOfWavelength(i.atm, k),
+                                                      i.transmittance, i.scattering, i.single_mie, up, h,
+                                                      to_glm(view), 0.0, to_glm(sun), t);
+  if (transmittance) *transmittance = t[k % 4];
+  return l[k % 4];
+}
+double SpectralRenderer::sun_and_sky_irradiance(const Vec3& point, const Vec3& normal, const Vec3& sun,
+                                                double lambda_nm, double* sky) const {
+  const Impl& i = *impl_;
+  glsl::vec3 up;
+  double h, e_sky;
+  up_and_altitude(point, i.atm.bottom_radius, up, h);
+  const double e_sun = glsl::spectral::GetSunAndSkyIrradianceAtWavelength(
+      i.atm, i.transmittance, i.irradiance, up, h, to_glm(normal), to_glm(sun), lambda_nm, e_sky);
+  if (sky) *sky = e_sky;
+  return e_sun;
+}
+double SpectralRenderer::sun_and_sky_irradiance_stored(const Vec3& point, const Vec3& normal, const Vec3& sun, int k,
+                                                       double* sky) const {
+  const Impl& i = *impl_;
+  glsl::vec3 up;
+  glsl::vec4 e_sky;
+  double h;
+  up_and_altitude(point, i.atm.bottom_radius, up, h);
+  const glsl::vec4 e_sun = glsl::spectral::GetSunAndSkyIrradiance(
+      glsl::spectral::SpecbakeAtmosphereOfWavelength(i.atm, k), i.transmittance, i.irradiance, up, h, to_glm(normal),
+      to_glm(sun), e_sky);
+  if (sky) *sky = e_sky[k % 4];
+  return e_sun[k % 4];
+}
+
 std::vector<double> to_tiled2d(const std::vector<double>& tex3d, const Sizes& s) {
   const int wd = s.scattering_width();
   std::vector<double> out(tex3d.size());
@@ -151,6 +216,57 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
     << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
     << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ");  // R, MU, MU_S, NU\n"
     << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef TEXTURE_RGBA\n#undef OUT\n#undef INOUT\n"
+    << "#endif\n";
+  return o.str();
+}
+
+std::string sampling_spectral_glsl(const Model& m, const SpectralLuts& l, const std::string& units_note) {
+  const Sizes& s = m.sizes;
+  const auto f = [](double v) { return glsl_float(v); };
+  const int sets = l.sets();
+  const double step = l.lambda_nm.size() > 1 ? l.lambda_nm[1] - l.lambda_nm[0] : 1.0;
+  std::ostringstream o;
+  o << "// specbake atmosphere, spectral radiance: sampling.glsl's lookups at " << l.lambda_nm.size()
+    << " stored wavelengths,\n"
+    << "// " << f(l.lambda_nm.front()) << " + i * " << f(step)
+    << " nm, four per RGBA texel: wavelength set k (wavelengths 4k..4k+3 in R, G, B, A) is layer k of\n"
+    << "// 2D array textures (" << sets << " layers). Lengths in km. " << units_note << "\n"
+    << "// GLSL 4.50 core or ES 3.20, without #version: include it after yours (ES: precision highp float and\n"
+    << "// sampler2DArray). Textures (filtering LINEAR, wrap CLAMP_TO_EDGE, no mipmaps):\n"
+    << "//   spectral_transmittance " << s.transmittance_w << "x" << s.transmittance_h << " (u: mu, v: altitude); "
+    << "spectral_irradiance " << s.irradiance_w << "x" << s.irradiance_h << " (u: mu_s, v: altitude), sky only;\n"
+    << "//   spectral_scattering_tiled2d, spectral_single_mie_scattering_tiled2d: width R*NU*MU_S = "
+    << s.r * s.scattering_width() << ", height MU = " << s.mu
+    << " (x = r_index*NU*MU_S + nu_slice*MU_S + mu_s_index).\n"
+    << "// GetSkyRadianceAtWavelength, GetSkyRadianceToPointAtWavelength, GetSunAndSkyIrradianceAtWavelength and\n"
+    << "// GetSolarIrradianceAtWavelength take any wavelength (nm) and interpolate linearly between the stored\n"
+    << "// ones; GetSkyRadiance & co. return the four wavelengths of set atm.layer.\n"
+    << "#ifndef SPECBAKE_ATMOSPHERE_SPECTRAL_GLSL\n#define SPECBAKE_ATMOSPHERE_SPECTRAL_GLSL\n"
+    << "#define SPECBAKE_SPECTRAL\n#define SPECBAKE_WAVELENGTH_SETS " << sets << "\n\n"
+    << glsl_subset_prelude() << "#define TEXTURE_LAYER(s, uv, layer) texture(s, vec3(uv, layer))\n"
+    << "#define OUT(T) out T\n#define INOUT(T) inout T\n\n"
+    << glsl_shared_source("kernels/atmosphere/lookup.cl") << "\n"
+    << glsl_shared_source("kernels/atmosphere/render.glsl") << "\n"
+    << "const SpecbakeAtmosphere SPECBAKE_ATMOSPHERE = SpecbakeAtmosphere(\n"
+    << "    " << f(m.bottom_radius_km) << ", " << f(m.top_radius_km) << ",  // bottom_radius, top_radius (km)\n"
+    << "    " << f(m.mu_s_min) << ", " << f(m.sun_angular_radius_rad) << ", " << f(m.mie_g)
+    << ",  // mu_s_min, sun_angular_radius (rad), mie_g\n"
+    << "    0.0, " << f(l.lambda_nm.front()) << ", " << f(step) << ", "
+    << f(static_cast<double>(l.lambda_nm.size())) << ",  // layer, lambda_first, lambda_step (nm), lambda_count\n"
+    << "    SpecbakeRadiance[" << sets << "](";
+  for (int k = 0; k < sets; ++k) {
+    o << (k ? ",\n        " : "") << "vec4(";
+    for (int c = 0; c < 4; ++c) {
+      const std::size_t i = 4 * static_cast<std::size_t>(k) + c;
+      o << (c ? ", " : "") << f(i < l.solar_irradiance.size() ? l.solar_irradiance[i] : 0.0);
+    }
+    o << ")";
+  }
+  o << "),  // solar_irradiance per set\n"
+    << "    " << f(s.transmittance_w) << ", " << f(s.transmittance_h) << ", " << f(s.irradiance_w) << ", "
+    << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
+    << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ");  // R, MU, MU_S, NU\n"
+    << glsl_subset_epilogue() << "#undef TEXTURE_LAYER\n#undef OUT\n#undef INOUT\n"
     << "#endif\n";
   return o.str();
 }

@@ -42,6 +42,36 @@ class Renderer {
   std::unique_ptr<Impl> impl_;
 };
 
+// `spectrum: {store: radiance}`: the textures at every stored wavelength, float32 as the files
+// hold them, four wavelengths (a set) per texel and the sets outermost: transmittance
+// [set][th][tw][4], irradiance [set][ih][iw][4], scattering and single_mie tiled 2D
+// [set][MU][R·NU·MU_S][4] (the layers of sampling_spectral.glsl's 2D array textures).
+struct SpectralLuts {
+  std::vector<double> lambda_nm;         // stored wavelengths (nm)
+  std::vector<double> solar_irradiance;  // at each
+  std::vector<float> transmittance, irradiance, scattering, single_mie;
+  int sets() const { return static_cast<int>((lambda_nm.size() + 3) / 4); }
+};
+
+// The spectral lookups of sampling_spectral.glsl (render.glsl built with SPECBAKE_SPECTRAL) on
+// the host in double over the float32 texels: radiance at any wavelength between the stored
+// ones (interpolated), or at stored wavelength i exactly. Cameras and points as Renderer's.
+class SpectralRenderer {
+ public:
+  SpectralRenderer(const Model& m, const SpectralLuts& luts);  // luts stays alive
+  ~SpectralRenderer();
+  double sky_radiance(const Vec3& camera, const Vec3& view, const Vec3& sun, double lambda_nm,
+                      double* transmittance) const;
+  double sky_radiance_stored(const Vec3& camera, const Vec3& view, const Vec3& sun, int i, double* transmittance) const;
+  double sun_and_sky_irradiance(const Vec3& point, const Vec3& normal, const Vec3& sun, double lambda_nm,
+                                double* sky) const;
+  double sun_and_sky_irradiance_stored(const Vec3& point, const Vec3& normal, const Vec3& sun, int i, double* sky) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 // [R][MU][NU·MU_S][3] → [MU][R·NU·MU_S][3], column = r·NU·MU_S + ν·MU_S + μ_s.
 std::vector<double> to_tiled2d(const std::vector<double>& tex3d, const Sizes& s);
 // Lookup in the tiled-2D layout exactly as sampling.glsl's GetScatteringTiled2D does it
@@ -51,6 +81,8 @@ Vec3 sample_tiled2d(const Model& m, const std::vector<double>& tiled, double r, 
 
 std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, bool layout_tiled2d,
                           const std::string& units_note);
+// sampling_spectral.glsl: render.glsl built with SPECBAKE_SPECTRAL for the stored wavelengths.
+std::string sampling_spectral_glsl(const Model& m, const SpectralLuts& luts, const std::string& units_note);
 
 // The preview views' geometry, shared by the previews and the GL test that draws them with the
 // shipped shader. Fisheyes: from kFisheyeAltitudeKm above the ground, equidistant, zenith at the

@@ -36,6 +36,10 @@ struct sampler2D {  // [h][w][channels]
   FilterProbe* probe = nullptr;
   int channels = 3;  // 3 (a fetch's alpha reads 1) or 4
 };
+struct sampler2DArray {  // [layers][h][w][4]: a spectral bundle's wavelength sets
+  const float* texels;
+  int w, h, layers;
+};
 struct sampler3D {  // [d][h][w][channels]
   const double* texels;
   int w, h, d;
@@ -87,6 +91,17 @@ inline vec4 texture_rgba(const sampler3D& s, vec3 uvw) {
   };
   return (1.0 - a[2].f) * plane(a[2].i0) + a[2].f * plane(a[2].i1);
 }
+// A layer of a 2D array texture, bilinear: the GPU's layer index is round(layer), clamped.
+inline vec4 texture_layer(const sampler2DArray& s, vec2 uv, double layer) {
+  const int l = std::clamp(static_cast<int>(std::floor(layer + 0.5)), 0, s.layers - 1);
+  const detail::Taps a[2] = {detail::taps(uv.x, s.w), detail::taps(uv.y, s.h)};
+  const auto at = [&](int i, int j) {
+    const float* v = s.texels + 4 * ((1LL * l * s.h + j) * s.w + i);
+    return vec4(v[0], v[1], v[2], v[3]);
+  };
+  return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0) + a[0].f * at(a[0].i1, a[1].i0)) +
+         a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1) + a[0].f * at(a[0].i1, a[1].i1));
+}
 template <class Sampler, class Uv>
 vec3 texture_rgb(const Sampler& s, Uv uv) {
   const vec4 v = texture_rgba(s, uv);
@@ -104,12 +119,13 @@ namespace {
 #define INOUT(T) T&
 #include "atmosphere/lookup.cl"
 #include "atmosphere/render.glsl"
-#undef TEXTURE_RGB
-#undef TEXTURE_RGBA
-#undef OUT
-#undef INOUT
 #undef GetScattering
 #undef SpecbakeScatteringSampler
+#undef SpecbakeRadiance
+#undef SpecbakeSampler2D
+#undef SPECBAKE_CHANNELS
+#undef SPECBAKE_FETCH
+#undef SPECBAKE_SOLAR_IRRADIANCE
 
 inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
   const Sizes& s = m.sizes;
@@ -133,6 +149,58 @@ inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
   a.nu_size = s.nu;
   return a;
 }
+
+// The spectral build (`spectrum: {store: radiance}`, sampling_spectral.glsl): four stored
+// wavelengths per texel, wavelength sets as layers of 2D array textures, scattering tiled 2D.
+namespace spectral {
+#define SPECBAKE_SPECTRAL
+#define SPECBAKE_WAVELENGTH_SETS 64
+#define TEXTURE_LAYER(s, uv, layer) texture_layer(s, uv, layer)
+#include "atmosphere/render.glsl"
+#undef SPECBAKE_SPECTRAL
+#undef SPECBAKE_SCATTERING_TILED2D
+#undef TEXTURE_LAYER
+#undef GetScattering
+#undef SpecbakeScatteringSampler
+#undef SpecbakeRadiance
+#undef SpecbakeSampler2D
+#undef SPECBAKE_CHANNELS
+#undef SPECBAKE_FETCH
+#undef SPECBAKE_SOLAR_IRRADIANCE
+
+// The atmosphere of a spectral bundle: stored wavelengths lambda_nm (equally spaced), four per
+// set, and the solar irradiance at each; layer 0.
+inline SpecbakeAtmosphere atmosphere_of(const Model& m, const std::vector<double>& lambda_nm,
+                                        const std::vector<double>& solar_irradiance) {
+  if (lambda_nm.size() > 4 * SPECBAKE_WAVELENGTH_SETS || solar_irradiance.size() != lambda_nm.size())
+    throw std::invalid_argument("spectral atmosphere: too many wavelengths or mismatched solar irradiance");
+  const Sizes& s = m.sizes;
+  SpecbakeAtmosphere a{};
+  a.bottom_radius = m.bottom_radius_km;
+  a.top_radius = m.top_radius_km;
+  a.mu_s_min = m.mu_s_min;
+  a.sun_angular_radius = m.sun_angular_radius_rad;
+  a.mie_g = m.mie_g;
+  a.layer = 0.0;
+  a.lambda_first = lambda_nm.empty() ? 0.0 : lambda_nm.front();
+  a.lambda_step = lambda_nm.size() > 1 ? lambda_nm[1] - lambda_nm[0] : 1.0;
+  a.lambda_count = static_cast<double>(lambda_nm.size());
+  for (std::size_t i = 0; i < lambda_nm.size(); ++i) a.solar_irradiance[i / 4][static_cast<int>(i % 4)] = solar_irradiance[i];
+  a.transmittance_w = s.transmittance_w;
+  a.transmittance_h = s.transmittance_h;
+  a.irradiance_w = s.irradiance_w;
+  a.irradiance_h = s.irradiance_h;
+  a.r_size = s.r;
+  a.mu_size = s.mu;
+  a.mu_s_size = s.mu_s;
+  a.nu_size = s.nu;
+  return a;
+}
+}  // namespace spectral
+#undef TEXTURE_RGB
+#undef TEXTURE_RGBA
+#undef OUT
+#undef INOUT
 }  // namespace
 #pragma GCC diagnostic pop
 

@@ -35,6 +35,9 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool spectral = false;                  // false: rgb (680, 550, 440 nm)
   double min_nm = 360.0, max_nm = 830.0;  // spectral: midpoints of `count` equal bins
   int count = 48;
+  // spectral: `store: luminance` (Bruneton's precomputed luminance in R, G, B) or `radiance`: also
+  // the radiance at every wavelength, four per RGBA texel (files spectral_*; sampling_spectral.glsl)
+  bool store_radiance = false;
   std::optional<int> orders = 4;  // nullopt: auto
   double tolerance = 1e-3;
   int transmittance_mu = 256, transmittance_r = 64, irradiance_mu_s = 64, irradiance_r = 16;
