@@ -147,6 +147,11 @@ std::vector<BadConfig> bad_configs() {
        "auto", 1, "", "jobs[0].spectrum", {"spectrum: auto searches", "colour difference"}},
       {"spectrum: neither rgb nor auto", sky("    spectrum: rbg\n"), 3, "rbg", 1, "", "jobs[0].spectrum",
        {"rgb | auto", "did you mean 'rgb'"}},
+      {"store: radiance with a count not a multiple of 4", sky("    spectrum: {count: 10, store: radiance}\n"), 3,
+       "10", 1, "", "jobs[0].spectrum.count", {"multiple of 4", "got 10"}},
+      {"store: radiance without a count, default 48 is fine; a typo in store is not",
+       sky("    spectrum: {store: radiant}\n"), 3, "radiant", 1, "", "jobs[0].spectrum.store",
+       {"luminance | radiance", "did you mean 'radiance'"}},
       {"sizes: unknown key beside scale", sky("    sizes: {scal: 50%}\n"), 3, "scal", 1, "", "jobs[0].sizes.scal",
        {"did you mean 'scale'"}},
   };
