@@ -278,8 +278,12 @@ double estimated_seconds(const AtmosphereSpec& spec) {
   // scattering texels at the default sizes (0.2-0.4 s), but what refining those textures costs
   const double transmittance = double(spec.transmittance_mu) * spec.transmittance_r;
   const double irradiance = double(spec.irradiance_mu_s) * spec.irradiance_r;
+  // store: radiance: one more pass of up to kInterpolationTests wavelengths (the interpolation check)
+  const int tests = std::min(kInterpolationTests, channels - 1);
+  const double interpolation =
+      spec.spectral && spec.store_radiance ? orders * (texels / 1048576.0) * (6.4 + 0.12 * pass_width_for(tests)) : 0.0;
   return 1.0 + orders * passes * (texels / 1048576.0) * (6.4 + 0.12 * width) +
-         passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + check;
+         passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + check + interpolation;
 }
 
 json parameters_json(const AtmosphereSpec& spec) {
