@@ -39,6 +39,7 @@ struct sampler2D {  // [h][w][channels]
 struct sampler2DArray {  // [layers][h][w][4]: a spectral bundle's wavelength sets
   const float* texels;
   int w, h, layers;
+  FilterProbe* probe = nullptr;
 };
 struct sampler3D {  // [d][h][w][channels]
   const double* texels;
@@ -93,8 +94,10 @@ inline vec4 texture_rgba(const sampler3D& s, vec3 uvw) {
 }
 // A layer of a 2D array texture, bilinear: the GPU's layer index is round(layer), clamped.
 inline vec4 texture_layer(const sampler2DArray& s, vec2 uv, double layer) {
+  const int n = s.probe ? s.probe->fetches++ : 0;
   const int l = std::clamp(static_cast<int>(std::floor(layer + 0.5)), 0, s.layers - 1);
-  const detail::Taps a[2] = {detail::taps(uv.x, s.w), detail::taps(uv.y, s.h)};
+  const detail::Taps a[2] = {detail::taps(uv.x, s.w, detail::shift(s.probe, n, 0)),
+                             detail::taps(uv.y, s.h, detail::shift(s.probe, n, 1))};
   const auto at = [&](int i, int j) {
     const float* v = s.texels + 4 * ((1LL * l * s.h + j) * s.w + i);
     return vec4(v[0], v[1], v[2], v[3]);
