@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 
 FIGURES = {  # kind -> the images the GL tests write, one row each
     "atmosphere": ["atmosphere-fisheye-20", "atmosphere-planet"],
-    "diffraction": ["diffraction-full", "diffraction-fast"],
+    "diffraction": ["diffraction-full", "diffraction-fast", "diffraction-fast-specular"],
     "dispersion": ["dispersion-slit"],
 }
 

@@ -41,3 +41,14 @@ FN real stam_gain(real cos_i, real cos_o, real wi_dot_wo, real wi_dot_h, real n)
   real g = R(1.0) + wi_dot_wo;
   return fresnel_dielectric(wi_dot_h, n) / fresnel_dielectric(R(1.0), n) * g * g / (w * w * cos_o);
 }
+
+/* The specular peak of the fast variant that evaluates it apart (src/kinds/diffraction/brdf.hpp,
+ * xyz_fast_specular): the Gaussian coherence window's |Ŵ(f)/Ŵ(0)|² = exp(−4π²σ²|f|²) at
+ * |f|² = d_sq/λ², d = (ω_i + ω_o)_xy (σ and λ in µm). */
+FN real specular_peak(real d_sq, real lambda_um, real sigma_um) {
+  real a = R(6.283185307179586) * sigma_um / lambda_um;
+  return exp(-a * a * d_sq);
+}
+
+/* The weight of b in the linear interpolation of x between a and b (a < b), clamped to [0, 1]. */
+FN real lerp_weight(real x, real a, real b) { return fmin(fmax((x - a) / (b - a), R(0.0)), R(1.0)); }

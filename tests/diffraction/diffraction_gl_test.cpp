@@ -79,7 +79,7 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   // The light 30° from the normal in the x–z plane; pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²)).
   const double light_deg = 30.0;
   const Wavelengths full = every_nm(spectrum, 10), fast = bins(spectrum, 8);
-  const std::string glsl = diffraction_glsl(f, p.bands, g, w.sum, 1.5, fast);
+  const std::string glsl = diffraction_glsl(f, p.bands, g, w, 1.5, fast);
   const std::string fs = "#version 320 es\nprecision highp float;\nprecision highp sampler2DArray;\n" + glsl +
                          "uniform sampler2DArray terms;\nuniform sampler2D spectrum;\nuniform int fast;\nout vec4 colour;\n"
                          "void main() {\n"
@@ -88,7 +88,8 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
                          "  if (r2 >= 1.0) { colour = vec4(0.0); return; }\n"
                          "  float a = radians(" + std::to_string(light_deg) + ");\n"
                          "  vec3 wi = vec3(sin(a), 0.0, cos(a)), wo = vec3(xy, sqrt(1.0 - r2));\n"
-                         "  colour = vec4(fast == 1 ? diffraction_srgb_fast(terms, wi, wo) : diffraction_srgb(terms, spectrum, wi, wo, 10), 1.0);\n"
+                         "  colour = vec4(fast == 2 ? diffraction_srgb_fast_specular(terms, spectrum, wi, wo, 10)\n"
+                         "               : fast == 1 ? diffraction_srgb_fast(terms, wi, wo) : diffraction_srgb(terms, spectrum, wi, wo, 10), 1.0);\n"
                          "}\n";
   std::string log;
   const GLuint prog = specbake::testing::gl_program(specbake::testing::kGlFullScreenVertex, fs, log);
@@ -104,13 +105,17 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
     glUniform1i(glGetUniformLocation(prog, "fast"), which);
     return target.draw();
   };
-  const std::vector<float> pixels_full = draw(0), pixels_fast = draw(1);
+  const std::vector<float> pixels_full = draw(0), pixels_fast = draw(1), pixels_specular = draw(2);
   ASSERT_EQ(glGetError(), static_cast<GLenum>(GL_NO_ERROR));
 
   // The host's evaluation: brdf_lobes' pixel centres match gl_FragCoord's, its row 0 at the top.
-  const BrdfTable t{f, p.bands, g, values, w.sum, 1.5};
-  const auto compare = [&](const std::vector<float>& pixels, const Wavelengths& wl, const char* what) {
-  const auto host = brdf_lobes(t, wl, {light_deg}, kPanel);
+  const BrdfTable t{f, p.bands, g, values, w.sum, 1.5, w.sigma_um};
+  // The variant drawn: 0 diffraction_srgb (every 10 nm), 1 diffraction_srgb_fast, 2
+  // diffraction_srgb_fast_specular.
+  const auto compare = [&](const std::vector<float>& pixels, int variant, const char* what) {
+  const Wavelengths& wl = variant == 0 ? full : fast;
+  const auto host = variant == 2 ? brdf_lobes_fast_specular(t, fast, full, {light_deg}, kPanel)
+                                 : brdf_lobes(t, wl, {light_deg}, kPanel);
 
   // The bound, per pixel and channel, from the host's own lookups. Per wavelength, with P_i/Σw at
   // the four texels the fetch blends: the filter's weights carry 8 fractional bits (D3D11's
@@ -140,10 +145,8 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
         for (double& c : h) c /= hl;
         const double gain = ref::stam_gain(wi[2], wo[2], wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2],
                                            wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2], 1.5);
-        for (std::size_t i = 0; i < wl.lambda_um.size(); ++i) {
-          const double lambda = wl.lambda_um[i], fu = -(wi[0] + wo[0]) / lambda, fv = -(wi[1] + wo[1]) / lambda;
-          if (std::fabs(fu) > g.f_max || std::fabs(fv) > g.f_max) continue;
-          const double kappa = 2.0 * kPi * (wi[2] + wo[2]) / lambda;
+        // |P/Σw|² at (fu, fv; κ) and the bound on its GL value's error (gain 1)
+        const auto p2_bound = [&](double fu, double fv, double kappa, double& p2) {
           const Band& band = band_for(p.bands, kappa);
           const double tu = std::clamp(g.texel_of(fu), 0.0, n - 1.0), tv = std::clamp(g.texel_of(fv), 0.0, n - 1.0);
           const int u0 = std::min(static_cast<int>(tu), n - 2), v0 = std::min(static_cast<int>(tv), n - 2);
@@ -166,8 +169,43 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
           for (int k = 0; k < 4; ++k)
             for (int l = 0; l < 4; ++l) spread = std::max(spread, std::abs(c[k] - c[l]));
           const double delta = std::ldexp(spread, -8) + 16.0 * band.terms * u * mass;
-          const double drho = gain * (2.0 * amp * delta + delta * delta) + 16.0 * u * gain * amp * amp;
-          for (int k = 0; k < 3; ++k) dxyz[k] += std::fabs(wl.xyz[i][k]) * drho;
+          p2 = std::norm(table_bilinear(values, g, f, band, kappa, g.texel_of(fu), g.texel_of(fv)) / w.sum);
+          return 2.0 * amp * delta + delta * delta + 16.0 * u * amp * amp;
+        };
+        const double du = -(wi[0] + wo[0]), dv = -(wi[1] + wo[1]);
+        const auto peak_arg = [&](double lambda) {  // G = exp(−arg)
+          const double a = 2.0 * kPi * w.sigma_um / lambda;
+          return a * a * (du * du + dv * dv);
+        };
+        const auto reach = [&](double lambda) { return std::fabs(du / lambda) <= g.f_max && std::fabs(dv / lambda) <= g.f_max; };
+        const auto add = [&](const std::array<double, 3>& weight, double d) {
+          for (int k = 0; k < 3; ++k) dxyz[k] += std::fabs(weight[k]) * d;
+        };
+        std::vector<double> chi2(wl.lambda_um.size()), dchi2(wl.lambda_um.size());
+        for (std::size_t i = 0; i < wl.lambda_um.size(); ++i) {
+          const double lambda = wl.lambda_um[i], kappa = 2.0 * kPi * (wi[2] + wo[2]) / lambda;
+          double p2 = 0;
+          if (reach(lambda)) add(wl.xyz[i], gain * p2_bound(du / lambda, dv / lambda, kappa, p2));
+          if (variant != 2) continue;
+          // the specular split: |χ|² = |P(0; κ)/Σw|² (its fetch bounded alike) times the peak
+          // G = exp(−arg): float32 forms arg within 16 ulps of it (σ/λ, its square, |d|² from the
+          // float inputs) and GLSL ES's exp is within (3 + 2|arg|) ulps, so |ΔG| ≤ G·(3 + 18 arg)·u
+          dchi2[i] = p2_bound(0.0, 0.0, kappa, chi2[i]);
+          const double arg = peak_arg(lambda), peak = reach(lambda) ? ref::specular_peak(du * du + dv * dv, lambda, w.sigma_um) : 0.0;
+          add(wl.xyz[i], gain * (dchi2[i] * peak + chi2[i] * peak * (3.0 + 18.0 * arg) * u + 16.0 * u * chi2[i] * peak));
+        }
+        if (variant == 2) {  // the peak every 10 nm, |χ|² interpolated between the fast wavelengths
+          std::size_t k = 0;
+          for (std::size_t i = 0; i < full.lambda_um.size(); ++i) {
+            const double lambda = full.lambda_um[i];
+            while (k + 2 < fast.lambda_um.size() && lambda > fast.lambda_um[k + 1]) ++k;
+            if (!reach(lambda)) continue;
+            const double peak = ref::specular_peak(du * du + dv * dv, lambda, w.sigma_um), arg = peak_arg(lambda);
+            const double c2 = std::max(chi2[k], chi2[k + 1]), dc2 = std::max(dchi2[k], dchi2[k + 1]);
+            // the interpolation weight in float32: within 4 ulps, moving the blend by 4u·|χ²_k − χ²_k+1|
+            add(full.xyz[i], gain * (dc2 * peak + c2 * peak * (3.0 + 18.0 * arg) * u + 16.0 * u * c2 * peak +
+                                     4.0 * u * std::fabs(chi2[k] - chi2[k + 1]) * peak));
+          }
         }
       }
       for (int c = 0; c < 3; ++c) {
@@ -187,7 +225,7 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
     }
   EXPECT_GT(lit, 50) << what << ": the view must show the pattern";
   specbake::testing::write_gl_figure(
-      std::string("diffraction-") + (std::string(what) == "diffraction_srgb" ? "full" : "fast"), kPanel, kPanel, gl_rgb,
+      std::string("diffraction-") + (variant == 0 ? "full" : variant == 1 ? "fast" : "fast-specular"), kPanel, kPanel, gl_rgb,
       host_rgb, over_bound,
       {{"title", std::string(what) + ", light at 30 deg"},
        {"gl", "llvmpipe, GLES 3.2"},
@@ -196,7 +234,8 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   RecordProperty(std::string(what) + "_worst_over_peak", std::to_string(worst / peak));
   RecordProperty(std::string(what) + "_worst_over_bound", std::to_string(worst_ratio));
   };
-  compare(pixels_full, full, "diffraction_srgb");
-  compare(pixels_fast, fast, "diffraction_srgb_fast");
+  compare(pixels_full, 0, "diffraction_srgb");
+  compare(pixels_fast, 1, "diffraction_srgb_fast");
+  compare(pixels_specular, 2, "diffraction_srgb_fast_specular");
 #endif
 }

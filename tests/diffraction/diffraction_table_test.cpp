@@ -307,6 +307,38 @@ TEST(DiffractionTable, BrdfOfAFlatMirrorIsFresnelTimesCosine) {
   EXPECT_EQ(brdf(t, {0.0, 0.0, 1.0}, {0.0, 0.0, -1.0}, 0.55), 0.0);
 }
 
+TEST(DiffractionTable, FastSpecularSplitLosesNoLightAndFollowsThePeak) {
+  // diffraction_srgb_fast_specular (brdf.hpp, xyz_fast_specular) writes |P|² as the peak
+  // |χ|²·G plus the remainder |P|² − |χ|²·G. Summed over the same wavelengths for both parts
+  // (|χ|² then interpolated at its own wavelengths, weight 0 or 1) the split must give back the
+  // plain sum: only double rounding apart (~1e-15 relative; 1e-12 asserted).
+  auto spec = grating(ProceduralField::Type::blazed_grating, 48, 0.1, 1.2, 0.25, 32, 3.0, 3.0);
+  const Baked b = bake_table_terms(spec);
+  const BrdfTable t{b.f, b.p.bands, b.g, b.values, b.w.sum, 1.5, b.w.sigma_um};
+  double y_norm = 0;
+  const auto rows = spectrum_rows(spec.range_nm, y_norm);
+  const Wavelengths few = bins(rows, 8), all = every_nm(rows, 10);
+  const double a = 30.0 * kPi / 180.0;
+  const std::array<double, 3> wi{std::sin(a), 0.0, std::cos(a)};
+  double largest_peak_share = 0;
+  for (double x : {-0.5, -0.48, -0.3, 0.0, 0.4}) {
+    const std::array<double, 3> wo{x, 0.05, std::sqrt(1.0 - x * x - 0.0025)};
+    std::array<double, 3> plain{0, 0, 0};
+    for (std::size_t k = 0; k < few.lambda_um.size(); ++k)
+      for (int c = 0; c < 3; ++c) plain[c] += brdf(t, wi, wo, few.lambda_um[k]) * few.xyz[k][c];
+    const auto split = xyz_fast_specular(t, wi, wo, few, few);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(split[c], plain[c], 1e-12 * std::fabs(plain[c]) + 1e-300) << x;
+    // With the peak summed every 10 nm the result moves only where the peak lies (x near
+    // −sin 30° = −0.5, the mirror direction). For |x + 0.5| > 0.45, |d|² > 0.2 and
+    // G = exp(−(2πσ/λ)²|d|²) < e^-58 at every λ ≤ 0.78 µm (σ = 3/√2 µm): nothing visible changes.
+    const auto fine = xyz_fast_specular(t, wi, wo, few, all);
+    const double moved = std::fabs(fine[1] - plain[1]) / std::max(std::fabs(plain[1]), 1e-300);
+    if (std::fabs(x + 0.5) > 0.45) EXPECT_LT(moved, 1e-12) << x;
+    largest_peak_share = std::max(largest_peak_share, moved);
+  }
+  EXPECT_GT(largest_peak_share, 1e-3) << "near the mirror direction the peak's finer spectral sum must show";
+}
+
 TEST(DiffractionTable, TableBakesFromEveryHeightfieldSource) {
   // size: auto from every source the job reads: a grey PNG, a single-channel EXR, a non-square raw
   // float32 field and a procedural binary grating; each must meet both tolerances at the measured

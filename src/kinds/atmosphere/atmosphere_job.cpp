@@ -348,6 +348,8 @@ json parameters_json(const AtmosphereSpec& spec) {
                   "non-luminance mode)";
   }
   p["luminance_conversion"] = lum;
+  // `store: radiance`: the radiance per wavelength as well (spectral_radiance: after the bake)
+  p["store"] = spec.store_radiance ? "luminance and radiance" : (sp.spectral ? "luminance" : "radiance");
   p["scene_check"] = spec.scene.check ? json{{"points", spec.scene.points}, {"relative_se", spec.scene.relative_se}}
                                       : json(false);
   const Sizes& s = m.sizes;

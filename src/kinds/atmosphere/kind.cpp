@@ -56,6 +56,7 @@ Kind kind() {
     std::string s;
     const auto& w = p.value("wavelengths_nm", nlohmann::json::array());
     s += w.size() == 3 ? "rgb" : std::to_string(w.size()) + " wavelengths";
+    if (p.value("store", "") == "luminance and radiance") s += " (radiance stored)";
     const nlohmann::json orders = p.contains("orders") ? p["orders"].value("used", nlohmann::json()) : nlohmann::json();
     const nlohmann::json requested = p.value("orders_requested", nlohmann::json("?"));
     s += ", orders " + (orders.is_number() ? orders.dump()

@@ -1,5 +1,6 @@
 #include "kinds/diffraction/brdf.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/colour_space.hpp"
@@ -21,19 +22,78 @@ Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 
-// Σ_λ ρ·weight_λ → linear sRGB, for one pair of directions.
-std::array<float, 3> colour(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const Wavelengths& wl, const Mat3& m) {
-  double xyz[3] = {0, 0, 0};
+// Σ_λ ρ·weight_λ (CIE XYZ), for one pair of directions.
+std::array<double, 3> xyz_sum(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const Wavelengths& wl) {
+  std::array<double, 3> xyz{0, 0, 0};
   for (std::size_t k = 0; k < wl.lambda_um.size(); ++k) {
     const double rho = brdf(t, wi, wo, wl.lambda_um[k]);
     for (int c = 0; c < 3; ++c) xyz[c] += rho * wl.xyz[k][c];
   }
+  return xyz;
+}
+std::array<float, 3> to_srgb(const std::array<double, 3>& xyz, const Mat3& m) {
   std::array<float, 3> rgb{};
   for (int r = 0; r < 3; ++r)
     rgb[r] = static_cast<float>(m[3 * r] * xyz[0] + m[3 * r + 1] * xyz[1] + m[3 * r + 2] * xyz[2]);
   return rgb;
 }
+
+// The lobes picture (brdf_lobes) of xyz(wi, wo).
+template <class Xyz>
+std::vector<float> lobes(const std::vector<double>& light_deg, int panel, Xyz xyz) {
+  const int width = panel * static_cast<int>(light_deg.size());
+  std::vector<float> rgb(3 * static_cast<std::size_t>(width) * panel, 0.0f);
+  const Mat3 m = xyz_to_srgb();
+  parallel_for(panel, [&](long long py) {
+    const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / panel;
+    for (std::size_t k = 0; k < light_deg.size(); ++k) {
+      const double a = light_deg[k] * kPi / 180.0;
+      const Vec3 wi = {std::sin(a), 0.0, std::cos(a)};
+      for (int px = 0; px < panel; ++px) {
+        const double x = -1.0 + (px + 0.5) * 2.0 / panel, r2 = x * x + y * y;
+        if (r2 >= 1.0) continue;
+        const auto c = to_srgb(xyz(wi, Vec3{x, y, std::sqrt(1.0 - r2)}), m);
+        float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * width + k * panel + px);
+        for (int i = 0; i < 3; ++i) dst[i] = c[i];
+      }
+    }
+  });
+  return rgb;
+}
 }  // namespace
+
+std::array<double, 3> xyz_fast_specular(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const Wavelengths& few,
+                                        const Wavelengths& all) {
+  std::array<double, 3> xyz{0, 0, 0};
+  const double ci = wi[2], co = wo[2];
+  if (ci <= 0.0 || co <= 0.0) return xyz;
+  const Vec3 h = normalize({wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]});
+  const double gain = ref::stam_gain(ci, co, dot(wi, wo), dot(wi, h), t.ior);
+  const double du = -(wi[0] + wo[0]), dv = -(wi[1] + wo[1]);
+  const auto peak = [&](double lambda_um) {  // G(f), 0 beyond the table's reach (as P)
+    if (std::fabs(du / lambda_um) > t.g.f_max || std::fabs(dv / lambda_um) > t.g.f_max) return 0.0;
+    return ref::specular_peak(du * du + dv * dv, lambda_um, t.sigma_um);
+  };
+  const double t0 = t.g.texel_of(0.0);
+  std::vector<double> chi2(few.lambda_um.size());
+  for (std::size_t k = 0; k < few.lambda_um.size(); ++k) {
+    const double lambda = few.lambda_um[k], kappa = 2.0 * kPi * (ci + co) / lambda;
+    const Band& band = band_for(t.bands, kappa);
+    chi2[k] = std::norm(table_bilinear(t.terms, t.g, t.f, band, kappa, t0, t0) / t.window_sum);
+    const double rest = brdf(t, wi, wo, lambda) - gain * chi2[k] * peak(lambda);
+    for (int c = 0; c < 3; ++c) xyz[c] += rest * few.xyz[k][c];
+  }
+  for (std::size_t i = 0; i < all.lambda_um.size(); ++i) {
+    const double lambda = all.lambda_um[i];
+    // |χ|² at λ: linear between the few wavelengths (ascending), clamped
+    std::size_t k = 0;
+    while (k + 2 < few.lambda_um.size() && lambda > few.lambda_um[k + 1]) ++k;
+    const double w = ref::lerp_weight(lambda, few.lambda_um[k], few.lambda_um[k + 1]);
+    const double spec = gain * (chi2[k] * (1.0 - w) + chi2[k + 1] * w) * peak(lambda);
+    for (int c = 0; c < 3; ++c) xyz[c] += spec * all.xyz[i][c];
+  }
+  return xyz;
+}
 
 double brdf(const BrdfTable& t, const Vec3& wi, const Vec3& wo, double lambda_um) {
   const double ci = wi[2], co = wo[2];
@@ -73,24 +133,12 @@ Wavelengths bins(const std::vector<double>& spectrum, int count) {
 }
 
 std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel) {
-  const int width = panel * static_cast<int>(light_deg.size());
-  std::vector<float> rgb(3 * static_cast<std::size_t>(width) * panel, 0.0f);
-  const Mat3 m = xyz_to_srgb();
-  parallel_for(panel, [&](long long py) {
-    const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / panel;
-    for (std::size_t k = 0; k < light_deg.size(); ++k) {
-      const double a = light_deg[k] * kPi / 180.0;
-      const Vec3 wi = {std::sin(a), 0.0, std::cos(a)};
-      for (int px = 0; px < panel; ++px) {
-        const double x = -1.0 + (px + 0.5) * 2.0 / panel, r2 = x * x + y * y;
-        if (r2 >= 1.0) continue;
-        const auto c = colour(t, wi, {x, y, std::sqrt(1.0 - r2)}, wl, m);
-        float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * width + k * panel + px);
-        for (int i = 0; i < 3; ++i) dst[i] = c[i];
-      }
-    }
-  });
-  return rgb;
+  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) { return xyz_sum(t, wi, wo, wl); });
+}
+
+std::vector<float> brdf_lobes_fast_specular(const BrdfTable& t, const Wavelengths& few, const Wavelengths& all,
+                                            const std::vector<double>& light_deg, int panel) {
+  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) { return xyz_fast_specular(t, wi, wo, few, all); });
 }
 
 std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const Vec3& light, int size) {
@@ -108,7 +156,7 @@ std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const 
       const Vec3 ty = cross(n, tx);
       const Vec3 l = normalize({light[0] - n[0], light[1] - n[1], light[2] - n[2]});
       const Vec3 wi = {dot(l, tx), dot(l, ty), dot(l, n)}, wo = {dot(view, tx), dot(view, ty), dot(view, n)};
-      const auto c = colour(t, wi, wo, wl, m);
+      const auto c = to_srgb(xyz_sum(t, wi, wo, wl), m);
       float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * size + px);
       for (int i = 0; i < 3; ++i) dst[i] = c[i];
     }

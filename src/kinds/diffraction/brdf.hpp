@@ -28,6 +28,7 @@ struct BrdfTable {
   const std::vector<float>& terms;  // [T][N][N][2]
   double window_sum = 1.0;           // Σ w_j
   double ior = 1.5;                  // Fresnel: dielectric index
+  double sigma_um = 0.0;             // the coherence window's σ (the specular peak's width)
 };
 
 // ρ_λ for unit vectors in the tangent frame (0 below the horizon on either side).
@@ -45,12 +46,26 @@ Wavelengths every_nm(const std::vector<double>& spectrum, int step_nm);
 // centre (diffraction_srgb_fast: the fast variant's few wavelengths).
 Wavelengths bins(const std::vector<double>& spectrum, int count);
 
+// The fast variant with the specular peak evaluated apart (diffraction_srgb_fast_specular;
+// the thesis's fast shader, seeds/003 § 3: "treats specular separately"). P = χ(κ)·Ŵ(f) + P_r:
+// χ(κ) = P(0; κ)/Σw is the window-weighted mean of e^{iκh} (the coherent, mirror-like part) and
+// Ŵ(f)/Σw ≈ exp(−2π²σ²|f|²) the Gaussian window's transform, so the specular peak is
+// C·|χ(κ)|²·G(f), G = exp(−4π²σ²|f|²): analytic in f, smooth in κ. The diffracted remainder
+// C·(|P|² − |χ|²G) is summed over the few wavelengths `few` (as diffraction_srgb_fast); the
+// peak over every wavelength of `all` (as diffraction_srgb), with |χ|² interpolated linearly in
+// λ between its values at `few` (clamped at the ends). CIE XYZ of one pair of directions.
+std::array<double, 3> xyz_fast_specular(const BrdfTable& t, const std::array<double, 3>& wi,
+                                        const std::array<double, 3>& wo, const Wavelengths& few, const Wavelengths& all);
+
 // Linear sRGB images (row-major, 3 floats per pixel) of the radiance ρ·D65 summed over `wl`:
 //  - lobes: for each light angle (degrees from the normal, in the x–z plane), the outgoing
 //    hemisphere seen from above (pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²))), panels side by side;
 //  - sphere: a unit sphere seen along −z (orthographic), tangent x along the lines of latitude
 //    around the view axis, lit by a point light at `light` (sphere radii) of D65 spectrum.
 std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel);
+// The same picture through xyz_fast_specular.
+std::vector<float> brdf_lobes_fast_specular(const BrdfTable& t, const Wavelengths& few, const Wavelengths& all,
+                                            const std::vector<double>& light_deg, int panel);
 std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const std::array<double, 3>& light, int size);
 
 }  // namespace specbake::diffraction

@@ -7,7 +7,7 @@
 
 namespace specbake::diffraction::ref {
 using real = double;
-using std::cos, std::fabs, std::fmax, std::fmod, std::pow, std::sin, std::sqrt;
+using std::cos, std::exp, std::fabs, std::fmax, std::fmin, std::fmod, std::pow, std::sin, std::sqrt;
 #include "diffraction/diffraction.cl"
 #include "diffraction/brdf.cl"
 }  // namespace specbake::diffraction::ref

@@ -18,7 +18,7 @@ std::string array(const char* type, const std::vector<T>& v, F&& show) {
 }  // namespace
 
 std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, const TableGeometry& g,
-                             double window_sum, double ior, const Wavelengths& fast) {
+                             const Window& window, double ior, const Wavelengths& fast) {
   std::vector<double> hi, k0, delta;
   std::vector<int> first, count;
   for (const auto& b : bands) {
@@ -54,7 +54,8 @@ std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, con
     << "const float DIFFRACTION_SAMPLES = " << glsl_float(static_cast<double>(f.count())) << ";  // W*H\n"
     << "const float DIFFRACTION_CENTER_UM = " << glsl_float(f.c) << ";\n"
     << "const float DIFFRACTION_SCALE_UM = " << glsl_float(f.s) << ";\n"
-    << "const float DIFFRACTION_WINDOW_SUM = " << glsl_float(window_sum) << ";\n"
+    << "const float DIFFRACTION_WINDOW_SUM = " << glsl_float(window.sum) << ";\n"
+    << "const float DIFFRACTION_SIGMA_UM = " << glsl_float(window.sigma_um) << ";  // the coherence window's sigma\n"
     << "const float DIFFRACTION_IOR = " << glsl_float(ior) << ";\n"
     << "const int DIFFRACTION_EXPANSION = " << (bands.front().expansion == Expansion::taylor ? 0 : 1)
     << ";  // 0 taylor, 1 chebyshev\n"
@@ -131,6 +132,42 @@ vec3 diffraction_srgb_fast(sampler2DArray terms, vec3 wi, vec3 wo) {
   vec3 xyz = vec3(0.0);
   for (int k = 0; k < DIFFRACTION_FAST_COUNT; ++k)
     xyz += diffraction_brdf(terms, wi, wo, DIFFRACTION_FAST_LAMBDA_UM[k]) * DIFFRACTION_FAST_XYZ[k];
+  return DIFFRACTION_XYZ_TO_SRGB * xyz;
+}
+
+// The fast variant with the specular peak evaluated apart (the thesis's fast shader): P = chi*W(f)
+// + P_r, chi(kappa) = P(0; kappa)/sum(w) the mean of e^{i kappa h}, so the peak is
+// gain*|chi|^2*specular_peak (brdf.cl): the diffracted remainder gain*|P|^2 - that is summed over
+// the DIFFRACTION_FAST_COUNT wavelengths, the peak over every step_nm-th row of the spectrum with
+// |chi|^2 interpolated linearly in lambda between the fast wavelengths. Twice the fast variant's
+// fetches (P and chi per fast wavelength); its error against diffraction_srgb is the manifest's
+// shader_fast_specular_vs_full record.
+vec3 diffraction_srgb_fast_specular(sampler2DArray terms, sampler2D spectrum, vec3 wi, vec3 wo, int step_nm) {
+  if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+  vec3 h = normalize(wi + wo);
+  float gain = stam_gain(wi.z, wo.z, dot(wi, wo), dot(wi, h), DIFFRACTION_IOR);
+  vec2 d = -(wi.xy + wo.xy);
+  float chi2[DIFFRACTION_FAST_COUNT];
+  vec3 xyz = vec3(0.0);
+  for (int k = 0; k < DIFFRACTION_FAST_COUNT; ++k) {
+    float lambda = DIFFRACTION_FAST_LAMBDA_UM[k];
+    vec2 chi = diffraction_p(terms, vec2(0.0), 2.0 * DIFFRACTION_PI * (wi.z + wo.z) / lambda);
+    chi2[k] = dot(chi, chi);
+    float peak = abs(d.x / lambda) > DIFFRACTION_F_MAX || abs(d.y / lambda) > DIFFRACTION_F_MAX
+                     ? 0.0 : specular_peak(dot(d, d), lambda, DIFFRACTION_SIGMA_UM);
+    xyz += (diffraction_brdf(terms, wi, wo, lambda) - gain * chi2[k] * peak) * DIFFRACTION_FAST_XYZ[k];
+  }
+  int count = textureSize(spectrum, 0).x;
+  int k = 0;
+  for (int i = 0; i < count; i += step_nm) {
+    vec4 s = texelFetch(spectrum, ivec2(i, 0), 0);
+    float lambda = s.x * 1e-3;
+    while (k + 2 < DIFFRACTION_FAST_COUNT && lambda > DIFFRACTION_FAST_LAMBDA_UM[k + 1]) ++k;
+    float w = lerp_weight(lambda, DIFFRACTION_FAST_LAMBDA_UM[k], DIFFRACTION_FAST_LAMBDA_UM[k + 1]);
+    float peak = abs(d.x / lambda) > DIFFRACTION_F_MAX || abs(d.y / lambda) > DIFFRACTION_F_MAX
+                     ? 0.0 : specular_peak(dot(d, d), lambda, DIFFRACTION_SIGMA_UM);
+    xyz += gain * (chi2[k] * (1.0 - w) + chi2[k + 1] * w) * peak * s.yzw * float(step_nm);
+  }
   return DIFFRACTION_XYZ_TO_SRGB * xyz;
 }
 

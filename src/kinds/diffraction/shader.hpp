@@ -12,8 +12,9 @@
 
 namespace specbake::diffraction {
 
-// `fast`: the wavelengths and XYZ weights of diffraction_srgb_fast.
+// `fast`: the wavelengths and XYZ weights of diffraction_srgb_fast (and of the diffracted part of
+// diffraction_srgb_fast_specular); `window`: the coherence window (Σw, σ).
 std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, const TableGeometry& g,
-                             double window_sum, double ior, const Wavelengths& fast);
+                             const Window& window, double ior, const Wavelengths& fast);
 
 }  // namespace specbake::diffraction

@@ -34,6 +34,7 @@ constexpr double kPreviewIor = 1.5;  // the Fresnel term's dielectric index (sha
 constexpr int kBrdfStepNm = 10;
 constexpr int kFastWavelengths = 8;  // the shader's fast variant     // wavelength step of the previews' spectral sums
 constexpr int kLobePanel = 256;     // pixels per side of each lobe panel
+constexpr double kPi = 3.141592653589793238462643;
 constexpr int kSpherePixels = 512;  // the sphere preview's size
 constexpr std::array<double, 3> kSphereLight = {2.0, 1.5, 3.0};
 
@@ -94,21 +95,43 @@ void add_brdf_previews(const BrdfTable& t, const Wavelengths& wl, const Waveleng
                      "a unit sphere covered by the surface (tangent x along circles about the view axis), seen along "
                      "-z, lit by a D65 point light at (2, 1.5, 3) radii; exposure " + format_g(es) +
                          " (99.5th percentile of the lit pixels)"});
-  const auto quick = brdf_lobes(t, fast, angles, kLobePanel);
-  double peak = 0, worst = 0, sq = 0;
+  double peak = 0;
   for (float v : lobes) peak = std::max(peak, static_cast<double>(std::fabs(v)));
-  for (std::size_t i = 0; i < lobes.size(); ++i) {
-    const double d = std::fabs(static_cast<double>(quick[i]) - lobes[i]);
-    worst = std::max(worst, d);
-    sq += d * d;
-  }
   const double scale = peak > 0 ? 1.0 / peak : 0.0;
-  r.accuracy.push_back(Accuracy::judged(
-      "shader_fast_vs_full",
-      "max |sRGB_fast - sRGB_full| / peak over the lobes picture (diffraction_srgb_fast, " +
-          std::to_string(fast.lambda_um.size()) + " wavelengths, against diffraction_srgb every 10 nm)",
-      worst * scale, std::nullopt, "the same BRDF every 10 nm",
-      {{"wavelengths", fast.lambda_um.size()}, {"rms_over_peak", std::sqrt(sq / lobes.size()) * scale}}));
+  // Pixels near the specular peak: where its Gaussian G = exp(−4π²σ²|f|²) at 550 nm is ≥ 1e-2.
+  std::vector<char> near_peak(lobes.size() / 3, 0);
+  for (int py = 0; py < kLobePanel; ++py)
+    for (std::size_t k = 0; k < angles.size(); ++k)
+      for (int px = 0; px < kLobePanel; ++px) {
+        const double x = -1.0 + (px + 0.5) * 2.0 / kLobePanel, y = 1.0 - (py + 0.5) * 2.0 / kLobePanel;
+        const double du = std::sin(angles[k] * kPi / 180.0) + x, f2 = (du * du + y * y) / (0.55 * 0.55);
+        near_peak[static_cast<std::size_t>(py) * kLobePanel * angles.size() + k * kLobePanel + px] =
+            4.0 * kPi * kPi * t.sigma_um * t.sigma_um * f2 <= std::log(100.0);
+      }
+  const auto record = [&](const std::string& name, const std::string& function, const std::vector<float>& quick,
+                          const std::string& what) {
+    double worst = 0, sq = 0, worst_near = 0;
+    for (std::size_t i = 0; i < lobes.size(); ++i) {
+      const double d = std::fabs(static_cast<double>(quick[i]) - lobes[i]);
+      worst = std::max(worst, d);
+      if (near_peak[i / 3]) worst_near = std::max(worst_near, d);
+      sq += d * d;
+    }
+    r.accuracy.push_back(Accuracy::judged(
+        name,
+        "max |sRGB_fast - sRGB_full| / peak over the lobes picture (" + function + ", " + what +
+            ", against diffraction_srgb every 10 nm)",
+        worst * scale, std::nullopt, "the same BRDF every 10 nm",
+        {{"wavelengths", fast.lambda_um.size()},
+         {"rms_over_peak", std::sqrt(sq / lobes.size()) * scale},
+         {"near_specular_max_over_peak", worst_near * scale},
+         {"near_specular", "pixels where the specular peak's exp(-4 pi^2 sigma^2 |f|^2) at 550 nm is >= 1e-2"}}));
+  };
+  const std::string few = std::to_string(fast.lambda_um.size()) + " wavelengths";
+  record("shader_fast_vs_full", "diffraction_srgb_fast", brdf_lobes(t, fast, angles, kLobePanel), few);
+  record("shader_fast_specular_vs_full", "diffraction_srgb_fast_specular",
+         brdf_lobes_fast_specular(t, fast, wl, angles, kLobePanel),
+         few + " for the diffracted part, the specular peak every 10 nm");
 }
 
 json window_json(const DiffractionSpec& spec, const Window& w, double length_um) {
@@ -324,11 +347,11 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
                     r);
     });
   const Wavelengths fast = bins(spectrum, kFastWavelengths);
-  r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win.sum, kPreviewIor, fast), "", {},
+  r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win, kPreviewIor, fast), "", {},
                      "", "", "GLSL: the table's lookup and the BRDF the previews draw (Stam, relative form)"});
   ctx.progress("preview", 0.95);
   tm.time("preview", [&] {
-    add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum, kPreviewIor}, every_nm(spectrum, kBrdfStepNm), fast, r);
+    add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum, kPreviewIor, win.sigma_um}, every_nm(spectrum, kBrdfStepNm), fast, r);
   });
   block["timings_s"] = tm.json();
   r.manifest_blocks["diffraction"] = block;
