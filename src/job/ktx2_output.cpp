@@ -37,7 +37,7 @@ Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm, cons
   return s;
 }
 
-void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, BakeResult& r) {
+void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, const JobContext& ctx, BakeResult& r) {
   Ktx2Image img;
   img.width = t.width;
   img.height = t.height;
@@ -52,6 +52,7 @@ void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, BakeResul
   o.metadata = t.metadata;
   o.metadata["specbake.layout"] = t.layout;
   o.metadata["specbake.units"] = t.units;
+  if (!ctx.bundle_hash.empty()) o.metadata["specbake.bundle_hash"] = ctx.bundle_hash;
   std::vector<std::int64_t> shape;
   if (t.depth) shape.push_back(t.depth);
   if (t.layers) shape.push_back(t.layers);

@@ -42,7 +42,9 @@ struct Ktx2Texture {
 
 // Appends the KTX2 file to r.files and, for rgba16f, the accuracy record `half:<file>` (the
 // half values' max relative error against the float32 data, judged against 2^-11; overflow
-// fails it with a warning naming the file).
-void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, BakeResult& r);
+// fails it with a warning naming the file). Its key/value data: KTXwriter (the tool and its
+// version), specbake.bundle_hash (ctx.bundle_hash, where there is one), specbake.layout,
+// specbake.units and the texture's own keys.
+void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, const JobContext& ctx, BakeResult& r);
 
 }  // namespace specbake

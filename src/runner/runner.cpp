@@ -354,12 +354,13 @@ void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
 }
 
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
-                     const RunProgress& progress, bool judge, Memo* memo) {
+                     const RunProgress& progress, bool judge, Memo* memo, const std::string& bundle_hash) {
   const double estimate_s = kind.cost_s(job);
   const auto tb = Clock::now();
   JobContext ctx{dev};
   ctx.judge = judge;
   ctx.memo = memo;
+  ctx.bundle_hash = bundle_hash;
   // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
   std::vector<cl_util::Profiler::Record> steps;
   std::optional<cl_util::Profiler::Stage> step(std::in_place, dev.profiler(), to_string(ev.stage));
@@ -449,7 +450,7 @@ std::vector<JobReport> Runner::run() {
           ev.index = static_cast<int>(index) + 1;
           ev.count = static_cast<int>(items.size());
           ev.job = name;
-          TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_);
+          TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, nullptr, r.hash);
           BakeResult& result = baked.result;
           const double bake_s = baked.bake_s;
           for (const auto& [step_name, sec] : baked.steps) stage_s[step_name] = cl_util::seconds_json(sec);

@@ -91,7 +91,8 @@ struct TimedBake {
   std::map<std::string, cl_util::StageSeconds> steps;
 };
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
-                     const RunProgress& progress, bool judge = true, Memo* memo = nullptr);
+                     const RunProgress& progress, bool judge = true, Memo* memo = nullptr,
+                     const std::string& bundle_hash = {});
 // Refuses (InputError at the job's entry) a job whose host-memory estimate exceeds what the
 // machine has available.
 void check_host_memory(const JobSpec& job, const MemoryEstimate& need);

@@ -52,6 +52,11 @@ TEST(AtmosphereKtx2, HalfTexturesCarryTheirMeasuredRounding) {
     EXPECT_EQ(k.depth, is3d ? 4u : 0u);  // r = 4 slices for the 3D textures, 0 for 2D
     EXPECT_EQ(k.width, is3d ? 3u * 6u : (std::string(name) == "transmittance" ? 32u : 16u));
     ASSERT_NE(k.value("specbake.layout"), nullptr);
+    // which bundle the file belongs to, and what wrote it
+    ASSERT_NE(k.value("specbake.bundle_hash"), nullptr);
+    EXPECT_EQ(*k.value("specbake.bundle_hash"), m["job"]["hash"].get<std::string>());
+    ASSERT_NE(k.value("KTXwriter"), nullptr);
+    EXPECT_EQ(k.value("KTXwriter")->rfind("specbake ", 0), 0u);
     const auto f = bin_floats(b / (std::string(name) + ".bin"));  // [..][3]
     ASSERT_EQ(k.rgba.size() / 4, f.size() / 3);
     std::vector<float> widened(f.size());

@@ -589,7 +589,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
 // rebuilt in the shader (GetCombinedScattering3D). What that rebuild costs is measured at every
 // texel from the float32 data and recorded (reported, not judged: it is the model's choice).
 void combined_ktx2_file(const AtmosphereSpec& spec, const Luts& L, const std::string& units, const std::string& param,
-                        const std::string& sizes, BakeResult& r) {
+                        const std::string& sizes, const JobContext& ctx, BakeResult& r) {
   const Sizes& s = L.model.sizes;
   const std::size_t texels = L.scattering.size() / 3;
   std::vector<float> rgba(4 * texels);
@@ -624,7 +624,7 @@ void combined_ktx2_file(const AtmosphereSpec& spec, const Luts& L, const std::st
                  "scattering with single Mie's red in alpha (rgba-combined; GetCombinedScattering3D rebuilds single "
                  "Mie's green and blue)",
                  {{"specbake.parameterisation", param}, {"specbake.sizes", sizes}}},
-                r);
+                ctx, r);
   r.accuracy.push_back(Accuracy::judged(
       "rgba_combined:single_mie", "max relative error of single Mie's green and blue rebuilt from the combined texture",
       worst, std::nullopt, "single_mie_scattering.bin (float32)",
@@ -640,7 +640,7 @@ void combined_ktx2_file(const AtmosphereSpec& spec, const Luts& L, const std::st
 // scattering and single Mie (x = nu*mu_s, y = mu, z = r), RGB padded to RGBA with alpha 1. Half
 // files carry an accuracy record of their rounding against the float32 data (.bin).
 void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& units, const std::string& param,
-                BakeResult& r) {
+                const JobContext& ctx, BakeResult& r) {
   const Sizes& s = L.model.sizes;
   struct Texture {
     bool wanted;
@@ -665,7 +665,7 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
     if (!t.wanted) continue;
     if (spec.ktx2_combined && std::string(t.name) == "single_mie_scattering") continue;  // in scattering's alpha
     if (spec.ktx2_combined && std::string(t.name) == "scattering") {
-      combined_ktx2_file(spec, L, units, param, sizes, r);
+      combined_ktx2_file(spec, L, units, param, sizes, ctx, r);
       continue;
     }
     const std::vector<float> f(t.data->begin(), t.data->end());
@@ -673,7 +673,7 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
                   {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, units,
                    std::string(t.name) + " (KTX2 copy)",
                    {{"specbake.parameterisation", param}, {"specbake.sizes", sizes}}},
-                  r);
+                  ctx, r);
   }
 }
 
@@ -691,7 +691,8 @@ std::string spectral_channel(const char* prefix, double nm) {
 // the sets outermost (.bin; KTX2 2D array textures of one layer per set), one Spectral OpenEXR per
 // texture with a channel per wavelength, sampling_spectral.glsl, and the wavelengths in the
 // manifest's parameters.
-void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Model& m, BakeResult& r) {
+void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Model& m, const JobContext& ctx,
+                    BakeResult& r) {
   const Sizes& s = m.sizes;
   const int sets = L.sets(), n = static_cast<int>(L.lambda_nm.size());
   std::string lambdas;
@@ -748,7 +749,7 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
                      {{"specbake.wavelengths_nm", lambdas},
                       {"specbake.sizes", "r=" + std::to_string(s.r) + " mu=" + std::to_string(s.mu) + " mu_s=" +
                                              std::to_string(s.mu_s) + " nu=" + std::to_string(s.nu)}}},
-                    r);
+                    ctx, r);
       files.push_back(t.name + ".ktx2");
     }
   }
@@ -844,8 +845,8 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                          {s.mu, s.r * wd, 3}, "EXR float32 ZIP", units, std::string(t.what) + " (tiled 2D, EXR)"});
     }
   }
-  if (spec.ktx2.enabled) ktx2_files(spec, L, units, param, r);
-  if (!b.radiance.lambda_nm.empty()) spectral_files(spec, b.radiance, L.model, r);
+  if (spec.ktx2.enabled) ktx2_files(spec, L, units, param, ctx, r);
+  if (!b.radiance.lambda_nm.empty()) spectral_files(spec, b.radiance, L.model, ctx, r);
   r.files.push_back({"sampling.glsl",
                      sampling_glsl(L.model, L.rgb, spec.layout_3d, spec.layout_tiled2d, "Values: " + units + "."), "",
                      {}, "", "", "GLSL lookup functions for the shipped layouts"});

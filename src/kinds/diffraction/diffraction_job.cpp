@@ -461,7 +461,7 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
                      "2D array: layer n = F_n (the manifest's bands name each band's first layer), x = ku, y = kv "
                      "(fftshifted); R = Re, G = Im",
                      "1", "F_n on the FFT grid (KTX2 copy of terms.bin)", {}},
-                    r);
+                    ctx, r);
     });
 
   ctx.progress("preview", 0.95);

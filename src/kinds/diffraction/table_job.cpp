@@ -344,7 +344,7 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
                      "2D array: layer n = F_n (the manifest's bands name each band's first layer), x = iu (f_u), "
                      "y = iv (f_v), table texels; R = Re, G = Im",
                      "1", "F_n at the table texels (KTX2 copy of table_terms.bin; sampler2DArray of the shader)", {}},
-                    r);
+                    ctx, r);
     });
   const Wavelengths fast = bins(spectrum, kFastWavelengths);
   r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win, kPreviewIor, fast), "", {},
