@@ -8,6 +8,7 @@
 
 #include "core/errors.hpp"
 #include "io/exr.hpp"
+#include "io/ktx2.hpp"
 
 namespace specbake {
 
@@ -103,8 +104,8 @@ BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double
       continue;
     }
     fd.status = "differs";
-    const bool exr = fs::path(path).extension() == ".exr";
-    if (numeric || exr) {
+    const bool exr = fs::path(path).extension() == ".exr", ktx2 = fs::path(path).extension() == ".ktx2";
+    if (numeric || exr || ktx2) {
       // EXR files are decoded (half or float) and compared pixel by pixel, [row][column][channel].
       std::vector<float> va, vb;
       std::vector<std::int64_t> dims;
@@ -124,6 +125,17 @@ BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double
         } catch (const InputError& e) {
           throw InputError({path, 0, 0, ""}, std::string("cannot compare ") + path + ": " + e.what());
         }
+      } else if (ktx2) {
+        // KTX2 files are decoded (half or float, Zstandard or not) and compared texel by texel;
+        // their key/value data (the bundle hash among it) is not a value.
+        try {
+          va = read_ktx2(ba, path).rgba;
+          vb = read_ktx2(bb, path).rgba;
+        } catch (const InputError& e) {
+          throw InputError({path, 0, 0, ""}, std::string("cannot compare ") + path + ": " + e.what());
+        }
+        const auto shape = fa_entry.value("shape", std::vector<std::int64_t>{});
+        dims = shape.empty() ? std::vector<std::int64_t>{static_cast<std::int64_t>(va.size())} : shape;
       } else {
         va = as_floats(ba);
         vb = as_floats(bb);

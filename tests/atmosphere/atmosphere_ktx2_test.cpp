@@ -135,3 +135,27 @@ TEST(AtmosphereKtx2, SettingsWithoutTheFormatAreRefused) {
 }
 
 }  // namespace
+
+namespace {
+// `diff` decodes KTX2 files: two bundles whose textures are equal but whose hashes differ (only the
+// previews setting changed) hold KTX2 files that differ in their key/value data alone, which diff
+// reports as the same values.
+TEST(AtmosphereKtx2, DiffComparesTexelsNotKeyValueData) {
+  t::TempDir tmp;
+  for (const char* v : {"a", "b"}) {
+    t::write_file(tmp / (std::string(v) + ".yaml"),
+                  std::string("specbake: 1\noutput: out\njobs:\n  - name: sky-") + v +
+                      "\n    kind: atmosphere\n    orders: 2\n    scene: none\n    previews: " +
+                      (std::string(v) == "a" ? "none" : "{size: 32}") +
+                      "\n    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, "
+                      "nu: 3}}\n    formats: [bin, exr, ktx2]\n");
+    const auto r = t::run_cli({"run", (tmp / (std::string(v) + ".yaml")).string()}, tmp.path());
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  const fs::path a = tmp / "out" / "sky-a" / "latest", b = tmp / "out" / "sky-b" / "latest";
+  EXPECT_NE(read(a / "scattering.ktx2"), read(b / "scattering.ktx2"));  // the bundle hash differs
+  const auto r = t::run_cli({"diff", a.string(), b.string()});
+  EXPECT_NE(r.out.find("same-values  scattering.ktx2"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("same  scattering.bin"), std::string::npos) << r.out;
+}
+}  // namespace
