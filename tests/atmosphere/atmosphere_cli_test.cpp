@@ -50,9 +50,12 @@ TEST(AtmosphereCli, BakesABundleWithEveryFile) {
     EXPECT_TRUE(img.attributes.count("specbake.layout")) << f;
   }
   const std::string glsl = read_file(b / "sampling.glsl");
-  for (const char* fn : {"vec3 GetSkyRadiance(", "vec3 GetSkyRadianceToPoint(", "vec3 GetSunAndSkyIrradiance(",
-                         "vec3 GetScattering3D(", "vec3 GetScatteringTiled2D(", "vec3 GetTransmittance(",
-                         "vec3 GetTransmittanceToTopAtmosphereBoundary(", "vec3 GetIrradiance(",
+  // the functions (their value type is SpecbakeRadiance, vec3 in this build) and the constants
+  for (const char* fn : {" GetSkyRadiance(SpecbakeAtmosphere atm,", " GetSkyRadianceToPoint(SpecbakeAtmosphere atm,",
+                         " GetSunAndSkyIrradiance(SpecbakeAtmosphere atm,", "vec3 GetScattering3D(SpecbakeAtmosphere atm,",
+                         " GetScatteringTiled2D(SpecbakeAtmosphere atm,", " GetTransmittance(SpecbakeAtmosphere atm,",
+                         " GetTransmittanceToTopAtmosphereBoundary(SpecbakeAtmosphere atm,",
+                         " GetIrradiance(SpecbakeAtmosphere atm,", "#define SpecbakeRadiance vec3",
                          "const SpecbakeAtmosphere SPECBAKE_ATMOSPHERE = SpecbakeAtmosphere("})
     EXPECT_NE(glsl.find(fn), std::string::npos) << fn;
   for (const char* png : {"planet_from_space.png", "sky_fisheye_sun_+60deg.png", "sky_fisheye_sun_+20deg.png",

@@ -334,10 +334,7 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
 #ifndef SPECBAKE_HAVE_GL
   GTEST_SKIP() << "built without EGL/GLES headers (Debian: libegl-dev, libgles-dev)";
 #else
-  specbake::testing::GlContext gl;
-  if (!gl.why.empty()) GTEST_SKIP() << "no EGL device: " << gl.why;
-  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_EXT_color_buffer_float")) << "float render targets";
-  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_OES_texture_float_linear")) << "filtered float textures";
+  SPECBAKE_GL_CONTEXT_OR_SKIP(gl);
 
   const Luts luts = reference_earth();
   const Model& m = luts.model;

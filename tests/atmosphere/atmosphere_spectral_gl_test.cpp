@@ -91,10 +91,7 @@ TEST(AtmosphereSpectralGl, ShippedSpectralSamplingMatchesTheHostOnLlvmpipe) {
 #ifndef SPECBAKE_HAVE_GL
   GTEST_SKIP() << "built without EGL/GLES headers (Debian: libegl-dev, libgles-dev)";
 #else
-  specbake::testing::GlContext gl;
-  if (!gl.why.empty()) GTEST_SKIP() << "no EGL device: " << gl.why;
-  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_EXT_color_buffer_float")) << "float render targets";
-  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_OES_texture_float_linear")) << "filtered float textures";
+  SPECBAKE_GL_CONTEXT_OR_SKIP(gl);
 
   // A small spectral bake of Bruneton's Earth, 8 wavelengths (2 sets), in double on the host.
   AtmosphereSpec spec;

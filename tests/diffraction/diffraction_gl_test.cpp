@@ -30,10 +30,7 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
 #ifndef SPECBAKE_HAVE_GL
   GTEST_SKIP() << "built without EGL/GLES headers (Debian: libegl-dev, libgles-dev)";
 #else
-  specbake::testing::GlContext gl;
-  if (!gl.why.empty()) GTEST_SKIP() << "no EGL device: " << gl.why;
-  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_EXT_color_buffer_float")) << "float render targets";
-  ASSERT_TRUE(specbake::testing::gl_has_extension("GL_OES_texture_float_linear")) << "filtered float textures";
+  SPECBAKE_GL_CONTEXT_OR_SKIP(gl);
 
   // A sawtooth (asymmetric, so a mirrored lookup would show) 48² field, window L = 3 µm, a 32²
   // power-mapped table, the terms in double then stored as float32 as the bundle stores them.

@@ -103,6 +103,15 @@ struct GlTarget {
   }
 };
 
+// The opening of every GL test: a GLES 3.2 context named `gl` (the test skips, with the reason,
+// where no EGL device opens one) with the float render targets and filtered float textures the
+// tests draw and sample with.
+#define SPECBAKE_GL_CONTEXT_OR_SKIP(gl)                                                                        \
+  ::specbake::testing::GlContext gl;                                                                           \
+  if (!gl.why.empty()) GTEST_SKIP() << "no EGL device: " << gl.why;                                            \
+  ASSERT_TRUE(::specbake::testing::gl_has_extension("GL_EXT_color_buffer_float")) << "float render targets";   \
+  ASSERT_TRUE(::specbake::testing::gl_has_extension("GL_OES_texture_float_linear")) << "filtered float textures"
+
 // A full-screen triangle (no vertex buffers: gl_VertexID).
 inline const char* kGlFullScreenVertex =
     "#version 320 es\nvoid main() {\n  vec2 c = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);\n"

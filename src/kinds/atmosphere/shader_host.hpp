@@ -130,18 +130,16 @@ namespace {
 #undef SPECBAKE_FETCH
 #undef SPECBAKE_SOLAR_IRRADIANCE
 
-inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
+// What both builds' SpecbakeAtmosphere hold alike: radii, sun, Mie g and the texture sizes.
+template <class Atmosphere>
+Atmosphere shared_atmosphere_of(const Model& m) {
   const Sizes& s = m.sizes;
-  SpecbakeAtmosphere a{};
+  Atmosphere a{};
   a.bottom_radius = m.bottom_radius_km;
   a.top_radius = m.top_radius_km;
   a.mu_s_min = m.mu_s_min;
   a.sun_angular_radius = m.sun_angular_radius_rad;
   a.mie_g = m.mie_g;
-  const auto v3 = [](const std::vector<double>& v) { return v.size() == 3 ? vec3(v[0], v[1], v[2]) : vec3(0.0); };
-  a.solar_irradiance = v3(rgb.solar_irradiance);
-  a.rayleigh_scattering = v3(rgb.rayleigh_scattering);
-  a.mie_scattering = v3(rgb.mie_scattering);
   a.transmittance_w = s.transmittance_w;
   a.transmittance_h = s.transmittance_h;
   a.irradiance_w = s.irradiance_w;
@@ -150,6 +148,15 @@ inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
   a.mu_size = s.mu;
   a.mu_s_size = s.mu_s;
   a.nu_size = s.nu;
+  return a;
+}
+
+inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
+  SpecbakeAtmosphere a = shared_atmosphere_of<SpecbakeAtmosphere>(m);
+  const auto v3 = [](const std::vector<double>& v) { return v.size() == 3 ? vec3(v[0], v[1], v[2]) : vec3(0.0); };
+  a.solar_irradiance = v3(rgb.solar_irradiance);
+  a.rayleigh_scattering = v3(rgb.rayleigh_scattering);
+  a.mie_scattering = v3(rgb.mie_scattering);
   return a;
 }
 
@@ -177,26 +184,12 @@ inline SpecbakeAtmosphere atmosphere_of(const Model& m, const std::vector<double
                                         const std::vector<double>& solar_irradiance) {
   if (lambda_nm.size() > 4 * SPECBAKE_WAVELENGTH_SETS || solar_irradiance.size() != lambda_nm.size())
     throw std::invalid_argument("spectral atmosphere: too many wavelengths or mismatched solar irradiance");
-  const Sizes& s = m.sizes;
-  SpecbakeAtmosphere a{};
-  a.bottom_radius = m.bottom_radius_km;
-  a.top_radius = m.top_radius_km;
-  a.mu_s_min = m.mu_s_min;
-  a.sun_angular_radius = m.sun_angular_radius_rad;
-  a.mie_g = m.mie_g;
+  SpecbakeAtmosphere a = shared_atmosphere_of<SpecbakeAtmosphere>(m);
   a.layer = 0.0;
   a.lambda_first = lambda_nm.empty() ? 0.0 : lambda_nm.front();
   a.lambda_step = lambda_nm.size() > 1 ? lambda_nm[1] - lambda_nm[0] : 1.0;
   a.lambda_count = static_cast<double>(lambda_nm.size());
   for (std::size_t i = 0; i < lambda_nm.size(); ++i) a.solar_irradiance[i / 4][static_cast<int>(i % 4)] = solar_irradiance[i];
-  a.transmittance_w = s.transmittance_w;
-  a.transmittance_h = s.transmittance_h;
-  a.irradiance_w = s.irradiance_w;
-  a.irradiance_h = s.irradiance_h;
-  a.r_size = s.r;
-  a.mu_size = s.mu;
-  a.mu_s_size = s.mu_s;
-  a.nu_size = s.nu;
   return a;
 }
 }  // namespace spectral
