@@ -95,7 +95,7 @@ std::vector<BadConfig> bad_configs() {
       {"Sellmeier with anomalous dispersion", job("    material: {sellmeier: {B: [1.0, -0.5], C: [0.0, 0.8]}}\n"), 3,
        "{B: [1.0, -0.5]", 1, "", "jobs[0].material.sellmeier", {"normal dispersion"}},
       {"Sellmeier pole inside the range", job("    material: {sellmeier: {B: [1.0, 0.2], C: [0.006, 0.25]}}\n"), 3,
-       "0.25", 1, "", "jobs[0].material.sellmeier.C[1]", {"pole", "500.0"}},
+       "0.25", 1, "", "jobs[0].material.sellmeier.C[1]", {"pole", "puts it at 500 nm"}},
       {"unknown sampling", job("    sampling: random\n" + kMat), 3, "random", 1, "", "jobs[0].sampling",
        {"uniform | gauss-legendre | visible-pdf | inverse-square", "'random'"}},
       {"n_d out of range", job("    material: {n_d: 0.9, v_d: 64.17}\n"), 3, "0.9", 1, "", "jobs[0].material.n_d",

@@ -465,7 +465,7 @@ void record_orders(const AtmosphereSpec& spec, const Baked& b, BakeResult& r) {
   r.parameters["pass_details"] = b.passes;
   if (!b.converged)
     r.warnings.push_back("orders: auto stopped at the cap of " + std::to_string(kMaxAutoOrders) +
-                         " orders before an order added less than the tolerance " + std::to_string(spec.tolerance));
+                         " orders before an order added less than the tolerance " + format_g(spec.tolerance));
 }
 
 void compute_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b) {
@@ -565,7 +565,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     for (const auto& c : b.self_checks)
       if (!(c.value("max_relative_error", 0.0) < b.self_check_worst)) stage = c.value("stage", "?");
     throw JobError("self-check failed in " + stage + ": the float32 kernels differ from the double reference by " +
-                   std::to_string(b.self_check_worst) + " (relative) > " + std::to_string(kCheckTolerance) +
+                   format_g(b.self_check_worst) + " (relative) > " + format_g(kCheckTolerance) +
                    ". Check the atmosphere's inputs first (optical depths far beyond any planet's make the float "
                    "sums lose their digits); `precision: double` computes in float64 on devices that have it");
   }

@@ -7,6 +7,7 @@
 #include "core/hash.hpp"
 #include "core/resources.hpp"
 #include "core/spectral_data.hpp"
+#include "core/text.hpp"
 #include "atmosphere/limits.h"
 #include "kinds/atmosphere/scene_check.hpp"
 #include "kinds/atmosphere/spec.hpp"
@@ -212,7 +213,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   if (job.has("top_radius_km")) s.top_radius_km = job.child("top_radius_km").number_in(1.0, 1e6, "in [1, 1e6] km");
   if (!(s.top_radius_km > s.bottom_radius_km))
     (job.has("top_radius_km") ? job.child("top_radius_km") : job.child("bottom_radius_km"))
-        .fail("expected top_radius_km > bottom_radius_km (" + std::to_string(s.bottom_radius_km) + ")");
+        .fail("expected top_radius_km > bottom_radius_km (" + format_g(s.bottom_radius_km, 6) + ")");
   if (job.has("sun_angular_radius_rad"))
     s.sun_angular_radius_rad = job.child("sun_angular_radius_rad").number_in(1e-6, 0.1, "in [1e-6, 0.1] rad");
   if (job.has("max_sun_zenith_deg"))

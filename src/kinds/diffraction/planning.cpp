@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "core/text.hpp"
 #include "kinds/diffraction/reference.hpp"
 
 namespace specbake::diffraction {
@@ -184,9 +185,9 @@ Plan make_plan(const DiffractionSpec& spec, const Field& f, double target) {
   } else {
     p.bands = auto_bands(spec.expansion, p.kappa_lo, p.kappa_hi, f.s, target, kUnitRoundoffF32, moments);
     if (p.bands.empty())
-      throw JobError("terms: auto cannot meet tolerance " + std::to_string(target) + " with at most " +
+      throw JobError("terms: auto cannot meet tolerance " + format_g(target) + " with at most " +
                      std::to_string(kMaxDiffractionTerms) + " FFT terms for y_max = kappa_hi*s = " +
-                     std::to_string(p.y_max) + " in float32; raise the tolerance or narrow range_nm / w_max");
+                     format_g(p.y_max) + " in float32; raise the tolerance or narrow range_nm / w_max");
   }
   for (const auto& b : p.bands) {
     p.total_terms += b.terms;

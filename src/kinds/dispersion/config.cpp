@@ -4,6 +4,7 @@
 #include "core/hash.hpp"
 #include "core/resources.hpp"
 #include "core/spectral_data.hpp"
+#include "core/text.hpp"
 #include "kinds/dispersion/reference.hpp"
 #include "kinds/dispersion/spec.hpp"
 
@@ -48,7 +49,7 @@ void check_glass(const At& at, const Sellmeier& sm) {
   for (double c : sm.C) c_min = std::min(c_min, c);
   const std::string hint = c_min > 1000.0 ? "; C looks like nm² (every C > 1000): expected µm² (divide by 10^6)" : "";
   if (!(std::isfinite(n_d) && n_d > 1.01 && n_d < 5.0))
-    at.fail("expected Sellmeier coefficients of a transparent glass, but they give n = " + std::to_string(n_d) +
+    at.fail("expected Sellmeier coefficients of a transparent glass, but they give n = " + format_g(n_d, 6) +
             " at 587.56 nm" + hint);
   if (!(std::isfinite(abbe) && abbe > 0.0 && abbe < 200.0))
     at.fail("expected normal dispersion in the visible (Abbe number in (0, 200)), but these coefficients give " +
@@ -135,7 +136,7 @@ DispersionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
       const double pole_nm = std::sqrt(d.material.sellmeier->C[i]) * 1000.0;
       if (pole_nm >= d.range_nm.lo && pole_nm <= d.range_nm.hi)
         c.item(i).fail("expected C_i (µm²) with its pole √C_i outside range_nm; C_i = " +
-                       std::to_string(d.material.sellmeier->C[i]) + " puts it at " + std::to_string(pole_nm) + " nm");
+                       format_g(d.material.sellmeier->C[i]) + " puts it at " + format_g(pole_nm) + " nm");
     }
     check_glass(job.child("material").child("sellmeier"), *d.material.sellmeier);
   }

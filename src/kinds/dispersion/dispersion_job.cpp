@@ -276,7 +276,7 @@ AutoChoice choose_samples(Device& dev, const DispersionSpec& spec, const Progres
   double e_hi = error_at(hi);
   while (e_hi > spec.tolerance_de2000) {
     if (hi >= kMaxSamples)
-      throw JobError("samples: auto cannot meet tolerance_de2000 " + std::to_string(spec.tolerance_de2000) +
+      throw JobError("samples: auto cannot meet tolerance_de2000 " + format_g(spec.tolerance_de2000) +
                      " with at most " + std::to_string(kMaxSamples) + " samples (mean CIEDE2000 " +
                      std::to_string(e_hi) + " at N = " + std::to_string(hi) + ")");
     hi = std::min(2 * hi, kMaxSamples);
@@ -423,7 +423,7 @@ Tables compute_step(const DispersionSpec& spec, const Planned& p, JobContext& ct
       if (!std::isfinite((*v)[i])) {
         const std::size_t sample = i * static_cast<std::size_t>(p.n) / v->size();
         throw JobError(std::string(what) + ": non-finite value at sample " + std::to_string(sample) + " (" +
-                       std::to_string(p.samples.lambda_nm[sample]) + " nm); check the material");
+                       format_g(p.samples.lambda_nm[sample]) + " nm); check the material");
       }
   r.parameters["w_raw_sum"] = t.w_raw_sum;
   return t;
@@ -477,8 +477,8 @@ void check_step(const DispersionSpec& spec, const Planned& p, const Tables& t, J
     bound = std::max(bound, kFloat32Ulp * a + n * agree_tol);
   }
   if (!(sum_err <= bound))
-    throw JobError("self-check failed: |sum K_n - I| = " + std::to_string(sum_err) + " exceeds its bound " +
-                   std::to_string(bound));
+    throw JobError("self-check failed: |sum K_n - I| = " + format_g(sum_err) + " exceeds its bound " +
+                   format_g(bound));
   const Accuracy sum_k = Accuracy::judged("sum_K_minus_I", "max abs entry of sum_n K_n - I (stored float32)", sum_err,
                                           bound, "the identity (white stays white)",
                                           {{"bound", "2^-24 * sum |K_n| + N * self-check tolerance"}});
@@ -512,13 +512,14 @@ void check_step(const DispersionSpec& spec, const Planned& p, const Tables& t, J
                                           {{"at_nm", at}, {"relative_to_index_spread", worst_ior / spread}}));
     if (worst_ior / spread > 0.02)
       r.warnings.push_back("the Cauchy/Abbe model the shader uses is off the Sellmeier index by up to " +
-                           std::to_string(worst_ior) + " (" + std::to_string(100.0 * worst_ior / spread) +
-                           " % of the index spread over range_nm) at " + std::to_string(at) + " nm");
+                           format_g(worst_ior, 3) + " (" + format_g(100.0 * worst_ior / spread, 3) +
+                           " % of the index spread over range_nm) at " + format_g(at) + " nm; ior.bin holds the "
+                           "Sellmeier index");
     if (spec.material.valid_nm &&
         (spec.range_nm.lo < spec.material.valid_nm->lo || spec.range_nm.hi > spec.material.valid_nm->hi))
       r.warnings.push_back("range_nm extrapolates the Sellmeier fit of " + spec.material.glass + " (valid " +
-                           std::to_string(spec.material.valid_nm->lo) + "-" +
-                           std::to_string(spec.material.valid_nm->hi) + " nm)");
+                           format_g(spec.material.valid_nm->lo) + "-" + format_g(spec.material.valid_nm->hi) +
+                           " nm)");
   }
 }
 
