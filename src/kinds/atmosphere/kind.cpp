@@ -30,8 +30,12 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
   // the encoded files (float32 + EXR) of the 4D textures.
   const std::uint64_t t2d = std::uint64_t(s.transmittance_mu) * s.transmittance_r +
                             std::uint64_t(s.irradiance_mu_s) * s.irradiance_r;
-  const std::uint64_t host = texels * 8 * (2 * 3 + 5 * w) + t2d * 8 * (3 * 3 + 4 * w) + texels * 3 * 4 * 4 +
-                             (std::uint64_t{1} << 26);
+  std::uint64_t host = texels * 8 * (2 * 3 + 5 * w) + t2d * 8 * (3 * 3 + 4 * w) + texels * 3 * 4 * 4 +
+                       (std::uint64_t{1} << 26);
+  // store: radiance: the float32 textures at every wavelength, and their files (.bin, the Spectral
+  // OpenEXR and its pixel copy, KTX2), all alive until the bundle is written
+  if (s.spectral && s.store_radiance)
+    host += (2 * texels + t2d) * std::uint64_t(s.count) * 4 * (s.ktx2.enabled ? 5 : 4);
   // The scene check: its traces (the bake's channels, then the 48-wavelength reference) one
   // after the other, counted as if alive beside the bake's buffers.
   TruthMemory check;
