@@ -68,42 +68,38 @@ inline vec4 texel(const double* t, int channels, long long index) {
 inline double shift(FilterProbe* p, int fetch, int axis) {
   return p && fetch == p->target && axis == p->axis ? p->delta : 0.0;
 }
+// The bilinear blend of at(i, j) around uv on w × h texels, with fetch n's probe shifts (if any).
+template <class At>
+vec4 bilinear(FilterProbe* p, int n, vec2 uv, int w, int h, At at) {
+  const Taps a[2] = {taps(uv.x, w, shift(p, n, 0)), taps(uv.y, h, shift(p, n, 1))};
+  return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0) + a[0].f * at(a[0].i1, a[1].i0)) +
+         a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1) + a[0].f * at(a[0].i1, a[1].i1));
+}
 }  // namespace detail
 
 inline vec4 texture_rgba(const sampler2D& s, vec2 uv) {
   const int n = s.probe ? s.probe->fetches++ : 0;
-  const detail::Taps a[2] = {detail::taps(uv.x, s.w, detail::shift(s.probe, n, 0)),
-                             detail::taps(uv.y, s.h, detail::shift(s.probe, n, 1))};
-  const auto at = [&](int i, int j) { return detail::texel(s.texels, s.channels, 1LL * j * s.w + i); };
-  return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0) + a[0].f * at(a[0].i1, a[1].i0)) +
-         a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1) + a[0].f * at(a[0].i1, a[1].i1));
+  return detail::bilinear(s.probe, n, uv, s.w, s.h,
+                          [&](int i, int j) { return detail::texel(s.texels, s.channels, 1LL * j * s.w + i); });
 }
 inline vec4 texture_rgba(const sampler3D& s, vec3 uvw) {
   const int n = s.probe ? s.probe->fetches++ : 0;
-  const detail::Taps a[3] = {detail::taps(uvw.x, s.w, detail::shift(s.probe, n, 0)),
-                             detail::taps(uvw.y, s.h, detail::shift(s.probe, n, 1)),
-                             detail::taps(uvw.z, s.d, detail::shift(s.probe, n, 2))};
-  const auto at = [&](int i, int j, int k) {
-    return detail::texel(s.texels, s.channels, (1LL * k * s.h + j) * s.w + i);
-  };
+  const detail::Taps z = detail::taps(uvw.z, s.d, detail::shift(s.probe, n, 2));
   const auto plane = [&](int k) {
-    return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0, k) + a[0].f * at(a[0].i1, a[1].i0, k)) +
-           a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1, k) + a[0].f * at(a[0].i1, a[1].i1, k));
+    return detail::bilinear(s.probe, n, vec2(uvw.x, uvw.y), s.w, s.h, [&](int i, int j) {
+      return detail::texel(s.texels, s.channels, (1LL * k * s.h + j) * s.w + i);
+    });
   };
-  return (1.0 - a[2].f) * plane(a[2].i0) + a[2].f * plane(a[2].i1);
+  return (1.0 - z.f) * plane(z.i0) + z.f * plane(z.i1);
 }
 // A layer of a 2D array texture, bilinear: the GPU's layer index is round(layer), clamped.
 inline vec4 texture_layer(const sampler2DArray& s, vec2 uv, double layer) {
   const int n = s.probe ? s.probe->fetches++ : 0;
   const int l = std::clamp(static_cast<int>(std::floor(layer + 0.5)), 0, s.layers - 1);
-  const detail::Taps a[2] = {detail::taps(uv.x, s.w, detail::shift(s.probe, n, 0)),
-                             detail::taps(uv.y, s.h, detail::shift(s.probe, n, 1))};
-  const auto at = [&](int i, int j) {
+  return detail::bilinear(s.probe, n, uv, s.w, s.h, [&](int i, int j) {
     const float* v = s.texels + 4 * ((1LL * l * s.h + j) * s.w + i);
     return vec4(v[0], v[1], v[2], v[3]);
-  };
-  return (1.0 - a[1].f) * ((1.0 - a[0].f) * at(a[0].i0, a[1].i0) + a[0].f * at(a[0].i1, a[1].i0)) +
-         a[1].f * ((1.0 - a[0].f) * at(a[0].i0, a[1].i1) + a[0].f * at(a[0].i1, a[1].i1));
+  });
 }
 template <class Sampler, class Uv>
 vec3 texture_rgb(const Sampler& s, Uv uv) {
