@@ -13,6 +13,7 @@
 #include "io/ktx2.hpp"
 #include "job/kind.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
+#include "atmosphere/radiance_earth.hpp"
 #include "support/testing.hpp"
 
 namespace {
@@ -122,23 +123,7 @@ TEST(AtmosphereRadiance, FilesHoldTheRadianceTheLuminanceTexturesWereSummedFrom)
 // The spectral lookups on the host over a double reference bake: exact at a stored wavelength,
 // linear between two (also across a set's edge, where two sets are read), clamped outside.
 TEST(AtmosphereRadiance, AtWavelengthIsExactAtStoredWavelengthsAndLinearBetween) {
-  AtmosphereSpec s;
-  set_earth_profiles(s);
-  s.transmittance_mu = 32;
-  s.transmittance_r = 8;
-  s.irradiance_mu_s = 16;
-  s.irradiance_r = 4;
-  s.scattering_r = 4;
-  s.scattering_mu = 8;
-  s.scattering_mu_s = 6;
-  s.scattering_nu = 3;
-  s.orders = 2;
-  s.spectral = true;
-  s.store_radiance = true;
-  s.min_nm = 400.0;
-  s.max_nm = 700.0;
-  s.count = 8;
-  const Baked b = bake_luts_reference(s);
+  const Baked b = bake_luts_reference(t::radiance_earth({32, 8}, {16, 4}, {4, 8, 6, 3}));
   ASSERT_EQ(b.radiance.lambda_nm.size(), 8u);
   const SpectralRenderer sr(b.luts.model, b.radiance);
   const double rb = b.luts.model.bottom_radius_km;

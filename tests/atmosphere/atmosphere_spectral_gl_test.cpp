@@ -14,6 +14,7 @@
 #include "core/parallel.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/shader_host.hpp"
+#include "atmosphere/radiance_earth.hpp"
 #include "support/gl_context.hpp"
 
 namespace {
@@ -94,22 +95,7 @@ TEST(AtmosphereSpectralGl, ShippedSpectralSamplingMatchesTheHostOnLlvmpipe) {
   SPECBAKE_GL_CONTEXT_OR_SKIP(gl);
 
   // A small spectral bake of Bruneton's Earth, 8 wavelengths (2 sets), in double on the host.
-  AtmosphereSpec spec;
-  set_earth_profiles(spec);
-  spec.transmittance_mu = 64;
-  spec.transmittance_r = 16;
-  spec.irradiance_mu_s = 16;
-  spec.irradiance_r = 4;
-  spec.scattering_r = 8;
-  spec.scattering_mu = 32;
-  spec.scattering_mu_s = 8;
-  spec.scattering_nu = 4;
-  spec.orders = 2;
-  spec.spectral = spec.store_radiance = true;
-  spec.min_nm = 400.0;
-  spec.max_nm = 700.0;
-  spec.count = 8;
-  const Baked baked = bake_luts_reference(spec);
+  const Baked baked = bake_luts_reference(specbake::testing::radiance_earth({64, 16}, {16, 4}, {8, 32, 8, 4}));
   const SpectralLuts& L = baked.radiance;
   const Model& m = baked.luts.model;
   const Sizes& s = m.sizes;
