@@ -51,6 +51,14 @@ struct At {
   At item(std::size_t i) const { return {node[i], key + "[" + std::to_string(i) + "]", file}; }
   bool has(const std::string& k) const { return node.IsMap() && node[k]; }
 
+  // Each item of a non-empty list, in order; fails naming `what` (e.g. "layouts (3d, tiled2d)")
+  // when this is not one.
+  template <class F>
+  void each_item(const std::string& what, F&& on_item) const {
+    if (!node.IsSequence() || node.size() == 0) fail("expected a non-empty list of " + what);
+    for (std::size_t i = 0; i < node.size(); ++i) on_item(item(i));
+  }
+
   void expect_map(const char* what) const {
     if (!node.IsMap()) fail(std::string("expected ") + what + " (a mapping), got " + shown());
   }

@@ -106,10 +106,9 @@ BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double
     fd.status = "differs";
     const bool exr = fs::path(path).extension() == ".exr", ktx2 = fs::path(path).extension() == ".ktx2";
     if (numeric || exr || ktx2) {
-      // EXR files are decoded (half or float) and compared pixel by pixel, [row][column][channel].
       std::vector<float> va, vb;
       std::vector<std::int64_t> dims;
-      if (exr) {
+      if (exr) {  // decoded (half or float) and compared pixel by pixel, [row][column][channel]
         try {
           const auto channels = exr_channels(ba);
           const ExrImage ia = exr_read(ba, channels), ib = exr_read(bb, exr_channels(bb));
@@ -134,11 +133,11 @@ BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double
         } catch (const InputError& e) {
           throw InputError({path, 0, 0, ""}, std::string("cannot compare ") + path + ": " + e.what());
         }
-        const auto shape = fa_entry.value("shape", std::vector<std::int64_t>{});
-        dims = shape.empty() ? std::vector<std::int64_t>{static_cast<std::int64_t>(va.size())} : shape;
       } else {
         va = as_floats(ba);
         vb = as_floats(bb);
+      }
+      if (!exr) {  // indexed by the manifest's shape
         const auto shape = fa_entry.value("shape", std::vector<std::int64_t>{});
         dims = shape.empty() ? std::vector<std::int64_t>{static_cast<std::int64_t>(va.size())} : shape;
       }

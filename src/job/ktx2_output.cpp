@@ -11,13 +11,14 @@ Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm, cons
   Ktx2Settings s;
   if (job.has("formats")) {
     const yaml::At f = job.child("formats");
-    if (!f.node.IsSequence() || f.node.size() == 0) f.fail("expected a non-empty list of formats (bin, exr, ktx2)");
     bool bin = false, exr = false;
-    for (std::size_t i = 0; i < f.node.size(); ++i) switch (f.item(i).choice<int>({{"bin", 0}, {"exr", 1}, {"ktx2", 2}})) {
+    f.each_item("formats (bin, exr, ktx2)", [&](const yaml::At& it) {
+      switch (it.choice<int>({{"bin", 0}, {"exr", 1}, {"ktx2", 2}})) {
         case 0: bin = true; break;
         case 1: exr = true; break;
         default: s.enabled = true; break;
       }
+    });
     if (!bin || !exr) f.fail("expected bin and exr in formats (every bundle has them; ktx2 is added on request)");
   }
   if (job.has("ktx2")) {

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "atmosphere/gl_perturb.hpp"
 #include "atmosphere/npy.hpp"
 #include "core/parallel.hpp"
 #include "core/resources.hpp"
@@ -52,8 +53,8 @@ Luts reference_earth() {
   return luts;
 }
 
-double f32(double x) { return static_cast<float>(x); }
-dvec3 f32(const dvec3& v) { return {f32(v.x), f32(v.y), f32(v.z)}; }
+using specbake::testing::f32;
+using specbake::testing::turned;
 
 // One pixel's inputs, as the GL side gets them (float32): kind 0 a sky ray along `dir`, kind 1 a
 // ground point `dir` km from the camera with its local vertical p_up at altitude p_h, kind −1
@@ -150,13 +151,6 @@ struct Host {
     return h;
   }
 };
-
-// A unit vector turned by angle e towards each of two directions orthogonal to it.
-std::vector<dvec3> turned(const dvec3& v, double e) {
-  const dvec3 a = glm::normalize(glm::cross(v, std::fabs(v.z) < 0.9 ? dvec3{0, 0, 1} : dvec3{1, 0, 0}));
-  const dvec3 b = glm::cross(v, a);
-  return {glm::normalize(v + e * a), glm::normalize(v - e * a), glm::normalize(v + e * b), glm::normalize(v - e * b)};
-}
 
 // The per-pixel bound on |GL − host|, per output and channel, as three terms:
 //  - filtering: GL implementations resolve texel coordinates to 8 fractional bits (D3D11's

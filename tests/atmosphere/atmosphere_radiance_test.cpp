@@ -7,7 +7,6 @@
 
 #include <cmath>
 #include <cstring>
-#include <fstream>
 
 #include "io/exr.hpp"
 #include "io/ktx2.hpp"
@@ -24,10 +23,7 @@ using nlohmann::json;
 using namespace specbake;
 using namespace specbake::atmosphere;
 
-std::string read(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using t::read_file;
 
 TEST(AtmosphereRadiance, FilesHoldTheRadianceTheLuminanceTexturesWereSummedFrom) {
   t::TempDir tmp;
@@ -88,7 +84,7 @@ TEST(AtmosphereRadiance, FilesHoldTheRadianceTheLuminanceTexturesWereSummedFrom)
 
     // The Spectral OpenEXR copy: one channel per wavelength, the same float32 values.
     std::vector<std::string> names;
-    for (const auto& c : exr_channels(read(b / (std::string(p.spectral) + ".exr")))) names.push_back(c);
+    for (const auto& c : exr_channels(read_file(b / (std::string(p.spectral) + ".exr")))) names.push_back(c);
     ASSERT_EQ(names.size(), 8u);
     EXPECT_NE(std::find(names.begin(), names.end(), "S0.418,750000nm"), names.end());
     std::vector<std::string> ordered;
@@ -100,13 +96,13 @@ TEST(AtmosphereRadiance, FilesHoldTheRadianceTheLuminanceTexturesWereSummedFrom)
       s[2] = '.';  // "S0." keeps its dot; the wavelength's decimal point is a comma
       ordered.push_back(s);
     }
-    const ExrImage exr = exr_read(read(b / (std::string(p.spectral) + ".exr")), ordered);
+    const ExrImage exr = exr_read(read_file(b / (std::string(p.spectral) + ".exr")), ordered);
     for (int i = 0; i < p.texels; ++i)
       for (int g = 0; g < n; ++g)
         ASSERT_EQ(exr.pixels[static_cast<std::size_t>(i) * n + g], rad[4 * ((g / 4) * p.texels + i) + g % 4]);
 
     // The KTX2 copy: a 2D array texture of one layer per wavelength set, the .bin texels bit for bit.
-    const auto k = read_ktx2(read(b / (std::string(p.spectral) + ".ktx2")), p.spectral);
+    const auto k = read_ktx2(read_file(b / (std::string(p.spectral) + ".ktx2")), p.spectral);
     EXPECT_EQ(k.layer_count, 2u);
     EXPECT_EQ(k.depth, 0u);
     ASSERT_NE(k.value("specbake.wavelengths_nm"), nullptr);

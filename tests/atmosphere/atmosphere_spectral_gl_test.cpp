@@ -15,6 +15,7 @@
 #include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/shader_host.hpp"
 #include "atmosphere/radiance_earth.hpp"
+#include "atmosphere/gl_perturb.hpp"
 #include "support/gl_context.hpp"
 
 namespace {
@@ -23,18 +24,8 @@ using namespace specbake;
 using namespace specbake::atmosphere;
 using glm::dvec3;
 
-double f32(double x) { return static_cast<float>(x); }
-dvec3 f32(const dvec3& v) { return {f32(v.x), f32(v.y), f32(v.z)}; }
-
-// A unit vector turned by angle e towards each of two directions orthogonal to it.
-std::vector<dvec3> turned(const dvec3& v, double e) {
-  const dvec3 a = glm::normalize(glm::cross(v, std::fabs(v.z) < 0.9 ? dvec3(0, 0, 1) : dvec3(1, 0, 0)));
-  const dvec3 b = glm::cross(v, a);
-  std::vector<dvec3> out;
-  for (const dvec3& w : {a, b})
-    for (double s : {e, -e}) out.push_back(glm::normalize(v + s * w));
-  return out;
-}
+using specbake::testing::f32;
+using specbake::testing::turned;
 
 struct Host {
   glsl::spectral::SpecbakeAtmosphere atm;
@@ -100,7 +91,7 @@ TEST(AtmosphereSpectralGl, ShippedSpectralSamplingMatchesTheHostOnLlvmpipe) {
   const Model& m = baked.luts.model;
   const Sizes& s = m.sizes;
   const int tiled_w = s.r * s.scattering_width();
-  const Host host{glsl::spectral::atmosphere_of(m, L.lambda_nm, L.solar_irradiance),
+  const Host host{glsl::spectral::atmosphere_of(m, L),
                   {L.transmittance.data(), s.transmittance_w, s.transmittance_h, L.sets()},
                   {L.scattering.data(), tiled_w, s.mu, L.sets()},
                   {L.single_mie.data(), tiled_w, s.mu, L.sets()}};

@@ -95,15 +95,11 @@ struct OrderAccumulator {
 void keep_radiance(SpectralLuts& L, const Sizes& s, int first, int count, int width, const PassResult& r) {
   const std::size_t sets = static_cast<std::size_t>(L.sets());
   const std::size_t n_t = 1ULL * s.transmittance_w * s.transmittance_h, n_e = 1ULL * s.irradiance_w * s.irradiance_h,
-                    n_s = s.scattering_texels(), wd = static_cast<std::size_t>(s.scattering_width());
+                    n_s = s.scattering_texels();
   const auto put = [&](std::vector<float>& dst, const std::vector<double>& src, std::size_t texels, bool tiled) {
     if (dst.empty()) dst.assign(4 * sets * texels, 0.0f);
     for (std::size_t t = 0; t < texels; ++t) {
-      std::size_t at = t;
-      if (tiled) {
-        const std::size_t x = t % wd, j = (t / wd) % s.mu, k = t / (wd * s.mu);
-        at = (j * s.r + k) * wd + x;
-      }
+      const std::size_t at = tiled ? tiled2d_index(t, s) : t;
       for (int i = 0; i < count; ++i) {
         const std::size_t g = static_cast<std::size_t>(first + i);
         dst[4 * ((g / 4) * texels + at) + g % 4] = static_cast<float>(src[t * width + i]);
@@ -263,8 +259,9 @@ int channels_per_pass(const AtmosphereSpec& spec) {
 double estimated_seconds(const AtmosphereSpec& spec) {
   if (spec.auto_sizes || spec.auto_spectrum) {
     const AtmosphereSpec start = search_start(spec);
-    AtmosphereSpec bare = start;
+    AtmosphereSpec bare = start;  // what each try costs; the check and the interpolation pass run once
     bare.scene.check = false;
+    bare.store_radiance = false;
     return kTypicalTries * estimated_seconds(bare) + (estimated_seconds(start) - estimated_seconds(bare));
   }
   const double texels = double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s * spec.scattering_nu;
@@ -281,7 +278,7 @@ double estimated_seconds(const AtmosphereSpec& spec) {
   // store: radiance: one more pass of up to kInterpolationTests wavelengths (the interpolation check)
   const int tests = std::min(kInterpolationTests, channels - 1);
   const double interpolation =
-      spec.spectral && spec.store_radiance ? orders * (texels / 1048576.0) * (6.4 + 0.12 * pass_width_for(tests)) : 0.0;
+      spec.store_radiance ? orders * (texels / 1048576.0) * (6.4 + 0.12 * pass_width_for(tests)) : 0.0;
   return 1.0 + orders * passes * (texels / 1048576.0) * (6.4 + 0.12 * width) +
          passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + check + interpolation;
 }
@@ -390,7 +387,6 @@ InterpolationError interpolation_error(const Model& m, const SpectralLuts& store
   const SpectralRenderer at(m, stored), ref(m, exact);
   const Vec3 camera{0.0, 0.0, m.bottom_radius_km + kFisheyeAltitudeKm}, ground{0.0, 0.0, m.bottom_radius_km},
       up{0.0, 0.0, 1.0};
-  constexpr int kGrid = 32;
   // one wavelength's values, interpolated and exact, then their relative errors (floor: 1e-3 of
   // the largest exact value at that wavelength)
   struct Pairs {
@@ -408,9 +404,9 @@ InterpolationError interpolation_error(const Model& m, const SpectralLuts& store
     Pairs l, t, e;
     for (const FisheyeView& v : kFisheyeViews) {
       const Vec3 sun = fisheye_sun(v);
-      for (int p = 0; p < kGrid * kGrid; ++p) {
+      for (int p = 0; p < kInterpolationGrid * kInterpolationGrid; ++p) {
         Vec3 view;
-        if (!fisheye_direction((2.0 * (p % kGrid) + 1.0) / kGrid - 1.0, (2.0 * (p / kGrid) + 1.0) / kGrid - 1.0, view))
+        if (!fisheye_direction((2.0 * (p % kInterpolationGrid) + 1.0) / kInterpolationGrid - 1.0, (2.0 * (p / kInterpolationGrid) + 1.0) / kInterpolationGrid - 1.0, view))
           continue;
         double t_test = 0.0, t_truth = 0.0;
         l.test.push_back(at.sky_radiance(camera, view, sun, lambda, &t_test));
@@ -513,6 +509,15 @@ void held_out_step(const AtmosphereSpec& use, const Baked& b, JobContext& ctx, B
   r.accuracy.insert(r.accuracy.begin() + 1, a);
 }
 
+// Where interpolation_error compares (the manifest's words).
+std::string interpolation_points() {
+  std::string suns;
+  for (const FisheyeView& v : kFisheyeViews) suns += (suns.empty() ? "" : ", ") + format_g(v.sun_elevation_deg);
+  const std::string n = std::to_string(kInterpolationGrid);
+  return "the preview fisheyes (sun at " + suns + " deg; " + n + " x " + n + " directions each, " +
+         format_g(kFisheyeAltitudeKm * 1e3) + " m above the ground) and each sun's sun and sky irradiance on the ground";
+}
+
 // `store: radiance`: the interpolation between stored wavelengths measured against a bake at
 // wavelengths halfway between them (same model, sizes and orders; one more pass on the device),
 // recorded as reported accuracy (not judged: the wavelength count is the user's choice).
@@ -532,21 +537,17 @@ void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& 
   exact.solar_irradiance = ch.solar_irradiance;
   keep_radiance(exact, m.sizes, 0, static_cast<int>(lambdas.size()), width, pass);
   const InterpolationError e = interpolation_error(m, b.radiance, exact);
-  const auto summary = [](const ErrorSummary& s) {
-    return json{{"max", s.max}, {"p99", s.p99}, {"median", s.median}, {"count", s.count}};
-  };
   r.accuracy.push_back(Accuracy::judged(
       "spectral_interpolation", "max relative error of the sky radiance interpolated between stored wavelengths",
       e.radiance.max, std::nullopt,
       "a bake at wavelengths halfway between stored ones (same model, sizes and " + std::to_string(b.orders_used) +
           " orders)",
       {{"test_wavelengths_nm", lambdas},
-       {"stored_step_nm", b.radiance.lambda_nm.size() > 1 ? b.radiance.lambda_nm[1] - b.radiance.lambda_nm[0] : 0.0},
-       {"sky_radiance", summary(e.radiance)},
-       {"transmittance", summary(e.transmittance)},
-       {"sun_and_sky_irradiance", summary(e.irradiance)},
-       {"points", "the preview fisheyes (sun at 60, 20, 5, 0, -4 deg; 32 x 32 directions each, 1 m above the "
-                  "ground) and each sun's sun and sky irradiance on the ground"},
+       {"stored_step_nm", b.radiance.step_nm()},
+       {"sky_radiance", summary_json(e.radiance)},
+       {"transmittance", summary_json(e.transmittance)},
+       {"sun_and_sky_irradiance", summary_json(e.irradiance)},
+       {"points", interpolation_points()},
        {"floor", "errors relative to max(|exact|, 1e-3 x the largest exact value at that wavelength)"},
        {"functions", "GetSkyRadianceAtWavelength, GetSunAndSkyIrradianceAtWavelength (sampling_spectral.glsl)"}}));
 }
@@ -582,6 +583,12 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     if (ctx.judge) throw JobError(sc.failure);
     r.warnings.push_back(sc.failure);
   }
+}
+
+// The scattering sizes as the KTX2 files' specbake.sizes value.
+std::string sizes_key(const Sizes& s) {
+  return "r=" + std::to_string(s.r) + " mu=" + std::to_string(s.mu) + " mu_s=" + std::to_string(s.mu_s) +
+         " nu=" + std::to_string(s.nu);
 }
 
 // `ktx2: {scattering: rgba-combined}`: scattering.ktx2 holds the scattering texture's RGB and
@@ -655,19 +662,14 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
        std::uint32_t(s.transmittance_h), 0, "2D: x = mu coordinate, y = r coordinate"},
       {spec.out_irradiance, "irradiance", &L.irradiance, std::uint32_t(s.irradiance_w), std::uint32_t(s.irradiance_h), 0,
        "2D: x = mu_s coordinate, y = r coordinate"},
-      {spec.out_scattering, "scattering", &L.scattering, wd, std::uint32_t(s.mu), std::uint32_t(s.r),
-       "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"},
-      {spec.out_single_mie, "single_mie_scattering", &L.single_mie, wd, std::uint32_t(s.mu), std::uint32_t(s.r),
+      {spec.out_scattering && !spec.ktx2_combined, "scattering", &L.scattering, wd, std::uint32_t(s.mu),
+       std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"},
+      {spec.out_single_mie && !spec.ktx2_combined, "single_mie_scattering", &L.single_mie, wd, std::uint32_t(s.mu),
+       std::uint32_t(s.r),
        "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"}};
-  const std::string sizes = "r=" + std::to_string(s.r) + " mu=" + std::to_string(s.mu) +
-                            " mu_s=" + std::to_string(s.mu_s) + " nu=" + std::to_string(s.nu);
+  const std::string sizes = sizes_key(s);
   for (const Texture& t : textures) {
     if (!t.wanted) continue;
-    if (spec.ktx2_combined && std::string(t.name) == "single_mie_scattering") continue;  // in scattering's alpha
-    if (spec.ktx2_combined && std::string(t.name) == "scattering") {
-      combined_ktx2_file(spec, L, units, param, sizes, ctx, r);
-      continue;
-    }
     const std::vector<float> f(t.data->begin(), t.data->end());
     add_ktx2_file(spec.ktx2,
                   {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, units,
@@ -675,6 +677,8 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
                    {{"specbake.parameterisation", param}, {"specbake.sizes", sizes}}},
                   ctx, r);
   }
+  // rgba-combined: scattering.ktx2 holds single Mie's red in alpha; there is no single_mie_scattering.ktx2
+  if (spec.ktx2_combined) combined_ktx2_file(spec, L, units, param, sizes, ctx, r);
 }
 
 // Spectral OpenEXR channel names (Fichet et al. 2021): "S0.<nm>nm" for emitted (radiance-like)
@@ -747,8 +751,7 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
                      *t.data, "2D array: layer k = wavelength set k (RGBA = wavelengths 4k..4k+3); " + t.axes, t.units,
                      t.what,
                      {{"specbake.wavelengths_nm", lambdas},
-                      {"specbake.sizes", "r=" + std::to_string(s.r) + " mu=" + std::to_string(s.mu) + " mu_s=" +
-                                             std::to_string(s.mu_s) + " nu=" + std::to_string(s.nu)}}},
+                      {"specbake.sizes", sizes_key(s)}}},
                     ctx, r);
       files.push_back(t.name + ".ktx2");
     }
@@ -765,7 +768,7 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
       {"wavelengths_nm", L.lambda_nm},
       {"sets", set_list},
       {"lambda_first_nm", L.lambda_nm.front()},
-      {"lambda_step_nm", n > 1 ? L.lambda_nm[1] - L.lambda_nm[0] : 0.0},
+      {"lambda_step_nm", L.step_nm()},
       {"solar_irradiance_W_m2_nm", L.solar_irradiance},
       {"files", files},
       {"interpolation", "linear between the stored wavelengths (sampling_spectral.glsl, ...AtWavelength); its "

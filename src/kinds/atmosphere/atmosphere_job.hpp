@@ -52,9 +52,10 @@ Baked bake_luts_reference(const AtmosphereSpec& spec);
 // sampling_spectral.glsl (GetSkyRadianceAtWavelength & co.) costs. Measured at wavelengths halfway
 // between stored ones (where it errs most): at most kInterpolationTests of them, spread evenly.
 inline constexpr int kInterpolationTests = 8;
+inline constexpr int kInterpolationGrid = 32;  // directions per fisheye axis
 std::vector<double> interpolation_test_wavelengths(const std::vector<double>& stored_nm);
 // Relative errors |interpolated − exact| / max(|exact|, 1e-3 · max |exact| at that wavelength) of
-// the sky radiance and its transmittance (the preview fisheyes: kFisheyeViews, a 32 × 32 grid of
+// the sky radiance and its transmittance (the preview fisheyes: kFisheyeViews, a kInterpolationGrid² grid of
 // directions each) and of the sun and sky irradiance on the ground (each view's sun), where
 // `exact` holds a bake at exactly `exact.lambda_nm`, read at its stored wavelengths.
 struct InterpolationError {

@@ -177,12 +177,6 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
   }
 }
 
-template <class F>
-void parse_list(const At& at, const char* what, F&& on_item) {
-  if (!at.node.IsSequence() || at.node.size() == 0) at.fail(std::string("expected a non-empty list of ") + what);
-  for (std::size_t i = 0; i < at.node.size(); ++i) on_item(at.item(i));
-}
-
 }  // namespace
 
 void scale_sizes(AtmosphereSpec& s, double f) {
@@ -268,14 +262,14 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   if (job.has("sizes")) parse_sizes(job.child("sizes"), s);
   if (job.has("layout")) {
     s.layout_3d = s.layout_tiled2d = false;
-    parse_list(job.child("layout"), "layouts (3d, tiled2d)", [&](const At& it) {
+    job.child("layout").each_item("layouts (3d, tiled2d)", [&](const At& it) {
       const int v = it.choice<int>({{"3d", 0}, {"tiled2d", 1}});
       (v == 0 ? s.layout_3d : s.layout_tiled2d) = true;
     });
   }
   if (job.has("outputs")) {
     s.out_transmittance = s.out_irradiance = s.out_scattering = s.out_single_mie = false;
-    parse_list(job.child("outputs"), "outputs", [&](const At& it) {
+    job.child("outputs").each_item("outputs", [&](const At& it) {
       switch (it.choice<int>({{"transmittance", 0}, {"irradiance", 1}, {"scattering", 2}, {"single_mie_scattering", 3}})) {
         case 0: s.out_transmittance = true; break;
         case 1: s.out_irradiance = true; break;

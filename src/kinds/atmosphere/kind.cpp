@@ -34,7 +34,7 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
                        (std::uint64_t{1} << 26);
   // store: radiance: the float32 textures at every wavelength, and their files (.bin, the Spectral
   // OpenEXR and its pixel copy, KTX2), all alive until the bundle is written
-  if (s.spectral && s.store_radiance)
+  if (s.store_radiance)
     host += (2 * texels + t2d) * std::uint64_t(s.count) * 4 * (s.ktx2.enabled ? 5 : 4);
   // The scene check: its traces (the bake's channels, then the 48-wavelength reference) one
   // after the other, counted as if alive beside the bake's buffers.

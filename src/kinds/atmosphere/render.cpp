@@ -96,7 +96,7 @@ struct SpectralRenderer::Impl {
 SpectralRenderer::SpectralRenderer(const Model& m, const SpectralLuts& l) : impl_(std::make_unique<Impl>()) {
   const Sizes& s = m.sizes;
   const int sets = l.sets();
-  impl_->atm = glsl::spectral::atmosphere_of(m, l.lambda_nm, l.solar_irradiance);
+  impl_->atm = glsl::spectral::atmosphere_of(m, l);
   impl_->transmittance = {l.transmittance.data(), s.transmittance_w, s.transmittance_h, sets};
   impl_->irradiance = {l.irradiance.data(), s.irradiance_w, s.irradiance_h, sets};
   impl_->scattering = {l.scattering.data(), s.r * s.scattering_width(), s.mu, sets};
@@ -154,13 +154,9 @@ double SpectralRenderer::sun_and_sky_irradiance_stored(const Vec3& point, const 
 }
 
 std::vector<double> to_tiled2d(const std::vector<double>& tex3d, const Sizes& s) {
-  const int wd = s.scattering_width();
   std::vector<double> out(tex3d.size());
-  for (int k = 0; k < s.r; ++k)
-    for (int j = 0; j < s.mu; ++j)
-      for (int i = 0; i < wd; ++i)
-        for (int c = 0; c < 3; ++c)
-          out[((1LL * j * s.r + k) * wd + i) * 3 + c] = tex3d[((1LL * k * s.mu + j) * wd + i) * 3 + c];
+  for (std::size_t t = 0; t < tex3d.size() / 3; ++t)
+    for (int c = 0; c < 3; ++c) out[3 * tiled2d_index(t, s) + c] = tex3d[3 * t + c];
   return out;
 }
 
@@ -224,7 +220,7 @@ std::string sampling_spectral_glsl(const Model& m, const SpectralLuts& l, const 
   const Sizes& s = m.sizes;
   const auto f = [](double v) { return glsl_float(v); };
   const int sets = l.sets();
-  const double step = l.lambda_nm.size() > 1 ? l.lambda_nm[1] - l.lambda_nm[0] : 1.0;
+  const double step = l.step_nm();
   std::ostringstream o;
   o << "// specbake atmosphere, spectral radiance: sampling.glsl's lookups at " << l.lambda_nm.size()
     << " stored wavelengths,\n"

@@ -51,6 +51,8 @@ struct SpectralLuts {
   std::vector<double> solar_irradiance;  // at each
   std::vector<float> transmittance, irradiance, scattering, single_mie;
   int sets() const { return static_cast<int>((lambda_nm.size() + 3) / 4); }
+  // The stored wavelengths' spacing (1 for a single one: any step keeps its index 0).
+  double step_nm() const { return lambda_nm.size() > 1 ? lambda_nm[1] - lambda_nm[0] : 1.0; }
 };
 
 // The spectral lookups of sampling_spectral.glsl (render.glsl built with SPECBAKE_SPECTRAL) on
@@ -74,6 +76,12 @@ class SpectralRenderer {
 
 // [R][MU][NU·MU_S][3] → [MU][R·NU·MU_S][3], column = r·NU·MU_S + ν·MU_S + μ_s.
 std::vector<double> to_tiled2d(const std::vector<double>& tex3d, const Sizes& s);
+// The tiled 2D index of the 3D layout's texel t ([R][MU][NU·MU_S] → [MU][R][NU·MU_S]).
+inline std::size_t tiled2d_index(std::size_t t, const Sizes& s) {
+  const std::size_t wd = static_cast<std::size_t>(s.scattering_width()), x = t % wd, j = (t / wd) % s.mu,
+                    k = t / (wd * s.mu);
+  return (j * s.r + k) * wd + x;
+}
 // Lookup in the tiled-2D layout exactly as sampling.glsl's GetScatteringTiled2D does it
 // (4 bilinear fetches with clamp-to-edge, lerps in r and ν).
 Vec3 sample_tiled2d(const Model& m, const std::vector<double>& tiled, double r, double mu, double mu_s, double nu,

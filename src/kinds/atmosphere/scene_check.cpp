@@ -51,7 +51,13 @@ std::vector<Vec3> rows_of(const std::vector<double>& v) {
   return out;
 }
 
-json summary_json(const ErrorSummary& s) { return {{"max", s.max}, {"p99", s.p99}, {"mean", s.mean}}; }
+}  // namespace
+
+json summary_json(const ErrorSummary& s) {
+  return {{"max", s.max}, {"p99", s.p99}, {"median", s.median}, {"mean", s.mean}, {"count", s.count}};
+}
+
+namespace {
 
 // Channel c's relative errors and the displayed-colour ΔE of one part.
 struct Part {

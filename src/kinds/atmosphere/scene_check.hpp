@@ -41,6 +41,8 @@ struct ErrorSummary {
   std::size_t count = 0;
 };
 ErrorSummary summarize_errors(std::vector<double> values);
+// {max, p99, median, mean, count}
+nlohmann::json summary_json(const ErrorSummary& s);
 
 // Per point relative errors |test − ref| / max(|ref|, 1e-3 · max_points |ref|) of one channel
 // (1 where that denominator is 0 and test is not: a channel the truth has no light in).

@@ -11,6 +11,7 @@
 #include <glm/glm.hpp>
 
 #include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/render.hpp"
 
 namespace specbake::atmosphere::glsl {
 
@@ -174,18 +175,17 @@ namespace spectral {
 #undef SPECBAKE_FETCH
 #undef SPECBAKE_SOLAR_IRRADIANCE
 
-// The atmosphere of a spectral bundle: stored wavelengths lambda_nm (equally spaced), four per
-// set, and the solar irradiance at each; layer 0.
-inline SpecbakeAtmosphere atmosphere_of(const Model& m, const std::vector<double>& lambda_nm,
-                                        const std::vector<double>& solar_irradiance) {
-  if (lambda_nm.size() > 4 * SPECBAKE_WAVELENGTH_SETS || solar_irradiance.size() != lambda_nm.size())
+// The atmosphere of a spectral bundle's stored wavelengths (equally spaced, four per set); layer 0.
+inline SpecbakeAtmosphere atmosphere_of(const Model& m, const SpectralLuts& l) {
+  if (l.lambda_nm.size() > 4 * SPECBAKE_WAVELENGTH_SETS || l.solar_irradiance.size() != l.lambda_nm.size())
     throw std::invalid_argument("spectral atmosphere: too many wavelengths or mismatched solar irradiance");
   SpecbakeAtmosphere a = shared_atmosphere_of<SpecbakeAtmosphere>(m);
   a.layer = 0.0;
-  a.lambda_first = lambda_nm.empty() ? 0.0 : lambda_nm.front();
-  a.lambda_step = lambda_nm.size() > 1 ? lambda_nm[1] - lambda_nm[0] : 1.0;
-  a.lambda_count = static_cast<double>(lambda_nm.size());
-  for (std::size_t i = 0; i < lambda_nm.size(); ++i) a.solar_irradiance[i / 4][static_cast<int>(i % 4)] = solar_irradiance[i];
+  a.lambda_first = l.lambda_nm.empty() ? 0.0 : l.lambda_nm.front();
+  a.lambda_step = l.step_nm();
+  a.lambda_count = static_cast<double>(l.lambda_nm.size());
+  for (std::size_t i = 0; i < l.lambda_nm.size(); ++i)
+    a.solar_irradiance[i / 4][static_cast<int>(i % 4)] = l.solar_irradiance[i];
   return a;
 }
 }  // namespace spectral

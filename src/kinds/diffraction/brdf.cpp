@@ -38,12 +38,11 @@ std::array<float, 3> to_srgb(const std::array<double, 3>& xyz, const Mat3& m) {
   return rgb;
 }
 
-// The lobes picture (brdf_lobes) of xyz(wi, wo).
-template <class Xyz>
-std::vector<float> lobes(const std::vector<double>& light_deg, int panel, Xyz xyz) {
+// The lobes picture (brdf_lobes) of pixel(wi, wo), three floats per pixel.
+template <class Pixel>
+std::vector<float> lobes(const std::vector<double>& light_deg, int panel, Pixel pixel) {
   const int width = panel * static_cast<int>(light_deg.size());
   std::vector<float> rgb(3 * static_cast<std::size_t>(width) * panel, 0.0f);
-  const Mat3 m = xyz_to_srgb();
   parallel_for(panel, [&](long long py) {
     const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / panel;
     for (std::size_t k = 0; k < light_deg.size(); ++k) {
@@ -52,7 +51,7 @@ std::vector<float> lobes(const std::vector<double>& light_deg, int panel, Xyz xy
       for (int px = 0; px < panel; ++px) {
         const double x = -1.0 + (px + 0.5) * 2.0 / panel, r2 = x * x + y * y;
         if (r2 >= 1.0) continue;
-        const auto c = to_srgb(xyz(wi, Vec3{x, y, std::sqrt(1.0 - r2)}), m);
+        const std::array<float, 3> c = pixel(wi, Vec3{x, y, std::sqrt(1.0 - r2)});
         float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * width + k * panel + px);
         for (int i = 0; i < 3; ++i) dst[i] = c[i];
       }
@@ -133,12 +132,24 @@ Wavelengths bins(const std::vector<double>& spectrum, int count) {
 }
 
 std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel) {
-  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) { return xyz_sum(t, wi, wo, wl); });
+  const Mat3 m = xyz_to_srgb();
+  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) { return to_srgb(xyz_sum(t, wi, wo, wl), m); });
 }
 
 std::vector<float> brdf_lobes_fast_specular(const BrdfTable& t, const Wavelengths& few, const Wavelengths& all,
                                             const std::vector<double>& light_deg, int panel) {
-  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) { return xyz_fast_specular(t, wi, wo, few, all); });
+  const Mat3 m = xyz_to_srgb();
+  return lobes(light_deg, panel,
+               [&](const Vec3& wi, const Vec3& wo) { return to_srgb(xyz_fast_specular(t, wi, wo, few, all), m); });
+}
+
+std::vector<float> brdf_lobes_specular_peak(const BrdfTable& t, const std::vector<double>& light_deg, int panel,
+                                            double lambda_um) {
+  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) {
+    const double du = wi[0] + wo[0], dv = wi[1] + wo[1];
+    const auto g = static_cast<float>(ref::specular_peak(du * du + dv * dv, lambda_um, t.sigma_um));
+    return std::array<float, 3>{g, g, g};
+  });
 }
 
 std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const Vec3& light, int size) {

@@ -63,6 +63,10 @@ std::array<double, 3> xyz_fast_specular(const BrdfTable& t, const std::array<dou
 //  - sphere: a unit sphere seen along −z (orthographic), tangent x along the lines of latitude
 //    around the view axis, lit by a point light at `light` (sphere radii) of D65 spectrum.
 std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel);
+// The specular peak's shape G (specular_peak, brdf.cl) at `lambda_um` over the same picture's
+// pixels (in all three channels): where the peak lies.
+std::vector<float> brdf_lobes_specular_peak(const BrdfTable& t, const std::vector<double>& light_deg, int panel,
+                                            double lambda_um);
 // The same picture through xyz_fast_specular.
 std::vector<float> brdf_lobes_fast_specular(const BrdfTable& t, const Wavelengths& few, const Wavelengths& all,
                                             const std::vector<double>& light_deg, int panel);

@@ -34,7 +34,6 @@ constexpr double kPreviewIor = 1.5;  // the Fresnel term's dielectric index (sha
 constexpr int kBrdfStepNm = 10;
 constexpr int kFastWavelengths = 8;  // the shader's fast variant     // wavelength step of the previews' spectral sums
 constexpr int kLobePanel = 256;     // pixels per side of each lobe panel
-constexpr double kPi = 3.141592653589793238462643;
 constexpr int kSpherePixels = 512;  // the sphere preview's size
 constexpr std::array<double, 3> kSphereLight = {2.0, 1.5, 3.0};
 
@@ -76,8 +75,9 @@ float percentile_exposure(const std::vector<float>& rgb) {
 }
 
 // The BRDF previews (brdf.hpp): lobes for three light angles, and a lit sphere, over `wl`
-// (every 10 nm); and the fast shader variant's error: the lobes over `fast` against those, as
-// fractions of the picture's peak (max and rms over the pixels and channels).
+// (every 10 nm); and the two fast shader variants' errors (the lobes over `fast`, and with the
+// specular peak apart over `fast` and `wl`) against those, as fractions of the picture's peak
+// (max and rms over the pixels and channels, and the max near the peak).
 void add_brdf_previews(const BrdfTable& t, const Wavelengths& wl, const Wavelengths& fast, BakeResult& r) {
   const std::vector<double> angles = {0.0, 30.0, 60.0};
   const auto lobes = brdf_lobes(t, wl, angles, kLobePanel);
@@ -98,23 +98,15 @@ void add_brdf_previews(const BrdfTable& t, const Wavelengths& wl, const Waveleng
   double peak = 0;
   for (float v : lobes) peak = std::max(peak, static_cast<double>(std::fabs(v)));
   const double scale = peak > 0 ? 1.0 / peak : 0.0;
-  // Pixels near the specular peak: where its Gaussian G = exp(−4π²σ²|f|²) at 550 nm is ≥ 1e-2.
-  std::vector<char> near_peak(lobes.size() / 3, 0);
-  for (int py = 0; py < kLobePanel; ++py)
-    for (std::size_t k = 0; k < angles.size(); ++k)
-      for (int px = 0; px < kLobePanel; ++px) {
-        const double x = -1.0 + (px + 0.5) * 2.0 / kLobePanel, y = 1.0 - (py + 0.5) * 2.0 / kLobePanel;
-        const double du = std::sin(angles[k] * kPi / 180.0) + x, f2 = (du * du + y * y) / (0.55 * 0.55);
-        near_peak[static_cast<std::size_t>(py) * kLobePanel * angles.size() + k * kLobePanel + px] =
-            4.0 * kPi * kPi * t.sigma_um * t.sigma_um * f2 <= std::log(100.0);
-      }
+  // Pixels near the specular peak: where its shape G at 550 nm is ≥ 1e-2.
+  const std::vector<float> peak_shape = brdf_lobes_specular_peak(t, angles, kLobePanel, 0.55);
   const auto record = [&](const std::string& name, const std::string& function, const std::vector<float>& quick,
                           const std::string& what) {
     double worst = 0, sq = 0, worst_near = 0;
     for (std::size_t i = 0; i < lobes.size(); ++i) {
       const double d = std::fabs(static_cast<double>(quick[i]) - lobes[i]);
       worst = std::max(worst, d);
-      if (near_peak[i / 3]) worst_near = std::max(worst_near, d);
+      if (peak_shape[i] >= 1e-2f) worst_near = std::max(worst_near, d);
       sq += d * d;
     }
     r.accuracy.push_back(Accuracy::judged(

@@ -53,7 +53,7 @@ void check_glass(const At& at, const Sellmeier& sm) {
             " at 587.56 nm" + hint);
   if (!(std::isfinite(abbe) && abbe > 0.0 && abbe < 200.0))
     at.fail("expected normal dispersion in the visible (Abbe number in (0, 200)), but these coefficients give " +
-            std::to_string(abbe) + hint);
+            format_g(abbe) + hint);
 }
 
 Material parse_material(const At& at, nlohmann::json& norm, Inputs& inputs) {

@@ -278,7 +278,7 @@ AutoChoice choose_samples(Device& dev, const DispersionSpec& spec, const Progres
     if (hi >= kMaxSamples)
       throw JobError("samples: auto cannot meet tolerance_de2000 " + format_g(spec.tolerance_de2000) +
                      " with at most " + std::to_string(kMaxSamples) + " samples (mean CIEDE2000 " +
-                     std::to_string(e_hi) + " at N = " + std::to_string(hi) + ")");
+                     format_g(e_hi) + " at N = " + std::to_string(hi) + ")");
     hi = std::min(2 * hi, kMaxSamples);
     e_hi = error_at(hi);
     progress("samples: auto (doubling)", 0.3 * std::log2(hi) / std::log2(kMaxSamples));
