@@ -496,16 +496,22 @@ std::vector<JobReport> Runner::run() {
       r.code = e.exit_code();
       r.reason = std::string(e.what()) + "; nothing of this job was published";
       stopped = true;
-    } catch (const Error& e) {
-      r.status = "failed";
-      r.code = e.exit_code();
-      r.reason = e.what();
-      spdlog::error("{}: {}", name, e.what());
     } catch (const std::exception& e) {
-      r.status = "failed";
-      r.code = ExitCode::job_failed;
-      r.reason = e.what();
-      spdlog::error("{}: {}", name, e.what());
+      if (const int sig = stop_requested()) {
+        // A stop came first: a failure after it is what the signal did (a system call it cut
+        // short inside a library's step), not the job's.
+        const Interrupted stop(sig);
+        r.status = "interrupted";
+        r.code = stop.exit_code();
+        r.reason = std::string(stop.what()) + " (the step it stopped: " + e.what() + "); nothing of this job was published";
+        stopped = true;
+      } else {
+        const auto* known = dynamic_cast<const Error*>(&e);
+        r.status = "failed";
+        r.code = known ? known->exit_code() : ExitCode::job_failed;
+        r.reason = e.what();
+        spdlog::error("{}: {}", name, e.what());
+      }
     }
     if (r.status != "built" && r.status != "up-to-date") {
       r.bundle.clear();

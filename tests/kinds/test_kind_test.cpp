@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <csignal>
 #include <fstream>
 
 #include "core/hash.hpp"
@@ -73,12 +74,42 @@ Kind squares_kind() {
   return k;
 }
 
+// `kind: cut-short` — a bake whose library step fails; with `stop: true` a stop (Ctrl-C) is
+// requested just before, as when a signal cuts a system call short inside a library.
+struct CutShortSpec : KindSpec {
+  bool stop = false;
+};
+Kind cut_short_kind() {
+  Kind k;
+  k.name = "cut-short";
+  k.summary = "test-only: fails in a library step";
+  k.parse = [](const yaml::At& job, json& norm, Inputs&) -> std::shared_ptr<const KindSpec> {
+    job.allow_keys({"name", "kind", "stop"});
+    auto s = std::make_shared<CutShortSpec>();
+    s->stop = job.has("stop") && job.child("stop").choice<int>({{"true", 1}, {"false", 0}}) == 1;
+    norm = {{"kind", "cut-short"}, {"stop", s->stop}};
+    return s;
+  };
+  k.plan = [](const JobSpec&, JobContext&) { return json::object(); };
+  k.bake = [](const JobSpec& j, JobContext& ctx) -> BakeResult {
+    ctx.enter(Stage::compute);
+    if (j.as<CutShortSpec>().stop) request_stop(SIGINT);
+    throw JobError("a library step failed (interrupted system call)");
+  };
+  k.cost_s = [](const JobSpec&) { return 0.01; };
+  k.memory = [](const JobSpec&) { return MemoryEstimate{1, 1}; };
+  return k;
+}
+
 class TestKind : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     bool known = false;
     for (const auto& k : kinds()) known = known || k.name == "squares";
-    if (!known) register_kind(squares_kind());
+    if (!known) {
+      register_kind(squares_kind());
+      register_kind(cut_short_kind());
+    }
   }
   testing::TempDir tmp_;
 };
@@ -133,6 +164,26 @@ TEST_F(TestKind, ItsConfigErrorsNameTheKeyAndSuggest) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("squares"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("did you mean 'squares'"), std::string::npos) << e.what();
+  }
+}
+
+// A job that fails after a stop was requested is reported interrupted (the stop's exit code, the
+// failure named as the step it stopped), and without a stop the same failure is a failure.
+TEST_F(TestKind, AFailureAfterAStopIsTheInterruption) {
+  RunOptions opts;
+  opts.out = tmp_.path() / "out";
+  for (const bool stop : {true, false}) {
+    const Config c = parse_config(std::string("specbake: 1\njobs:\n  - name: cut\n    kind: cut-short\n    stop: ") +
+                                      (stop ? "true" : "false") + "\n",
+                                  "cut.yaml");
+    Runner run({c}, opts);
+    const auto reports = run.run();
+    clear_stop_request();
+    ASSERT_EQ(reports.size(), 1u);
+    EXPECT_EQ(reports[0].status, stop ? "interrupted" : "failed") << reports[0].reason;
+    EXPECT_EQ(reports[0].code, stop ? ExitCode::interrupted : ExitCode::job_failed);
+    EXPECT_NE(reports[0].reason.find("interrupted system call"), std::string::npos) << reports[0].reason;
+    EXPECT_FALSE(fs::exists(opts.out.value() / "cut" / "latest"));
   }
 }
 
