@@ -459,12 +459,31 @@ FN void scattering_slices(const AtmosphereParameters* a, GLOBAL const real* tex,
   for (int s = 0; s < a->nu_size; ++s)
     texture_3d(tex, wd, a->mu_size, a->r_size, ((real)s + u_mu_s) / (real)a->nu_size, u_mu, u_r, slices + s * NCH);
 }
-/* Linear interpolation between the two slices around nu (corner-sampled, divisor NU − 1). */
-FN void lerp_slices(const AtmosphereParameters* a, const real* slices, real nu, real* out) {
-  const real x = (clamp_cosine(nu) + R(1.0)) * R(0.5) * (real)(a->nu_size - 1);
+/* The two slices around nu and the weight of the second (corner-sampled, divisor NU − 1):
+ * the value at nu is slice s0 × (1 − f) + slice s1 × f. */
+FN real slice_position(const AtmosphereParameters* a, real nu) {
+  return (clamp_cosine(nu) + R(1.0)) * R(0.5) * (real)(a->nu_size - 1);
+}
+FN void slice_weights(const AtmosphereParameters* a, real nu, int* s0, int* s1, real* f) {
+  const real x = slice_position(a, nu);
   const real x0 = floor(x);
-  const real f = x - x0;
-  const int s0 = clamp_int((int)x0, 0, a->nu_size - 1), s1 = clamp_int((int)x0 + 1, 0, a->nu_size - 1);
+  *f = x - x0;
+  *s0 = clamp_int((int)x0, 0, a->nu_size - 1);
+  *s1 = clamp_int((int)x0 + 1, 0, a->nu_size - 1);
+}
+/* The same weights as a function of x = slice_position(ν), for slice s: 1 − |x − s|, or 0. */
+FN real hat(real x, int s) { return fmax(R(0.0), R(1.0) - fmax(x - (real)s, (real)s - x)); }
+/* The slice count as a compile-time constant in the kernels (built with NU_MAX = NU), so that
+ * loops over every slice have a fixed trip count; the C++ reference reads it. */
+#ifdef __OPENCL_C_VERSION__
+#  define NU_SLICES(a) NU_MAX
+#else
+#  define NU_SLICES(a) ((a)->nu_size)
+#endif
+FN void lerp_slices(const AtmosphereParameters* a, const real* slices, real nu, real* out) {
+  int s0, s1;
+  real f;
+  slice_weights(a, nu, &s0, &s1, &f);
   for (int c = 0; c < NCH; ++c) out[c] = slices[s0 * NCH + c] * (R(1.0) - f) + slices[s1 * NCH + c] * f;
 }
 
@@ -625,9 +644,20 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
 
 /* J_n at (h, mu, mu_s) and `count` values nu[k] (a texel row of the ν axis) from the 16
  * incidence entries of (h, mu_s) and the ground irradiance of order n − 2 (direct for order
- * 2); out[k·NCH + c], per km per sr. The view direction's part of each sample — the phase
- * functions of its angle to the view, which do not depend on ν — is computed once for the
- * whole row; each ν then only moves the sun (the incident radiance's ν and the ground's μ_s). */
+ * 2); out[k·NCH + c], per km per sr.
+ *
+ * The sum is arranged so that the work per incident direction does not grow with the channel
+ * count (the same quadrature, the same terms, summed in another order). For direction ω_i =
+ * (θ_l, φ_m) and the sun of nu[k], the sky's light is linear between the NU stored slices:
+ * I(ν_i) = Σ_s hat_s(ν_i) I_s (slice_weights), and the light scattered towards the view is
+ * (β_R ρ_R P_R(ω·ω_i) + β_M ρ_M P_M(ω·ω_i)) dω. So each θ_l reduces to channel-independent
+ * weights over the 32 φ,
+ *   A_X[s] = Σ_φ P_X(ω·ω_i) hat_s(ν_i) dω        (X = R, M: the view's phase function),
+ * and J gains Σ_s I_s[c] (β_R[c] A_R[s] + β_M[c] A_M[s]). At order 2 the light is single
+ * scattering stored without its phase function, so the weights also carry P_R(ν_i) (for the
+ * Rayleigh slices) or P_M(ν_i) (Mie): four arrays. The ground's light, T·albedo/π times the
+ * ground irradiance at the ground normal's μ_s, is added per direction. The view's phase
+ * functions, which do not depend on ν, are computed once per θ_l for the whole row. */
 FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* incidence,
                            GLOBAL const real* delta_irradiance, real h, real mu, real mu_s, const real* nu, int count,
                            int order, real* out) {
@@ -646,45 +676,90 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
     beta_m[c] = a->mie_scattering[c] * rho_m;
   }
   for (int k = 0; k < count * NCH; ++k) out[k] = R(0.0);
-  /* phi_m and 2π − phi_m share cos(phi) (so the phase functions, since omega_y = 0) and the
-   * length of the ground normal: the loop visits them in pairs, sin(phi) = ±sin_phi[m]. */
+  /* phi_m and 2π − phi_m share cos(phi) (so the view's phase functions, since omega_y = 0)
+   * and the length of the ground normal: the loop visits them in pairs, sin(phi) = ±sin_phi[m]. */
   real cos_phi[DENSITY_SPHERE_STEPS], sin_phi[DENSITY_SPHERE_STEPS];
   for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
     const real phi = ((real)m + R(0.5)) * d_angle;
     cos_phi[m] = cos(phi);
     sin_phi[m] = sin(phi);
   }
+  const int single = order == 2, nu_n = a->nu_size;
   const int stride = incidence_stride(a);
   real e[INC_MAX];
+  /* per φ of the current θ: the view's phase functions × dω, and the direction's x and y */
+  real view_r[DENSITY_SPHERE_STEPS], view_m[DENSITY_SPHERE_STEPS], wx[DENSITY_SPHERE_STEPS], wy[DENSITY_SPHERE_STEPS];
+  real scatter[DENSITY_SPHERE_STEPS * NCH]; /* β_R[c] view_r + β_M[c] view_m: the ground's light */
+  /* A_R, A_M of the source slices, then (order 2) of the Mie slices */
+  real weights[4 * NU_MAX];
+  real* const a_r = weights;
+  real* const a_m = weights + NU_MAX;
+  real* const a_r_mie = weights + 2 * NU_MAX;
+  real* const a_m_mie = weights + 3 * NU_MAX;
   for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
     for (int k = 0; k < stride; ++k) e[k] = incidence[l * stride + k];
     const int ground = e[INC_GROUND(a)] != R(0.0);
     const real cos_theta = e[INC_COS(a)], sin_theta = e[INC_SIN(a)];
     const real distance = e[INC_DISTANCE(a)], n_z = e[INC_NZ(a)], inv_n = e[INC_INV_N(a)];
     const real d_omega = d_angle * d_angle * sin_theta;
+    /* the sun's cosine to the ground normal n = r·z + distance·ω_i is (distance·ν_i + (n_z −
+     * distance·cos θ)·μ_s)/|n|, affine in ν_i */
+    const real ground_slope = distance * inv_n, ground_offset = (n_z - distance * cos_theta) * mu_s * inv_n;
     for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
-      const real wx = cos_phi[m] * sin_theta, wy = sin_phi[m] * sin_theta;
-      const real nu2 = wx * omega_x + cos_theta * mu;
-      const real pr = rayleigh_phase(nu2) * d_omega, pm = mie_phase(a->mie_g, nu2) * d_omega;
-      real scatter[NCH];
-      for (int c = 0; c < NCH; ++c) scatter[c] = beta_r[c] * pr + beta_m[c] * pm;
-      for (int k = 0; k < count; ++k) {
-        const real along = wx * sun_x[k] + cos_theta * mu_s;
-        real incident[NCH], pair[NCH];
-        for (int c = 0; c < NCH; ++c) pair[c] = R(0.0);
+      wx[m] = cos_phi[m] * sin_theta;
+      wy[m] = sin_phi[m] * sin_theta;
+      const real nu2 = wx[m] * omega_x + cos_theta * mu;
+      view_r[m] = rayleigh_phase(nu2) * d_omega;
+      view_m[m] = mie_phase(a->mie_g, nu2) * d_omega;
+      for (int c = 0; c < NCH; ++c) scatter[m * NCH + c] = beta_r[c] * view_r[m] + beta_m[c] * view_m[m];
+    }
+    for (int k = 0; k < count; ++k) {
+      for (int s = 0; s < NU_SLICES(a); ++s) a_r[s] = a_m[s] = a_r_mie[s] = a_m_mie[s] = R(0.0);
+      real ground_light[NCH];
+      for (int c = 0; c < NCH; ++c) ground_light[c] = R(0.0);
+      for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
+        const real along = wx[m] * sun_x[k] + cos_theta * mu_s;
         for (int side = 0; side < 2; ++side) {
-          const real wy_s = side == 0 ? wy : -wy;
-          incident_from_slices(a, e + INC_SOURCE(a), e + INC_MIE(a), along + wy_s * sun_y[k], order, incident);
-          if (ground) {
-            const real mu_g = (distance * (wx * sun_x[k] + wy_s * sun_y[k]) + n_z * mu_s) * inv_n;
-            real g[NCH];
-            get_ground_irradiance(a, delta_irradiance, mu_g, g);
-            for (int c = 0; c < NCH; ++c) incident[c] += e[INC_GROUND_TERM(a) + c] * g[c];
+          const real wy_s = side == 0 ? wy[m] : -wy[m];
+          const real nu_i = along + wy_s * sun_y[k];
+          /* slice_weights as a hat function over all slices (zero away from the two around
+           * x): a fixed-length loop without indexing by x, which the compiler vectorises */
+          const real x = slice_position(a, nu_i);
+          if (single) {
+            const real p_r = rayleigh_phase(nu_i), p_m = mie_phase(a->mie_g, nu_i);
+            const real rr = view_r[m] * p_r, mr = view_m[m] * p_r, rm = view_r[m] * p_m, mm = view_m[m] * p_m;
+            for (int s = 0; s < NU_SLICES(a); ++s) {
+              const real w = hat(x, s);
+              a_r[s] += rr * w;
+              a_m[s] += mr * w;
+              a_r_mie[s] += rm * w;
+              a_m_mie[s] += mm * w;
+            }
+          } else {
+            for (int s = 0; s < NU_SLICES(a); ++s) {
+              const real w = hat(x, s);
+              a_r[s] += view_r[m] * w;
+              a_m[s] += view_m[m] * w;
+            }
           }
-          for (int c = 0; c < NCH; ++c) pair[c] += incident[c];
+          if (ground) {
+            real g[NCH];
+            get_ground_irradiance(a, delta_irradiance, ground_slope * nu_i + ground_offset, g);
+            for (int c = 0; c < NCH; ++c) ground_light[c] += scatter[m * NCH + c] * g[c];
+          }
         }
-        for (int c = 0; c < NCH; ++c) out[k * NCH + c] += pair[c] * scatter[c];
       }
+      real* const j = out + k * NCH;
+      for (int s = 0; s < nu_n; ++s) {
+        const real* const source = e + INC_SOURCE(a) + s * NCH;
+        for (int c = 0; c < NCH; ++c) j[c] += source[c] * (beta_r[c] * a_r[s] + beta_m[c] * a_m[s]);
+        if (single) {
+          const real* const mie = e + INC_MIE(a) + s * NCH;
+          for (int c = 0; c < NCH; ++c) j[c] += mie[c] * (beta_r[c] * a_r_mie[s] + beta_m[c] * a_m_mie[s]);
+        }
+      }
+      if (ground)
+        for (int c = 0; c < NCH; ++c) j[c] += e[INC_GROUND_TERM(a) + c] * ground_light[c];
     }
   }
 }
