@@ -437,3 +437,59 @@ TEST(AtmosphereDevice, FloatOnlyDeviceBakesAndRefusesDouble) {
     EXPECT_NE(std::string(e.what()).find("cl_khr_fp64"), std::string::npos) << e.what();
   }
 }
+
+// The self-checks judge every stage on the inputs the device actually used. A backend (the
+// double reference standing in for a device) whose multiple scattering of order 2 comes out
+// 1 % high: that stage's check sees ~1e-2, and every other check — including the density of
+// order 3 and the indirect irradiance of order 2, which read the corrupted texture — sees only
+// the reference against itself (0 up to rounding in the sums, < 1e-12). A checker that kept
+// an older copy of a texture, or read a stage's inputs from the wrong generation, would flag
+// those later stages too; one that skipped re-reading outputs would miss the corruption.
+TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
+  const AtmosphereSpec s = small(earth());
+  const Model m = model_of(s);
+  const Channels ch = channels_at(s, {680.0, 550.0, 440.0});
+  class Corrupting final : public PassBackend {
+   public:
+    explicit Corrupting(std::unique_ptr<PassBackend> b) : b_(std::move(b)) {}
+    int channels() const override { return b_->channels(); }
+    void transmittance() override { b_->transmittance(); }
+    void direct_irradiance() override { b_->direct_irradiance(); }
+    void single_scattering() override { b_->single_scattering(); }
+    void scattering_density(int order) override {
+      order_ = order;
+      b_->scattering_density(order);
+    }
+    void indirect_irradiance(int order) override { b_->indirect_irradiance(order); }
+    void multiple_scattering() override {
+      b_->multiple_scattering();
+      if (order_ != 2) return;
+      std::vector<double> v = b_->read(Tex::delta_multiple);
+      for (double& x : v) x *= 1.01;
+      b_->write(Tex::delta_multiple, std::move(v));
+    }
+    std::vector<double> read(Tex t) override { return b_->read(t); }
+    void write(Tex t, std::vector<double> v) override { b_->write(t, std::move(v)); }
+
+   private:
+    std::unique_ptr<PassBackend> b_;
+    int order_ = 0;
+  } b(make_host_backend(m, ch, 3));
+  auto checker = make_stage_checker(m, ch, 3, 64, 1e-3);
+  std::vector<StageCheck> checks;
+  run_pass(b, m, PassPlan{4, false, 1e-3}, kQuiet, 0.0, 1.0,
+           [&](PassStage stage, int order, PassBackend& be) { checks.push_back(checker->check(be, stage, order)); });
+  int corrupted = 0;
+  for (const StageCheck& c : checks) {
+    SCOPED_TRACE(c.stage + " order " + std::to_string(c.order));
+    if (c.stage == "multiple_scattering" && c.order == 2) {
+      ++corrupted;
+      // |1.01 x − x| / (|x| + 1e-3 max) ≤ 0.01, and = 0.01/(1 + 1e-3 max/|x|) at the texels checked
+      EXPECT_GT(c.max_rel, 0.005);
+      EXPECT_LE(c.max_rel, 0.0100001);
+    } else {
+      EXPECT_LT(c.max_rel, 1e-12);
+    }
+  }
+  EXPECT_EQ(corrupted, 1);
+}

@@ -158,13 +158,16 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     const Channels ch = all.slice(first, count);
     auto backend = make(ch, width);
     StageHook hook;
-    if (check_texels > 0)
+    std::unique_ptr<StageChecker> checker;
+    if (check_texels > 0) {
+      checker = make_stage_checker(m, ch, width, check_texels, kCheckFloor);
       hook = [&](PassStage stage, int order, PassBackend& b) {
-        const StageCheck c = check_stage(b, m, ch, stage, order, check_texels, kCheckFloor);
+        const StageCheck c = checker->check(b, stage, order);
         out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
                                    {"max_relative_error", c.max_rel}});
         out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
       };
+    }
     const OrderHook on_order = [&](int order, const std::vector<double>& s_add, const std::vector<double>& e_add) {
       if (!s_add.empty()) acc.add(order, false, to_rgb(first, count, s_add, n_s));
       if (!e_add.empty()) acc.add(order, true, to_rgb(first, count, e_add, n_e));

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <optional>
+#include <set>
 
 #include "kinds/atmosphere/reference_widths.hpp"
 
@@ -261,67 +262,80 @@ double relative_change(const std::vector<double>& add, const std::vector<double>
   return rel;
 }
 
-template <class HB>
-StageCheck check_with(PassBackend& b, const Model& m, const Channels& ch, PassStage stage, int order,
-                      int count, double floor) {
-  HB h(m, ch);
-  const int w = b.channels();
+// The textures a stage reads and writes, as the reference recomputes them.
+struct StageTextures {
   std::vector<Tex> inputs, outputs;
+};
+StageTextures textures_of(PassStage stage, int order) {
   switch (stage) {
-    case PassStage::transmittance:
-      outputs = {Tex::transmittance};
-      break;
-    case PassStage::direct_irradiance:
-      inputs = {Tex::transmittance};
-      outputs = {Tex::delta_irradiance};
-      break;
-    case PassStage::single_scattering:
-      inputs = {Tex::transmittance};
-      outputs = {Tex::delta_rayleigh, Tex::delta_mie};
-      break;
+    case PassStage::transmittance: return {{}, {Tex::transmittance}};
+    case PassStage::direct_irradiance: return {{Tex::transmittance}, {Tex::delta_irradiance}};
+    case PassStage::single_scattering: return {{Tex::transmittance}, {Tex::delta_rayleigh, Tex::delta_mie}};
     case PassStage::scattering_density:
       // order 2 reads single scattering, later orders the previous multiple order
-      inputs = {Tex::transmittance, Tex::delta_irradiance};
-      if (order == 2) inputs.insert(inputs.end(), {Tex::delta_rayleigh, Tex::delta_mie});
-      else inputs.push_back(Tex::delta_multiple);
-      outputs = {Tex::density};
-      break;
+      if (order == 2)
+        return {{Tex::transmittance, Tex::delta_irradiance, Tex::delta_rayleigh, Tex::delta_mie}, {Tex::density}};
+      return {{Tex::transmittance, Tex::delta_irradiance, Tex::delta_multiple}, {Tex::density}};
     case PassStage::indirect_irradiance:
-      inputs = order == 1 ? std::vector<Tex>{Tex::delta_rayleigh, Tex::delta_mie} : std::vector<Tex>{Tex::delta_multiple};
-      outputs = {Tex::delta_irradiance};
-      break;
-    case PassStage::multiple_scattering:
-      inputs = {Tex::transmittance, Tex::density};
-      outputs = {Tex::delta_multiple};
-      break;
+      if (order == 1) return {{Tex::delta_rayleigh, Tex::delta_mie}, {Tex::delta_irradiance}};
+      return {{Tex::delta_multiple}, {Tex::delta_irradiance}};
+    case PassStage::multiple_scattering: return {{Tex::transmittance, Tex::density}, {Tex::delta_multiple}};
   }
-  for (Tex t : inputs) h.write(t, b.read(t));
-  std::vector<std::vector<double>> dev;
-  for (Tex t : outputs) dev.push_back(b.read(t));
-  const long long n = static_cast<long long>(dev[0].size()) / w;
-  const int k_out = static_cast<int>(outputs.size());
-  std::vector<double> scale(k_out * w, 0.0);
-  for (int o = 0; o < k_out; ++o)
-    for (long long i = 0; i < n; ++i)
-      for (int c = 0; c < w; ++c) scale[o * w + c] = std::max(scale[o * w + c], std::fabs(dev[o][i * w + c]));
-  StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count, n)), 0.0};
-  std::vector<double> errs(r.texels, 0.0);
-  parallel_for(r.texels, [&](long long k) {
-    // spread over the texture: a fixed multiplicative stride (coprime with most sizes)
-    const long long id = (k * 2654435761LL + 12345) % n;
-    std::vector<double> want(2 * w);
-    h.texel(stage, order, id, want.data());
-    double e = 0.0;
-    for (int o = 0; o < k_out; ++o)
-      for (int c = 0; c < w; ++c) {
-        const double ref = want[o * w + c], got = dev[o][id * w + c];
-        e = std::max(e, std::fabs(got - ref) / (std::fabs(ref) + floor * scale[o * w + c] + 1e-300));
-      }
-    errs[k] = e;
-  });
-  for (double e : errs) r.max_rel = std::max(r.max_rel, e);
-  return r;
+  return {};
 }
+
+template <class HB>
+class HostStageChecker final : public StageChecker {
+ public:
+  HostStageChecker(const Model& m, const Channels& ch, int count, double floor)
+      : h_(m, ch), count_(count), floor_(floor) {}
+
+  StageCheck check(PassBackend& b, PassStage stage, int order) override {
+    const int w = b.channels();
+    const StageTextures io = textures_of(stage, order);
+    // the stage just rewrote its outputs; inputs come from the checks of the stages that wrote
+    // them (read here only if that stage went unchecked)
+    for (Tex t : io.outputs) held_.erase(t);
+    for (Tex t : io.inputs)
+      if (held_.insert(t).second) h_.write(t, b.read(t));
+    std::vector<std::vector<double>> dev;
+    for (Tex t : io.outputs) dev.push_back(b.read(t));
+    const long long n = static_cast<long long>(dev[0].size()) / w;
+    const int k_out = static_cast<int>(io.outputs.size());
+    std::vector<double> scale(k_out * w, 0.0);
+    for (int o = 0; o < k_out; ++o)
+      for (long long i = 0; i < n; ++i)
+        for (int c = 0; c < w; ++c) scale[o * w + c] = std::max(scale[o * w + c], std::fabs(dev[o][i * w + c]));
+    StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count_, n)), 0.0};
+    std::vector<double> errs(r.texels, 0.0);
+    parallel_for(r.texels, [&](long long k) {
+      // spread over the texture: a fixed multiplicative stride (coprime with most sizes)
+      const long long id = (k * 2654435761LL + 12345) % n;
+      std::vector<double> want(2 * w);
+      h_.texel(stage, order, id, want.data());
+      double e = 0.0;
+      for (int o = 0; o < k_out; ++o)
+        for (int c = 0; c < w; ++c) {
+          const double ref = want[o * w + c], got = dev[o][id * w + c];
+          e = std::max(e, std::fabs(got - ref) / (std::fabs(ref) + floor_ * scale[o * w + c] + 1e-300));
+        }
+      errs[k] = e;
+    });
+    for (double e : errs) r.max_rel = std::max(r.max_rel, e);
+    // the device's outputs become the reference's inputs of later checks
+    for (int o = 0; o < k_out; ++o) {
+      h_.write(io.outputs[o], std::move(dev[o]));
+      held_.insert(io.outputs[o]);
+    }
+    return r;
+  }
+
+ private:
+  HB h_;
+  int count_;
+  double floor_;
+  std::set<Tex> held_;  // textures h_ holds as the device has them now
+};
 
 }  // namespace
 
@@ -336,10 +350,10 @@ std::unique_ptr<PassBackend> make_host_backend(const Model& m, const Channels& c
   });
 }
 
-StageCheck check_stage(PassBackend& b, const Model& m, const Channels& ch, PassStage stage, int order,
-                       int count, double floor) {
-  return with_width(b.channels(), [&](auto ref) {
-    return check_with<typename decltype(ref)::Backend>(b, m, ch, stage, order, count, floor);
+std::unique_ptr<StageChecker> make_stage_checker(const Model& m, const Channels& ch, int width, int count,
+                                                 double floor) {
+  return with_width(width, [&](auto ref) -> std::unique_ptr<StageChecker> {
+    return std::make_unique<HostStageChecker<typename decltype(ref)::Backend>>(m, ch, count, floor);
   });
 }
 

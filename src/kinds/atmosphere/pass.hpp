@@ -110,15 +110,23 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
 // 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it).
 std::vector<double> inverse_rayleigh_phase(const Model& m);
 
-// Self-check: recomputes `count` texels of a stage's output in double from the backend's own
-// inputs and returns the largest |device − reference| / (|reference| + floor·max|reference|).
+// Self-checks of one pass: after each stage, recomputes `count` texels of its output in double
+// from the backend's own inputs and returns the largest |device − reference| / (|reference| +
+// floor·max|device|). The checker keeps, in double, each texture as the check of the stage that
+// wrote it read it, so a texture is read from the device once per stage that writes it, not
+// again by every later check that uses it as an input. Call it after every stage of the pass.
 struct StageCheck {
   std::string stage;
   int order = 0;
   int texels = 0;
   double max_rel = 0.0;
 };
-StageCheck check_stage(PassBackend& b, const Model& m, const Channels& ch, PassStage stage, int order,
-                       int count, double floor);
+class StageChecker {
+ public:
+  virtual ~StageChecker() = default;
+  virtual StageCheck check(PassBackend& b, PassStage stage, int order) = 0;
+};
+std::unique_ptr<StageChecker> make_stage_checker(const Model& m, const Channels& ch, int width, int count,
+                                                 double floor);
 
 }  // namespace specbake::atmosphere
