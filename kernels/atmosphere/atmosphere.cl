@@ -337,23 +337,40 @@ FN void texture_2d(GLOBAL const real* tex, int w, int h, real u, real v, real* o
     out[c] = (R(1.0) - fy) * ((R(1.0) - fx) * t00[c] + fx * t10[c]) + fy * ((R(1.0) - fx) * t01[c] + fx * t11[c]);
 }
 
-/* Trilinear lookup at (u, v, w) in a [d][h][wd] texture. */
-FN void texture_3d(GLOBAL const real* tex, int wd, int h, int d, real u, real v, real w, real* out) {
-  const real x = u * (real)wd - R(0.5), y = v * (real)h - R(0.5), z = w * (real)d - R(0.5);
-  const real x0 = floor(x), y0 = floor(y), z0 = floor(z);
-  const real fx = x - x0, fy = y - y0, fz = z - z0;
+/* Trilinear lookup at (u, v, w) in a [d][h][wd] texture, in two parts: the rows along the two
+ * slower axes (v over h, w over d) and their weights, which lookups at one (v, w) and several
+ * u share (the two ν slices of a scattering lookup, the NU slices of scattering_slices), and
+ * the filter along u over those rows. */
+typedef struct {
+  int j0, j1, k0, k1; /* rows (v) and planes (w) of the taps */
+  real fy, fz;        /* weights of j1 and k1 */
+} TexelRows;
+FN TexelRows texture_3d_rows(int h, int d, real v, real w) {
+  const real y = v * (real)h - R(0.5), z = w * (real)d - R(0.5);
+  const real y0 = floor(y), z0 = floor(z);
+  TexelRows r;
+  r.fy = y - y0;
+  r.fz = z - z0;
+  r.j0 = clamp_int((int)y0, 0, h - 1);
+  r.j1 = clamp_int((int)y0 + 1, 0, h - 1);
+  r.k0 = clamp_int((int)z0, 0, d - 1);
+  r.k1 = clamp_int((int)z0 + 1, 0, d - 1);
+  return r;
+}
+FN void texture_3d_at(GLOBAL const real* tex, int wd, int h, const TexelRows* r, real u, real* out) {
+  const real x = u * (real)wd - R(0.5);
+  const real x0 = floor(x);
+  const real fx = x - x0, fy = r->fy, fz = r->fz;
   const int i0 = clamp_int((int)x0, 0, wd - 1), i1 = clamp_int((int)x0 + 1, 0, wd - 1);
-  const int j0 = clamp_int((int)y0, 0, h - 1), j1 = clamp_int((int)y0 + 1, 0, h - 1);
-  const int k0 = clamp_int((int)z0, 0, d - 1), k1 = clamp_int((int)z0 + 1, 0, d - 1);
   const int plane = wd * h;
-  GLOBAL const real* p000 = tex + (k0 * plane + j0 * wd + i0) * NCH;
-  GLOBAL const real* p100 = tex + (k0 * plane + j0 * wd + i1) * NCH;
-  GLOBAL const real* p010 = tex + (k0 * plane + j1 * wd + i0) * NCH;
-  GLOBAL const real* p110 = tex + (k0 * plane + j1 * wd + i1) * NCH;
-  GLOBAL const real* p001 = tex + (k1 * plane + j0 * wd + i0) * NCH;
-  GLOBAL const real* p101 = tex + (k1 * plane + j0 * wd + i1) * NCH;
-  GLOBAL const real* p011 = tex + (k1 * plane + j1 * wd + i0) * NCH;
-  GLOBAL const real* p111 = tex + (k1 * plane + j1 * wd + i1) * NCH;
+  GLOBAL const real* p000 = tex + (r->k0 * plane + r->j0 * wd + i0) * NCH;
+  GLOBAL const real* p100 = tex + (r->k0 * plane + r->j0 * wd + i1) * NCH;
+  GLOBAL const real* p010 = tex + (r->k0 * plane + r->j1 * wd + i0) * NCH;
+  GLOBAL const real* p110 = tex + (r->k0 * plane + r->j1 * wd + i1) * NCH;
+  GLOBAL const real* p001 = tex + (r->k1 * plane + r->j0 * wd + i0) * NCH;
+  GLOBAL const real* p101 = tex + (r->k1 * plane + r->j0 * wd + i1) * NCH;
+  GLOBAL const real* p011 = tex + (r->k1 * plane + r->j1 * wd + i0) * NCH;
+  GLOBAL const real* p111 = tex + (r->k1 * plane + r->j1 * wd + i1) * NCH;
   for (int c = 0; c < NCH; ++c) {
     const real lo = (R(1.0) - fy) * ((R(1.0) - fx) * p000[c] + fx * p100[c]) +
                     fy * ((R(1.0) - fx) * p010[c] + fx * p110[c]);
@@ -361,6 +378,10 @@ FN void texture_3d(GLOBAL const real* tex, int wd, int h, int d, real u, real v,
                     fy * ((R(1.0) - fx) * p011[c] + fx * p111[c]);
     out[c] = (R(1.0) - fz) * lo + fz * hi;
   }
+}
+FN void texture_3d(GLOBAL const real* tex, int wd, int h, int d, real u, real v, real w, real* out) {
+  const TexelRows r = texture_3d_rows(h, d, v, w);
+  texture_3d_at(tex, wd, h, &r, u, out);
 }
 
 /* ---- transmittance lookups ----------------------------------------------------------- */
@@ -423,8 +444,9 @@ FN void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex,
   const real x0 = floor(x);
   const real f = x - x0;
   real v0[NCH], v1[NCH];
-  texture_3d(tex, wd, a->mu_size, a->r_size, (x0 + uvwz[1]) / (real)a->nu_size, uvwz[2], uvwz[3], v0);
-  texture_3d(tex, wd, a->mu_size, a->r_size, (x0 + R(1.0) + uvwz[1]) / (real)a->nu_size, uvwz[2], uvwz[3], v1);
+  const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
+  texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + uvwz[1]) / (real)a->nu_size, v0);
+  texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + R(1.0) + uvwz[1]) / (real)a->nu_size, v1);
   for (int c = 0; c < NCH; ++c) out[c] = v0[c] * (R(1.0) - f) + v1[c] * f;
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
@@ -456,8 +478,9 @@ FN void get_ground_irradiance(const AtmosphereParameters* a, GLOBAL const real* 
 FN void scattering_slices(const AtmosphereParameters* a, GLOBAL const real* tex, real u_mu_s, real u_mu, real u_r,
                           real* slices) {
   const int wd = a->nu_size * a->mu_s_size;
+  const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, u_mu, u_r);
   for (int s = 0; s < a->nu_size; ++s)
-    texture_3d(tex, wd, a->mu_size, a->r_size, ((real)s + u_mu_s) / (real)a->nu_size, u_mu, u_r, slices + s * NCH);
+    texture_3d_at(tex, wd, a->mu_size, &rows, ((real)s + u_mu_s) / (real)a->nu_size, slices + s * NCH);
 }
 /* The two slices around nu and the weight of the second (corner-sampled, divisor NU − 1):
  * the value at nu is slice s0 × (1 − f) + slice s1 × f. */
