@@ -281,8 +281,8 @@ double estimated_seconds(const AtmosphereSpec& spec) {
   // store: radiance: one more pass of up to kInterpolationTests wavelengths (the interpolation check)
   const int tests = std::min(kInterpolationTests, channels - 1);
   const double interpolation =
-      spec.store_radiance ? orders * (texels / 1048576.0) * (6.4 + 0.12 * pass_width_for(tests)) : 0.0;
-  return 1.0 + orders * passes * (texels / 1048576.0) * (6.4 + 0.12 * width) +
+      spec.store_radiance ? orders * (texels / 1048576.0) * (4.6 + 0.14 * pass_width_for(tests)) : 0.0;
+  return 1.0 + orders * passes * (texels / 1048576.0) * (4.6 + 0.14 * width) +
          passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + check + interpolation;
 }
 

@@ -20,7 +20,7 @@ int channels_per_pass(const AtmosphereSpec& spec);
 
 // Wall seconds of a bake on a 2-core CPU device (PoCL), from a cost model calibrated on the
 // bundled configs: per order and pass, a geometry part and a per-channel part, both
-// proportional to the scattering texels (default Earth rgb ~27 s, 48 wavelengths ~100 s,
+// proportional to the scattering texels (default Earth rgb ~31 s with its scene check, 48 wavelengths ~90 s,
 // 13 orders ~90 s), small terms for the transmittance and irradiance texels (from a default
 // bake's stage times), plus the scene check (~0.07 s a point). `orders: auto` is costed at 10 orders.
 double estimated_seconds(const AtmosphereSpec& spec);
