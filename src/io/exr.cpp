@@ -7,13 +7,31 @@
 #include <ImfOutputFile.h>
 #include <ImfStdIO.h>
 #include <ImfStringAttribute.h>
+#include <ImfThreading.h>
 #include <Iex.h>
 
+#include <algorithm>
+#include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "core/errors.hpp"
 
 namespace specbake {
+
+namespace {
+// OpenEXR compresses line blocks on its global thread pool (the file's bytes do not depend on
+// the thread count: blocks are written in order); started once, one thread per core, ≤ 16.
+int exr_threads() {
+  static std::once_flag once;
+  static int n = 0;
+  std::call_once(once, [] {
+    n = static_cast<int>(std::min(16u, std::max(1u, std::thread::hardware_concurrency())));
+    Imf::setGlobalThreadCount(n);
+  });
+  return n;
+}
+}  // namespace
 
 std::string exr_bytes(const ExrImage& img) {
   const std::size_t nc = img.channels.size();
@@ -37,7 +55,7 @@ std::string exr_bytes(const ExrImage& img) {
       fb.insert(img.channels[c], Imf::Slice(type, base + c * elem, elem * nc, elem * nc * img.width));
     Imf::StdOSStream os;
     {
-      Imf::OutputFile file(os, header);
+      Imf::OutputFile file(os, header, exr_threads());
       file.setFrameBuffer(fb);
       file.writePixels(img.height);
     }
