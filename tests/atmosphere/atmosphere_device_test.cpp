@@ -468,7 +468,7 @@ TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
       for (double& x : v) x *= 1.01;
       b_->write(Tex::delta_multiple, std::move(v));
     }
-    std::vector<double> read(Tex t) override { return b_->read(t); }
+    void read_into(Tex t, std::vector<double>& out) override { b_->read_into(t, out); }
     void write(Tex t, std::vector<double> v) override { b_->write(t, std::move(v)); }
 
    private:

@@ -105,18 +105,18 @@ class DeviceBackend final : public PassBackend {
   }
   void multiple_scattering() override { launch("multiple_scattering_texture", n_s_, {&rays_, &J_, &dS_}); }
 
-  std::vector<double> read(Tex t) override {
+  void read_into(Tex t, std::vector<double>& out) override {
     const long long n = texels(t) * width_;
-    return cl_util::checked("reading an atmosphere texture", [&] {
-      std::vector<double> out(n);
+    out.resize(n);
+    cl_util::checked("reading an atmosphere texture", [&] {
       if (dbl_) {
         read_buffer(buffer(t), n * sizeof(double), out.data());
       } else {
-        std::vector<float> f(n);
-        read_buffer(buffer(t), n * sizeof(float), f.data());
-        std::copy(f.begin(), f.end(), out.begin());
+        staging_.resize(n);  // kept between reads: no fresh pages for every texture read
+        read_buffer(buffer(t), n * sizeof(float), staging_.data());
+        std::copy(staging_.begin(), staging_.begin() + n, out.begin());
       }
-      return out;
+      return 0;
     });
   }
   void write(Tex t, std::vector<double> v) override {
@@ -229,6 +229,7 @@ class DeviceBackend final : public PassBackend {
   cl::Program program_;
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
   cl::Buffer T_, dE_, dR_, dM_, dS_, J_, rays_, incidence_;
+  std::vector<float> staging_;
 };
 
 struct ChannelStats {
@@ -297,15 +298,21 @@ class HostStageChecker final : public StageChecker {
     // them (read here only if that stage went unchecked)
     for (Tex t : io.outputs) held_.erase(t);
     for (Tex t : io.inputs)
-      if (held_.insert(t).second) h_.write(t, b.read(t));
-    std::vector<std::vector<double>> dev;
-    for (Tex t : io.outputs) dev.push_back(b.read(t));
-    const long long n = static_cast<long long>(dev[0].size()) / w;
+      if (held_.insert(t).second) b.read_into(t, h_.texture(t));
+    // the device's outputs go straight into the reference's copies (no stage's recomputation
+    // reads its own output texture), where later checks find them as inputs
+    std::vector<const std::vector<double>*> dev;
+    for (Tex t : io.outputs) {
+      b.read_into(t, h_.texture(t));
+      held_.insert(t);
+      dev.push_back(&h_.texture(t));
+    }
+    const long long n = static_cast<long long>(dev[0]->size()) / w;
     const int k_out = static_cast<int>(io.outputs.size());
     std::vector<double> scale(k_out * w, 0.0);
     for (int o = 0; o < k_out; ++o)
       for (long long i = 0; i < n; ++i)
-        for (int c = 0; c < w; ++c) scale[o * w + c] = std::max(scale[o * w + c], std::fabs(dev[o][i * w + c]));
+        for (int c = 0; c < w; ++c) scale[o * w + c] = std::max(scale[o * w + c], std::fabs((*dev[o])[i * w + c]));
     StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count_, n)), 0.0};
     std::vector<double> errs(r.texels, 0.0);
     parallel_for(r.texels, [&](long long k) {
@@ -316,17 +323,12 @@ class HostStageChecker final : public StageChecker {
       double e = 0.0;
       for (int o = 0; o < k_out; ++o)
         for (int c = 0; c < w; ++c) {
-          const double ref = want[o * w + c], got = dev[o][id * w + c];
+          const double ref = want[o * w + c], got = (*dev[o])[id * w + c];
           e = std::max(e, std::fabs(got - ref) / (std::fabs(ref) + floor_ * scale[o * w + c] + 1e-300));
         }
       errs[k] = e;
     });
     for (double e : errs) r.max_rel = std::max(r.max_rel, e);
-    // the device's outputs become the reference's inputs of later checks
-    for (int o = 0; o < k_out; ++o) {
-      h_.write(io.outputs[o], std::move(dev[o]));
-      held_.insert(io.outputs[o]);
-    }
     return r;
   }
 
@@ -453,6 +455,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   r.orders_used = 1;
   r.converged = !plan.auto_orders;
   const std::vector<double> inv_phase = cap >= 2 ? inverse_rayleigh_phase(m) : std::vector<double>{};
+  std::vector<double> add;  // what order n adds, reused across orders
   for (int n = 2; n <= cap; ++n) {
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
     hook(PassStage::scattering_density, n);
@@ -470,7 +473,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     step("order " + std::to_string(n) + ": indirect irradiance", 0.02);
     timed(PassStage::multiple_scattering, n, [&] { b.multiple_scattering(); });
     hook(PassStage::multiple_scattering, n);
-    std::vector<double> add = b.read(Tex::delta_multiple);
+    b.read_into(Tex::delta_multiple, add);
     for (std::size_t i = 0; i < add.size(); ++i) add[i] *= inv_phase[i / w];
     for (std::size_t i = 0; i < add.size(); ++i) r.scattering[i] += add[i];
     OrderStats o;

@@ -50,7 +50,13 @@ class PassBackend {
   virtual void scattering_density(int order) = 0;     // J ← f(T, ΔR, ΔM, ΔS, ΔE)
   virtual void indirect_irradiance(int order) = 0;    // ΔE ← indirect from scattering of `order`
   virtual void multiple_scattering() = 0;             // ΔS ← f(T, J)
-  virtual std::vector<double> read(Tex t) = 0;        // [texels][channels()]
+  // [texels][channels()] into `out`, resized (its storage is reused when large enough)
+  virtual void read_into(Tex t, std::vector<double>& out) = 0;
+  std::vector<double> read(Tex t) {
+    std::vector<double> out;
+    read_into(t, out);
+    return out;
+  }
   virtual void write(Tex t, std::vector<double> values) = 0;  // [texels][channels()]
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
   virtual cl_util::Profiler* profiler() { return nullptr; }
