@@ -337,10 +337,10 @@ FN void texture_2d(GLOBAL const real* tex, int w, int h, real u, real v, real* o
     out[c] = (R(1.0) - fy) * ((R(1.0) - fx) * t00[c] + fx * t10[c]) + fy * ((R(1.0) - fx) * t01[c] + fx * t11[c]);
 }
 
-/* Trilinear lookup at (u, v, w) in a [d][h][wd] texture, in two parts: the rows along the two
- * slower axes (v over h, w over d) and their weights, which lookups at one (v, w) and several
- * u share (the two ν slices of a scattering lookup, the NU slices of scattering_slices), and
- * the filter along u over those rows. */
+/* Trilinear lookup at (u, v, w) in a [d][h][wd] texture, in two parts: texture_3d_rows, the
+ * rows along the two slower axes (v over h, w over d) and their weights, which every lookup
+ * here shares between several u (the two ν slices of a scattering lookup, the NU slices of
+ * scattering_slices), and texture_3d_at, the filter along u over those rows. */
 typedef struct {
   int j0, j1, k0, k1; /* rows (v) and planes (w) of the taps */
   real fy, fz;        /* weights of j1 and k1 */
@@ -378,10 +378,6 @@ FN void texture_3d_at(GLOBAL const real* tex, int wd, int h, const TexelRows* r,
                     fy * ((R(1.0) - fx) * p011[c] + fx * p111[c]);
     out[c] = (R(1.0) - fz) * lo + fz * hi;
   }
-}
-FN void texture_3d(GLOBAL const real* tex, int wd, int h, int d, real u, real v, real w, real* out) {
-  const TexelRows r = texture_3d_rows(h, d, v, w);
-  texture_3d_at(tex, wd, h, &r, u, out);
 }
 
 /* ---- transmittance lookups ----------------------------------------------------------- */
