@@ -26,12 +26,13 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
   const std::uint64_t incidence = std::uint64_t(s.scattering_r) * s.scattering_mu_s * DENSITY_SPHERE_STEPS *
                                   ((2 * s.scattering_nu + 1) * w + INC_FIXED) * real;
   // Host: the final textures and a pass's read-backs in double (scattering and single Mie,
-  // 3 channels; a pass's accumulations and reads, w channels), the 2D textures likewise, and
-  // the encoded files (float32 + EXR) of the 4D textures.
+  // 3 channels; a pass's accumulations and reads, w channels, with the self-checks' copies of
+  // up to three 4D textures), the float32 staging of a read, the 2D textures likewise, and the
+  // encoded files (float32 + EXR) of the 4D textures.
   const std::uint64_t t2d = std::uint64_t(s.transmittance_mu) * s.transmittance_r +
                             std::uint64_t(s.irradiance_mu_s) * s.irradiance_r;
-  std::uint64_t host = texels * 8 * (2 * 3 + 5 * w) + t2d * 8 * (3 * 3 + 4 * w) + texels * 3 * 4 * 4 +
-                       (std::uint64_t{1} << 26);
+  std::uint64_t host = texels * 8 * (2 * 3 + 6 * w) + texels * 4 * w + t2d * 8 * (3 * 3 + 4 * w) +
+                       texels * 3 * 4 * 4 + (std::uint64_t{1} << 26);
   // store: radiance: the float32 textures at every wavelength, and their files (.bin, the Spectral
   // OpenEXR and its pixel copy, KTX2), all alive until the bundle is written
   if (s.store_radiance)

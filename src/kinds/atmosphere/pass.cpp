@@ -329,10 +329,22 @@ class HostStageChecker final : public StageChecker {
       errs[k] = e;
     });
     for (double e : errs) r.max_rel = std::max(r.max_rel, e);
+    // Free the copies whose last reader in run_pass's order has been checked: ΔR and ΔM after
+    // the indirect irradiance of order 1 (the density of order 2 runs before it), J after the
+    // multiple scattering it feeds. Memory only: a check that needs a freed texture reads it again.
+    if (stage == PassStage::indirect_irradiance && order == 1) release({Tex::delta_rayleigh, Tex::delta_mie});
+    if (stage == PassStage::multiple_scattering) release({Tex::density});
     return r;
   }
 
  private:
+  void release(std::initializer_list<Tex> textures) {
+    for (Tex t : textures) {
+      held_.erase(t);
+      std::vector<double>().swap(h_.texture(t));
+    }
+  }
+
   HB h_;
   int count_;
   double floor_;
