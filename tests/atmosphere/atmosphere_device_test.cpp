@@ -451,30 +451,27 @@ TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
   const Channels ch = channels_at(s, {680.0, 550.0, 440.0});
   class Corrupting final : public PassBackend {
    public:
-    explicit Corrupting(std::unique_ptr<PassBackend> b) : b_(std::move(b)) {}
-    int channels() const override { return b_->channels(); }
-    void transmittance() override { b_->transmittance(); }
-    void direct_irradiance() override { b_->direct_irradiance(); }
-    void single_scattering() override { b_->single_scattering(); }
+    Corrupting(const Model& m, const Channels& ch) : b_(m, ch) {}
+    int channels() const override { return b_.channels(); }
+    void transmittance() override { b_.transmittance(); }
+    void direct_irradiance() override { b_.direct_irradiance(); }
+    void single_scattering() override { b_.single_scattering(); }
     void scattering_density(int order) override {
       order_ = order;
-      b_->scattering_density(order);
+      b_.scattering_density(order);
     }
-    void indirect_irradiance(int order) override { b_->indirect_irradiance(order); }
+    void indirect_irradiance(int order) override { b_.indirect_irradiance(order); }
     void multiple_scattering() override {
-      b_->multiple_scattering();
+      b_.multiple_scattering();
       if (order_ != 2) return;
-      std::vector<double> v = b_->read(Tex::delta_multiple);
-      for (double& x : v) x *= 1.01;
-      b_->write(Tex::delta_multiple, std::move(v));
+      for (double& x : b_.texture(Tex::delta_multiple)) x *= 1.01;
     }
-    void read_into(Tex t, std::vector<double>& out) override { b_->read_into(t, out); }
-    void write(Tex t, std::vector<double> v) override { b_->write(t, std::move(v)); }
+    void read_into(Tex t, std::vector<double>& out) override { b_.read_into(t, out); }
 
    private:
-    std::unique_ptr<PassBackend> b_;
+    ref3::HostBackend b_;
     int order_ = 0;
-  } b(make_host_backend(m, ch, 3));
+  } b(m, ch);
   auto checker = make_stage_checker(m, ch, 3, 64, 1e-3);
   std::vector<StageCheck> checks;
   run_pass(b, m, PassPlan{4, false, 1e-3}, kQuiet, 0.0, 1.0,

@@ -119,23 +119,6 @@ class DeviceBackend final : public PassBackend {
       return 0;
     });
   }
-  void write(Tex t, std::vector<double> v) override {
-    const long long n = texels(t) * width_;
-    if (static_cast<long long>(v.size()) != n) throw JobError(std::string("wrong size for ") + to_string(t));
-    cl_util::checked("writing an atmosphere texture", [&] {
-      cl::Event ev;
-      if (dbl_) {
-        dev_.profiler().wait(
-            [&] { dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(double), v.data(), nullptr, &ev); });
-      } else {
-        std::vector<float> f(v.begin(), v.end());
-        dev_.profiler().wait(
-            [&] { dev_.queue().enqueueWriteBuffer(buffer(t), CL_TRUE, 0, n * sizeof(float), f.data(), nullptr, &ev); });
-      }
-      dev_.profiler().record(ev);
-      return 0;
-    });
-  }
   cl_util::Profiler* profiler() override { return &dev_.profiler(); }
 
  private:

@@ -57,7 +57,6 @@ class PassBackend {
     read_into(t, out);
     return out;
   }
-  virtual void write(Tex t, std::vector<double> values) = 0;  // [texels][channels()]
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
   virtual cl_util::Profiler* profiler() { return nullptr; }
 };
