@@ -88,23 +88,51 @@ Fft2d& shared_fft(Device& dev, std::size_t width, std::size_t height, std::size_
   return dev.reusable<Fft2d>(key, [&] { return std::make_unique<Fft2d>(dev, width, height, batch, precision); });
 }
 
+namespace {
+constexpr std::size_t kRowBatch = 64;
+std::size_t row_batch(std::size_t count) { return std::min(count, kRowBatch); }
+}  // namespace
+
+cl::Buffer fft_rows_buffer(Device& dev, std::size_t n, std::size_t count) {
+  const std::size_t batch = row_batch(std::max<std::size_t>(count, 1)), array_bytes = n * 2 * sizeof(float);
+  const std::size_t arrays = (std::max<std::size_t>(count, 1) + batch - 1) / batch * batch;
+  cl::Buffer buf = checked("FFT rows: buffer",
+                           [&] { return cl::Buffer(dev.context(), CL_MEM_READ_WRITE, arrays * array_bytes); });
+  if (arrays > count)
+    checked("FFT rows: zero the last batch's tail", [&] {
+      cl::Event ev;
+      dev.queue().enqueueFillBuffer(buf, 0.0f, count * array_bytes, (arrays - count) * array_bytes, nullptr, &ev);
+      dev.profiler().record(ev);
+      return CL_SUCCESS;
+    });
+  return buf;
+}
+
+void fft_rows(Device& dev, cl::Buffer& rows, std::size_t n, std::size_t count) {
+  if (count == 0) return;
+  const std::size_t batch = row_batch(count);
+  Fft2d& fft = shared_fft(dev, n, 1, batch, FftPrecision::single);
+  for (std::size_t g = 0; g * batch < count; ++g) fft.forward(rows, g * batch);
+}
+
 void fft_rows(Device& dev, std::vector<float>& data, std::size_t n, std::size_t count) {
   if (count == 0) return;
-  constexpr std::size_t kBatch = 64;
-  const std::size_t batch = std::min(count, kBatch);
-  Fft2d& fft = shared_fft(dev, n, 1, batch, FftPrecision::single);
-  const std::size_t groups = (count + batch - 1) / batch, array_bytes = n * 2 * sizeof(float);
-  cl::Buffer buf = checked("FFT rows: buffer", [&] {
-    return cl::Buffer(dev.context(), CL_MEM_READ_WRITE, groups * batch * array_bytes);
-  });
+  const std::size_t bytes = count * n * 2 * sizeof(float);
+  cl::Buffer buf = fft_rows_buffer(dev, n, count);
   checked("FFT rows: upload", [&] {
-    if (groups * batch > count)
-      dev.queue().enqueueFillBuffer(buf, 0.0f, count * array_bytes, (groups * batch - count) * array_bytes);
-    return dev.queue().enqueueWriteBuffer(buf, CL_TRUE, 0, count * array_bytes, data.data());
+    cl::Event ev;
+    dev.queue().enqueueWriteBuffer(buf, CL_FALSE, 0, bytes, data.data(), nullptr, &ev);
+    dev.profiler().record(ev);
+    return CL_SUCCESS;
   });
-  for (std::size_t g = 0; g < groups; ++g) fft.forward(buf, g * batch);
-  checked("FFT rows: download",
-          [&] { return dev.queue().enqueueReadBuffer(buf, CL_TRUE, 0, count * array_bytes, data.data()); });
+  fft_rows(dev, buf, n, count);
+  checked("FFT rows: download", [&] {
+    cl::Event ev;
+    dev.queue().enqueueReadBuffer(buf, CL_FALSE, 0, bytes, data.data(), nullptr, &ev);
+    dev.profiler().record(ev);
+    dev.profiler().wait([&] { dev.queue().finish(); });
+    return CL_SUCCESS;
+  });
 }
 
 }  // namespace specbake::cl_util

@@ -46,7 +46,13 @@ Fft2d& shared_fft(Device& dev, std::size_t width, std::size_t height, std::size_
 
 // Forward FFTs of `count` consecutive length-n complex arrays (interleaved float re, im, as the
 // 2D transform's sign), in place, on the device in float32: batches of up to 64 rows share one
-// plan (a Fft2d of height 1). The caller's vector holds count·n·2 floats.
+// plan (a Fft2d of height 1).
+// A device buffer for fft_rows: `count` rows rounded up to whole batches, the rows past `count`
+// zeroed (they are transformed with the last batch and never read).
+cl::Buffer fft_rows_buffer(Device& dev, std::size_t n, std::size_t count);
+// The rows of a buffer from fft_rows_buffer(dev, n, count), on the device.
+void fft_rows(Device& dev, cl::Buffer& rows, std::size_t n, std::size_t count);
+// The caller's count·n·2 floats: uploaded, transformed, read back.
 void fft_rows(Device& dev, std::vector<float>& data, std::size_t n, std::size_t count);
 
 }  // namespace specbake::cl_util

@@ -6,6 +6,7 @@
 #include <tuple>
 #include <utility>
 
+#include "cl/buffers.hpp"
 #include "cl/fft.hpp"
 #include "core/parallel.hpp"
 #include "kinds/diffraction/reference.hpp"
@@ -319,6 +320,14 @@ std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field
   const std::size_t per_term = static_cast<std::size_t>(ay.count) * sum_n;
   const int group = static_cast<int>(
       std::clamp<std::size_t>(kGroupBytes / (per_term * 2 * sizeof(float)), 1, DIFFRACTION_MAX_BATCH));
+  // The row stage's inputs on the device: the field, the x axis's kept-sample weights (window ×
+  // deconvolution) and the y window.
+  cl::Program program = dev.build(kProgram, dev.real_options());
+  cl::Kernel row_inputs = cl_util::checked("table row inputs", [&] { return cl::Kernel(program, "diffraction_table_row_inputs"); });
+  std::vector<double> weight_x(ax.count);
+  for (int l = 0; l < ax.count; ++l) weight_x[l] = w.wx[ax.lo + l] * ax.deconv[l];
+  const cl::Buffer h_dev = cl_util::upload_real(dev, f.h_um), wx_dev = cl_util::upload_real(dev, weight_x),
+                   wy_dev = cl_util::upload_real(dev, w.wy);
   for (const auto& band : bands)
     for (int t0 = 0; t0 < band.terms; t0 += group) {
       const int g = std::min(group, band.terms - t0);
@@ -328,25 +337,40 @@ std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field
       std::vector<float> buf;
       for (int r0 = 0; r0 < ay.count; r0 += chunk) {
         const int c = std::min(chunk, ay.count - r0);
-        buf.assign(static_cast<std::size_t>(g) * c * ax.n * 2, 0.0f);
-        // Term inputs q_n·w / φ̂ of the kept samples, [term][row][n] (zero-padded).
-        parallel_for(c, [&](long long r) {
-          const int iy = ay.lo + r0 + static_cast<int>(r);
-          double re[DIFFRACTION_MAX_BATCH], im[DIFFRACTION_MAX_BATCH];
-          for (int l = 0; l < ax.count; ++l) {
-            const int ix = ax.lo + l;
-            ref::term_inputs(f.h_um[static_cast<std::size_t>(iy) * f.width + ix], f.c, inv_s,
-                             band.expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV,
-                             band.kappa0, band.delta, t0, g, re, im);
-            const double a = w.wx[ix] * w.wy[iy] * ax.deconv[l];
-            for (int j = 0; j < g; ++j) {
-              float* dst = buf.data() + ((static_cast<std::size_t>(j) * c + r) * ax.n + l) * 2;
-              dst[0] = static_cast<float>(a * re[j]);
-              dst[1] = static_cast<float>(a * im[j]);
-            }
-          }
+        const std::size_t arrays = static_cast<std::size_t>(g) * c, bytes = arrays * ax.n * 2 * sizeof(float);
+        buf.resize(arrays * ax.n * 2);
+        cl_util::checked("table rows", [&] {
+          // Term inputs q_n·w / φ̂ of the kept samples, [term][row][n] (zero-padded), transformed.
+          cl::Buffer q = cl_util::fft_rows_buffer(dev, ax.n, arrays);
+          int arg = 0;
+          row_inputs.setArg(arg++, h_dev);
+          row_inputs.setArg(arg++, f.width);
+          row_inputs.setArg(arg++, ax.lo);
+          row_inputs.setArg(arg++, ax.count);
+          row_inputs.setArg(arg++, ax.n);
+          row_inputs.setArg(arg++, wx_dev);
+          row_inputs.setArg(arg++, wy_dev);
+          row_inputs.setArg(arg++, ay.lo + r0);
+          row_inputs.setArg(arg++, c);
+          cl_util::set_real_arg(dev, row_inputs, arg++, f.c);
+          cl_util::set_real_arg(dev, row_inputs, arg++, inv_s);
+          row_inputs.setArg(arg++, band.expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV);
+          cl_util::set_real_arg(dev, row_inputs, arg++, band.kappa0);
+          cl_util::set_real_arg(dev, row_inputs, arg++, band.delta);
+          row_inputs.setArg(arg++, t0);
+          row_inputs.setArg(arg++, g);
+          row_inputs.setArg(arg++, q);
+          cl::Event ev;
+          dev.queue().enqueueNDRangeKernel(row_inputs, cl::NullRange, cl::NDRange(ax.n, c), cl::NullRange, nullptr,
+                                           &ev);
+          dev.profiler().record(ev);
+          cl_util::fft_rows(dev, q, ax.n, arrays);
+          cl::Event read;
+          dev.queue().enqueueReadBuffer(q, CL_FALSE, 0, bytes, buf.data(), nullptr, &read);
+          dev.profiler().record(read);
+          dev.profiler().wait([&] { dev.queue().finish(); });
+          return 0;
         });
-        cl_util::fft_rows(dev, buf, ax.n, static_cast<std::size_t>(g) * c);
         if (progress) progress((band.first_term + t0 + g * 0.8 * (r0 + c) / ay.count) / total);
         parallel_for(static_cast<long long>(g) * c, [&](long long idx) {
           const long long j = idx / c, r = idx % c;
