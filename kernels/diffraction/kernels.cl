@@ -63,3 +63,49 @@ __kernel void diffraction_table_row_inputs(__global const real* h, int width, in
     q[2 * (j * per_term + at) + 1] = (float)(a * im[j]);
   }
 }
+
+/* The windowed field of `rows` field rows from iy_first (the exact transform's input; host twin
+ * direct_transform_grid in src/kinds/diffraction/table.cpp): one work item per sample,
+ *   a[r][ix] = wx[ix]·wy[iy]·e^{iκh[iy][ix]},   iy = iy_first + r,
+ * into ar/ai[r·width + ix]. Built in double only (SPECBAKE_REAL_DOUBLE): it feeds a ground truth. */
+__kernel void diffraction_windowed_rows(__global const real* h, __global const real* wx, __global const real* wy,
+                                        int width, int iy_first, int rows, real kappa, __global real* ar,
+                                        __global real* ai) {
+  const int ix = get_global_id(0), r = get_global_id(1);
+  if (ix >= width || r >= rows) return;
+  const int iy = iy_first + r;
+  const real w = wx[ix] * wy[iy], ph = kappa * h[(size_t)iy * width + ix];
+  real c;
+  const real sn = sincos(ph, &c);
+  ar[(size_t)r * width + ix] = w * c;
+  ai[(size_t)r * width + ix] = w * sn;
+}
+
+/* The row stage of the exact transform on a product grid: one work item per (frequency a, row r),
+ *   R[iy_first + r][a] = Σ_ix a[r][ix]·e_a[ix],   e_a[ix] = e^{−2πi·fu[a]·x_ix},
+ * with a[r][ix] from diffraction_windowed_rows and the phasors tabulated by the host ([ix][a]:
+ * neighbouring work items read neighbouring phasors), summed in ix order, into rr/ri[iy·nu + a]. */
+__kernel void diffraction_exact_rows(__global const real* ar, __global const real* ai, int width, int iy_first,
+                                     int rows, __global const real* er, __global const real* ei, int nu,
+                                     __global real* rr, __global real* ri) {
+  const int a = get_global_id(0), r = get_global_id(1);
+  if (a >= nu || r >= rows) return;
+  /* four partial sums over ix ≡ 0, 1, 2, 3 (mod 4), added at the end: independent chains */
+  real sr[4] = {R(0.0), R(0.0), R(0.0), R(0.0)}, si[4] = {R(0.0), R(0.0), R(0.0), R(0.0)};
+  __global const real* pr = ar + (size_t)r * width;
+  __global const real* pi = ai + (size_t)r * width;
+  int ix = 0;
+  for (; ix + 4 <= width; ix += 4)
+    for (int k = 0; k < 4; ++k) {
+      const real qr = er[(size_t)(ix + k) * nu + a], qi = ei[(size_t)(ix + k) * nu + a];
+      sr[k] += pr[ix + k] * qr - pi[ix + k] * qi;
+      si[k] += pr[ix + k] * qi + pi[ix + k] * qr;
+    }
+  for (; ix < width; ++ix) {
+    const real qr = er[(size_t)ix * nu + a], qi = ei[(size_t)ix * nu + a];
+    sr[ix & 3] += pr[ix] * qr - pi[ix] * qi;
+    si[ix & 3] += pr[ix] * qi + pi[ix] * qr;
+  }
+  rr[(size_t)(iy_first + r) * nu + a] = (sr[0] + sr[1]) + (sr[2] + sr[3]);
+  ri[(size_t)(iy_first + r) * nu + a] = (si[0] + si[1]) + (si[2] + si[3]);
+}

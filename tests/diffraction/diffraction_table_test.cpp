@@ -191,6 +191,55 @@ TEST(DiffractionTable, FftPathMatchesDirectSums) {
                             "tall field");
 }
 
+TEST(DiffractionTable, ExactGridOnTheDeviceMatchesHostAndSinglePointSums) {
+  // The measurement's ground truth on the device (fp64) against the host's row-by-row sums and
+  // against direct_transform's single-point 2D sums (the phase of each sample formed at once).
+  // A field without symmetry (a tilt plus pseudo-random heights, 60 × 44: W ≠ H catches swapped
+  // axes), a window narrower than it, more frequencies on one axis than a SIMD width divides, κ
+  // across the range.
+  Field f;
+  f.width = 60;
+  f.height = 44;
+  f.dx_um = 0.125;
+  std::uint64_t state = 12345;
+  for (int iy = 0; iy < f.height; ++iy)
+    for (int ix = 0; ix < f.width; ++ix) {
+      state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+      f.h_um.push_back(0.004 * ix + 0.2 * static_cast<double>(state >> 11) * 0x1p-53);
+    }
+  const Window w = make_window(f, 1.5);
+  cl_util::Device& dev = tst::shared_device();
+  if (!dev.info().fp64) GTEST_SKIP() << "the device has no fp64: the exact sums stay on the host";
+  const ExactGrid grid(&dev, f, w);
+  ASSERT_TRUE(grid.on_device());
+  std::vector<double> fu, fv;
+  for (int k = 0; k < 37; ++k) fu.push_back(-3.7 + 0.23 * k);
+  for (int k = 0; k < 5; ++k) fv.push_back(-1.1 + 0.61 * k);
+  double sum_w = 0;
+  for (double y : w.wy)
+    for (double x : w.wx) sum_w += x * y;
+  // Each value is a sum of W·H terms of modulus w_j (times unit phasors), by rows of W then H
+  // rows: recursive summation errs by at most about (W + H + 8)·u·Σw per evaluation (the 8: the
+  // phasors' and products' few roundings); two evaluations differ by at most twice that.
+  const double bound = 2.0 * (f.width + f.height + 8) * 0x1p-53 * sum_w;
+  for (double kappa : {0.0, 4.1, 33.0}) {
+    const auto device = grid(kappa, fu, fv), host = direct_transform_grid(f, w, kappa, fu, fv);
+    const auto a = windowed_field(f, w, kappa);
+    ASSERT_EQ(device.size(), fu.size() * fv.size());
+    double worst_host = 0, worst_single = 0, largest = 0;
+    for (std::size_t b = 0; b < fv.size(); ++b)
+      for (std::size_t i = 0; i < fu.size(); ++i) {
+        const std::size_t at = b * fu.size() + i;
+        worst_host = std::max(worst_host, std::abs(device[at] - host[at]));
+        worst_single = std::max(worst_single, std::abs(device[at] - direct_transform(a, f, fu[i], fv[b])));
+        largest = std::max(largest, std::abs(device[at]));
+      }
+    EXPECT_LE(worst_host, bound) << "kappa " << kappa;
+    EXPECT_LE(worst_single, bound) << "kappa " << kappa;
+    EXPECT_GT(largest, 1e-3 * sum_w) << "kappa " << kappa << ": the grid must hold more than rounding";
+  }
+}
+
 TEST(DiffractionTable, TallFieldAcrossBands) {
   // y_max = κ_hi·s ≈ 40: amplitude 1.21 µm, κ_hi = 2π·2/0.38 µm.
   const auto spec = grating(ProceduralField::Type::sine_grating, 20, 0.1, 0.4, 1.21, 12, 1.0, 1.5);

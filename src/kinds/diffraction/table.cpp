@@ -442,12 +442,35 @@ cplx direct_transform(const std::vector<cplx>& a, const Field& f, double fu, dou
   return {sr, si};
 }
 
+namespace {
+// The column stage of the grid's direct sums: out[b][a] = Σ_iy e^{−2πi fv[b] y_iy}·R[iy][a], in iy
+// order (R from the host's or the device's row stage).
+std::vector<cplx> grid_columns(const Field& f, const std::vector<double>& fv, int nu, const std::vector<double>& rr,
+                               const std::vector<double>& ri) {
+  const int H = f.height, nv = static_cast<int>(fv.size());
+  std::vector<double> evr, evi;
+  axis_phasors(fv, H, f.dx_um, evr, evi);
+  std::vector<cplx> out(static_cast<std::size_t>(nu) * nv);
+  parallel_for(nv, [&](long long b) {
+    for (int a = 0; a < nu; ++a) {
+      double sr = 0, si = 0;
+      for (int iy = 0; iy < H; ++iy) {
+        const double er = evr[b * H + iy], ei = evi[b * H + iy], pr = rr[iy * nu + a], pi = ri[iy * nu + a];
+        sr += er * pr - ei * pi;
+        si += er * pi + ei * pr;
+      }
+      out[b * nu + a] = {sr, si};
+    }
+  });
+  return out;
+}
+}  // namespace
+
 std::vector<cplx> direct_transform_grid(const Field& f, const Window& w, double kappa, const std::vector<double>& fu,
                                         const std::vector<double>& fv) {
-  const int W = f.width, H = f.height, nu = static_cast<int>(fu.size()), nv = static_cast<int>(fv.size());
-  std::vector<double> eur, eui, evr, evi;
+  const int W = f.width, H = f.height, nu = static_cast<int>(fu.size());
+  std::vector<double> eur, eui;
   axis_phasors(fu, W, f.dx_um, eur, eui);
-  axis_phasors(fv, H, f.dx_um, evr, evi);
   // Rows: R[iy][a] = Σ_ix w·e^{iκh}·e^{−2πi fu[a] x}, each row on its own (deterministic).
   std::vector<double> rr(static_cast<std::size_t>(H) * nu), ri(rr.size());
   parallel_for(H, [&](long long iy) {
@@ -462,19 +485,97 @@ std::vector<cplx> direct_transform_grid(const Field& f, const Window& w, double 
       std::tie(rr[iy * nu + a], ri[iy * nu + a]) = row_dot(ar.data(), ai.data(), eur.data() + at, eui.data() + at, W);
     }
   });
-  std::vector<cplx> out(static_cast<std::size_t>(nu) * nv);
-  parallel_for(nv, [&](long long b) {
-    for (int a = 0; a < nu; ++a) {
-      double sr = 0, si = 0;
-      for (int iy = 0; iy < H; ++iy) {
-        const double er = evr[b * H + iy], ei = evi[b * H + iy], pr = rr[iy * nu + a], pi = ri[iy * nu + a];
-        sr += er * pr - ei * pi;
-        si += er * pi + ei * pr;
-      }
-      out[b * nu + a] = {sr, si};
-    }
+  return grid_columns(f, fv, nu, rr, ri);
+}
+
+struct ExactGrid::Impl {
+  cl_util::Device* dev = nullptr;
+  cl::Kernel windowed, rows;
+  cl::Buffer h, wx, wy;
+};
+
+// Rows of the windowed field held on the device at once (two double arrays of W each).
+constexpr std::size_t kExactChunkBytes = 64u << 20;
+
+ExactGrid::ExactGrid(cl_util::Device* dev, const Field& f, const Window& w)
+    : f_(f), w_(w), impl_(std::make_shared<Impl>()) {
+  if (!dev || !dev->info().fp64) return;
+  cl_util::checked("exact transform: device set-up", [&] {
+    const cl::Program program = dev->build(kProgram, dev->real_options());
+    impl_->windowed = cl::Kernel(program, "diffraction_windowed_rows");
+    impl_->rows = cl::Kernel(program, "diffraction_exact_rows");
+    impl_->h = cl_util::upload_real(*dev, f.h_um);
+    impl_->wx = cl_util::upload_real(*dev, w.wx);
+    impl_->wy = cl_util::upload_real(*dev, w.wy);
+    return 0;
   });
-  return out;
+  impl_->dev = dev;
+}
+
+bool ExactGrid::on_device() const { return impl_->dev != nullptr; }
+
+std::vector<cplx> ExactGrid::operator()(double kappa, const std::vector<double>& fu,
+                                        const std::vector<double>& fv) const {
+  if (!impl_->dev) return direct_transform_grid(f_, w_, kappa, fu, fv);
+  cl_util::Device& dev = *impl_->dev;
+  const int W = f_.width, H = f_.height, nu = static_cast<int>(fu.size());
+  if (nu == 0 || fv.empty()) return {};
+  // The phasors as [ix][a] (the host's [a][ix] transposed).
+  std::vector<double> eur, eui, er_t, ei_t;
+  axis_phasors(fu, W, f_.dx_um, eur, eui);
+  er_t.resize(eur.size());
+  ei_t.resize(eui.size());
+  for (int a = 0; a < nu; ++a)
+    for (int ix = 0; ix < W; ++ix) {
+      er_t[static_cast<std::size_t>(ix) * nu + a] = eur[static_cast<std::size_t>(a) * W + ix];
+      ei_t[static_cast<std::size_t>(ix) * nu + a] = eui[static_cast<std::size_t>(a) * W + ix];
+    }
+  const std::size_t n = static_cast<std::size_t>(H) * nu;
+  const int chunk = static_cast<int>(std::clamp<std::size_t>(kExactChunkBytes / (2 * sizeof(double) * W), 1, H));
+  std::vector<double> rr(n), ri(n);
+  cl_util::checked("exact transform: rows", [&] {
+    const cl::Buffer er = cl_util::upload_real(dev, er_t), ei = cl_util::upload_real(dev, ei_t);
+    const cl::Buffer r_re = cl_util::device_real(dev, n), r_im = cl_util::device_real(dev, n);
+    const cl::Buffer a_re = cl_util::device_real(dev, static_cast<std::size_t>(chunk) * W),
+                     a_im = cl_util::device_real(dev, static_cast<std::size_t>(chunk) * W);
+    cl::Kernel& kw = impl_->windowed;
+    cl::Kernel& kr = impl_->rows;
+    for (int y0 = 0; y0 < H; y0 += chunk) {
+      const int rows = std::min(chunk, H - y0);
+      int arg = 0;
+      for (const cl::Buffer* b : {&impl_->h, &impl_->wx, &impl_->wy}) kw.setArg(arg++, *b);
+      kw.setArg(arg++, W);
+      kw.setArg(arg++, y0);
+      kw.setArg(arg++, rows);
+      kw.setArg(arg++, kappa);
+      kw.setArg(arg++, a_re);
+      kw.setArg(arg++, a_im);
+      arg = 0;
+      kr.setArg(arg++, a_re);
+      kr.setArg(arg++, a_im);
+      kr.setArg(arg++, W);
+      kr.setArg(arg++, y0);
+      kr.setArg(arg++, rows);
+      kr.setArg(arg++, er);
+      kr.setArg(arg++, ei);
+      kr.setArg(arg++, nu);
+      kr.setArg(arg++, r_re);
+      kr.setArg(arg++, r_im);
+      cl::Event e1, e2;
+      dev.queue().enqueueNDRangeKernel(kw, cl::NullRange, cl::NDRange(W, rows), cl::NullRange, nullptr, &e1);
+      dev.profiler().record(e1);
+      dev.queue().enqueueNDRangeKernel(kr, cl::NullRange, cl::NDRange(nu, rows), cl::NullRange, nullptr, &e2);
+      dev.profiler().record(e2);
+    }
+    cl::Event a, b;
+    dev.queue().enqueueReadBuffer(r_re, CL_FALSE, 0, n * sizeof(double), rr.data(), nullptr, &a);
+    dev.queue().enqueueReadBuffer(r_im, CL_FALSE, 0, n * sizeof(double), ri.data(), nullptr, &b);
+    dev.profiler().record(a);
+    dev.profiler().record(b);
+    dev.profiler().wait([&] { dev.queue().finish(); });
+    return 0;
+  });
+  return grid_columns(f_, fv, nu, rr, ri);
 }
 
 namespace {
@@ -542,7 +643,8 @@ nlohmann::json TableError::json() const {
                                        {"per_kappa", between_per_kappa}}},
           {"kappas", kappas},
           {"energy_ratio_per_kappa", energy_ratio},
-          {"reference", "direct double-precision sum over the samples of w * exp(i kappa h) * exp(-2 pi i f.x)"}};
+          {"reference", "direct double-precision sum over the samples of w * exp(i kappa h) * exp(-2 pi i f.x)"},
+          {"reference_computed_on", reference_on}};
 }
 
 namespace {
@@ -555,8 +657,13 @@ int random_count(const Field& f, int fixed, int lo, int hi) {
 
 }  // namespace
 
-TableMeasurement::TableMeasurement(const Field& f, const Window& w, const TableGeometry& shape, std::vector<double> kappas)
-    : f_(f), w_(w), kappas_(std::move(kappas)) {
+cl_util::Device* TableMeasurement::exact_device(cl_util::Device* dev) {
+  return dev && dev->info().fp64 && dev->info().type != "cpu" ? dev : nullptr;
+}
+
+TableMeasurement::TableMeasurement(cl_util::Device* dev, const Field& f, const Window& w, const TableGeometry& shape,
+                                   std::vector<double> kappas)
+    : f_(f), w_(w), kappas_(std::move(kappas)), exact_grid_(exact_device(dev), f, w) {
   // s-values: 8 around the centre spanning ±0.08 (the specular peak; not on any ladder size's
   // texel centres or cell edges), then pseudo-random ones in (−1, 1).
   random_per_axis_ = random_count(f, 8, 4, 24);
@@ -565,7 +672,7 @@ TableMeasurement::TableMeasurement(const Field& f, const Window& w, const TableG
     for (int k = 0; k < 8; ++k) axis->push_back(shape.freq_at_s((k - 3.5 + 0.3) / 48.0));
     for (int k = 0; k < random_per_axis_; ++k) axis->push_back(shape.freq_at_s(2.0 * rng.next() - 1.0));
   }
-  for (double kappa : kappas_) exact_.push_back(direct_transform_grid(f, w, kappa, bu_, bv_));
+  for (double kappa : kappas_) exact_.push_back(exact_grid_(kappa, bu_, bv_));
 }
 
 std::vector<double> TableMeasurement::between_errors(const std::vector<Band>& bands, const TableGeometry& g,
@@ -606,6 +713,7 @@ TableError TableMeasurement::measure(const std::vector<Band>& bands, const Table
 
   TableError e;
   e.kappas = kappas_;
+  e.reference_on = exact_grid_.on_device() ? "device" : "host";
   e.texel_points = static_cast<int>(tu.size() * tv.size());
   e.between_points = static_cast<int>(bu_.size() * bv_.size());
   std::vector<double> all_t, all_b;
@@ -613,7 +721,7 @@ TableError TableMeasurement::measure(const std::vector<Band>& bands, const Table
   for (std::size_t k = 0; k < kappas_.size(); ++k) {
     const double kappa = kappas_[k];
     const Evaluator ev(terms, g, f_, band_for(bands, kappa), kappa);
-    const auto exact = direct_transform_grid(f_, w_, kappa, fu, fv);
+    const auto exact = exact_grid_(kappa, fu, fv);
     std::vector<double> et(exact.size());
     for (std::size_t i = 0; i < et.size(); ++i)
       et[i] = std::abs(ev.at(tu[i % tu.size()], tv[i / tu.size()]) - exact[i]) * inv;
@@ -643,7 +751,7 @@ TableError TableMeasurement::measure(const std::vector<Band>& bands, const Table
 
 TableError measure_table(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g,
                          const std::vector<float>& terms, const std::vector<double>& kappas) {
-  return TableMeasurement(f, w, g, kappas).measure(bands, g, terms);
+  return TableMeasurement(nullptr, f, w, g, kappas).measure(bands, g, terms);
 }
 
 }  // namespace specbake::diffraction

@@ -21,6 +21,8 @@
 // The reconstruction is the one of the full-bin terms: P(f;κ) = W·H·e^{iκc}·Σ_n coef_n(κ)·F_n(f).
 #include <complex>
 #include <functional>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -99,6 +101,25 @@ cplx direct_transform(const std::vector<cplx>& a, const Field& f, double fu, dou
 std::vector<cplx> direct_transform_grid(const Field& f, const Window& w, double kappa, const std::vector<double>& fu,
                                         const std::vector<double>& fv);
 
+// The same grid sums for many κ over one field: on `dev` when given and it has fp64 (the windowed
+// field by diffraction_windowed_rows, each row's sums by diffraction_exact_rows, one work item per
+// frequency and row, in four interleaved partial sums; the field and window uploaded once), else
+// direct_transform_grid on the host's threads (each row summed in ix order). The rows are then
+// combined on the host in iy order. The two differ by rounding only (the device's cos/sin,
+// contractions and summation order: a few units of 1e-16 of Σw per row and column).
+class ExactGrid {
+ public:
+  ExactGrid(cl_util::Device* dev, const Field& f, const Window& w);  // dev may be null
+  std::vector<cplx> operator()(double kappa, const std::vector<double>& fu, const std::vector<double>& fv) const;
+  bool on_device() const;
+
+ private:
+  struct Impl;
+  const Field& f_;
+  const Window& w_;
+  std::shared_ptr<Impl> impl_;
+};
+
 // P from stored table terms (float32 [T][N][N][2]) at texel (iu, iv) for κ in `band`.
 cplx table_value(const std::vector<float>& terms, const TableGeometry& g, const Field& f, const Band& band,
                  double kappa, int iu, int iv);
@@ -113,6 +134,7 @@ struct TableError {
   double between_max = 0.0, between_p99 = 0.0, between_at_kappa = 0.0;
   int texel_points = 0, between_points = 0;
   std::vector<double> kappas, texel_per_kappa, between_per_kappa, energy_ratio;
+  std::string reference_on = "host";  // where the direct sums ran: "device" or "host"
   nlohmann::json json() const;
 };
 
@@ -124,12 +146,17 @@ struct TableError {
 // per axis keeps each κ's direct sums near 1e9 sample visits (fewer for large fields).
 class TableMeasurement {
  public:
-  // `shape`: the mapping (power, f_max) every measured table shares; its size is not used.
-  TableMeasurement(const Field& f, const Window& w, const TableGeometry& shape, std::vector<double> kappas);
+  // `shape`: the mapping (power, f_max) every measured table shares; its size is not used. The
+  // direct sums run on `dev` (ExactGrid) when exact_device says so, else on the host.
+  TableMeasurement(cl_util::Device* dev, const Field& f, const Window& w, const TableGeometry& shape,
+                   std::vector<double> kappas);
   // Between-texel error only (what `size: auto` compares), max over the points and κ.
   double between_max(const std::vector<Band>& bands, const TableGeometry& g, const std::vector<float>& terms) const;
   // Everything: texels (direct sums made now), between texels, energy.
   TableError measure(const std::vector<Band>& bands, const TableGeometry& g, const std::vector<float>& terms) const;
+  // `dev` when it has fp64 and is not a CPU, else null (the host): on a CPU device (PoCL) the
+  // host's threads and libm do these sums 2-3x faster (docs/diffraction.md, "Where the work runs").
+  static cl_util::Device* exact_device(cl_util::Device* dev);
 
  private:
   std::vector<double> between_errors(const std::vector<Band>& bands, const TableGeometry& g,
@@ -140,6 +167,7 @@ class TableMeasurement {
   std::vector<double> bu_, bv_;             // between-texel frequencies (cycles/µm)
   std::vector<std::vector<cplx>> exact_;    // per κ: [b][a] at (bu_[a], bv_[b])
   int random_per_axis_ = 0;
+  ExactGrid exact_grid_;
 };
 TableError measure_table(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g,
                          const std::vector<float>& terms, const std::vector<double>& kappas);

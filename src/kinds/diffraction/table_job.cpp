@@ -229,7 +229,7 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
     // none of an earlier phase did. The chosen table is then measured at texels and for energy.
     ctx.progress("error measurement", 0.1);
     const TableMeasurement meas =
-        tm.time("error measurement", [&] { return TableMeasurement(f, win, geoms.front(), measurement_kappas(p)); });
+        tm.time("error measurement", [&] { return TableMeasurement(&ctx.device, f, win, geoms.front(), measurement_kappas(p)); });
     std::size_t chosen = 0;
     bool met = false;
     for (std::size_t first = 0; first < sizes.size() && !met;) {
