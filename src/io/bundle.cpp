@@ -20,6 +20,7 @@
 
 #include "core/errors.hpp"
 #include "core/hash.hpp"
+#include "core/parallel.hpp"
 
 namespace specbake {
 
@@ -269,12 +270,19 @@ fs::path BundleStore::publish(const std::string& job, const std::string& hash12,
   fs::remove_all(tmp, ec);
   make_dirs(tmp);
   try {
+    // The files are written (and synced) and hashed on the hardware threads, one file each; the
+    // list keeps the jobs' order.
+    for (const auto& f : files) make_dirs((tmp / f.path).parent_path());
+    std::vector<std::string> sha(files.size());
+    parallel_for(static_cast<long long>(files.size()), [&](long long i) {
+      const OutputFile& f = files[static_cast<std::size_t>(i)];
+      write_file_synced(tmp / f.path, f.bytes);
+      sha[static_cast<std::size_t>(i)] = sha256_hex(f.bytes);
+    });
     nlohmann::json list = nlohmann::json::array();
-    for (const auto& f : files) {
-      const fs::path p = tmp / f.path;
-      make_dirs(p.parent_path());
-      write_file_synced(p, f.bytes);
-      nlohmann::json entry = {{"path", f.path}, {"sha256", sha256_hex(f.bytes)}, {"bytes", f.bytes.size()}};
+    for (std::size_t i = 0; i < files.size(); ++i) {
+      const OutputFile& f = files[i];
+      nlohmann::json entry = {{"path", f.path}, {"sha256", sha[i]}, {"bytes", f.bytes.size()}};
       if (!f.dtype.empty()) entry["dtype"] = f.dtype;
       if (!f.shape.empty()) entry["shape"] = f.shape;
       if (!f.layout.empty()) entry["layout"] = f.layout;
