@@ -345,7 +345,7 @@ typedef struct {
   int j0, j1, k0, k1; /* rows (v) and planes (w) of the taps */
   real fy, fz;        /* weights of j1 and k1 */
 } TexelRows;
-FN TexelRows texture_3d_rows(int h, int d, real v, real w) {
+FN_HOT TexelRows texture_3d_rows(int h, int d, real v, real w) {
   const real y = v * (real)h - R(0.5), z = w * (real)d - R(0.5);
   const real y0 = floor(y), z0 = floor(z);
   TexelRows r;
@@ -357,7 +357,7 @@ FN TexelRows texture_3d_rows(int h, int d, real v, real w) {
   r.k1 = clamp_int((int)z0 + 1, 0, d - 1);
   return r;
 }
-FN void texture_3d_at(GLOBAL const real* tex, int wd, int h, const TexelRows* r, real u, real* out) {
+FN_HOT void texture_3d_at(GLOBAL const real* tex, int wd, int h, const TexelRows* r, real u, real* out) {
   const real x = u * (real)wd - R(0.5);
   const real x0 = floor(x);
   const real fx = x - x0, fy = r->fy, fz = r->fz;
@@ -434,7 +434,7 @@ FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T
 
 /* ---- scattering lookups -------------------------------------------------------------- */
 /* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
-FN void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
+FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
   const int wd = a->nu_size * a->mu_s_size;
   const real x = clamp_real(uvwz[0], R(0.0), R(1.0)) * (real)(a->nu_size - 1);
   const real x0 = floor(x);
@@ -594,7 +594,7 @@ FN void single_scattering(const AtmosphereParameters* a, GLOBAL const real* T, r
 }
 
 /* ---- multiple scattering of order n (paper Eq. 7, 50-interval trapezoid) --------------- */
-FN void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const real* J, const real* s, real mu_s, real nu,
+FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const real* J, const real* s, real mu_s, real nu,
                                 real* out) {
   real uvwz[4], j[NCH];
   uvwz[0] = scattering_u_nu_at(nu);
