@@ -337,10 +337,14 @@ FN void texture_2d(GLOBAL const real* tex, int w, int h, real u, real v, real* o
     out[c] = (R(1.0) - fy) * ((R(1.0) - fx) * t00[c] + fx * t10[c]) + fy * ((R(1.0) - fx) * t01[c] + fx * t11[c]);
 }
 
-/* Trilinear lookup at (u, v, w) in a [d][h][wd] texture, in two parts: texture_3d_rows, the
+/* Trilinear lookup at (u, v, w) in a [d][h][wd] texture, in three parts: texture_3d_rows, the
  * rows along the two slower axes (v over h, w over d) and their weights, which every lookup
  * here shares between several u (the two ν slices of a scattering lookup, the NU slices of
- * scattering_slices), and texture_3d_at, the filter along u over those rows. */
+ * scattering_slices, every texel of a row in the multiple-scattering kernel);
+ * texture_3d_column, the bilinear blend of those rows at one column x; and texture_3d_at, the
+ * filter along u between two columns. A caller that needs many u at the same rows can blend
+ * every column once and filter along u from there (multiple_scattering_add_columns): the same
+ * operations in the same order. */
 typedef struct {
   int j0, j1, k0, k1; /* rows (v) and planes (w) of the taps */
   real fy, fz;        /* weights of j1 and k1 */
@@ -357,27 +361,38 @@ FN_HOT TexelRows texture_3d_rows(int h, int d, real v, real w) {
   r.k1 = clamp_int((int)z0 + 1, 0, d - 1);
   return r;
 }
-FN_HOT void texture_3d_at(GLOBAL const real* tex, int wd, int h, const TexelRows* r, real u, real* out) {
+/* The two columns of a filter along u over wd texels (centres, clamp to edge), and the weight
+ * of the second. */
+typedef struct {
+  int i0, i1;
+  real fx;
+} TexelColumns;
+FN_HOT TexelColumns texture_columns(int wd, real u) {
   const real x = u * (real)wd - R(0.5);
   const real x0 = floor(x);
-  const real fx = x - x0, fy = r->fy, fz = r->fz;
-  const int i0 = clamp_int((int)x0, 0, wd - 1), i1 = clamp_int((int)x0 + 1, 0, wd - 1);
+  TexelColumns c;
+  c.fx = x - x0;
+  c.i0 = clamp_int((int)x0, 0, wd - 1);
+  c.i1 = clamp_int((int)x0 + 1, 0, wd - 1);
+  return c;
+}
+/* Column i of the rows r: the bilinear blend over (v, w) of its four taps. */
+FN_HOT void texture_3d_column(GLOBAL const real* tex, int wd, int h, const TexelRows* r, int i, real* out) {
   const int plane = wd * h;
-  GLOBAL const real* p000 = tex + (r->k0 * plane + r->j0 * wd + i0) * NCH;
-  GLOBAL const real* p100 = tex + (r->k0 * plane + r->j0 * wd + i1) * NCH;
-  GLOBAL const real* p010 = tex + (r->k0 * plane + r->j1 * wd + i0) * NCH;
-  GLOBAL const real* p110 = tex + (r->k0 * plane + r->j1 * wd + i1) * NCH;
-  GLOBAL const real* p001 = tex + (r->k1 * plane + r->j0 * wd + i0) * NCH;
-  GLOBAL const real* p101 = tex + (r->k1 * plane + r->j0 * wd + i1) * NCH;
-  GLOBAL const real* p011 = tex + (r->k1 * plane + r->j1 * wd + i0) * NCH;
-  GLOBAL const real* p111 = tex + (r->k1 * plane + r->j1 * wd + i1) * NCH;
-  for (int c = 0; c < NCH; ++c) {
-    const real lo = (R(1.0) - fy) * ((R(1.0) - fx) * p000[c] + fx * p100[c]) +
-                    fy * ((R(1.0) - fx) * p010[c] + fx * p110[c]);
-    const real hi = (R(1.0) - fy) * ((R(1.0) - fx) * p001[c] + fx * p101[c]) +
-                    fy * ((R(1.0) - fx) * p011[c] + fx * p111[c]);
-    out[c] = (R(1.0) - fz) * lo + fz * hi;
-  }
+  GLOBAL const real* p00 = tex + (r->k0 * plane + r->j0 * wd + i) * NCH;
+  GLOBAL const real* p10 = tex + (r->k0 * plane + r->j1 * wd + i) * NCH;
+  GLOBAL const real* p01 = tex + (r->k1 * plane + r->j0 * wd + i) * NCH;
+  GLOBAL const real* p11 = tex + (r->k1 * plane + r->j1 * wd + i) * NCH;
+  const real fy = r->fy, fz = r->fz;
+  for (int c = 0; c < NCH; ++c)
+    out[c] = (R(1.0) - fz) * ((R(1.0) - fy) * p00[c] + fy * p10[c]) + fz * ((R(1.0) - fy) * p01[c] + fy * p11[c]);
+}
+FN_HOT void texture_3d_at(GLOBAL const real* tex, int wd, int h, const TexelRows* r, real u, real* out) {
+  const TexelColumns x = texture_columns(wd, u);
+  real c0[NCH], c1[NCH];
+  texture_3d_column(tex, wd, h, r, x.i0, c0);
+  texture_3d_column(tex, wd, h, r, x.i1, c1);
+  for (int c = 0; c < NCH; ++c) out[c] = (R(1.0) - x.fx) * c0[c] + x.fx * c1[c];
 }
 
 /* ---- transmittance lookups ----------------------------------------------------------- */
@@ -433,17 +448,44 @@ FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T
 }
 
 /* ---- scattering lookups -------------------------------------------------------------- */
+/* The two ν slices around u_nu (corner-sampled, divisor NU − 1): the first and the weight of
+ * the second. */
+FN_HOT real scattering_nu_slice(const AtmosphereParameters* a, real u_nu, real* f) {
+  const real x = clamp_real(u_nu, R(0.0), R(1.0)) * (real)(a->nu_size - 1);
+  const real x0 = floor(x);
+  *f = x - x0;
+  return x0;
+}
 /* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
 FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
   const int wd = a->nu_size * a->mu_s_size;
-  const real x = clamp_real(uvwz[0], R(0.0), R(1.0)) * (real)(a->nu_size - 1);
-  const real x0 = floor(x);
-  const real f = x - x0;
+  real f;
+  const real x0 = scattering_nu_slice(a, uvwz[0], &f);
   real v0[NCH], v1[NCH];
   const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
   texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + uvwz[1]) / (real)a->nu_size, v0);
   texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + R(1.0) + uvwz[1]) / (real)a->nu_size, v1);
   for (int c = 0; c < NCH; ++c) out[c] = v0[c] * (R(1.0) - f) + v1[c] * f;
+}
+/* scattering_lookup at (u_nu, u_mu_s) over columns already blended at its (u_mu, u_r) rows:
+ * columns[i·NCH + c] = texture_3d_column(i) for every column i of the texture. The same
+ * operations in the same order as scattering_lookup. */
+FN_HOT void scattering_lookup_columns(const AtmosphereParameters* a, LOCAL const real* columns, real u_nu,
+                                      real u_mu_s, real* out) {
+  const int wd = a->nu_size * a->mu_s_size;
+  real f;
+  const real x0 = scattering_nu_slice(a, u_nu, &f);
+  const TexelColumns s0 = texture_columns(wd, (x0 + u_mu_s) / (real)a->nu_size);
+  const TexelColumns s1 = texture_columns(wd, (x0 + R(1.0) + u_mu_s) / (real)a->nu_size);
+  LOCAL const real* c00 = columns + s0.i0 * NCH;
+  LOCAL const real* c01 = columns + s0.i1 * NCH;
+  LOCAL const real* c10 = columns + s1.i0 * NCH;
+  LOCAL const real* c11 = columns + s1.i1 * NCH;
+  for (int c = 0; c < NCH; ++c) {
+    const real v0 = (R(1.0) - s0.fx) * c00[c] + s0.fx * c01[c];
+    const real v1 = (R(1.0) - s1.fx) * c10[c] + s1.fx * c11[c];
+    out[c] = v0 * (R(1.0) - f) + v1 * f;
+  }
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -602,6 +644,15 @@ FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const 
   uvwz[2] = s[RAY_U_MU];
   uvwz[3] = s[RAY_U_R];
   scattering_lookup(a, J, uvwz, j);
+  for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
+}
+/* multiple_scattering_add with J's columns blended at the sample's (u_mu, u_r) rows
+ * (texture_3d_column of texture_3d_rows(s[RAY_U_MU], s[RAY_U_R]) for every column): every texel
+ * of a (μ, r) row shares its ray samples, so the kernel blends the columns once per sample. */
+FN_HOT void multiple_scattering_add_columns(const AtmosphereParameters* a, LOCAL const real* columns, const real* s,
+                                            real mu_s, real nu, real* out) {
+  real j[NCH];
+  scattering_lookup_columns(a, columns, scattering_u_nu_at(nu), scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s, nu)), j);
   for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
 }
 /* Multiple scattering along the ray (h, mu) of length d_b to its boundary. */

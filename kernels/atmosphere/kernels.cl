@@ -128,8 +128,10 @@ __kernel void indirect_irradiance_texture(AtmosphereParameters a, __global const
   for (int c = 0; c < NCH; ++c) delta_E[id * NCH + c] = e[c];
 }
 
-__kernel void multiple_scattering_texture(AtmosphereParameters a, __global const real* samples,
-                                          __global const real* J, __global real* delta_S) {
+/* One work item per texel: the form for devices whose local memory cannot hold a row's columns
+ * (multiple_scattering_texture below). */
+__kernel void multiple_scattering_texels(AtmosphereParameters a, __global const real* samples,
+                                         __global const real* J, __global real* delta_S) {
   const int id = get_global_id(0);
   if (id >= a.r_size * a.mu_size * a.nu_size * a.mu_s_size) return;
   real h, mu, mu_s, nu, out[NCH], s[RAY_STRIDE];
@@ -142,4 +144,37 @@ __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const
     multiple_scattering_add(&a, J, s, mu_s, nu, out);
   }
   for (int c = 0; c < NCH; ++c) delta_S[id * NCH + c] = out[c];
+}
+
+/* One work group per texel row (z, y) along x = ν·MU_S + μ_s (local size L; item lx takes the
+ * texels x = lx, lx + L, ...). Every texel of the row samples its ray at the same (u_mu, u_r),
+ * so at each sample the group blends J's rows into one value per column (texture_3d_column),
+ * in local memory `columns` (MU_S·NU·NCH reals), and each texel filters along x from there:
+ * multiple_scattering_ray's operations, with the row blends shared instead of repeated per
+ * texel. */
+__kernel void multiple_scattering_texture(AtmosphereParameters a, __global const real* samples,
+                                          __global const real* J, __global real* delta_S, __local real* columns) {
+  const int wd = a.nu_size * a.mu_s_size, lx = get_local_id(0), L = get_local_size(0);
+  const int row_id = get_group_id(0), y = row_id % a.mu_size, z = row_id / a.mu_size;
+  __global const real* row = samples + row_id * (SCATTERING_STEPS + 1) * RAY_STRIDE;
+  for (int base = 0; base < wd; base += L) {
+    const int x = base + lx, active = x < wd;
+    real h, mu, mu_s = R(0.0), nu = R(0.0), out[NCH], s[RAY_STRIDE], v[NCH];
+    int ground;
+    if (active) scattering_params_from_texel(&a, x, y, z, &h, &mu, &mu_s, &nu, &ground);
+    for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
+    for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+      for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
+      const TexelRows rows = texture_3d_rows(a.mu_size, a.r_size, s[RAY_U_MU], s[RAY_U_R]);
+      for (int col = lx; col < wd; col += L) {
+        texture_3d_column(J, wd, a.mu_size, &rows, col, v);
+        for (int c = 0; c < NCH; ++c) columns[col * NCH + c] = v[c];
+      }
+      barrier(CLK_LOCAL_MEM_FENCE);
+      if (active) multiple_scattering_add_columns(&a, columns, s, mu_s, nu, out);
+      barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (active)
+      for (int c = 0; c < NCH; ++c) delta_S[(row_id * wd + x) * NCH + c] = out[c];
+  }
 }

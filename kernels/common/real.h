@@ -31,12 +31,14 @@ typedef double real;
 typedef float real;
 #  endif
 #  define GLOBAL __global
+#  define LOCAL __local
 #  define FN
 #  define FN_HOT static inline __attribute__((always_inline))
 #  define REQUIRE(condition) ((void)0)
 #else
 /* C++: the including namespace has `using real = double;` and the <cmath> names in scope. */
 #  define GLOBAL
+#  define LOCAL
 #  define FN inline
 #  define FN_HOT inline
 #  define REQUIRE(condition) \

@@ -124,6 +124,8 @@ DeviceInfo describe(int pi, int di, const cl::Platform& p, const cl::Device& d) 
   info.fp64 = trim(d.getInfo<CL_DEVICE_EXTENSIONS>()).find("cl_khr_fp64") != std::string::npos;
   info.global_mem_bytes = d.getInfo<CL_DEVICE_GLOBAL_MEM_SIZE>();
   info.max_alloc_bytes = d.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
+  info.local_mem_bytes = d.getInfo<CL_DEVICE_LOCAL_MEM_SIZE>();
+  info.max_work_group_size = d.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>();
   info.compute_units = d.getInfo<CL_DEVICE_MAX_COMPUTE_UNITS>();
   return info;
 }

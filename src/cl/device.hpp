@@ -23,6 +23,8 @@ struct DeviceInfo {
   bool fp64 = false;
   unsigned long long global_mem_bytes = 0;
   unsigned long long max_alloc_bytes = 0;
+  unsigned long long local_mem_bytes = 0;  // CL_DEVICE_LOCAL_MEM_SIZE
+  std::size_t max_work_group_size = 0;     // CL_DEVICE_MAX_WORK_GROUP_SIZE
   unsigned compute_units = 0;
 };
 

@@ -1,6 +1,7 @@
 #pragma once
 // Host-side data parallelism for the double-precision reference paths and host sums.
 #include <algorithm>
+#include <cstddef>
 #include <exception>
 #include <mutex>
 #include <thread>
@@ -33,6 +34,18 @@ void parallel_for(long long n, Fn&& fn) {
     });
   for (auto& th : pool) th.join();
   if (first) std::rethrow_exception(first);
+}
+
+// Runs fn(first, last, k) over [0, n) cut into fixed chunks of `chunk` elements (chunk k is
+// [k·chunk, min(n, (k + 1)·chunk))), the chunks on the hardware threads. Per-chunk partial
+// results combined in chunk order give the same bytes whatever the thread count.
+template <class Fn>
+void parallel_chunks(std::size_t n, std::size_t chunk, Fn&& fn) {
+  const long long chunks = static_cast<long long>((n + chunk - 1) / chunk);
+  parallel_for(chunks, [&](long long k) {
+    const std::size_t first = static_cast<std::size_t>(k) * chunk;
+    fn(first, std::min(n, first + chunk), static_cast<std::size_t>(k));
+  });
 }
 
 }  // namespace specbake

@@ -9,6 +9,7 @@
 #include <map>
 #include <optional>
 
+#include "core/parallel.hpp"
 #include "core/text.hpp"
 #include "core/version.hpp"
 #include "io/exr.hpp"
@@ -42,13 +43,22 @@ struct OrderAccumulator {
   std::map<int, std::array<std::vector<double>, 4>> stats;  // single pass: s max/mean, e max/mean
   std::map<int, double> relative;
 
-  static std::array<std::vector<double>, 2> max_mean(const std::vector<double>& v) {
+  template <class T>
+  static std::array<std::vector<double>, 2> max_mean(const std::vector<T>& v) {
+    const std::size_t n = v.size() / 3, chunks = (n + kSumChunk - 1) / kSumChunk;
+    std::vector<double> part_max(3 * chunks, 0.0), part_sum(3 * chunks, 0.0);
+    parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
+      for (std::size_t i = first; i < last; ++i)
+        for (int c = 0; c < 3; ++c) {
+          part_max[3 * k + c] = std::max(part_max[3 * k + c], static_cast<double>(v[3 * i + c]));
+          part_sum[3 * k + c] += v[3 * i + c];
+        }
+    });
     std::vector<double> mx(3, 0.0), mean(3, 0.0);
-    const std::size_t n = v.size() / 3;
-    for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t k = 0; k < chunks; ++k)
       for (int c = 0; c < 3; ++c) {
-        mx[c] = std::max(mx[c], v[3 * i + c]);
-        mean[c] += v[3 * i + c];
+        mx[c] = std::max(mx[c], part_max[3 * k + c]);
+        mean[c] += part_sum[3 * k + c];
       }
     for (double& m : mean) m /= std::max<std::size_t>(n, 1);
     return {mx, mean};
@@ -62,17 +72,19 @@ struct OrderAccumulator {
     }
     auto& buf = (irradiance ? e : s)[order];
     if (buf.empty()) buf.assign(rgb.size(), 0.0f);
-    for (std::size_t i = 0; i < rgb.size(); ++i) buf[i] += static_cast<float>(rgb[i]);
+    parallel_chunks(rgb.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
+      for (std::size_t i = first; i < last; ++i) buf[i] += static_cast<float>(rgb[i]);
+    });
   }
   json to_json() {
     if (!single_pass) {
       for (auto& [o, b] : s) {
-        const auto mm = max_mean(std::vector<double>(b.begin(), b.end()));
+        const auto mm = max_mean(b);
         stats[o][0] = mm[0];
         stats[o][1] = mm[1];
       }
       for (auto& [o, b] : e) {
-        const auto mm = max_mean(std::vector<double>(b.begin(), b.end()));
+        const auto mm = max_mean(b);
         stats[o][2] = mm[0];
         stats[o][3] = mm[1];
       }
@@ -98,13 +110,15 @@ void keep_radiance(SpectralLuts& L, const Sizes& s, int first, int count, int wi
                     n_s = s.scattering_texels();
   const auto put = [&](std::vector<float>& dst, const std::vector<double>& src, std::size_t texels, bool tiled) {
     if (dst.empty()) dst.assign(4 * sets * texels, 0.0f);
-    for (std::size_t t = 0; t < texels; ++t) {
-      const std::size_t at = tiled ? tiled2d_index(t, s) : t;
-      for (int i = 0; i < count; ++i) {
-        const std::size_t g = static_cast<std::size_t>(first + i);
-        dst[4 * ((g / 4) * texels + at) + g % 4] = static_cast<float>(src[t * width + i]);
+    parallel_chunks(texels, kSumChunk, [&](std::size_t t0, std::size_t t1, std::size_t) {
+      for (std::size_t t = t0; t < t1; ++t) {
+        const std::size_t at = tiled ? tiled2d_index(t, s) : t;
+        for (int i = 0; i < count; ++i) {
+          const std::size_t g = static_cast<std::size_t>(first + i);
+          dst[4 * ((g / 4) * texels + at) + g % 4] = static_cast<float>(src[t * width + i]);
+        }
       }
-    }
+    });
   };
   put(L.transmittance, r.transmittance, n_t, false);
   put(L.irradiance, r.irradiance, n_e, false);
@@ -141,12 +155,14 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   // pass channels → R,G,B: identity in rgb mode, the CIE weights in spectral mode
   auto to_rgb = [&](int first, int count, const std::vector<double>& v, std::size_t texels) {
     std::vector<double> o(3 * texels, 0.0);
-    for (std::size_t t = 0; t < texels; ++t)
-      for (int i = 0; i < count; ++i)
-        for (int c = 0; c < 3; ++c) {
-          const double k = sp.spectral ? sp.to_rgb[c * n + first + i] : (c == i ? 1.0 : 0.0);
-          o[3 * t + c] += k * v[t * width + i];
-        }
+    parallel_chunks(texels, kSumChunk, [&](std::size_t t0, std::size_t t1, std::size_t) {
+      for (std::size_t t = t0; t < t1; ++t)
+        for (int i = 0; i < count; ++i)
+          for (int c = 0; c < 3; ++c) {
+            const double k = sp.spectral ? sp.to_rgb[c * n + first + i] : (c == i ? 1.0 : 0.0);
+            o[3 * t + c] += k * v[t * width + i];
+          }
+    });
     return o;
   };
   if (spec.store_radiance) {
@@ -181,7 +197,9 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     for (const auto& o : r.orders) acc.relative[o.order] = std::max(acc.relative[o.order], o.relative);
     const auto add_into = [&](std::vector<double>& dst, const std::vector<double>& src, std::size_t texels) {
       const auto v = to_rgb(first, count, src, texels);
-      for (std::size_t i = 0; i < v.size(); ++i) dst[i] += v[i];
+      parallel_chunks(v.size(), kSumChunk, [&](std::size_t i0, std::size_t i1, std::size_t) {
+        for (std::size_t i = i0; i < i1; ++i) dst[i] += v[i];
+      });
     };
     add_into(out.luts.irradiance, r.irradiance, n_e);
     add_into(out.luts.scattering, r.scattering, n_s);

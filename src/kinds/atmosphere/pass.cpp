@@ -4,10 +4,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 #include <set>
 
+#include "core/parallel.hpp"
 #include "kinds/atmosphere/reference_widths.hpp"
 
 namespace specbake::atmosphere {
@@ -85,6 +87,10 @@ class DeviceBackend final : public PassBackend {
       return 0;
     });
     check_layout();
+    row_group_ = choose_row_group();
+    spdlog::debug("atmosphere: multiple scattering {} ({} B of local memory per row, {} B on the device)",
+                  row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row" : "per texel",
+                  row_columns_bytes(), dev_.info().local_mem_bytes);
   }
   int channels() const override { return width_; }
 
@@ -103,7 +109,26 @@ class DeviceBackend final : public PassBackend {
   void indirect_irradiance(int order) override {
     launch("indirect_irradiance_texture", n_e_, {&dR_, &dM_, &dS_, order, &dE_});
   }
-  void multiple_scattering() override { launch("multiple_scattering_texture", n_s_, {&rays_, &J_, &dS_}); }
+  // One work group per (μ, r) row sharing its column blends in local memory
+  // (multiple_scattering_texture), or, where the device's local memory cannot hold a row's
+  // columns, one work item per texel (multiple_scattering_texels): the same operations.
+  void multiple_scattering() override {
+    if (row_group_ == 0) {
+      launch("multiple_scattering_texels", n_s_, {&rays_, &J_, &dS_});
+      return;
+    }
+    cl_util::checked("multiple_scattering_texture", [&] {
+      cl::Kernel k(program_, "multiple_scattering_texture");
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      k.setArg(1, rays_);
+      k.setArg(2, J_);
+      k.setArg(3, dS_);
+      k.setArg(4, cl::Local(row_columns_bytes()));
+      const std::size_t rows = static_cast<std::size_t>(sizes_.r) * sizes_.mu;
+      enqueue(k, cl::NDRange(rows * row_group_), cl::NDRange(row_group_));
+      return 0;
+    });
+  }
 
   void read_into(Tex t, std::vector<double>& out) override {
     const long long n = texels(t) * width_;
@@ -143,12 +168,27 @@ class DeviceBackend final : public PassBackend {
     }
     return T_;
   }
-  void enqueue(cl::Kernel& k, long long n) {
+  void enqueue(cl::Kernel& k, long long n) { enqueue(k, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange); }
+  void enqueue(cl::Kernel& k, const cl::NDRange& global, const cl::NDRange& local) {
     cl::Event ev;
-    dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange,
-                                      nullptr, &ev);
+    dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, global, local, nullptr, &ev);
     dev_.profiler().record(ev);
     dev_.profiler().wait([&] { dev_.queue().finish(); });
+  }
+  std::size_t row_columns_bytes() const {
+    return static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s * width_ * (dbl_ ? sizeof(double) : sizeof(float));
+  }
+  // Work-group size of the row kernel: the row's width, or the most the kernel allows (items
+  // then take several texels); 0 when the device's local memory cannot hold the columns.
+  std::size_t choose_row_group() {
+    return cl_util::checked("sizing multiple_scattering_texture", [&]() -> std::size_t {
+      cl::Kernel k(program_, "multiple_scattering_texture");
+      const cl::Device d = dev_.context().getInfo<CL_CONTEXT_DEVICES>().front();
+      const std::size_t most = k.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(d);
+      const unsigned long long fixed = k.getWorkGroupInfo<CL_KERNEL_LOCAL_MEM_SIZE>(d);
+      if (fixed + row_columns_bytes() > dev_.info().local_mem_bytes) return 0;
+      return std::min({most, dev_.info().max_work_group_size, static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s});
+    });
   }
   // A blocking read, recorded with its wait.
   void read_buffer(const cl::Buffer& b, std::size_t bytes, void* to) {
@@ -211,6 +251,7 @@ class DeviceBackend final : public PassBackend {
   Block block_;
   cl::Program program_;
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
+  std::size_t row_group_ = 0;
   cl::Buffer T_, dE_, dR_, dM_, dS_, J_, rays_, incidence_;
   std::vector<float> staging_;
 };
@@ -219,12 +260,20 @@ struct ChannelStats {
   std::vector<double> max, mean;
 };
 ChannelStats stats_of(const std::vector<double>& v, int w) {
+  const std::size_t n = v.size() / w, chunks = (n + kSumChunk - 1) / kSumChunk;
+  std::vector<double> mx(chunks * w, 0.0), sum(chunks * w, 0.0);
+  parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
+    for (std::size_t i = first; i < last; ++i)
+      for (int c = 0; c < w; ++c) {
+        mx[k * w + c] = std::max(mx[k * w + c], v[i * w + c]);
+        sum[k * w + c] += v[i * w + c];
+      }
+  });
   ChannelStats s{std::vector<double>(w, 0.0), std::vector<double>(w, 0.0)};
-  const std::size_t n = v.size() / w;
-  for (std::size_t i = 0; i < n; ++i)
+  for (std::size_t k = 0; k < chunks; ++k)
     for (int c = 0; c < w; ++c) {
-      s.max[c] = std::max(s.max[c], v[i * w + c]);
-      s.mean[c] += v[i * w + c];
+      s.max[c] = std::max(s.max[c], mx[k * w + c]);
+      s.mean[c] += sum[k * w + c];
     }
   for (int c = 0; c < w; ++c) s.mean[c] /= std::max<std::size_t>(n, 1);
   return s;
@@ -232,18 +281,23 @@ ChannelStats stats_of(const std::vector<double>& v, int w) {
 
 // max over texels of |add| / acc, where acc exceeds kAutoFloor × its channel's maximum.
 double relative_change(const std::vector<double>& add, const std::vector<double>& acc, int w) {
-  std::vector<double> floor(w, 0.0);
+  const std::vector<double> floor = [&] {
+    std::vector<double> f = stats_of(acc, w).max;
+    for (double& x : f) x *= kAutoFloor;
+    return f;
+  }();
   const std::size_t n = acc.size() / w;
-  for (std::size_t i = 0; i < n; ++i)
-    for (int c = 0; c < w; ++c) floor[c] = std::max(floor[c], acc[i * w + c]);
-  for (double& f : floor) f *= kAutoFloor;
-  double rel = 0.0;
-  for (std::size_t i = 0; i < n; ++i)
-    for (int c = 0; c < w; ++c) {
-      const double a = acc[i * w + c];
-      if (a > floor[c] && a > 0.0) rel = std::max(rel, std::fabs(add[i * w + c]) / a);
-    }
-  return rel;
+  std::vector<double> rel((n + kSumChunk - 1) / kSumChunk, 0.0);
+  parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
+    for (std::size_t i = first; i < last; ++i)
+      for (int c = 0; c < w; ++c) {
+        const double a = acc[i * w + c];
+        if (a > floor[c] && a > 0.0) rel[k] = std::max(rel[k], std::fabs(add[i * w + c]) / a);
+      }
+  });
+  double out = 0.0;
+  for (double r : rel) out = std::max(out, r);
+  return out;
 }
 
 // The textures a stage reads and writes, as the reference recomputes them.
@@ -458,7 +512,9 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
     hook(PassStage::indirect_irradiance, n - 1);
     const std::vector<double> dE = b.read(Tex::delta_irradiance);
-    for (std::size_t i = 0; i < dE.size(); ++i) r.irradiance[i] += dE[i];
+    parallel_chunks(dE.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
+      for (std::size_t i = first; i < last; ++i) r.irradiance[i] += dE[i];
+    });
     {
       const auto s = stats_of(dE, w);
       r.orders[n - 2].irradiance_max = s.max;
@@ -469,8 +525,12 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     timed(PassStage::multiple_scattering, n, [&] { b.multiple_scattering(); });
     hook(PassStage::multiple_scattering, n);
     b.read_into(Tex::delta_multiple, add);
-    for (std::size_t i = 0; i < add.size(); ++i) add[i] *= inv_phase[i / w];
-    for (std::size_t i = 0; i < add.size(); ++i) r.scattering[i] += add[i];
+    parallel_chunks(add.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
+      for (std::size_t i = first; i < last; ++i) {
+        add[i] *= inv_phase[i / w];
+        r.scattering[i] += add[i];
+      }
+    });
     OrderStats o;
     o.order = n;
     const auto s = stats_of(add, w);

@@ -100,6 +100,9 @@ inline constexpr int kMaxAutoOrders = 40;
 // Texels whose accumulated value is below this fraction of their channel's maximum do not
 // enter the relative change of `orders: auto` (0/0 in the dark).
 inline constexpr double kAutoFloor = 1e-4;
+// Elements per chunk of the host's sums over a texture (parallel_chunks: the same bytes whatever
+// the thread count).
+inline constexpr std::size_t kSumChunk = 1 << 14;
 
 // Called after every stage with the backend (for self-checks) and the stage name.
 using StageHook = std::function<void(PassStage stage, int order, PassBackend& b)>;
