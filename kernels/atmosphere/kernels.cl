@@ -1,5 +1,6 @@
 /* kernels.cl — OpenCL entry points of the atmosphere job: one work item per texel (or per
- * table entry). The maths is in atmosphere.cl. Textures are row-major with NCH channels
+ * table entry, or per ν row for the density); the multiple scattering runs one work group per
+ * (μ, r) texel row. The maths is in atmosphere.cl. Textures are row-major with NCH channels
  * innermost:
  *   transmittance [h][w][NCH], irradiance [h][w][NCH], scattering [R][MU][NU·MU_S][NCH],
  *   ray samples [R][MU][SCATTERING_STEPS + 1][RAY_STRIDE],
