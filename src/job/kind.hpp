@@ -58,7 +58,7 @@ struct JobContext {
   Memo* memo = nullptr;  // none: nothing is reused beyond this bake
   // The bundle's hash (config, inputs, programs, device), for files that record it (KTX2's
   // key/value data); empty where no bundle is published (`sweep`).
-  std::string bundle_hash;
+  std::string bundle_hash{};
 
   void enter(Stage s) {
     stage = s;
