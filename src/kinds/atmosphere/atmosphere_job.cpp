@@ -43,31 +43,11 @@ struct OrderAccumulator {
   std::map<int, std::array<std::vector<double>, 4>> stats;  // single pass: s max/mean, e max/mean
   std::map<int, double> relative;
 
-  template <class T>
-  static std::array<std::vector<double>, 2> max_mean(const std::vector<T>& v) {
-    const std::size_t n = v.size() / 3, chunks = (n + kSumChunk - 1) / kSumChunk;
-    std::vector<double> part_max(3 * chunks, 0.0), part_sum(3 * chunks, 0.0);
-    parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
-      for (std::size_t i = first; i < last; ++i)
-        for (int c = 0; c < 3; ++c) {
-          part_max[3 * k + c] = std::max(part_max[3 * k + c], static_cast<double>(v[3 * i + c]));
-          part_sum[3 * k + c] += v[3 * i + c];
-        }
-    });
-    std::vector<double> mx(3, 0.0), mean(3, 0.0);
-    for (std::size_t k = 0; k < chunks; ++k)
-      for (int c = 0; c < 3; ++c) {
-        mx[c] = std::max(mx[c], part_max[3 * k + c]);
-        mean[c] += part_sum[3 * k + c];
-      }
-    for (double& m : mean) m /= std::max<std::size_t>(n, 1);
-    return {mx, mean};
-  }
   void add(int order, bool irradiance, const std::vector<double>& rgb) {
     if (single_pass) {
-      const auto mm = max_mean(rgb);
-      stats[order][irradiance ? 2 : 0] = mm[0];
-      stats[order][irradiance ? 3 : 1] = mm[1];
+      const ChannelStats mm = channel_stats(rgb, 3);
+      stats[order][irradiance ? 2 : 0] = mm.max;
+      stats[order][irradiance ? 3 : 1] = mm.mean;
       return;
     }
     auto& buf = (irradiance ? e : s)[order];
@@ -79,14 +59,14 @@ struct OrderAccumulator {
   json to_json() {
     if (!single_pass) {
       for (auto& [o, b] : s) {
-        const auto mm = max_mean(b);
-        stats[o][0] = mm[0];
-        stats[o][1] = mm[1];
+        const ChannelStats mm = channel_stats(b, 3);
+        stats[o][0] = mm.max;
+        stats[o][1] = mm.mean;
       }
       for (auto& [o, b] : e) {
-        const auto mm = max_mean(b);
-        stats[o][2] = mm[0];
-        stats[o][3] = mm[1];
+        const ChannelStats mm = channel_stats(b, 3);
+        stats[o][2] = mm.max;
+        stats[o][3] = mm.mean;
       }
     }
     json out = json::array();

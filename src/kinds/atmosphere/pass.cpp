@@ -9,7 +9,6 @@
 #include <optional>
 #include <set>
 
-#include "core/parallel.hpp"
 #include "kinds/atmosphere/reference_widths.hpp"
 
 namespace specbake::atmosphere {
@@ -256,33 +255,10 @@ class DeviceBackend final : public PassBackend {
   std::vector<float> staging_;
 };
 
-struct ChannelStats {
-  std::vector<double> max, mean;
-};
-ChannelStats stats_of(const std::vector<double>& v, int w) {
-  const std::size_t n = v.size() / w, chunks = (n + kSumChunk - 1) / kSumChunk;
-  std::vector<double> mx(chunks * w, 0.0), sum(chunks * w, 0.0);
-  parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
-    for (std::size_t i = first; i < last; ++i)
-      for (int c = 0; c < w; ++c) {
-        mx[k * w + c] = std::max(mx[k * w + c], v[i * w + c]);
-        sum[k * w + c] += v[i * w + c];
-      }
-  });
-  ChannelStats s{std::vector<double>(w, 0.0), std::vector<double>(w, 0.0)};
-  for (std::size_t k = 0; k < chunks; ++k)
-    for (int c = 0; c < w; ++c) {
-      s.max[c] = std::max(s.max[c], mx[k * w + c]);
-      s.mean[c] += sum[k * w + c];
-    }
-  for (int c = 0; c < w; ++c) s.mean[c] /= std::max<std::size_t>(n, 1);
-  return s;
-}
-
 // max over texels of |add| / acc, where acc exceeds kAutoFloor × its channel's maximum.
 double relative_change(const std::vector<double>& add, const std::vector<double>& acc, int w) {
   const std::vector<double> floor = [&] {
-    std::vector<double> f = stats_of(acc, w).max;
+    std::vector<double> f = channel_stats(acc, w).max;
     for (double& x : f) x *= kAutoFloor;
     return f;
   }();
@@ -494,7 +470,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   {
     OrderStats o;
     o.order = 1;
-    const auto s = stats_of(r.scattering, w);
+    const auto s = channel_stats(r.scattering, w);
     o.scattering_max = s.max;
     o.scattering_mean = s.mean;
     o.relative = 1.0;
@@ -516,7 +492,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
       for (std::size_t i = first; i < last; ++i) r.irradiance[i] += dE[i];
     });
     {
-      const auto s = stats_of(dE, w);
+      const auto s = channel_stats(dE, w);
       r.orders[n - 2].irradiance_max = s.max;
       r.orders[n - 2].irradiance_mean = s.mean;
       if (on_order) on_order(n - 1, {}, dE);
@@ -533,7 +509,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     });
     OrderStats o;
     o.order = n;
-    const auto s = stats_of(add, w);
+    const auto s = channel_stats(add, w);
     o.scattering_max = s.max;
     o.scattering_mean = s.mean;
     o.relative = std::max(relative_change(add, r.scattering, w), relative_change(dE, r.irradiance, w));

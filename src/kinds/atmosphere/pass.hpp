@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "cl/device.hpp"
+#include "core/parallel.hpp"
 #include "kinds/atmosphere/model.hpp"
 #include "job/kind.hpp"
 
@@ -103,6 +104,32 @@ inline constexpr double kAutoFloor = 1e-4;
 // Elements per chunk of the host's sums over a texture (parallel_chunks: the same bytes whatever
 // the thread count).
 inline constexpr std::size_t kSumChunk = 1 << 14;
+
+// Per-channel maximum (floored at 0) and mean of a [texels][w] texture, reduced in chunks of
+// kSumChunk texels on the host's threads and combined in chunk order.
+struct ChannelStats {
+  std::vector<double> max, mean;
+};
+template <class T>
+ChannelStats channel_stats(const std::vector<T>& v, int w) {
+  const std::size_t n = v.size() / w, chunks = (n + kSumChunk - 1) / kSumChunk;
+  std::vector<double> mx(chunks * w, 0.0), sum(chunks * w, 0.0);
+  parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
+    for (std::size_t i = first; i < last; ++i)
+      for (int c = 0; c < w; ++c) {
+        mx[k * w + c] = std::max(mx[k * w + c], static_cast<double>(v[i * w + c]));
+        sum[k * w + c] += v[i * w + c];
+      }
+  });
+  ChannelStats s{std::vector<double>(w, 0.0), std::vector<double>(w, 0.0)};
+  for (std::size_t k = 0; k < chunks; ++k)
+    for (int c = 0; c < w; ++c) {
+      s.max[c] = std::max(s.max[c], mx[k * w + c]);
+      s.mean[c] += sum[k * w + c];
+    }
+  for (int c = 0; c < w; ++c) s.mean[c] /= std::max<std::size_t>(n, 1);
+  return s;
+}
 
 // Called after every stage with the backend (for self-checks) and the stage name.
 using StageHook = std::function<void(PassStage stage, int order, PassBackend& b)>;
