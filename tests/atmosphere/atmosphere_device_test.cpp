@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
+#include <limits>
 #include <memory>
 
 #include "atmosphere/npy.hpp"
@@ -475,33 +477,45 @@ TEST(AtmosphereDevice, RowGroupsMatchPerTexelMultipleScattering) {
 // the reference against itself (0 up to rounding in the sums, < 1e-12). A checker that kept
 // an older copy of a texture, or read a stage's inputs from the wrong generation, would flag
 // those later stages too; one that skipped re-reading outputs would miss the corruption.
+// The double reference standing in for a device, with `corrupt` applied to its textures after
+// each stage (the stage and its order as run_pass numbers them).
+class Corrupting final : public PassBackend {
+ public:
+  using Corrupt = std::function<void(PassStage, int, ref3::HostBackend&)>;
+  Corrupting(const Model& m, const Channels& ch, Corrupt corrupt) : b_(m, ch), corrupt_(std::move(corrupt)) {}
+  int channels() const override { return b_.channels(); }
+  void transmittance() override { run(PassStage::transmittance, 0, [&] { b_.transmittance(); }); }
+  void direct_irradiance() override { run(PassStage::direct_irradiance, 0, [&] { b_.direct_irradiance(); }); }
+  void single_scattering() override { run(PassStage::single_scattering, 1, [&] { b_.single_scattering(); }); }
+  void scattering_density(int order) override {
+    order_ = order;
+    run(PassStage::scattering_density, order, [&] { b_.scattering_density(order); });
+  }
+  void indirect_irradiance(int order) override {
+    run(PassStage::indirect_irradiance, order, [&] { b_.indirect_irradiance(order); });
+  }
+  void multiple_scattering() override { run(PassStage::multiple_scattering, order_, [&] { b_.multiple_scattering(); }); }
+  void read_into(Tex t, std::vector<double>& out) override { b_.read_into(t, out); }
+
+ private:
+  template <class F>
+  void run(PassStage stage, int order, F&& f) {
+    f();
+    corrupt_(stage, order, b_);
+  }
+  ref3::HostBackend b_;
+  Corrupt corrupt_;
+  int order_ = 0;
+};
+
 TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
   const AtmosphereSpec s = small(earth());
   const Model m = model_of(s);
   const Channels ch = channels_at(s, {680.0, 550.0, 440.0});
-  class Corrupting final : public PassBackend {
-   public:
-    Corrupting(const Model& m, const Channels& ch) : b_(m, ch) {}
-    int channels() const override { return b_.channels(); }
-    void transmittance() override { b_.transmittance(); }
-    void direct_irradiance() override { b_.direct_irradiance(); }
-    void single_scattering() override { b_.single_scattering(); }
-    void scattering_density(int order) override {
-      order_ = order;
-      b_.scattering_density(order);
-    }
-    void indirect_irradiance(int order) override { b_.indirect_irradiance(order); }
-    void multiple_scattering() override {
-      b_.multiple_scattering();
-      if (order_ != 2) return;
-      for (double& x : b_.texture(Tex::delta_multiple)) x *= 1.01;
-    }
-    void read_into(Tex t, std::vector<double>& out) override { b_.read_into(t, out); }
-
-   private:
-    ref3::HostBackend b_;
-    int order_ = 0;
-  } b(m, ch);
+  Corrupting b(m, ch, [](PassStage stage, int order, ref3::HostBackend& h) {
+    if (stage != PassStage::multiple_scattering || order != 2) return;
+    for (double& x : h.texture(Tex::delta_multiple)) x *= 1.01;
+  });
   auto checker = make_stage_checker(m, ch, 3, 64, 1e-3);
   std::vector<StageCheck> checks;
   run_pass(b, m, PassPlan{4, false, 1e-3}, kQuiet, 0.0, 1.0,
@@ -519,4 +533,39 @@ TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
     }
   }
   EXPECT_EQ(corrupted, 1);
+}
+
+// A value that is not finite anywhere in a stage's output fails that stage's check, wherever it
+// is (not only at the sampled texels): one NaN in one channel of one texel of J of order 3 —
+// texel 1, which the 64 sampled texels do not include — is counted, and the check reads +inf.
+// The stages before it are clean; the multiple scattering that reads it is flagged too.
+TEST(AtmosphereSelfCheck, NonFiniteValuesAnywhereFailTheStage) {
+  const AtmosphereSpec s = small(earth());
+  const Model m = model_of(s);
+  const Channels ch = channels_at(s, {680.0, 550.0, 440.0});
+  Corrupting b(m, ch, [](PassStage stage, int order, ref3::HostBackend& h) {
+    if (stage == PassStage::scattering_density && order == 3) h.texture(Tex::density)[1 * 3 + 2] = std::nan("");
+  });
+  constexpr int kSampled = 64;
+  const long long n = m.sizes.scattering_texels();
+  for (long long k = 0; k < kSampled; ++k) ASSERT_NE((k * 2654435761LL + 12345) % n, 1) << "texel 1 is sampled";
+  auto checker = make_stage_checker(m, ch, 3, kSampled, 1e-3);
+  std::vector<StageCheck> checks;
+  run_pass(b, m, PassPlan{3, false, 1e-3}, kQuiet, 0.0, 1.0,
+           [&](PassStage stage, int order, PassBackend& be) { checks.push_back(checker->check(be, stage, order)); });
+  bool seen = false;
+  for (const StageCheck& c : checks) {
+    SCOPED_TRACE(c.stage + " order " + std::to_string(c.order));
+    if (c.stage == "scattering_density" && c.order == 3) {
+      seen = true;
+      EXPECT_EQ(c.non_finite, 1);
+      EXPECT_EQ(c.max_rel, std::numeric_limits<double>::infinity());
+    } else if (!seen) {
+      EXPECT_EQ(c.non_finite, 0);
+      EXPECT_LT(c.max_rel, 1e-12);
+    } else if (c.stage == "multiple_scattering") {
+      EXPECT_GT(c.non_finite, 0);
+    }
+  }
+  EXPECT_TRUE(seen);
 }

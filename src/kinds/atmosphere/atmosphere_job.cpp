@@ -152,7 +152,18 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   for (int p = 0; p < passes; ++p) {
     const int first = p * width, count = std::min(width, n - first);
     const Channels ch = all.slice(first, count);
-    auto backend = make(ch, width);
+    // host-only steps of the job, timed by the wall clock: the backend's set-up (program build,
+    // allocations, layout check) and the combination of a pass into the bundle's textures
+    const auto host_stage = [&](const char* stage, auto&& f) {
+      const auto t0 = std::chrono::steady_clock::now();
+      f();
+      cl_util::StageSeconds sec;
+      sec.stage = stage;
+      sec.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      cl_util::accumulate(stage_total[stage], sec);
+    };
+    std::unique_ptr<PassBackend> backend;
+    host_stage("setup", [&] { backend = make(ch, width); });
     StageHook hook;
     std::unique_ptr<StageChecker> checker;
     if (check_texels > 0) {
@@ -161,6 +172,7 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
         const StageCheck c = checker->check(b, stage, order);
         out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
                                    {"max_relative_error", c.max_rel}});
+        if (c.non_finite > 0) out.self_checks.back()["non_finite_values"] = c.non_finite;
         out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
       };
     }
@@ -181,11 +193,13 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
         for (std::size_t i = i0; i < i1; ++i) dst[i] += v[i];
       });
     };
-    add_into(out.luts.irradiance, r.irradiance, n_e);
-    add_into(out.luts.scattering, r.scattering, n_s);
-    add_into(out.luts.single_mie, r.single_mie, n_s);
-    if (!sp.spectral) out.luts.transmittance = r.transmittance;
-    if (spec.store_radiance) keep_radiance(out.radiance, s, first, count, width, r);
+    host_stage("combine", [&] {
+      add_into(out.luts.irradiance, r.irradiance, n_e);
+      add_into(out.luts.scattering, r.scattering, n_s);
+      add_into(out.luts.single_mie, r.single_mie, n_s);
+      if (!sp.spectral) out.luts.transmittance = r.transmittance;
+      if (spec.store_radiance) keep_radiance(out.radiance, s, first, count, width, r);
+    });
     out.orders_used = std::max(out.orders_used, r.orders_used);
     out.converged = out.converged && r.converged;
     out.passes.push_back({{"wavelengths_nm", ch.lambda_nm}, {"orders_used", r.orders_used}, {"converged", r.converged}});
@@ -557,6 +571,12 @@ void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& 
 void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r,
                 std::optional<SceneCheck> checked = std::nullopt) {
   ctx.enter(Stage::check);
+  for (const auto& c : b.self_checks)
+    if (c.contains("non_finite_values"))
+      throw JobError("self-check failed: the device's " + c.value("stage", std::string("?")) + " (order " +
+                     std::to_string(c.value("order", 0)) + ", pass " + std::to_string(c.value("pass", 0)) +
+                     ") wrote " + std::to_string(c["non_finite_values"].get<long long>()) +
+                     " non-finite values (NaN or inf). Try another device (`specbake devices`, `device:` or `--device`) or `precision: double`");
   r.accuracy.push_back(Accuracy::judged(
       "self_check", "max relative error |device - reference| / (|reference| + 1e-3 * channel max)",
       b.self_check_worst, kCheckTolerance,
@@ -868,7 +888,8 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   timings["note"] = "per stage: device_s = sum of the OpenCL profiling times (end - start) of its commands, "
                     "host_s = wall_s minus the time the host waited for the device, wall_s = elapsed; "
                     "'self_check' = the double recomputation after each stage, 'host' = reads and sums between "
-                    "stages; per_order[0] = transmittance and direct irradiance, per_order[n] = the stages of "
+                    "stages; in total only: 'setup' = each pass's program build, allocations and layout check, "
+                    "'combine' = adding each pass into the bundle's textures; per_order[0] = transmittance and direct irradiance, per_order[n] = the stages of "
                     "order n (indirect_irradiance of order n is computed during order n + 1)";
   r.manifest_blocks["atmosphere"]["timings_s"] = timings;
   for (const auto& [stage, sec] : timings["total"].items())

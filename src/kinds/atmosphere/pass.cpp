@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <set>
 
@@ -35,6 +36,15 @@ const char* to_string(Tex t) {
 
 namespace {
 
+
+// The kernels' compile-time slice count NU_MAX (the private arrays and fixed-length loops of
+// scattering_density) is the texture's NU, but never below 8. NVIDIA's OpenCL compiler (driver
+// 580, H100) turns every texel of the density kernel into NaN when NU_MAX is 2..7 (NU_MAX 8 and
+// 16 are right, and so is NU_MAX 4 built with -cl-opt-disable); PoCL is right for every NU_MAX.
+// Slices past NU have a zero hat weight and are never read, so the texels are the same
+// operations either way (bit-identical on PoCL; AtmosphereDevice.SmallSizesMatchDoubleReference
+// and the other NU = 4 tests catch the NaNs on such a device).
+constexpr int kNuMaxAtLeast = 8;
 
 // Table shapes, from atmosphere.cl's macros (visible here through reference.hpp): ray samples
 // [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][DENSITY_SPHERE_STEPS][(2 NU + 1) NCH + INC_FIXED].
@@ -66,7 +76,8 @@ class DeviceBackend final : public PassBackend {
   DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
       : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), block_(make_block(m, ch, width, dbl)) {
     const std::string options = std::string("-DNCH=") + std::to_string(width) + " -DNU_MAX=" +
-                                std::to_string(m.sizes.nu) + (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
+                                std::to_string(std::max(m.sizes.nu, kNuMaxAtLeast)) +
+                                (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
     if (dbl && !dev.info().fp64) throw DeviceError("precision: double needs a device with cl_khr_fp64");
     program_ = dev.build(kProgram, options);
     n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
@@ -323,10 +334,19 @@ class HostStageChecker final : public StageChecker {
     const long long n = static_cast<long long>(dev[0]->size()) / w;
     const int k_out = static_cast<int>(io.outputs.size());
     std::vector<double> scale(k_out * w, 0.0);
+    long long non_finite = 0;
     for (int o = 0; o < k_out; ++o)
       for (long long i = 0; i < n; ++i)
-        for (int c = 0; c < w; ++c) scale[o * w + c] = std::max(scale[o * w + c], std::fabs((*dev[o])[i * w + c]));
-    StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count_, n)), 0.0};
+        for (int c = 0; c < w; ++c) {
+          const double v = (*dev[o])[i * w + c];
+          if (!std::isfinite(v)) ++non_finite;
+          else scale[o * w + c] = std::max(scale[o * w + c], std::fabs(v));
+        }
+    StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count_, n)), 0.0, non_finite};
+    if (non_finite > 0) {
+      r.max_rel = std::numeric_limits<double>::infinity();
+      return r;
+    }
     std::vector<double> errs(r.texels, 0.0);
     parallel_for(r.texels, [&](long long k) {
       // spread over the texture: a fixed multiplicative stride (coprime with most sizes)

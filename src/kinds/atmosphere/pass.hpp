@@ -147,14 +147,16 @@ std::vector<double> inverse_rayleigh_phase(const Model& m);
 
 // Self-checks of one pass: after each stage, recomputes `count` texels of its output in double
 // from the backend's own inputs and returns the largest |device − reference| / (|reference| +
-// floor·max|device|). The checker keeps, in double, each texture as the check of the stage that
+// floor·max|device|), or +inf with the count when any value of the outputs, anywhere in the
+// texture, is not finite. The checker keeps, in double, each texture as the check of the stage that
 // wrote it read it, so a texture is read from the device once per stage that writes it, not
 // again by every later check that uses it as an input. Call it after every stage of the pass.
 struct StageCheck {
   std::string stage;
   int order = 0;
   int texels = 0;
-  double max_rel = 0.0;
+  double max_rel = 0.0;       // +inf when any value is not finite
+  long long non_finite = 0;   // values (texel × channel) of the stage's outputs that are NaN or ±inf
 };
 class StageChecker {
  public:
