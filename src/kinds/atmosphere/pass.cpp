@@ -149,7 +149,9 @@ class DeviceBackend final : public PassBackend {
       } else {
         staging_.resize(n);  // kept between reads: no fresh pages for every texture read
         read_buffer(buffer(t), n * sizeof(float), staging_.data());
-        std::copy(staging_.begin(), staging_.begin() + n, out.begin());
+        parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
+          std::copy(staging_.begin() + first, staging_.begin() + last, out.begin() + first);
+        });
       }
       return 0;
     });
@@ -333,15 +335,27 @@ class HostStageChecker final : public StageChecker {
     }
     const long long n = static_cast<long long>(dev[0]->size()) / w;
     const int k_out = static_cast<int>(io.outputs.size());
+    // per output and channel the largest |value|, and the values that are not finite: chunks of
+    // texels on the host's threads (a maximum and a count do not depend on the order)
+    const std::size_t chunks = (static_cast<std::size_t>(n) + kSumChunk - 1) / kSumChunk;
+    std::vector<double> chunk_scale(chunks * k_out * w, 0.0);
+    std::vector<long long> chunk_bad(chunks, 0);
+    parallel_chunks(static_cast<std::size_t>(n), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
+      double* sc = chunk_scale.data() + k * k_out * w;
+      for (int o = 0; o < k_out; ++o)
+        for (std::size_t i = first; i < last; ++i)
+          for (int c = 0; c < w; ++c) {
+            const double v = (*dev[o])[i * w + c];
+            if (!std::isfinite(v)) ++chunk_bad[k];
+            else sc[o * w + c] = std::max(sc[o * w + c], std::fabs(v));
+          }
+    });
     std::vector<double> scale(k_out * w, 0.0);
     long long non_finite = 0;
-    for (int o = 0; o < k_out; ++o)
-      for (long long i = 0; i < n; ++i)
-        for (int c = 0; c < w; ++c) {
-          const double v = (*dev[o])[i * w + c];
-          if (!std::isfinite(v)) ++non_finite;
-          else scale[o * w + c] = std::max(scale[o * w + c], std::fabs(v));
-        }
+    for (std::size_t k = 0; k < chunks; ++k) {
+      non_finite += chunk_bad[k];
+      for (int j = 0; j < k_out * w; ++j) scale[j] = std::max(scale[j], chunk_scale[k * k_out * w + j]);
+    }
     StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count_, n)), 0.0, non_finite};
     if (non_finite > 0) {
       r.max_rel = std::numeric_limits<double>::infinity();
