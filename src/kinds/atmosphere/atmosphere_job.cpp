@@ -4,9 +4,12 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <optional>
 
 #include "core/parallel.hpp"
@@ -807,6 +810,15 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                                                 : "W m^-2 nm^-1 (radiance textures: per sr) at 680/550/440 nm";
   const std::string param = "Bruneton 2017 (r, mu, mu_s, nu) parameterisation, texel centres";
   const int wd = s.scattering_width();
+  // The textures' files are listed here in their bundle order with their bytes encoded later, all
+  // at once on the host's threads (each task fills its own files' bytes: the same bundle whatever
+  // the thread count). The textures and the strings the tasks read outlive the tasks.
+  std::vector<std::function<void()>> encode;
+  const auto later = [&](OutputFile f, std::function<std::string()> bytes) {
+    const std::size_t at = r.files.size();
+    r.files.push_back(std::move(f));
+    encode.push_back([&r, at, bytes = std::move(bytes)] { r.files[at].bytes = bytes(); });
+  };
   auto attrs = [&](const std::string& layout, const std::string& content) {
     return std::map<std::string, std::string>{{"specbake.layout", layout},
                                               {"specbake.content", content},
@@ -816,25 +828,27 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   if (spec.out_transmittance) {
     const std::string lay = "[r=" + std::to_string(s.transmittance_h) + "][mu=" + std::to_string(s.transmittance_w) +
                             "][RGB]; u = mu coordinate, v = r coordinate";
-    r.files.push_back({"transmittance.bin", float32_le(L.transmittance, "transmittance"), "float32",
-                       {s.transmittance_h, s.transmittance_w, 3}, le + "; " + lay, "1",
-                       "transmittance to the top of the atmosphere at 680/550/440 nm"});
-    r.files.push_back({"transmittance.exr", exr_of(s.transmittance_w, s.transmittance_h, L.transmittance,
-                                                   attrs(lay, "transmittance to the top boundary")),
-                       "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32 ZIP, row j = r index", "1",
-                       "transmittance (EXR copy)"});
+    later({"transmittance.bin", "", "float32", {s.transmittance_h, s.transmittance_w, 3}, le + "; " + lay, "1",
+           "transmittance to the top of the atmosphere at 680/550/440 nm"},
+          [&] { return float32_le(L.transmittance, "transmittance"); });
+    later({"transmittance.exr", "", "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32 ZIP, row j = r index",
+           "1", "transmittance (EXR copy)"},
+          [&, a = attrs(lay, "transmittance to the top boundary")] {
+            return exr_of(s.transmittance_w, s.transmittance_h, L.transmittance, a);
+          });
   }
   if (spec.out_irradiance) {
     const std::string lay = "[r=" + std::to_string(s.irradiance_h) + "][mu_s=" + std::to_string(s.irradiance_w) +
                             "][RGB]";
-    r.files.push_back({"irradiance.bin", float32_le(L.irradiance, "irradiance"), "float32",
-                       {s.irradiance_h, s.irradiance_w, 3}, le + "; " + lay, units,
-                       "sky (indirect) irradiance on a horizontal surface, orders 1..N-1, as the reference stores "
-                       "it: the direct sun is NOT included (add solar_irradiance * T_sun * cos)"});
-    r.files.push_back({"irradiance.exr", exr_of(s.irradiance_w, s.irradiance_h, L.irradiance,
-                                                attrs(lay, "indirect (sky) irradiance only")),
-                       "", {s.irradiance_h, s.irradiance_w, 3}, "EXR float32 ZIP, row j = r index", units,
-                       "irradiance (EXR copy)"});
+    later({"irradiance.bin", "", "float32", {s.irradiance_h, s.irradiance_w, 3}, le + "; " + lay, units,
+           "sky (indirect) irradiance on a horizontal surface, orders 1..N-1, as the reference stores "
+           "it: the direct sun is NOT included (add solar_irradiance * T_sun * cos)"},
+          [&] { return float32_le(L.irradiance, "irradiance"); });
+    later({"irradiance.exr", "", "", {s.irradiance_h, s.irradiance_w, 3}, "EXR float32 ZIP, row j = r index", units,
+           "irradiance (EXR copy)"},
+          [&, a = attrs(lay, "indirect (sky) irradiance only")] {
+            return exr_of(s.irradiance_w, s.irradiance_h, L.irradiance, a);
+          });
   }
   struct Tex3 {
     bool wanted;
@@ -851,24 +865,33 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     if (spec.layout_3d) {
       const std::string lay = "[r=" + std::to_string(s.r) + "][mu=" + std::to_string(s.mu) + "][nu*mu_s=" +
                               std::to_string(s.nu) + "*" + std::to_string(s.mu_s) + "][RGB]; x = nu_slice*MU_S + mu_s";
-      r.files.push_back({name + ".bin", float32_le(*t.data, name), "float32", {s.r, s.mu, wd, 3}, le + "; " + lay,
-                         units, t.what});
-      r.files.push_back({name + ".exr",
-                         exr_of(wd, s.mu * s.r, *t.data,
-                                attrs(lay + "; EXR rows = r*MU + mu (3D depth slices stacked)", t.what)),
-                         "", {s.r, s.mu, wd, 3}, "EXR float32 ZIP, row = r*MU + mu", units, t.what});
+      later({name + ".bin", "", "float32", {s.r, s.mu, wd, 3}, le + "; " + lay, units, t.what},
+            [&, data = t.data, name] { return float32_le(*data, name); });
+      later({name + ".exr", "", "", {s.r, s.mu, wd, 3}, "EXR float32 ZIP, row = r*MU + mu", units, t.what},
+            [&, data = t.data, a = attrs(lay + "; EXR rows = r*MU + mu (3D depth slices stacked)", t.what)] {
+              return exr_of(wd, s.mu * s.r, *data, a);
+            });
     }
     if (spec.layout_tiled2d) {
-      const auto tiled = to_tiled2d(*t.data, s);
+      // one tiled copy for both files, made by the first task to need it
+      const auto tiled = std::make_shared<std::vector<double>>();
+      const auto once = std::make_shared<std::once_flag>();
+      const auto tiled_of = [&s, data = t.data, tiled, once]() -> const std::vector<double>& {
+        std::call_once(*once, [&] { *tiled = to_tiled2d(*data, s); });
+        return *tiled;
+      };
       const std::string lay = "[mu=" + std::to_string(s.mu) + "][r*nu*mu_s=" + std::to_string(s.r) + "*" +
                               std::to_string(s.nu) + "*" + std::to_string(s.mu_s) +
                               "][RGB]; column = r*NU*MU_S + nu_slice*MU_S + mu_s";
-      r.files.push_back({name + "_tiled2d.bin", float32_le(tiled, name), "float32", {s.mu, s.r * wd, 3},
-                         le + "; " + lay, units, std::string(t.what) + " (tiled 2D layout)"});
-      r.files.push_back({name + "_tiled2d.exr", exr_of(s.r * wd, s.mu, tiled, attrs(lay, t.what)), "",
-                         {s.mu, s.r * wd, 3}, "EXR float32 ZIP", units, std::string(t.what) + " (tiled 2D, EXR)"});
+      later({name + "_tiled2d.bin", "", "float32", {s.mu, s.r * wd, 3}, le + "; " + lay, units,
+             std::string(t.what) + " (tiled 2D layout)"},
+            [tiled_of, name] { return float32_le(tiled_of(), name); });
+      later({name + "_tiled2d.exr", "", "", {s.mu, s.r * wd, 3}, "EXR float32 ZIP", units,
+             std::string(t.what) + " (tiled 2D, EXR)"},
+            [&, tiled_of, a = attrs(lay, t.what)] { return exr_of(s.r * wd, s.mu, tiled_of(), a); });
     }
   }
+  parallel_for(static_cast<long long>(encode.size()), [&](long long i) { encode[i](); });
   if (spec.ktx2.enabled) ktx2_files(spec, L, units, param, ctx, r);
   if (!b.radiance.lambda_nm.empty()) spectral_files(spec, b.radiance, L.model, ctx, r);
   r.files.push_back({"sampling.glsl",

@@ -295,10 +295,15 @@ std::vector<float> exposed(const Image& img, double ev100) {
 template <class Shade>
 Image render_image(int n, Shade shade) {
   Image img{n, std::vector<double>(3 * static_cast<std::size_t>(n) * n, 0.0)};
-  parallel_for(1LL * n * n, [&](long long p) {
-    const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
-    for (int c = 0; c < 3; ++c) img.rgb[3 * p + c] = v[c];
-  });
+  // rows of pixels on the host's threads (each thread writes whole rows: no cache line shared
+  // between threads, as interleaved pixels would)
+  parallel_chunks(static_cast<std::size_t>(n) * n, static_cast<std::size_t>(n),
+                  [&](std::size_t first, std::size_t last, std::size_t) {
+                    for (std::size_t p = first; p < last; ++p) {
+                      const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
+                      for (int c = 0; c < 3; ++c) img.rgb[3 * p + c] = v[c];
+                    }
+                  });
   return img;
 }
 
