@@ -125,6 +125,7 @@ DeviceInfo describe(int pi, int di, const cl::Platform& p, const cl::Device& d) 
   info.global_mem_bytes = d.getInfo<CL_DEVICE_GLOBAL_MEM_SIZE>();
   info.max_alloc_bytes = d.getInfo<CL_DEVICE_MAX_MEM_ALLOC_SIZE>();
   info.local_mem_bytes = d.getInfo<CL_DEVICE_LOCAL_MEM_SIZE>();
+  info.fp32_correct_divide_sqrt = (d.getInfo<CL_DEVICE_SINGLE_FP_CONFIG>() & CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT) != 0;
   info.max_work_group_size = d.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>();
   info.compute_units = d.getInfo<CL_DEVICE_MAX_COMPUTE_UNITS>();
   return info;
@@ -193,9 +194,20 @@ std::string Device::description() const {
 cl::Program Device::build(const std::string& kernel_path, const std::string& options) {
   const std::string key = kernel_path + "\n" + options;
   if (auto it = programs_.find(key); it != programs_.end()) return it->second;
-  const std::string source = kernel_source(kernel_path);
+  cl::Program program = build_source(kernel_path, kernel_source(kernel_path), options);
+  programs_.emplace(key, program);
+  return program;
+}
+
+cl::Program Device::build_source(const std::string& kernel_path, const std::string& source,
+                                 const std::string& options) {
   cl::Program program = checked("creating program", [&] { return cl::Program(context_, source); });
-  std::string opts = "-cl-std=CL1.2 " + options;
+  // float32 division and square root correctly rounded wherever the device can (OpenCL allows
+  // 2.5 and 3 ulp by default, and NVIDIA's driver uses that freedom): the kernels' float32 error
+  // bounds (docs/atmosphere.md, the tests' kFloat32Chain) count one rounding per operation, and
+  // the atmosphere's near-horizon geometry decides ground or sky from such quotients and roots
+  std::string opts = "-cl-std=CL1.2 " + std::string(info_.fp32_correct_divide_sqrt
+                                                     ? "-cl-fp32-correctly-rounded-divide-sqrt " : "") + options;
   if (const char* inject = std::getenv("SPECBAKE_INJECT_BUILD_FAILURE");
       inject && kernel_path.find(inject) != std::string::npos)
     opts += " -DSPECBAKE_INJECTED_BUILD_FAILURE";
@@ -220,7 +232,6 @@ cl::Program Device::build(const std::string& kernel_path, const std::string& opt
                       (first.empty() ? "" : ": " + first + (first.size() < log.size() ? " (build log above)" : "")));
   }
   if (!log.empty()) spdlog::debug("OpenCL build log for {}:\n{}", kernel_path, log);
-  programs_.emplace(key, program);
   return program;
 }
 

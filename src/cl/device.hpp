@@ -21,6 +21,9 @@ struct DeviceInfo {
   std::string version;
   std::string type;  // cpu | gpu | accelerator | other
   bool fp64 = false;
+  // CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT in CL_DEVICE_SINGLE_FP_CONFIG: programs are built with
+  // -cl-fp32-correctly-rounded-divide-sqrt there (Device::build)
+  bool fp32_correct_divide_sqrt = false;
   unsigned long long global_mem_bytes = 0;
   unsigned long long max_alloc_bytes = 0;
   unsigned long long local_mem_bytes = 0;  // CL_DEVICE_LOCAL_MEM_SIZE
@@ -50,6 +53,10 @@ class Device {
   // Builds the embedded kernel file (includes resolved), once per (path, options); the
   // build log goes to spdlog, and a failed build throws DeviceError carrying the log.
   cl::Program build(const std::string& kernel_path, const std::string& options = "");
+  // The same for OpenCL source text named `name` (in logs and errors): the options every
+  // program gets (the OpenCL version, correctly rounded float32 division and square root where
+  // the device has them), then `options`.
+  cl::Program build_source(const std::string& name, const std::string& source, const std::string& options = "");
   // Options selecting `real` = double where the device has cl_khr_fp64.
   std::string real_options() const { return info_.fp64 ? "-DSPECBAKE_REAL_DOUBLE" : ""; }
   // "Device name (Platform, OpenCL x.y)"
