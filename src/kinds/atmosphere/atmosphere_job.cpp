@@ -911,9 +911,10 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   timings["note"] = "per stage: device_s = sum of the OpenCL profiling times (end - start) of its commands, "
                     "host_s = wall_s minus the time the host waited for the device, wall_s = elapsed; "
                     "'self_check' = the double recomputation after each stage, 'host' = reads and sums between "
-                    "stages; in total only: 'setup' = each pass's program build, allocations and layout check, "
-                    "'combine' = adding each pass into the bundle's textures; per_order[0] = transmittance and direct irradiance, per_order[n] = the stages of "
-                    "order n (indirect_irradiance of order n is computed during order n + 1)";
+                    "stages; in total only: 'setup' = each pass's program build, allocations and layout "
+                    "check, 'combine' = adding each pass into the bundle's textures; per_order[0] = "
+                    "transmittance and direct irradiance, per_order[n] = the stages of order n "
+                    "(indirect_irradiance of order n is computed during order n + 1)";
   r.manifest_blocks["atmosphere"]["timings_s"] = timings;
   for (const auto& [stage, sec] : timings["total"].items())
     spdlog::debug("atmosphere: {} total: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", stage,
