@@ -191,6 +191,14 @@ std::string Device::description() const {
   return info_.name + " (" + info_.platform + ", " + info_.version + ")";
 }
 
+std::string common_build_options(const DeviceInfo& info) {
+  // float32 division and square root correctly rounded wherever the device can (NVIDIA's driver
+  // uses the 2.5/3 ulp freedom otherwise): the kernels' float32 error bounds (docs/atmosphere.md,
+  // the tests' kFloat32Chain) count one rounding per operation, and the atmosphere's near-horizon
+  // geometry decides ground or sky from such quotients and roots
+  return std::string("-cl-std=CL1.2") + (info.fp32_correct_divide_sqrt ? " -cl-fp32-correctly-rounded-divide-sqrt" : "");
+}
+
 cl::Program Device::build(const std::string& kernel_path, const std::string& options) {
   const std::string key = kernel_path + "\n" + options;
   if (auto it = programs_.find(key); it != programs_.end()) return it->second;
@@ -202,12 +210,7 @@ cl::Program Device::build(const std::string& kernel_path, const std::string& opt
 cl::Program Device::build_source(const std::string& kernel_path, const std::string& source,
                                  const std::string& options) {
   cl::Program program = checked("creating program", [&] { return cl::Program(context_, source); });
-  // float32 division and square root correctly rounded wherever the device can (OpenCL allows
-  // 2.5 and 3 ulp by default, and NVIDIA's driver uses that freedom): the kernels' float32 error
-  // bounds (docs/atmosphere.md, the tests' kFloat32Chain) count one rounding per operation, and
-  // the atmosphere's near-horizon geometry decides ground or sky from such quotients and roots
-  std::string opts = "-cl-std=CL1.2 " + std::string(info_.fp32_correct_divide_sqrt
-                                                     ? "-cl-fp32-correctly-rounded-divide-sqrt " : "") + options;
+  std::string opts = common_build_options(info_) + " " + options;
   if (const char* inject = std::getenv("SPECBAKE_INJECT_BUILD_FAILURE");
       inject && kernel_path.find(inject) != std::string::npos)
     opts += " -DSPECBAKE_INJECTED_BUILD_FAILURE";

@@ -31,6 +31,12 @@ struct DeviceInfo {
   unsigned compute_units = 0;
 };
 
+// The options every program is built with on this device, before its own: the OpenCL C version
+// and, where the device reports CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT, correctly rounded float32
+// division and square root (OpenCL allows 2.5 and 3 ulp otherwise). Part of a bundle's identity:
+// the bytes depend on them.
+std::string common_build_options(const DeviceInfo& info);
+
 // Name of an OpenCL status code, e.g. -11 -> "CL_BUILD_PROGRAM_FAILURE".
 const char* error_name(int code);
 

@@ -58,7 +58,8 @@ int stop_requested() { return g_stop.load(); }
 void clear_stop_request() { g_stop.store(0); }
 
 json device_identity(const cl_util::DeviceInfo& d) {
-  return {{"name", d.name}, {"platform", d.platform}, {"version", d.version}};
+  return {{"name", d.name}, {"platform", d.platform}, {"version", d.version},
+          {"build_options", cl_util::common_build_options(d)}};
 }
 
 std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector<JobReport>* invalid) {

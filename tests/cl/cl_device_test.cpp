@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "cl/device.hpp"
+#include "runner/runner.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;
@@ -80,4 +81,21 @@ TEST(DeviceBuild, Float32DivideAndSqrtAreCorrectlyRounded) {
     EXPECT_LE(worst_q, 3);
     EXPECT_LE(worst_r, 3);
   }
+}
+
+// The options every program gets are part of the device's identity in a bundle's hash: a
+// bundle baked with other options (an earlier version without correctly rounded division, or a
+// device without it) is not "up to date" for this one.
+TEST(DeviceBuild, CommonOptionsEnterTheBundleIdentity) {
+  cl_util::DeviceInfo info = cl_util::select_device("auto");
+  info.fp32_correct_divide_sqrt = true;
+  const std::string with = cl_util::common_build_options(info);
+  EXPECT_NE(with.find("-cl-fp32-correctly-rounded-divide-sqrt"), std::string::npos) << with;
+  EXPECT_NE(with.find("-cl-std=CL1.2"), std::string::npos) << with;
+  const nlohmann::json a = specbake::device_identity(info);
+  info.fp32_correct_divide_sqrt = false;
+  EXPECT_EQ(cl_util::common_build_options(info).find("correctly-rounded"), std::string::npos);
+  const nlohmann::json b = specbake::device_identity(info);
+  EXPECT_EQ(a.at("build_options").get<std::string>(), with);
+  EXPECT_NE(a.dump(), b.dump());
 }
