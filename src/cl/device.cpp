@@ -207,12 +207,12 @@ cl::Program Device::build(const std::string& kernel_path, const std::string& opt
   return program;
 }
 
-cl::Program Device::build_source(const std::string& kernel_path, const std::string& source,
+cl::Program Device::build_source(const std::string& name, const std::string& source,
                                  const std::string& options) {
   cl::Program program = checked("creating program", [&] { return cl::Program(context_, source); });
   std::string opts = common_build_options(info_) + " " + options;
   if (const char* inject = std::getenv("SPECBAKE_INJECT_BUILD_FAILURE");
-      inject && kernel_path.find(inject) != std::string::npos)
+      inject && name.find(inject) != std::string::npos)
     opts += " -DSPECBAKE_INJECTED_BUILD_FAILURE";
   cl_int status = CL_SUCCESS;
   try {
@@ -229,12 +229,12 @@ cl::Program Device::build_source(const std::string& kernel_path, const std::stri
   }
   if (status != CL_SUCCESS) {
     // The log goes to the log once; the error carries its first line.
-    spdlog::error("OpenCL build of {} failed ({}); build log:\n{}", kernel_path, error_name(status), log);
+    spdlog::error("OpenCL build of {} failed ({}); build log:\n{}", name, error_name(status), log);
     const std::string first = log.substr(0, log.find('\n'));
-    throw DeviceError("building kernel " + kernel_path + " failed with " + error_name(status) +
+    throw DeviceError("building kernel " + name + " failed with " + error_name(status) +
                       (first.empty() ? "" : ": " + first + (first.size() < log.size() ? " (build log above)" : "")));
   }
-  if (!log.empty()) spdlog::debug("OpenCL build log for {}:\n{}", kernel_path, log);
+  if (!log.empty()) spdlog::debug("OpenCL build log for {}:\n{}", name, log);
   return program;
 }
 

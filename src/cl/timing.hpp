@@ -119,6 +119,19 @@ class Profiler {
   bool waiting_ = false;
 };
 
+// A stage of host work only (no device commands: a program build, a combination of results):
+// runs f and returns its wall time as both wall_s and host_s.
+template <class F>
+StageSeconds host_only(std::string stage, F&& f) {
+  const auto t0 = std::chrono::steady_clock::now();
+  f();
+  StageSeconds s;
+  s.stage = std::move(stage);
+  s.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  s.closed = true;
+  return s;
+}
+
 // Adds s's seconds and commands into `into` (sums over passes, orders, repeats).
 void accumulate(StageSeconds& into, const StageSeconds& s);
 // {"device_s": …, "host_s": …, "wall_s": …}

@@ -495,7 +495,11 @@ class Corrupting final : public PassBackend {
     run(PassStage::indirect_irradiance, order, [&] { b_.indirect_irradiance(order); });
   }
   void multiple_scattering() override { run(PassStage::multiple_scattering, order_, [&] { b_.multiple_scattering(); }); }
-  void read_into(Tex t, std::vector<double>& out) override { b_.read_into(t, out); }
+  void read_into(Tex t, std::vector<double>& out) override {
+    ++reads;
+    b_.read_into(t, out);
+  }
+  int reads = 0;  // texture reads, by anyone
 
  private:
   template <class F>
@@ -518,8 +522,8 @@ TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
   });
   auto checker = make_stage_checker(m, ch, 3, 64, 1e-3);
   std::vector<StageCheck> checks;
-  run_pass(b, m, PassPlan{4, false, 1e-3}, kQuiet, 0.0, 1.0,
-           [&](PassStage stage, int order, PassBackend& be) { checks.push_back(checker->check(be, stage, order)); });
+  run_pass(b, m, PassPlan{4, false, 1e-3}, kQuiet, 0.0, 1.0, checker.get(),
+           [&](const StageCheck& c) { checks.push_back(c); });
   int corrupted = 0;
   for (const StageCheck& c : checks) {
     SCOPED_TRACE(c.stage + " order " + std::to_string(c.order));
@@ -533,6 +537,73 @@ TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
     }
   }
   EXPECT_EQ(corrupted, 1);
+}
+
+// With a checker, run_pass takes its sums from the checker's copies: each texture is read once
+// per stage that writes it (transmittance, direct ΔE, ΔR and ΔM, then per order n = 2, 3 the
+// density J, ΔE of order n − 1 and ΔS: 4 + 3 × 2 = 10 reads), not once for the check and again
+// for the sums (18), and the result is bit-identical to a pass run without checks.
+TEST(AtmosphereSelfCheck, ChecksAndSumsShareOneReadPerTexture) {
+  const AtmosphereSpec s = small(earth());
+  const Model m = model_of(s);
+  const Channels ch = channels_at(s, {680.0, 550.0, 440.0});
+  const auto none = [](PassStage, int, ref3::HostBackend&) {};
+  Corrupting checked(m, ch, none), plain(m, ch, none);
+  auto checker = make_stage_checker(m, ch, 3, 16, 1e-3);
+  int checks = 0;
+  const PassPlan plan{3, false, 1e-3};
+  const PassResult a = run_pass(checked, m, plan, kQuiet, 0.0, 1.0, checker.get(), [&](const StageCheck&) { ++checks; });
+  const PassResult b = run_pass(plain, m, plan, kQuiet, 0.0, 1.0);
+  EXPECT_EQ(checks, 9);  // 3 stages, then 3 per order n = 2, 3
+  EXPECT_EQ(checked.reads, 10);
+  EXPECT_EQ(plain.reads, 8);  // the sums' own reads: T, ΔE, ΔR, ΔM, then ΔE and ΔS per order
+  EXPECT_EQ(a.transmittance, b.transmittance);
+  EXPECT_EQ(a.direct_irradiance, b.direct_irradiance);
+  EXPECT_EQ(a.irradiance, b.irradiance);
+  EXPECT_EQ(a.scattering, b.scattering);
+  EXPECT_EQ(a.single_mie, b.single_mie);
+  ASSERT_EQ(a.orders.size(), b.orders.size());
+  for (std::size_t i = 0; i < a.orders.size(); ++i) {
+    EXPECT_EQ(a.orders[i].scattering_max, b.orders[i].scattering_max);
+    EXPECT_EQ(a.orders[i].irradiance_mean, b.orders[i].irradiance_mean);
+    EXPECT_EQ(a.orders[i].relative, b.orders[i].relative);
+  }
+}
+
+// The job's verdict on its self-checks: a stage that wrote values that are not finite stops the
+// job with a message naming the stage, its order and pass and the count; a stage beyond the
+// tolerance stops it naming that stage; otherwise the record carries the worst value.
+TEST(AtmosphereSelfCheck, TheJobStopsOnANonFiniteOrInaccurateStage) {
+  Baked b;
+  b.self_checks = nlohmann::json::array({{{"stage", "transmittance"}, {"max_relative_error", 1e-6}},
+                                         {{"stage", "multiple_scattering"}, {"max_relative_error", 3e-5}}});
+  b.self_check_worst = 3e-5;
+  const Accuracy ok = judge_self_checks(b);
+  EXPECT_TRUE(ok.passed);
+  EXPECT_EQ(ok.value, 3e-5);
+  EXPECT_EQ(ok.name, "self_check");
+
+  Baked inaccurate = b;
+  inaccurate.self_checks[1]["max_relative_error"] = 0.01;
+  inaccurate.self_check_worst = 0.01;
+  try {
+    judge_self_checks(inaccurate);
+    ADD_FAILURE() << "an inaccurate stage passed";
+  } catch (const JobError& e) {
+    EXPECT_NE(std::string(e.what()).find("self-check failed in multiple_scattering"), std::string::npos) << e.what();
+  }
+
+  Baked bad = b;
+  bad.self_check_worst = std::numeric_limits<double>::infinity();
+  bad.non_finite = NonFiniteStage{"scattering_density", 3, 1, 5};
+  try {
+    judge_self_checks(bad);
+    ADD_FAILURE() << "a non-finite stage passed";
+  } catch (const JobError& e) {
+    EXPECT_NE(std::string(e.what()).find("scattering_density (order 3, pass 1) wrote 5 non-finite values"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // A value that is not finite anywhere in a stage's output fails that stage's check, wherever it
@@ -551,8 +622,8 @@ TEST(AtmosphereSelfCheck, NonFiniteValuesAnywhereFailTheStage) {
   for (long long k = 0; k < kSampled; ++k) ASSERT_NE((k * 2654435761LL + 12345) % n, 1) << "texel 1 is sampled";
   auto checker = make_stage_checker(m, ch, 3, kSampled, 1e-3);
   std::vector<StageCheck> checks;
-  run_pass(b, m, PassPlan{3, false, 1e-3}, kQuiet, 0.0, 1.0,
-           [&](PassStage stage, int order, PassBackend& be) { checks.push_back(checker->check(be, stage, order)); });
+  run_pass(b, m, PassPlan{3, false, 1e-3}, kQuiet, 0.0, 1.0, checker.get(),
+           [&](const StageCheck& c) { checks.push_back(c); });
   bool seen = false;
   for (const StageCheck& c : checks) {
     SCOPED_TRACE(c.stage + " order " + std::to_string(c.order));

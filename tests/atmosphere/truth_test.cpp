@@ -634,7 +634,7 @@ TEST(Truth, AgainstBakedLutsAtHighSun) {
   plan.auto_orders = true;
   plan.tolerance = 1e-3;
   std::vector<double> accumulated, scattering_1, scattering_4;
-  const PassResult pr = run_pass(*backend, hm, plan, [](std::string_view, double) {}, 0, 1, {},
+  const PassResult pr = run_pass(*backend, hm, plan, [](std::string_view, double) {}, 0, 1, nullptr, {},
                                  [&](int order, const std::vector<double>& add, const std::vector<double>&) {
                                    if (add.empty()) return;
                                    if (accumulated.empty()) accumulated.assign(add.size(), 0.0);

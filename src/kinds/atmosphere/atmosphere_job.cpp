@@ -155,36 +155,30 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   for (int p = 0; p < passes; ++p) {
     const int first = p * width, count = std::min(width, n - first);
     const Channels ch = all.slice(first, count);
-    // host-only steps of the job, timed by the wall clock: the backend's set-up (program build,
-    // allocations, layout check) and the combination of a pass into the bundle's textures
+    // host-only steps of the job: the backend's set-up (program build, allocations, layout
+    // check) and the combination of a pass into the bundle's textures
     const auto host_stage = [&](const char* stage, auto&& f) {
-      const auto t0 = std::chrono::steady_clock::now();
-      f();
-      cl_util::StageSeconds sec;
-      sec.stage = stage;
-      sec.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      cl_util::accumulate(stage_total[stage], sec);
+      cl_util::accumulate(stage_total[stage], cl_util::host_only(stage, f));
     };
     std::unique_ptr<PassBackend> backend;
     host_stage("setup", [&] { backend = make(ch, width); });
-    StageHook hook;
     std::unique_ptr<StageChecker> checker;
-    if (check_texels > 0) {
-      checker = make_stage_checker(m, ch, width, check_texels, kCheckFloor);
-      hook = [&](PassStage stage, int order, PassBackend& b) {
-        const StageCheck c = checker->check(b, stage, order);
-        out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
-                                   {"max_relative_error", c.max_rel}});
-        if (c.non_finite > 0) out.self_checks.back()["non_finite_values"] = c.non_finite;
-        out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
-      };
-    }
+    if (check_texels > 0) checker = make_stage_checker(m, ch, width, check_texels, kCheckFloor);
+    const CheckHook on_check = [&](const StageCheck& c) {
+      out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
+                                 {"max_relative_error", c.max_rel}});
+      if (c.non_finite > 0) {
+        out.self_checks.back()["non_finite_values"] = c.non_finite;
+        if (!out.non_finite) out.non_finite = NonFiniteStage{c.stage, c.order, p, c.non_finite};
+      }
+      out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
+    };
     const OrderHook on_order = [&](int order, const std::vector<double>& s_add, const std::vector<double>& e_add) {
       if (!s_add.empty()) acc.add(order, false, to_rgb(first, count, s_add, n_s));
       if (!e_add.empty()) acc.add(order, true, to_rgb(first, count, e_add, n_e));
     };
     const double p0 = 0.9 * p / passes, p1 = 0.9 * (p + 1) / passes;
-    const PassResult r = run_pass(*backend, m, plan, progress, p0, p1, hook, on_order);
+    const PassResult r = run_pass(*backend, m, plan, progress, p0, p1, checker.get(), on_check, on_order);
     for (const StageTime& t : r.timings) {
       cl_util::accumulate(stage_total[t.stage], t.seconds);
       cl_util::accumulate(per_order[t.order][t.stage], t.seconds);
@@ -209,9 +203,9 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   }
   if (sp.spectral) {
     // The render-time transmittance is at 680/550/440 nm, as the GPU model's luminance mode.
-    const auto t0 = std::chrono::steady_clock::now();
-    auto b = make(rgb, 3);  // builds the 3-channel program: host time of this stage
-    const double make_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::unique_ptr<PassBackend> b;
+    cl_util::accumulate(stage_total["transmittance_rgb"],  // the 3-channel program's build
+                        cl_util::host_only("transmittance_rgb", [&] { b = make(rgb, 3); }));
     cl_util::Profiler own;
     cl_util::Profiler& prof = b->profiler() ? *b->profiler() : own;
     cl_util::Profiler::Stage st(prof, "transmittance_rgb");
@@ -219,9 +213,7 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     out.luts.transmittance = b->read(Tex::transmittance);
     st.close();
     prof.settle();
-    cl_util::StageSeconds sec = *st.record();
-    sec.wall_s += make_s;
-    cl_util::accumulate(stage_total["transmittance_rgb"], sec);
+    cl_util::accumulate(stage_total["transmittance_rgb"], *st.record());
   }
   out.timings = {{"total", json::object()}, {"per_order", json::array()}};
   for (const auto& [stage, sec] : stage_total) out.timings["total"][stage] = cl_util::seconds_json(sec);
@@ -570,21 +562,14 @@ void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& 
        {"functions", "GetSkyRadianceAtWavelength, GetSunAndSkyIrradianceAtWavelength (sampling_spectral.glsl)"}}));
 }
 
-// `checked`: the scene check already made of these LUTs (an auto search's), not made again.
-void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r,
-                std::optional<SceneCheck> checked = std::nullopt) {
-  ctx.enter(Stage::check);
-  for (const auto& c : b.self_checks)
-    if (c.contains("non_finite_values"))
-      throw JobError("self-check failed: the device's " + c.value("stage", std::string("?")) + " (order " +
-                     std::to_string(c.value("order", 0)) + ", pass " + std::to_string(c.value("pass", 0)) +
-                     ") wrote " + std::to_string(c["non_finite_values"].get<long long>()) +
-                     " non-finite values (NaN or inf). Try another device (`specbake devices`, `device:` or `--device`) or `precision: double`");
-  r.accuracy.push_back(Accuracy::judged(
-      "self_check", "max relative error |device - reference| / (|reference| + 1e-3 * channel max)",
-      b.self_check_worst, kCheckTolerance,
-      "double reference path recomputing 24 texels of each stage from the device's own inputs",
-      {{"stages", b.self_checks}}));
+}  // namespace
+
+Accuracy judge_self_checks(const Baked& b) {
+  if (const auto& f = b.non_finite)
+    throw JobError("self-check failed: the device's " + f->stage + " (order " + std::to_string(f->order) +
+                   ", pass " + std::to_string(f->pass) + ") wrote " + std::to_string(f->values) +
+                   " non-finite values (NaN or inf). Try another device (`specbake devices`, `device:` or "
+                   "`--device`) or `precision: double`");
   if (!(b.self_check_worst <= kCheckTolerance)) {
     std::string stage = "?";
     for (const auto& c : b.self_checks)
@@ -594,6 +579,20 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                    ". Check the atmosphere's inputs first (optical depths far beyond any planet's make the float "
                    "sums lose their digits); `precision: double` computes in float64 on devices that have it");
   }
+  return Accuracy::judged(
+      "self_check", "max relative error |device - reference| / (|reference| + 1e-3 * channel max)",
+      b.self_check_worst, kCheckTolerance,
+      "double reference path recomputing 24 texels of each stage from the device's own inputs",
+      {{"stages", b.self_checks}});
+}
+
+namespace {
+
+// `checked`: the scene check already made of these LUTs (an auto search's), not made again.
+void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r,
+                std::optional<SceneCheck> checked = std::nullopt) {
+  ctx.enter(Stage::check);
+  r.accuracy.push_back(judge_self_checks(b));
   if (!spec.scene.check) return;
   // the error in the user's scene: the LUTs against the path-traced truth at the scene's points
   SceneCheck sc = checked ? std::move(*checked)

@@ -1,4 +1,7 @@
 #pragma once
+#include <optional>
+#include <string>
+
 #include "kinds/atmosphere/pass.hpp"
 #include "job/kind.hpp"
 #include "kinds/atmosphere/render.hpp"
@@ -26,6 +29,12 @@ int channels_per_pass(const AtmosphereSpec& spec);
 double estimated_seconds(const AtmosphereSpec& spec);
 
 // The LUTs of a bake (final textures in R,G,B), with what the manifest reports about them.
+// The first stage whose outputs held values that are not finite (NaN or ±inf).
+struct NonFiniteStage {
+  std::string stage;
+  int order = 0, pass = 0;
+  long long values = 0;
+};
 struct Baked {
   Luts luts;
   Spectrum spectrum;
@@ -35,6 +44,7 @@ struct Baked {
   nlohmann::json passes;       // wavelengths of each pass, orders used
   nlohmann::json self_checks;  // device vs double reference, per stage
   double self_check_worst = 0.0;
+  std::optional<NonFiniteStage> non_finite;  // a stage wrote values that are not finite
   // `spectrum: {store: radiance}`: the radiance at every wavelength (else empty)
   SpectralLuts radiance;
   // Seconds per stage summed over passes ("total" by stage name, "per_order" by order), each
@@ -45,6 +55,9 @@ struct Baked {
 // stage in double from the device's own inputs).
 Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress,
                 int self_check_texels = 0);
+// The self-checks' verdict: the accuracy record, or a JobError naming the stage when a stage
+// wrote values that are not finite or differs from the double reference beyond the tolerance.
+Accuracy judge_self_checks(const Baked& b);
 // The same bake on the host in double (small sizes: tests).
 Baked bake_luts_reference(const AtmosphereSpec& spec);
 

@@ -384,6 +384,8 @@ class HostStageChecker final : public StageChecker {
     return r;
   }
 
+  const std::vector<double>* held(Tex t) override { return held_.count(t) ? &h_.texture(t) : nullptr; }
+
  private:
   void release(std::initializer_list<Tex> textures) {
     for (Tex t : textures) {
@@ -446,7 +448,8 @@ const char* to_string(PassStage s) {
 }
 
 PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
-                    double p0, double p1, const StageHook& on_stage, const OrderHook& on_order) {
+                    double p0, double p1, StageChecker* checker, const CheckHook& on_check,
+                    const OrderHook& on_order) {
   const int w = b.channels();
   const int cap = plan.auto_orders ? kMaxAutoOrders : plan.orders;
   // rough relative cost of the stages, for progress only
@@ -484,7 +487,28 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     gap.emplace(prof, "host", order);
   };
   auto hook = [&](PassStage stage, int order) {
-    if (on_stage) run_stage("self_check", order, [&] { on_stage(stage, order, b); });
+    if (!checker) return;
+    run_stage("self_check", order, [&] {
+      const StageCheck c = checker->check(b, stage, order);
+      if (on_check) on_check(c);
+    });
+  };
+  // A texture as the device has it now: the checker's copy when it holds one (read once per
+  // stage for both), else read into `scratch`.
+  auto texture = [&](Tex t, std::vector<double>& scratch) -> const std::vector<double>& {
+    if (checker)
+      if (const std::vector<double>* h = checker->held(t)) return *h;
+    b.read_into(t, scratch);
+    return scratch;
+  };
+  // A texture the result keeps: copied (on the host's threads) from the checker's copy, or read.
+  auto keep = [&](Tex t, std::vector<double>& into) {
+    const std::vector<double>& v = texture(t, into);
+    if (&v == &into) return;
+    into.resize(v.size());
+    parallel_chunks(v.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
+      std::copy(v.begin() + first, v.begin() + last, into.begin() + first);
+    });
   };
   auto timed = [&](PassStage what, int order, auto&& f) { run_stage(to_string(what), order, f); };
 
@@ -492,13 +516,13 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   hook(PassStage::transmittance, 0);
   timed(PassStage::direct_irradiance, 0, [&] { b.direct_irradiance(); });
   hook(PassStage::direct_irradiance, 0);
-  r.transmittance = b.read(Tex::transmittance);
-  r.direct_irradiance = b.read(Tex::delta_irradiance);
+  keep(Tex::transmittance, r.transmittance);
+  keep(Tex::delta_irradiance, r.direct_irradiance);
   step("transmittance", 0.02);
   timed(PassStage::single_scattering, 1, [&] { b.single_scattering(); });
   hook(PassStage::single_scattering, 1);
-  r.scattering = b.read(Tex::delta_rayleigh);
-  r.single_mie = b.read(Tex::delta_mie);
+  keep(Tex::delta_rayleigh, r.scattering);
+  keep(Tex::delta_mie, r.single_mie);
   r.irradiance.assign(r.direct_irradiance.size(), 0.0);
   step("single scattering", 0.1);
   {
@@ -514,14 +538,15 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   r.orders_used = 1;
   r.converged = !plan.auto_orders;
   const std::vector<double> inv_phase = cap >= 2 ? inverse_rayleigh_phase(m) : std::vector<double>{};
-  std::vector<double> add;  // what order n adds, reused across orders
+  std::vector<double> add;      // what order n adds, reused across orders
+  std::vector<double> dE_read;  // ΔE when read here (no checker's copy), reused across orders
   for (int n = 2; n <= cap; ++n) {
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
     hook(PassStage::scattering_density, n);
     step("order " + std::to_string(n) + ": scattering density", 0.55);
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
     hook(PassStage::indirect_irradiance, n - 1);
-    const std::vector<double> dE = b.read(Tex::delta_irradiance);
+    const std::vector<double>& dE = texture(Tex::delta_irradiance, dE_read);
     parallel_chunks(dE.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
       for (std::size_t i = first; i < last; ++i) r.irradiance[i] += dE[i];
     });
@@ -534,10 +559,12 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     step("order " + std::to_string(n) + ": indirect irradiance", 0.02);
     timed(PassStage::multiple_scattering, n, [&] { b.multiple_scattering(); });
     hook(PassStage::multiple_scattering, n);
-    b.read_into(Tex::delta_multiple, add);
+    // ΔS / P_R: from the checker's copy, or read into `add` and scaled in place
+    const std::vector<double>& dS = texture(Tex::delta_multiple, add);
+    add.resize(dS.size());
     parallel_chunks(add.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
       for (std::size_t i = first; i < last; ++i) {
-        add[i] *= inv_phase[i / w];
+        add[i] = dS[i] * inv_phase[i / w];
         r.scattering[i] += add[i];
       }
     });

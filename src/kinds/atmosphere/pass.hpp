@@ -131,16 +131,10 @@ ChannelStats channel_stats(const std::vector<T>& v, int w) {
   return s;
 }
 
-// Called after every stage with the backend (for self-checks) and the stage name.
-using StageHook = std::function<void(PassStage stage, int order, PassBackend& b)>;
 // Called with each order's additions (scattering [texels][w], irradiance [texels][w] or
 // empty for the last order), so that callers can convert and combine passes.
 using OrderHook = std::function<void(int order, const std::vector<double>& scattering_add,
                                      const std::vector<double>& irradiance_add)>;
-
-PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
-                    double progress_from, double progress_to, const StageHook& on_stage = {},
-                    const OrderHook& on_order = {});
 
 // 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it).
 std::vector<double> inverse_rayleigh_phase(const Model& m);
@@ -162,8 +156,20 @@ class StageChecker {
  public:
   virtual ~StageChecker() = default;
   virtual StageCheck check(PassBackend& b, PassStage stage, int order) = 0;
+  // The texture as the device has it now, in double, when the checks hold that copy (else
+  // null): run_pass takes its sums from it instead of reading the texture again.
+  virtual const std::vector<double>* held(Tex t) = 0;
 };
 std::unique_ptr<StageChecker> make_stage_checker(const Model& m, const Channels& ch, int width, int count,
                                                  double floor);
+
+// Called with each stage's check when run_pass is given a checker.
+using CheckHook = std::function<void(const StageCheck& check)>;
+
+// Runs the pass; with a checker, checks every stage after it runs (reported through on_check)
+// and reads each texture once: the sums use the checker's copies.
+PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
+                    double progress_from, double progress_to, StageChecker* checker = nullptr,
+                    const CheckHook& on_check = {}, const OrderHook& on_order = {});
 
 }  // namespace specbake::atmosphere
