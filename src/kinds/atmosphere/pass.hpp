@@ -144,7 +144,7 @@ std::vector<double> inverse_rayleigh_phase(const Model& m);
 // floor·max|device|), or +inf with the count when any value of the outputs, anywhere in the
 // texture, is not finite. The checker keeps, in double, each texture as the check of the stage that
 // wrote it read it, so a texture is read from the device once per stage that writes it, not
-// again by every later check that uses it as an input. Call it after every stage of the pass.
+// again by every later check that uses it as an input. run_pass calls it after every stage.
 struct StageCheck {
   std::string stage;
   int order = 0;
