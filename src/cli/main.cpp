@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
@@ -194,7 +195,8 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
     if (plan) {
       std::string est = "-", dmem = "-", hmem = "-";
       if (r.estimate.is_object()) {
-        est = "~" + ProgressLine::duration(r.estimate.value("seconds_2core_cpu", 0.0));
+        est = "~" + ProgressLine::duration(r.estimate.value("seconds", 0.0));
+        if (r.estimate.contains("calibrated_on")) est += "*";
         auto mib = [](std::uint64_t bytes) { return bytes < (1u << 20) ? std::string("<1 MiB") : std::to_string(bytes >> 20) + " MiB"; };
         dmem = mib(r.estimate.value("device_bytes", std::uint64_t{0}));
         hmem = mib(r.estimate.value("host_bytes", std::uint64_t{0}));
@@ -208,6 +210,10 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
     }
   }
   print_table(rows);
+  if (plan && std::any_of(reports.begin(), reports.end(), [](const JobReport& r) {
+        return r.estimate.is_object() && r.estimate.contains("calibrated_on");
+      }))
+    std::cout << "* est. time scaled to this device by the job's last bake on it; others: the 2-core CPU model\n";
   for (const auto& r : reports) {
     const bool bad = r.code != ExitCode::ok;
     if (bad) std::cout << r.name << (r.name.empty() ? "" : ": ") << r.status << ": " << r.reason << "\n";

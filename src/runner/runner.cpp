@@ -240,9 +240,40 @@ class Selections {
   std::map<std::string, cl_util::DeviceInfo> picked_;
 };
 
+// `seconds`: the kind's cost model (wall seconds on a 2-core CPU under PoCL) until a bake on
+// the job's device calibrates it (calibrate_estimate).
 json estimate_json(const Kind& kind, const JobSpec& job) {
   const MemoryEstimate m = kind.memory(job);
-  return {{"seconds_2core_cpu", kind.cost_s(job)}, {"device_bytes", m.total_bytes}, {"host_bytes", m.host_bytes}};
+  const double model_s = kind.cost_s(job);
+  return {{"seconds", model_s},
+          {"seconds_2core_cpu", model_s},
+          {"basis", "2-core CPU model"},
+          {"device_bytes", m.total_bytes},
+          {"host_bytes", m.host_bytes}};
+}
+
+// The cost model scaled to a device by the job's last bake on it: the manifest of `latest` records
+// the bake's seconds and the model's seconds for that bake's settings; `seconds` becomes their
+// ratio times the model's seconds for these settings (the bake's own time for a rebake of the
+// same settings). Unchanged without such a bundle, or when it was baked on another device.
+void calibrate_estimate(json& estimate, const fs::path& latest, const json& device) {
+  std::error_code ec;
+  if (!fs::exists(latest / "manifest.json", ec)) return;
+  try {
+    std::ifstream in(latest / "manifest.json");
+    const json m = json::parse(in);
+    const json& d = m.at("device");
+    for (const char* key : {"name", "platform", "version"})
+      if (d.value(key, std::string()) != device.value(key, std::string())) return;
+    const json& t = m.at("timings_s");
+    const double bake_s = t.value("bake", 0.0), model_s = t.value("model_2core_cpu_s", 0.0);
+    if (!(bake_s > 0.0 && model_s > 0.0)) return;
+    estimate["seconds"] = estimate.value("seconds_2core_cpu", 0.0) * bake_s / model_s;
+    estimate["basis"] = "last bake on this device";
+    estimate["calibrated_on"] = fs::canonical(latest, ec).string();
+  } catch (const json::exception& e) {
+    spdlog::debug("{}: no calibration from its manifest: {}", latest.string(), e.what());
+  }
 }
 
 
@@ -327,6 +358,7 @@ std::vector<JobReport> Runner::plan() {
       const std::string hash12 = r.hash.substr(0, 12);
       const bool current = store.is_complete(it.job->name, hash12);
       r.bundle = store.bundle_dir(it.job->name, hash12);
+      calibrate_estimate(r.estimate, store.job_dir(it.job->name) / "latest", r.device);
       r.reason = current ? (options_.force ? "up to date; --force rebuilds it" : "up to date; would be skipped")
                          : "would be built";
       JobContext ctx{devices.get(info)};
@@ -481,7 +513,7 @@ std::vector<JobReport> Runner::run() {
           }
           for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
           for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
-          manifest["timings_s"] = {{"bake", bake_s}, {"steps", stage_s}};
+          manifest["timings_s"] = {{"bake", bake_s}, {"model_2core_cpu_s", kind.cost_s(*it.job)}, {"steps", stage_s}};
           const auto tw = Clock::now();
           r.bundle = store.publish(name, hash12, manifest, result.files);
           r.status = "built";

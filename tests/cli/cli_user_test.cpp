@@ -285,6 +285,43 @@ TEST_F(CliUser, PlanShowsEstimates) {
   EXPECT_FALSE(fs::exists(tmp_ / "out"));
 }
 
+// After a bake, plan scales the cost model to the device by the job's last bake on it: for the
+// same settings the estimate is that bake's own seconds (model × bake / model, to rounding); a
+// bundle baked on another device does not calibrate it.
+TEST_F(CliUser, PlanCalibratesOnTheLastBakeOnThisDevice) {
+  const fs::path c = cfg(config(kSky));
+  ASSERT_EQ(run({"run", c.string()}).exit_code, 0);
+  const fs::path latest = tmp_ / "out" / "sky" / "latest";
+  const json manifest = t::read_json(latest / "manifest.json");
+  const double bake_s = manifest["timings_s"]["bake"].get<double>();
+  const double model_s = manifest["timings_s"]["model_2core_cpu_s"].get<double>();
+  ASSERT_GT(bake_s, 0.0);
+  ASSERT_GT(model_s, 0.0);
+
+  const fs::path report = tmp_ / "plan.json";
+  auto r = run({"plan", c.string(), "--report", report.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  json e = t::read_json(report)["jobs"][0]["estimate"];
+  EXPECT_DOUBLE_EQ(e["seconds_2core_cpu"].get<double>(), model_s);  // the same settings
+  EXPECT_NEAR(e["seconds"].get<double>(), bake_s, 1e-12 * bake_s);
+  EXPECT_EQ(e["basis"], "last bake on this device");
+  EXPECT_EQ(e["calibrated_on"].get<std::string>(), fs::canonical(latest).string());
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("sky +atmosphere +up to date; would be skipped +~[0-9.]+ s\\* ")))
+      << r.out;
+  EXPECT_NE(r.out.find("* est. time scaled to this device"), std::string::npos) << r.out;
+
+  json other = manifest;
+  other["device"]["name"] = "another device";
+  t::write_file(latest / "manifest.json", other.dump(2));
+  r = run({"plan", c.string(), "--report", report.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  e = t::read_json(report)["jobs"][0]["estimate"];
+  EXPECT_FALSE(e.contains("calibrated_on"));
+  EXPECT_EQ(e["basis"], "2-core CPU model");
+  EXPECT_DOUBLE_EQ(e["seconds"].get<double>(), model_s);
+  EXPECT_EQ(r.out.find("* est. time"), std::string::npos) << r.out;
+}
+
 }  // namespace
 
 namespace {
