@@ -119,8 +119,9 @@ class Profiler {
   bool waiting_ = false;
 };
 
-// A stage of host work only (no device commands: a program build, a combination of results):
-// runs f and returns its wall time as both wall_s and host_s.
+// A stage timed by the wall clock alone (a program build, a combination of results): runs f and
+// returns its wall time as both wall_s and host_s. Any device work inside f (a layout check's
+// kernel) counts as host time: use it for stages that are host work but for such small parts.
 template <class F>
 StageSeconds host_only(std::string stage, F&& f) {
   const auto t0 = std::chrono::steady_clock::now();

@@ -270,7 +270,8 @@ void calibrate_estimate(json& estimate, const fs::path& latest, const json& devi
     if (!(bake_s > 0.0 && model_s > 0.0)) return;
     estimate["seconds"] = estimate.value("seconds_2core_cpu", 0.0) * bake_s / model_s;
     estimate["basis"] = "last bake on this device";
-    estimate["calibrated_on"] = fs::canonical(latest, ec).string();
+    const fs::path bundle = fs::canonical(latest, ec);
+    estimate["calibrated_on"] = ec ? latest.string() : bundle.string();
   } catch (const json::exception& e) {
     spdlog::debug("{}: no calibration from its manifest: {}", latest.string(), e.what());
   }

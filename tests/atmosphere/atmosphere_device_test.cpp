@@ -565,6 +565,8 @@ TEST(AtmosphereSelfCheck, ChecksAndSumsShareOneReadPerTexture) {
   ASSERT_EQ(a.orders.size(), b.orders.size());
   for (std::size_t i = 0; i < a.orders.size(); ++i) {
     EXPECT_EQ(a.orders[i].scattering_max, b.orders[i].scattering_max);
+    EXPECT_EQ(a.orders[i].scattering_mean, b.orders[i].scattering_mean);
+    EXPECT_EQ(a.orders[i].irradiance_max, b.orders[i].irradiance_max);
     EXPECT_EQ(a.orders[i].irradiance_mean, b.orders[i].irradiance_mean);
     EXPECT_EQ(a.orders[i].relative, b.orders[i].relative);
   }

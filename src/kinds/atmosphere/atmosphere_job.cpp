@@ -167,11 +167,12 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     const CheckHook on_check = [&](const StageCheck& c) {
       out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
                                  {"max_relative_error", c.max_rel}});
+      out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
       if (c.non_finite > 0) {
         out.self_checks.back()["non_finite_values"] = c.non_finite;
-        if (!out.non_finite) out.non_finite = NonFiniteStage{c.stage, c.order, p, c.non_finite};
+        out.non_finite = NonFiniteStage{c.stage, c.order, p, c.non_finite};
+        judge_self_checks(out);  // stops the bake here: later stages would only spread the NaN
       }
-      out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
     };
     const OrderHook on_order = [&](int order, const std::vector<double>& s_add, const std::vector<double>& e_add) {
       if (!s_add.empty()) acc.add(order, false, to_rgb(first, count, s_add, n_s));

@@ -28,13 +28,13 @@ int channels_per_pass(const AtmosphereSpec& spec);
 // bake's stage times), plus the scene check (~0.07 s a point). `orders: auto` is costed at 10 orders.
 double estimated_seconds(const AtmosphereSpec& spec);
 
-// The LUTs of a bake (final textures in R,G,B), with what the manifest reports about them.
-// The first stage whose outputs held values that are not finite (NaN or ±inf).
+// The stage whose outputs held values that are not finite (NaN or ±inf); the bake stops there.
 struct NonFiniteStage {
   std::string stage;
   int order = 0, pass = 0;
   long long values = 0;
 };
+// The LUTs of a bake (final textures in R,G,B), with what the manifest reports about them.
 struct Baked {
   Luts luts;
   Spectrum spectrum;

@@ -357,12 +357,25 @@ class HostStageChecker final : public StageChecker {
       for (int j = 0; j < k_out * w; ++j) scale[j] = std::max(scale[j], chunk_scale[k * k_out * w + j]);
     }
     StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count_, n)), 0.0, non_finite};
-    if (non_finite > 0) {
-      r.max_rel = std::numeric_limits<double>::infinity();
-      return r;
-    }
-    std::vector<double> errs(r.texels, 0.0);
-    parallel_for(r.texels, [&](long long k) {
+    if (non_finite > 0) r.max_rel = std::numeric_limits<double>::infinity();
+    else r.max_rel = sampled_error(stage, order, n, w, dev, scale, r.texels);
+    // Free the copies whose last reader in run_pass's order has been checked: ΔR and ΔM after
+    // the indirect irradiance of order 1 (the density of order 2 runs before it), J after the
+    // multiple scattering it feeds. Memory only: a check that needs a freed texture reads it again.
+    if (stage == PassStage::indirect_irradiance && order == 1) release({Tex::delta_rayleigh, Tex::delta_mie});
+    if (stage == PassStage::multiple_scattering) release({Tex::density});
+    return r;
+  }
+
+  const std::vector<double>* held(Tex t) override { return held_.count(t) ? &h_.texture(t) : nullptr; }
+
+ private:
+  // The largest relative error of `texels` texels spread over the texture, recomputed in double.
+  double sampled_error(PassStage stage, int order, long long n, int w, const std::vector<const std::vector<double>*>& dev,
+                       const std::vector<double>& scale, int texels) const {
+    const int k_out = static_cast<int>(dev.size());
+    std::vector<double> errs(texels, 0.0);
+    parallel_for(texels, [&](long long k) {
       // spread over the texture: a fixed multiplicative stride (coprime with most sizes)
       const long long id = (k * 2654435761LL + 12345) % n;
       std::vector<double> want(2 * w);
@@ -375,18 +388,11 @@ class HostStageChecker final : public StageChecker {
         }
       errs[k] = e;
     });
-    for (double e : errs) r.max_rel = std::max(r.max_rel, e);
-    // Free the copies whose last reader in run_pass's order has been checked: ΔR and ΔM after
-    // the indirect irradiance of order 1 (the density of order 2 runs before it), J after the
-    // multiple scattering it feeds. Memory only: a check that needs a freed texture reads it again.
-    if (stage == PassStage::indirect_irradiance && order == 1) release({Tex::delta_rayleigh, Tex::delta_mie});
-    if (stage == PassStage::multiple_scattering) release({Tex::density});
-    return r;
+    double worst = 0.0;
+    for (double e : errs) worst = std::max(worst, e);
+    return worst;
   }
 
-  const std::vector<double>* held(Tex t) override { return held_.count(t) ? &h_.texture(t) : nullptr; }
-
- private:
   void release(std::initializer_list<Tex> textures) {
     for (Tex t : textures) {
       held_.erase(t);
