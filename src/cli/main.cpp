@@ -210,10 +210,15 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
     }
   }
   print_table(rows);
-  if (plan && std::any_of(reports.begin(), reports.end(), [](const JobReport& r) {
-        return r.estimate.is_object() && r.estimate.contains("calibrated_on");
-      }))
-    std::cout << "* est. time scaled to this device by the job's last bake on it; others: the 2-core CPU model\n";
+  if (plan) {
+    const auto calibrated = [](const JobReport& r) {
+      return r.estimate.is_object() && r.estimate.contains("calibrated_on");
+    };
+    if (std::any_of(reports.begin(), reports.end(), calibrated))
+      std::cout << "* est. time scaled to this device by the job's last bake on it"
+                << (std::all_of(reports.begin(), reports.end(), calibrated) ? "" : "; others: the 2-core CPU model")
+                << "\n";
+  }
   for (const auto& r : reports) {
     const bool bad = r.code != ExitCode::ok;
     if (bad) std::cout << r.name << (r.name.empty() ? "" : ": ") << r.status << ": " << r.reason << "\n";

@@ -168,11 +168,8 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
       out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
                                  {"max_relative_error", c.max_rel}});
       out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
-      if (c.non_finite > 0) {
-        out.self_checks.back()["non_finite_values"] = c.non_finite;
-        out.non_finite = NonFiniteStage{c.stage, c.order, p, c.non_finite};
-        judge_self_checks(out);  // stops the bake here: later stages would only spread the NaN
-      }
+      // stop here: later stages would only spread the NaN
+      if (c.non_finite > 0) throw non_finite_error({c.stage, c.order, p, c.non_finite});
     };
     const OrderHook on_order = [&](int order, const std::vector<double>& s_add, const std::vector<double>& e_add) {
       if (!s_add.empty()) acc.add(order, false, to_rgb(first, count, s_add, n_s));
@@ -565,12 +562,14 @@ void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& 
 
 }  // namespace
 
+JobError non_finite_error(const NonFiniteStage& f) {
+  return JobError("self-check failed: the device's " + f.stage + " (order " + std::to_string(f.order) + ", pass " +
+                  std::to_string(f.pass) + ") wrote " + std::to_string(f.values) +
+                  " non-finite values (NaN or inf). Try another device (`specbake devices`, `device:` or "
+                  "`--device`) or `precision: double`");
+}
+
 Accuracy judge_self_checks(const Baked& b) {
-  if (const auto& f = b.non_finite)
-    throw JobError("self-check failed: the device's " + f->stage + " (order " + std::to_string(f->order) +
-                   ", pass " + std::to_string(f->pass) + ") wrote " + std::to_string(f->values) +
-                   " non-finite values (NaN or inf). Try another device (`specbake devices`, `device:` or "
-                   "`--device`) or `precision: double`");
   if (!(b.self_check_worst <= kCheckTolerance)) {
     std::string stage = "?";
     for (const auto& c : b.self_checks)

@@ -1,5 +1,4 @@
 #pragma once
-#include <optional>
 #include <string>
 
 #include "kinds/atmosphere/pass.hpp"
@@ -28,7 +27,7 @@ int channels_per_pass(const AtmosphereSpec& spec);
 // bake's stage times), plus the scene check (~0.07 s a point). `orders: auto` is costed at 10 orders.
 double estimated_seconds(const AtmosphereSpec& spec);
 
-// The stage whose outputs held values that are not finite (NaN or ±inf); the bake stops there.
+// A stage whose outputs held values that are not finite (NaN or ±inf): the bake stops there.
 struct NonFiniteStage {
   std::string stage;
   int order = 0, pass = 0;
@@ -44,7 +43,6 @@ struct Baked {
   nlohmann::json passes;       // wavelengths of each pass, orders used
   nlohmann::json self_checks;  // device vs double reference, per stage
   double self_check_worst = 0.0;
-  std::optional<NonFiniteStage> non_finite;  // a stage wrote values that are not finite
   // `spectrum: {store: radiance}`: the radiance at every wavelength (else empty)
   SpectralLuts radiance;
   // Seconds per stage summed over passes ("total" by stage name, "per_order" by order), each
@@ -55,8 +53,10 @@ struct Baked {
 // stage in double from the device's own inputs).
 Baked bake_luts(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress,
                 int self_check_texels = 0);
-// The self-checks' verdict: the accuracy record, or a JobError naming the stage when a stage
-// wrote values that are not finite or differs from the double reference beyond the tolerance.
+// The error that stops a bake at a stage that wrote values that are not finite.
+JobError non_finite_error(const NonFiniteStage& f);
+// The self-checks' verdict: the accuracy record, or a JobError naming the stage that differs
+// from the double reference beyond the tolerance.
 Accuracy judge_self_checks(const Baked& b);
 // The same bake on the host in double (small sizes: tests).
 Baked bake_luts_reference(const AtmosphereSpec& spec);

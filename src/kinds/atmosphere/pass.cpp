@@ -36,6 +36,15 @@ const char* to_string(Tex t) {
 
 namespace {
 
+// `to` = `from` converted to double, in chunks on the host's threads.
+template <class S>
+void copy_chunks(const std::vector<S>& from, std::vector<double>& to) {
+  to.resize(from.size());
+  parallel_chunks(from.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
+    std::copy(from.begin() + first, from.begin() + last, to.begin() + first);
+  });
+}
+
 
 // The kernels' compile-time slice count NU_MAX (the private arrays and fixed-length loops of
 // scattering_density) is the texture's NU, but never below 8. NVIDIA's OpenCL compiler (driver
@@ -149,9 +158,7 @@ class DeviceBackend final : public PassBackend {
       } else {
         staging_.resize(n);  // kept between reads: no fresh pages for every texture read
         read_buffer(buffer(t), n * sizeof(float), staging_.data());
-        parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
-          std::copy(staging_.begin() + first, staging_.begin() + last, out.begin() + first);
-        });
+        copy_chunks(staging_, out);
       }
       return 0;
     });
@@ -510,11 +517,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   // A texture the result keeps: copied (on the host's threads) from the checker's copy, or read.
   auto keep = [&](Tex t, std::vector<double>& into) {
     const std::vector<double>& v = texture(t, into);
-    if (&v == &into) return;
-    into.resize(v.size());
-    parallel_chunks(v.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
-      std::copy(v.begin() + first, v.begin() + last, into.begin() + first);
-    });
+    if (&v != &into) copy_chunks(v, into);
   };
   auto timed = [&](PassStage what, int order, auto&& f) { run_stage(to_string(what), order, f); };
 
