@@ -626,9 +626,10 @@ int main(int argc, char** argv) {
       const char* verb = gc_dry_run ? "would remove" : "removed";
       for (const auto& p : g.bundles) std::cout << verb << " bundle " << p.string() << "\n";
       for (const auto& p : g.temporaries) std::cout << verb << " leftover " << p.string() << "\n";
+      for (const auto& p : g.results) std::cout << verb << " kept result " << p.string() << " (no bundle lists it)\n";
       for (const auto& p : g.busy) std::cout << "skipped " << p.string() << " (a running bake holds it)\n";
-      std::cout << verb << " " << g.bundles.size() << " bundle(s) and " << g.temporaries.size()
-                << " leftover(s) of interrupted runs\n";
+      std::cout << verb << " " << g.bundles.size() << " bundle(s), " << g.results.size() << " kept result(s) and "
+                << g.temporaries.size() << " leftover(s) of interrupted runs\n";
       return 0;
     }
     if (app.got_subcommand("diff")) return cmd_diff(diff_old, diff_new, fail_abs, fail_rel);

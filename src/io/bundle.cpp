@@ -11,9 +11,12 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <map>
 #include <optional>
+#include <set>
 #include <limits>
 
 #include <spdlog/spdlog.h>
@@ -21,6 +24,7 @@
 #include "core/errors.hpp"
 #include "core/hash.hpp"
 #include "core/parallel.hpp"
+#include "io/result_store.hpp"
 
 namespace specbake {
 
@@ -196,6 +200,7 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
   for (const auto& job : fs::directory_iterator(root_, ec))
     if (job.is_directory() && !job.is_symlink() && job.path().filename().string().front() != '.') jobs.push_back(job.path());
   std::sort(jobs.begin(), jobs.end());
+  std::set<std::string> listed;  // kept results some remaining bundle lists
   for (const auto& job : jobs) {
     const std::string name = job.filename().string();
     // A job a live run holds is left alone (not waited for); a lock whose holder died is free.
@@ -215,6 +220,7 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
     fs::path latest;
     if (fs::is_symlink(job / "latest", ec)) latest = fs::read_symlink(job / "latest", ec);
     std::vector<std::pair<std::string, fs::path>> bundles;  // (created, dir)
+    std::map<fs::path, std::vector<std::string>> lists;      // dir -> its manifest's results_kept
     for (const auto& b : fs::directory_iterator(job, ec)) {
       const std::string entry = b.path().filename().string();
       if (entry.rfind(".tmp-", 0) == 0 || entry.rfind(".latest-", 0) == 0) {
@@ -229,7 +235,9 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
       std::string created;
       try {
         std::ifstream in(b.path() / "manifest.json");
-        created = nlohmann::json::parse(in).value("created_utc", "");
+        const nlohmann::json m = nlohmann::json::parse(in);
+        created = m.value("created_utc", "");
+        if (m.contains("results_kept")) lists[b.path()] = m["results_kept"].get<std::vector<std::string>>();
       } catch (const std::exception&) {
         continue;  // not a bundle: leave it alone
       }
@@ -241,6 +249,7 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
     for (const auto& [created, dir] : bundles) {
       if (dir.filename() == latest.filename() || kept < keep) {
         ++kept;
+        for (const auto& r : lists[dir]) listed.insert(r);
         continue;
       }
       out.bundles.push_back(dir);
@@ -256,6 +265,32 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
       }
     lock.reset();         // removes the lock file
     fs::remove(job, ec);  // a job folder nothing is left in
+  }
+  // Kept results (io/result_store.hpp) that no remaining bundle lists, and temporary files of
+  // writers that died; none while a run holds a job (it may be about to list what it kept).
+  const fs::path results = results_dir(root_);
+  if (out.busy.empty() && fs::is_directory(results, ec)) {
+    std::vector<fs::path> unlisted;
+    for (const auto& e : fs::directory_iterator(results, ec)) {
+      const std::string entry = e.path().filename().string();
+      if (entry.rfind(".tmp-", 0) == 0) {
+        const std::string pid = entry.substr(entry.rfind('-') + 1);
+        const long p = std::strtol(pid.c_str(), nullptr, 10);
+        if (p <= 0 || (::kill(static_cast<pid_t>(p), 0) != 0 && errno == ESRCH)) out.temporaries.push_back(e.path());
+      } else if (e.is_regular_file() && !listed.count(entry)) {
+        unlisted.push_back(e.path());
+      }
+    }
+    std::sort(unlisted.begin(), unlisted.end());
+    for (const auto& f : unlisted) out.results.push_back(f);
+    if (!dry_run)
+      for (const auto& f : out.temporaries)
+        if (f.parent_path() == results) fs::remove(f, ec);
+    if (!dry_run)
+      for (const auto& f : out.results) {
+        fs::remove(f, ec);
+        if (ec) throw IoError("cannot remove " + f.string() + ": " + ec.message());
+      }
   }
   return out;
 }

@@ -2,6 +2,7 @@
 // Versioned bundles on disk:
 //   <output>/<job>/<hash12>/manifest.json + files     one complete bake
 //   <output>/<job>/latest -> <hash12>                 the newest complete bundle (symlink)
+//   <output>/.results/                                results bakes reuse (io/result_store.hpp)
 // A bundle is written into <output>/<job>/.tmp-<hash12>-<pid>, fsynced, and renamed into
 // place; `latest` is replaced last by an atomic rename. A killed run leaves at most a
 // stale .tmp-* folder, which the next run removes. The writer knows nothing of job kinds.
@@ -53,6 +54,7 @@ struct GcResult {
   std::vector<fs::path> bundles;      // old bundles removed (or that would be)
   std::vector<fs::path> temporaries;  // .tmp-*/.latest-* of interrupted runs, stale .lock files
   std::vector<fs::path> busy;         // job folders a live run holds: left alone
+  std::vector<fs::path> results;      // kept results (<output>/.results) no remaining bundle lists
 };
 
 class BundleStore {
@@ -72,7 +74,8 @@ class BundleStore {
   // Prunes bundles of every job under the root, keeping the `keep` newest (by manifest
   // creation time) and always the one `latest` points at, and removes what interrupted runs
   // left (temporary folders, lock files of dead processes). Jobs a live run holds are skipped.
-  // dry_run: changes nothing, returns what would be removed.
+  // Then the kept results (io/result_store.hpp) that no remaining bundle's manifest lists in
+  // `results_kept`, unless a run holds some job. dry_run: changes nothing, returns what would be removed.
   GcResult gc(int keep, bool dry_run = false) const;
   // Writes files and manifest (the manifest's "files" list is filled in here) and
   // publishes the bundle atomically, then updates `latest`. Returns the bundle path.

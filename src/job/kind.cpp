@@ -75,4 +75,9 @@ std::string expanded_program(const std::string& path) {
   return it->second;
 }
 
+nlohmann::json device_identity(const cl_util::DeviceInfo& d) {
+  return {{"name", d.name}, {"platform", d.platform}, {"version", d.version},
+          {"build_options", cl_util::common_build_options(d)}};
+}
+
 }  // namespace specbake

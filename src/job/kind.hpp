@@ -15,15 +15,18 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
 
 #include "cl/device.hpp"
 #include "core/config.hpp"
 #include "io/bundle.hpp"
+#include "io/result_store.hpp"
 
 namespace specbake {
 
@@ -34,16 +37,45 @@ const char* to_string(Stage s);
 // in [0, 1] of the whole job done.
 using Progress = std::function<void(std::string_view what, double fraction)>;
 
-// Results a kind may reuse between bakes of one process that differ only in settings the result
-// does not depend on (the atmosphere's path-traced scene is the same for every texture size):
-// keyed by the kind with everything the value depends on. `sweep` and auto searches share one.
+// Results a kind may reuse between bakes that differ only in settings the result does not
+// depend on (the atmosphere's path-traced scene is the same for every texture size): keyed by
+// the kind with everything the value depends on. `sweep` and auto searches share one in a
+// process; with `disk`, `kept` values also outlive the process (io/result_store.hpp).
 struct Memo {
   std::map<std::string, std::shared_ptr<const void>> items;
+  const ResultStore* disk = nullptr;  // none: this process only
+  // The `disk` entries this memo read or wrote (file names): a bundle's manifest lists them as
+  // `results_kept`, and `gc` keeps the entries some bundle lists.
+  std::set<std::string> disk_used;
+
   template <class T, class Make>
   std::shared_ptr<const T> get(const std::string& key, Make make) {
     auto it = items.find(key);
     if (it == items.end()) it = items.emplace(key, std::make_shared<const T>(make())).first;
     return std::static_pointer_cast<const T>(it->second);
+  }
+  // As `get`, and through `disk`: a value an earlier run kept under `key` is decoded instead of
+  // made (decode(bytes) -> T throws on bytes it cannot read: then it is made again), and a made
+  // one is encoded (encode(const T&) -> std::string) and kept. `key` must name everything the
+  // value depends on, the programs' sources, the device and the tool's version included.
+  template <class T, class Make, class Encode, class Decode>
+  std::shared_ptr<const T> kept(const std::string& key, Make make, Encode encode, Decode decode) {
+    return get<T>(key, [&]() -> T {
+      if (!disk) return make();
+      const std::string name = ResultStore::name_of(key);
+      if (const std::optional<std::string> bytes = disk->get(key)) {
+        try {
+          T value = decode(*bytes);
+          disk_used.insert(name);
+          return value;
+        } catch (const std::exception& e) {
+          spdlog::warn("{}: not used ({}); computing it again", (disk->dir() / name).string(), e.what());
+        }
+      }
+      T value = make();
+      if (disk->put(key, encode(value))) disk_used.insert(name);
+      return value;
+    });
   }
 };
 
@@ -150,5 +182,9 @@ void check_device_memory(const JobSpec& job, const MemoryEstimate& need, const c
 // The bytes every `Kind::programs` entry contributes to the hash: the program's source with
 // every include expanded (as the device compiles it).
 std::string expanded_program(const std::string& path);
+
+// What a device contributes to the identity of a result (a bundle's hash, a kept result's key):
+// its name, platform, version and the options every program is built with there.
+nlohmann::json device_identity(const cl_util::DeviceInfo& d);
 
 }  // namespace specbake

@@ -57,11 +57,6 @@ void request_stop(int signal) { g_stop.store(signal); }
 int stop_requested() { return g_stop.load(); }
 void clear_stop_request() { g_stop.store(0); }
 
-json device_identity(const cl_util::DeviceInfo& d) {
-  return {{"name", d.name}, {"platform", d.platform}, {"version", d.version},
-          {"build_options", cl_util::common_build_options(d)}};
-}
-
 std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector<JobReport>* invalid) {
   std::vector<fs::path> files;
   std::set<fs::path> seen_files;
@@ -362,7 +357,12 @@ std::vector<JobReport> Runner::plan() {
       calibrate_estimate(r.estimate, store.job_dir(it.job->name) / "latest", r.device);
       r.reason = current ? (options_.force ? "up to date; --force rebuilds it" : "up to date; would be skipped")
                          : "would be built";
+      // plan writes nothing: it reads what earlier runs kept (an auto search's scene truth)
+      const ResultStore results(results_dir(it.output), /*writable=*/false);
+      Memo memo;
+      memo.disk = &results;
       JobContext ctx{devices.get(info)};
+      ctx.memo = &memo;
       r.parameters = kind.plan(*it.job, ctx);
       const MemoryEstimate need = kind.memory(*it.job);
       check_device_memory(*it.job, need, info);
@@ -484,7 +484,11 @@ std::vector<JobReport> Runner::run() {
           ev.index = static_cast<int>(index) + 1;
           ev.count = static_cast<int>(items.size());
           ev.job = name;
-          TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, nullptr, r.hash);
+          // results this bake can take from earlier runs, and keeps for later ones
+          const ResultStore results(results_dir(it.output));
+          Memo memo;
+          memo.disk = &results;
+          TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, &memo, r.hash);
           BakeResult& result = baked.result;
           const double bake_s = baked.bake_s;
           for (const auto& [step_name, sec] : baked.steps) stage_s[step_name] = cl_util::seconds_json(sec);
@@ -512,6 +516,7 @@ std::vector<JobReport> Runner::run() {
             if (manifest.contains(b.key())) throw JobError("manifest block '" + b.key() + "' clashes with a standard key");
             manifest[b.key()] = b.value();
           }
+          if (!memo.disk_used.empty()) manifest["results_kept"] = memo.disk_used;
           for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
           for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
           manifest["timings_s"] = {{"bake", bake_s}, {"model_2core_cpu_s", kind.cost_s(*it.job)}, {"steps", stage_s}};

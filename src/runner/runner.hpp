@@ -101,10 +101,6 @@ void request_stop(int signal);
 int stop_requested();  // the signal number, 0 if none
 void clear_stop_request();
 
-// The device as a job's hash names it (what `selector` picks here): name, platform, OpenCL version
-// and the build options every program gets there (cl_util::common_build_options).
-nlohmann::json device_identity(const cl_util::DeviceInfo& d);
-
 class Runner {
  public:
   Runner(std::vector<Config> configs, RunOptions options, RunProgress progress = {}, JobDone done = {});

@@ -325,7 +325,11 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
   std::error_code ec;
   fs::create_directories(res.out, ec);
   if (ec || !fs::is_directory(res.out)) throw IoError("cannot create the sweep folder " + res.out.string());
-  Memo memo;  // e.g. the atmosphere's path-traced scene, traced once for every size
+  // e.g. the atmosphere's path-traced scene: traced once for every size, and kept in the sweep's
+  // folder for the next sweep of the same scene
+  const ResultStore results(results_dir(res.out));
+  Memo memo;
+  memo.disk = &results;
 
   auto write_files = [&] {
     mark_pareto(res.points);

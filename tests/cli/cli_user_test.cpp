@@ -8,6 +8,7 @@
 #include <chrono>
 #include <fstream>
 #include <regex>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -366,15 +367,70 @@ TEST_F(CliUser, GcDryRunAndLeftovers) {
   auto r = run({"gc", (tmp_ / "out").string(), "--keep", "1", "--dry-run"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
   std::smatch m;
-  ASSERT_TRUE(std::regex_search(r.out, m, std::regex("would remove ([12]) bundle\\(s\\) and 2 leftover\\(s\\)"))) << r.out;
+  ASSERT_TRUE(std::regex_search(r.out, m, std::regex("would remove ([12]) bundle\\(s\\), 0 kept result\\(s\\) and 2 leftover\\(s\\)"))) << r.out;
   const std::string n = m[1];
   EXPECT_TRUE(t::snapshot(tmp_ / "out") == before);
   r = run({"gc", (tmp_ / "out").string(), "--keep", "1"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.out.find("removed " + n + " bundle(s) and 2 leftover(s)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("removed " + n + " bundle(s), 0 kept result(s) and 2 leftover(s)"), std::string::npos) << r.out;
   EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism" / ".tmp-0123456789ab-999999"));
   EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism" / ".lock"));
   EXPECT_TRUE(fs::exists(tmp_ / "out" / "prism" / "latest" / "manifest.json"));
+}
+
+// Kept results (<output>/.results): a bake's scene truth is kept there and listed in its
+// manifest; a second bake of the same atmosphere and scene (other sizes) reuses it and lists it
+// too. gc keeps every entry a remaining bundle lists and removes the others (with the dry run
+// listing the same), and a bake after the entry is gone traces the scene again.
+TEST_F(CliUser, GcKeepsTheResultsBundlesList) {
+  const std::string sky = "  - name: sky\n    kind: atmosphere\n    preset: earth\n    orders: 2\n"
+                          "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: MU, mu_s: 8, nu: 4}}\n"
+                          "    scene: {points: 6, relative_se: 0.1}\n";
+  auto sized = [&](int mu) { return std::regex_replace(sky, std::regex("MU"), std::to_string(mu)); };
+  auto find_accuracy = [](const json& list, const std::string& name) -> const json* {
+    for (const auto& a : list)
+      if (a["name"] == name) return &a;
+    return nullptr;
+  };
+  ASSERT_EQ(run({"run", cfg(config(sized(16))).string()}).exit_code, 0);
+  const fs::path results = tmp_ / "out" / ".results";
+  auto entries = [&] {
+    std::set<std::string> names;
+    for (const auto& e : fs::directory_iterator(results)) names.insert(e.path().filename().string());
+    return names;
+  };
+  const std::set<std::string> kept = entries();
+  ASSERT_EQ(kept.size(), 2u);  // the rgb truth and the 48-wavelength reference
+  const json first = t::read_json(tmp_ / "out" / "sky" / "latest" / "manifest.json");
+  EXPECT_EQ(first["results_kept"].get<std::set<std::string>>(), kept);
+  const json* rec = find_accuracy(first["accuracy"], "vs_path_traced");
+  ASSERT_NE(rec, nullptr);
+  EXPECT_TRUE(rec->at("details")["truth"]["reused"].is_null());
+  // other sizes: the same scene, reused
+  ASSERT_EQ(run({"run", cfg(config(sized(32))).string()}).exit_code, 0);
+  const json second = t::read_json(tmp_ / "out" / "sky" / "latest" / "manifest.json");
+  EXPECT_EQ(second["results_kept"].get<std::set<std::string>>(), kept);
+  rec = find_accuracy(second["accuracy"], "vs_path_traced");
+  EXPECT_TRUE(kept.count(rec->at("details")["truth"]["reused"].get<std::string>()));
+  EXPECT_TRUE(kept.count(rec->at("details")["spectral_truth"]["reused"].get<std::string>()));
+  EXPECT_EQ(entries(), kept);
+  // an entry no bundle lists, and a temporary file of a writer that died
+  t::write_file(results / "0123456789abcdef0123456789abcdef.zst", "stale");
+  t::write_file(results / ".tmp-0123456789abcdef0123456789abcdef.zst-999999", "half");
+  auto r = run({"gc", (tmp_ / "out").string(), "--keep", "1", "--dry-run"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("would remove 1 bundle(s), 1 kept result(s) and 1 leftover(s)"), std::string::npos) << r.out;
+  EXPECT_EQ(entries().size(), 4u);
+  r = run({"gc", (tmp_ / "out").string(), "--keep", "1"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("removed 1 bundle(s), 1 kept result(s) and 1 leftover(s)"), std::string::npos) << r.out;
+  EXPECT_EQ(entries(), kept);
+  // without them, the next bake traces again (and keeps the same entries)
+  fs::remove_all(results);
+  ASSERT_EQ(run({"run", cfg(config(sized(24))).string()}).exit_code, 0);
+  const json third = t::read_json(tmp_ / "out" / "sky" / "latest" / "manifest.json");
+  EXPECT_TRUE(find_accuracy(third["accuracy"], "vs_path_traced")->at("details")["truth"]["reused"].is_null());
+  EXPECT_EQ(entries(), kept);
 }
 
 }  // namespace

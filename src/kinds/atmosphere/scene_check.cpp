@@ -9,8 +9,10 @@
 #include <limits>
 
 #include "core/colour_space.hpp"
+#include "core/hash.hpp"
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
+#include "core/version.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/model.hpp"
 
@@ -234,16 +236,40 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   const std::uint64_t seed = sc.seed + static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
   Memo local;
   Memo& keep = memo ? *memo : local;
-  // everything a trace depends on: the model and wavelengths, the scene and its point set, the split
-  auto key = [&](const AtmosphereSpec& traced, const char* what, int split) {
+  // Everything a trace depends on: the model and wavelengths, the scene and its point set, the
+  // walks' options (the split among them), the tracer's program, the device and the tool.
+  const std::string where = "/points " + sha256_hex(truth_points_csv(points)) + "/program " +
+                            sha256_hex(expanded_program(kTruthProgram)) + "/device " +
+                            device_identity(dev.info()).dump() + "/version " + kVersion;
+  json scene = scene_json(sc);  // the tolerances judge the truth; they do not change it
+  scene.erase("tolerance_de2000");
+  scene.erase("tolerance_relative");
+  auto key = [&](const AtmosphereSpec& traced, const char* what, const TruthOptions& o) {
     const json p = parameters_json(traced);
+    const json walks = {{"paths", o.paths},         {"orders", o.orders},
+                        {"seed", o.seed},           {"paths_per_batch", o.paths_per_batch},
+                        {"target", o.target_relative_se}, {"max_paths", o.max_paths},
+                        {"split", o.split_orders},  {"weights", o.target_weights}};
     return std::string("atmosphere.truth/") + what + "/" + p["atmosphere"].dump() + p["channels"].dump() +
-           scene_json(sc).dump() + "/first " + std::to_string(first) + "/split " + std::to_string(split);
+           scene.dump() + "/first " + std::to_string(first) + "/walks " + walks.dump() + where;
   };
   const std::size_t n = points.size();
   const Spectrum sp = spectrum_of(spec);
   auto report = [&](double from, double to) {
     return [&, from, to](std::string_view, double f) { progress("scene check", from + (to - from) * f); };
+  };
+  auto trace = [&](const AtmosphereSpec& traced, const char* what, const TruthOptions& o, double from, double to) {
+    const std::string k = key(traced, what, o);
+    return keep.kept<TruthResult>(
+        k, [&] { return trace_truth(traced, dev, points, o, report(from, to)); }, truth_result_bytes,
+        [&](const std::string& bytes) {
+          TruthResult r = truth_result_from_bytes(bytes);
+          r.reused = ResultStore::name_of(k);
+          spdlog::info("atmosphere: scene check: the path-traced truth at {} reused from {} (kept by an earlier run)",
+                       traced.spectral ? std::to_string(traced.count) + " wavelengths" : std::string("rgb"),
+                       (keep.disk->dir() / r.reused).string());
+          return r;
+        });
   };
 
   // The bake's wavelengths, all orders, split at the bake's orders.
@@ -254,8 +280,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm &&
                            spec.max_nm == ss.max_nm);
   const double split = reference ? 0.5 : 0.9;
-  const auto t_kept = keep.get<TruthResult>(key(spec, "bake", orders_used),
-                                            [&] { return trace_truth(spec, dev, points, o, report(0.0, split)); });
+  const auto t_kept = trace(spec, "bake", o, 0.0, split);
   const TruthResult& t = *t_kept;
   const TruthBundleValues all = to_bundle_units(spec, t), low = to_bundle_units(spec, t.low_part());
   const std::vector<Vec3> t_all = rows_of(all.radiance), t_low = rows_of(low.radiance), se_all = rows_of(all.standard_error);
@@ -266,8 +291,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   std::shared_ptr<const TruthResult> s_kept = std::make_shared<const TruthResult>();
   TruthOptions so = scene_truth_options(ss, seed + kSpectralSeedOffset);
   if (reference)
-    s_kept = keep.get<TruthResult>(key(ss, "reference", 0),
-                                   [&] { return trace_truth(ss, dev, points, so, report(split, 1.0)); });
+    s_kept = trace(ss, "reference", so, split, 1.0);
   const TruthResult& s = *s_kept;
   if (reference) {
     const TruthBundleValues v = to_bundle_units(ss, s);

@@ -724,6 +724,7 @@ nlohmann::json TruthResult::summary() const {
           {"precision", precision},
           {"device", device},
           {"seconds", seconds},
+          {"reused", reused.empty() ? nlohmann::json(nullptr) : nlohmann::json(reused)},
           {"units", "W m^-2 sr^-1 nm^-1 per traced wavelength"}};
 }
 

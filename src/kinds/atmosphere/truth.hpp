@@ -88,7 +88,8 @@ struct TruthResult {
   long long truncated = 0;             // all-orders walks stopped after 1000 events (bias; expected 0)
   std::string precision;               // "float64" or "float32" (device arithmetic)
   std::string device;                  // device description, or "host (C++ double)"
-  double seconds = 0.0;                // wall time (tables and walks)
+  double seconds = 0.0;                // wall time (tables and walks); 0 when reused
+  std::string reused;                  // the kept entry it was read from (a file name); empty: traced now
   double L(std::size_t point, std::size_t channel) const { return radiance[point * channels + channel]; }
   double se(std::size_t point, std::size_t channel) const { return standard_error[point * channels + channel]; }
   // The orders-1..N part as a result of its own (radiance = low), for the same conversions.
@@ -124,6 +125,11 @@ struct TruthBundleValues {
   std::string units;
 };
 TruthBundleValues to_bundle_units(const AtmosphereSpec& spec, const TruthResult& r);
+
+// A result as bytes for a ResultStore (CBOR; every number exact; not `seconds`, so the bytes
+// are the same every run), and back (throws std::exception on bytes that are not such a result).
+std::string truth_result_bytes(const TruthResult& r);
+TruthResult truth_result_from_bytes(const std::string& bytes);
 
 // POINTS.csv: the header kTruthPointsHeader, then one point per line (4 numbers). Blank lines
 // only at the end. altitude >= 0; zenith angles in [0, 180]; azimuth in [-360, 360].

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 
 #include "kinds/atmosphere/model.hpp"
 #include "kinds/atmosphere/truth.hpp"
@@ -107,6 +108,59 @@ std::vector<TruthPoint> parse_truth_points(const std::string& text, const fs::pa
 }
 
 std::vector<TruthPoint> read_truth_points(const fs::path& file) { return parse_truth_points(read_all(file), file); }
+
+std::string truth_result_bytes(const TruthResult& r) {
+  const nlohmann::json j = {{"lambda_nm", r.lambda_nm},
+                            {"channel_names", r.channel_names},
+                            {"points", r.points},
+                            {"channels", r.channels},
+                            {"radiance", r.radiance},
+                            {"standard_error", r.standard_error},
+                            {"paths", r.paths},
+                            {"split_orders", r.split_orders},
+                            {"radiance_low", r.radiance_low},
+                            {"standard_error_low", r.standard_error_low},
+                            {"radiance_high", r.radiance_high},
+                            {"standard_error_high", r.standard_error_high},
+                            {"orders", r.orders},
+                            {"seed", r.seed},
+                            {"mean_events", r.mean_events},
+                            {"truncated", r.truncated},
+                            {"precision", r.precision},
+                            {"device", r.device}};  // not its seconds: the bytes are the same every run
+  const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(j);
+  return std::string(cbor.begin(), cbor.end());
+}
+
+TruthResult truth_result_from_bytes(const std::string& bytes) {
+  const nlohmann::json j = nlohmann::json::from_cbor(bytes);
+  TruthResult r;
+  j.at("lambda_nm").get_to(r.lambda_nm);
+  j.at("channel_names").get_to(r.channel_names);
+  j.at("points").get_to(r.points);
+  j.at("channels").get_to(r.channels);
+  j.at("radiance").get_to(r.radiance);
+  j.at("standard_error").get_to(r.standard_error);
+  j.at("paths").get_to(r.paths);
+  j.at("split_orders").get_to(r.split_orders);
+  j.at("radiance_low").get_to(r.radiance_low);
+  j.at("standard_error_low").get_to(r.standard_error_low);
+  j.at("radiance_high").get_to(r.radiance_high);
+  j.at("standard_error_high").get_to(r.standard_error_high);
+  j.at("orders").get_to(r.orders);
+  j.at("seed").get_to(r.seed);
+  j.at("mean_events").get_to(r.mean_events);
+  j.at("truncated").get_to(r.truncated);
+  j.at("precision").get_to(r.precision);
+  j.at("device").get_to(r.device);
+  const std::size_t cells = r.points * r.channels;
+  const std::size_t split = r.split_orders > 0 ? cells : 0;
+  if (r.channels != r.lambda_nm.size() || r.channels != r.channel_names.size() || r.radiance.size() != cells ||
+      r.standard_error.size() != cells || r.paths.size() != r.points || r.radiance_low.size() != split ||
+      r.standard_error_low.size() != split || r.radiance_high.size() != split || r.standard_error_high.size() != split)
+    throw std::runtime_error("a path-traced result whose arrays do not match its points and channels");
+  return r;
+}
 
 std::string truth_points_csv(const std::vector<TruthPoint>& points) {
   std::string s = std::string(kTruthPointsHeader) + "\n";
