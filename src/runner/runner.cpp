@@ -388,8 +388,9 @@ void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
 }
 
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
-                     const RunProgress& progress, bool judge, Memo* memo, const std::string& bundle_hash) {
-  const double estimate_s = kind.cost_s(job);
+                     const RunProgress& progress, bool judge, Memo* memo, const std::string& bundle_hash,
+                     double estimate_s) {
+  if (estimate_s < 0.0) estimate_s = kind.cost_s(job);
   const auto tb = Clock::now();
   JobContext ctx{dev};
   ctx.judge = judge;
@@ -410,8 +411,8 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
     ev.what = std::string(what);
     ev.fraction = std::clamp(f, 0.0, 1.0);
     const double elapsed = seconds_since(tb);
-    // ETA: from the measured rate once a few percent are done, else from the cost model
-    // (calibrated on a 2-core CPU; other devices differ).
+    // ETA: from the measured rate once a few percent are done, else from the estimate (`run`: the
+    // cost model scaled by the job's last bake on this device, as `plan` shows it).
     ev.eta_s = ev.fraction >= 0.05 ? elapsed * (1.0 - ev.fraction) / ev.fraction : std::max(0.0, estimate_s - elapsed);
     spdlog::trace("{}: {} {}: {:.1f} %", ev.job, to_string(ev.stage), ev.what, 100.0 * ev.fraction);
     if (progress) progress(ev);
@@ -488,7 +489,10 @@ std::vector<JobReport> Runner::run() {
           const ResultStore results(results_dir(it.output));
           Memo memo;
           memo.disk = &results;
-          TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, &memo, r.hash);
+          json estimate = estimate_json(kind, *it.job);
+          calibrate_estimate(estimate, store.job_dir(name) / "latest", r.device);
+          TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, &memo, r.hash,
+                                       estimate.value("seconds", -1.0));
           BakeResult& result = baked.result;
           const double bake_s = baked.bake_s;
           for (const auto& [step_name, sec] : baked.steps) stage_s[step_name] = cl_util::seconds_json(sec);

@@ -84,7 +84,9 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
 // safe point and throws Interrupted there.
 // A bake through the kind's table entry, timed per step (plan, compute, check, files) with the
 // device's profiler: what `run` publishes and `sweep` measures. `ev` names the job for progress
-// events; `judge` and `memo` as in JobContext. Throws what the bake throws, Interrupted on a stop request.
+// events; `judge` and `memo` as in JobContext; `estimate_s` is the progress line's ETA until 5 %
+// of the job is done (< 0: the kind's 2-core CPU model). Throws what the bake throws, Interrupted
+// on a stop request.
 struct TimedBake {
   BakeResult result;
   double bake_s = 0.0;
@@ -92,7 +94,7 @@ struct TimedBake {
 };
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
                      const RunProgress& progress, bool judge = true, Memo* memo = nullptr,
-                     const std::string& bundle_hash = {});
+                     const std::string& bundle_hash = {}, double estimate_s = -1.0);
 // Refuses (InputError at the job's entry) a job whose host-memory estimate exceeds what the
 // machine has available.
 void check_host_memory(const JobSpec& job, const MemoryEstimate& need);
