@@ -194,6 +194,7 @@ void BundleStore::clean_stale(const std::string& job) const {
 
 GcResult BundleStore::gc(int keep, bool dry_run) const {
   GcResult out;
+  const fs::file_time_type started = fs::file_time_type::clock::now();
   std::error_code ec;
   if (!fs::is_directory(root_, ec)) throw IoError("no output folder " + root_.string());
   std::vector<fs::path> jobs;
@@ -266,8 +267,10 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
     lock.reset();         // removes the lock file
     fs::remove(job, ec);  // a job folder nothing is left in
   }
-  // Kept results (io/result_store.hpp) that no remaining bundle lists, and temporary files of
-  // writers that died; none while a run holds a job (it may be about to list what it kept).
+  // Kept results (io/result_store.hpp) that no remaining bundle lists (the manifest key
+  // `results_kept` the runner writes), and temporary files of writers that died. None while a
+  // run holds a job (it may be about to list what it kept), and none written since gc began (by
+  // a run that took a job after gc had passed it).
   const fs::path results = results_dir(root_);
   if (out.busy.empty() && fs::is_directory(results, ec)) {
     std::vector<fs::path> unlisted;
@@ -277,7 +280,7 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
         const std::string pid = entry.substr(entry.rfind('-') + 1);
         const long p = std::strtol(pid.c_str(), nullptr, 10);
         if (p <= 0 || (::kill(static_cast<pid_t>(p), 0) != 0 && errno == ESRCH)) out.temporaries.push_back(e.path());
-      } else if (e.is_regular_file() && !listed.count(entry)) {
+      } else if (e.is_regular_file() && !listed.count(entry) && fs::last_write_time(e.path(), ec) < started && !ec) {
         unlisted.push_back(e.path());
       }
     }

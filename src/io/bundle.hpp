@@ -75,7 +75,7 @@ class BundleStore {
   // creation time) and always the one `latest` points at, and removes what interrupted runs
   // left (temporary folders, lock files of dead processes). Jobs a live run holds are skipped.
   // Then the kept results (io/result_store.hpp) that no remaining bundle's manifest lists in
-  // `results_kept`, unless a run holds some job. dry_run: changes nothing, returns what would be removed.
+  // `results_kept` and that were written before gc began, unless a run holds some job. dry_run: changes nothing, returns what would be removed.
   GcResult gc(int keep, bool dry_run = false) const;
   // Writes files and manifest (the manifest's "files" list is filled in here) and
   // publishes the bundle atomically, then updates `latest`. Returns the bundle path.

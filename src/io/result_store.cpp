@@ -1,11 +1,12 @@
 #include "io/result_store.hpp"
 
+#include <fcntl.h>
 #include <unistd.h>
 #include <zstd.h>
 
+#include <cstdint>
 #include <fstream>
 #include <memory>
-#include <sstream>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -21,6 +22,9 @@ using json = nlohmann::json;
 
 // Compression level: the entries are small (a scene's truth: ~0.1–2 MB of doubles); speed over ratio.
 constexpr int kLevel = 3;
+// What a read accepts: no entry is near 1 GiB, and doubles do not compress 4096-fold.
+constexpr std::uintmax_t kMaxBytes = std::uintmax_t{1} << 30;
+constexpr unsigned long long kMaxRatio = 4096;
 
 }  // namespace
 
@@ -34,20 +38,22 @@ std::optional<std::string> ResultStore::get(std::string_view key) const {
     spdlog::warn("{}: not used ({}); computing it again", file.string(), why);
     return std::nullopt;
   };
-  std::ifstream in(file, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  if (!in.good() && !in.eof()) return miss("unreadable");
-  const std::string packed = s.str();
-  const unsigned long long size = ZSTD_getFrameContentSize(packed.data(), packed.size());
-  if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN || size > (1ULL << 34))
-    return miss("not a Zstandard frame of known size");
-  std::vector<std::uint8_t> raw(size);
-  const std::size_t n = ZSTD_decompress(raw.data(), raw.size(), packed.data(), packed.size());
-  if (ZSTD_isError(n) || n != size) return miss(std::string("damaged: ") + (ZSTD_isError(n) ? ZSTD_getErrorName(n) : "short"));
-  json entry;
   try {
-    entry = json::from_cbor(raw);
+    const std::uintmax_t packed_size = fs::file_size(file);
+    if (packed_size > kMaxBytes) return miss("larger than any kept result");
+    std::string packed(packed_size, '\0');
+    std::ifstream in(file, std::ios::binary);
+    in.read(packed.data(), static_cast<std::streamsize>(packed.size()));
+    if (!in || static_cast<std::uintmax_t>(in.gcount()) != packed_size) return miss("unreadable");
+    // The frame's header says how large the content is; a damaged header is refused before
+    // anything that large is allocated (the checksum is only checked while decompressing).
+    const unsigned long long size = ZSTD_getFrameContentSize(packed.data(), packed.size());
+    if (size == ZSTD_CONTENTSIZE_ERROR || size == ZSTD_CONTENTSIZE_UNKNOWN) return miss("not a Zstandard frame of known size");
+    if (size > kMaxBytes || size > kMaxRatio * packed_size + 65536) return miss("damaged: implausible content size");
+    std::vector<std::uint8_t> raw(size);
+    const std::size_t n = ZSTD_decompress(raw.data(), raw.size(), packed.data(), packed.size());
+    if (ZSTD_isError(n) || n != size) return miss(std::string("damaged: ") + (ZSTD_isError(n) ? ZSTD_getErrorName(n) : "short"));
+    const json entry = json::from_cbor(raw);
     if (entry.at("key").get<std::string>() != key) return miss("kept for another key");
     const auto& bytes = entry.at("value").get_binary();
     spdlog::debug("{}: reused", file.string());
@@ -79,6 +85,11 @@ bool ResultStore::put(std::string_view key, std::string_view bytes) const {
       out.close();
       if (!out) throw std::runtime_error("cannot write " + tmp.string());
     }
+    // on disk before it is renamed into place: after a crash the name holds a whole entry or none
+    const int fd = ::open(tmp.c_str(), O_RDONLY | O_CLOEXEC);
+    const bool synced = fd >= 0 && ::fsync(fd) == 0;
+    if (fd >= 0) ::close(fd);
+    if (!synced) throw std::runtime_error("cannot sync " + tmp.string());
     fs::rename(tmp, file);
     return true;
   } catch (const std::exception& e) {

@@ -6,8 +6,8 @@
 // <name> is the first 32 hex digits of SHA-256(key). The caller's key names everything the
 // bytes depend on (inputs, the programs' sources, the device, the tool's version); a read
 // compares the stored key with it, so a colliding name or a damaged file is a miss (logged),
-// never a wrong result. Writes go to a temporary file renamed into place, so a reader sees a
-// whole entry or none. The store knows nothing of what the bytes mean.
+// never a wrong result. Writes go to a temporary file, synced and renamed into place, so a
+// reader sees a whole entry or none. The store knows nothing of what the bytes mean.
 #include <filesystem>
 #include <optional>
 #include <string>

@@ -40,13 +40,13 @@ using Progress = std::function<void(std::string_view what, double fraction)>;
 // Results a kind may reuse between bakes that differ only in settings the result does not
 // depend on (the atmosphere's path-traced scene is the same for every texture size): keyed by
 // the kind with everything the value depends on. `sweep` and auto searches share one in a
-// process; with `disk`, `kept` values also outlive the process (io/result_store.hpp).
+// process; with a `store`, `kept` values also outlive the process (io/result_store.hpp).
 struct Memo {
   std::map<std::string, std::shared_ptr<const void>> items;
-  const ResultStore* disk = nullptr;  // none: this process only
-  // The `disk` entries this memo read or wrote (file names): a bundle's manifest lists them as
+  const ResultStore* store = nullptr;  // none: this process only
+  // The `store` entries this memo read or wrote (file names): a bundle's manifest lists them as
   // `results_kept`, and `gc` keeps the entries some bundle lists.
-  std::set<std::string> disk_used;
+  std::set<std::string> store_used;
 
   template <class T, class Make>
   std::shared_ptr<const T> get(const std::string& key, Make make) {
@@ -54,26 +54,26 @@ struct Memo {
     if (it == items.end()) it = items.emplace(key, std::make_shared<const T>(make())).first;
     return std::static_pointer_cast<const T>(it->second);
   }
-  // As `get`, and through `disk`: a value an earlier run kept under `key` is decoded instead of
+  // As `get`, and through `store`: a value an earlier run kept under `key` is decoded instead of
   // made (decode(bytes) -> T throws on bytes it cannot read: then it is made again), and a made
   // one is encoded (encode(const T&) -> std::string) and kept. `key` must name everything the
   // value depends on, the programs' sources, the device and the tool's version included.
   template <class T, class Make, class Encode, class Decode>
   std::shared_ptr<const T> kept(const std::string& key, Make make, Encode encode, Decode decode) {
     return get<T>(key, [&]() -> T {
-      if (!disk) return make();
+      if (!store) return make();
       const std::string name = ResultStore::name_of(key);
-      if (const std::optional<std::string> bytes = disk->get(key)) {
+      if (const std::optional<std::string> bytes = store->get(key)) {
         try {
           T value = decode(*bytes);
-          disk_used.insert(name);
+          store_used.insert(name);
           return value;
         } catch (const std::exception& e) {
-          spdlog::warn("{}: not used ({}); computing it again", (disk->dir() / name).string(), e.what());
+          spdlog::warn("{}: not used ({}); computing it again", (store->dir() / name).string(), e.what());
         }
       }
       T value = make();
-      if (disk->put(key, encode(value))) disk_used.insert(name);
+      if (store->put(key, encode(value))) store_used.insert(name);
       return value;
     });
   }

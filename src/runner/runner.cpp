@@ -360,7 +360,7 @@ std::vector<JobReport> Runner::plan() {
       // plan writes nothing: it reads what earlier runs kept (an auto search's scene truth)
       const ResultStore results(results_dir(it.output), /*writable=*/false);
       Memo memo;
-      memo.disk = &results;
+      memo.store = &results;
       JobContext ctx{devices.get(info)};
       ctx.memo = &memo;
       r.parameters = kind.plan(*it.job, ctx);
@@ -488,7 +488,7 @@ std::vector<JobReport> Runner::run() {
           // results this bake can take from earlier runs, and keeps for later ones
           const ResultStore results(results_dir(it.output));
           Memo memo;
-          memo.disk = &results;
+          memo.store = &results;
           json estimate = estimate_json(kind, *it.job);
           calibrate_estimate(estimate, store.job_dir(name) / "latest", r.device);
           TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, &memo, r.hash,
@@ -520,7 +520,7 @@ std::vector<JobReport> Runner::run() {
             if (manifest.contains(b.key())) throw JobError("manifest block '" + b.key() + "' clashes with a standard key");
             manifest[b.key()] = b.value();
           }
-          if (!memo.disk_used.empty()) manifest["results_kept"] = memo.disk_used;
+          if (!memo.store_used.empty()) manifest["results_kept"] = memo.store_used;
           for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
           for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
           manifest["timings_s"] = {{"bake", bake_s}, {"model_2core_cpu_s", kind.cost_s(*it.job)}, {"steps", stage_s}};

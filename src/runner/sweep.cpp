@@ -329,7 +329,7 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
   // folder for the next sweep of the same scene
   const ResultStore results(results_dir(res.out));
   Memo memo;
-  memo.disk = &results;
+  memo.store = &results;
 
   auto write_files = [&] {
     mark_pareto(res.points);

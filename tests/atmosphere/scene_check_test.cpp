@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <regex>
+#include <set>
 #include <sstream>
 
 #include "atmosphere/single_scattering.hpp"
@@ -298,9 +299,10 @@ TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
 }
 
 // The truth kept between runs (Memo with a ResultStore): a second check with a fresh memo
-// reads it instead of tracing and gives the same bytes (scene_check.csv) and record; a scene
-// with another seed, or a split at other orders, is traced anew (the 48-wavelength reference,
-// which has no split, is reused); a damaged entry is traced again, with the same result.
+// reads it instead of tracing and gives the same bytes (scene_check.csv) and record, also for
+// other texture sizes; a scene with another seed, another ground albedo, or a split at other
+// orders is traced anew (the 48-wavelength reference, which has no split, is reused there); a
+// damaged entry is traced again, with the same result.
 TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
   t::TempDir dir;
   const AtmosphereSpec s = spec_of(
@@ -309,41 +311,47 @@ TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
       "    scene: {points: 6, relative_se: 0.1}\n");
   const Baked b = bake_luts(s, t::shared_device(), [](std::string_view, double) {}, 0);
   const ResultStore store(dir / "results");
-  auto check = [&](const AtmosphereSpec& spec, int orders, Memo& memo) {
-    return check_scene(spec, b.luts, orders, t::shared_device(), [](std::string_view, double) {}, &memo);
+  // each check with a fresh memo (as a new run has): only the store carries results over
+  auto check = [&](const AtmosphereSpec& spec, int orders, std::set<std::string>* used = nullptr) {
+    Memo memo;
+    memo.store = &store;
+    SceneCheck c = check_scene(spec, b.luts, orders, t::shared_device(), [](std::string_view, double) {}, &memo);
+    if (used) *used = memo.store_used;
+    return c;
   };
-  auto reused = [](const SceneCheck& c, const char* which) { return c.record.details[which]["reused"]; };
-  Memo m1;
-  m1.disk = &store;
-  const SceneCheck c1 = check(s, b.orders_used, m1);
+  auto reused = [](const SceneCheck& c, const char* which) { return c.record.details.at(which).at("reused"); };
+  std::set<std::string> used1, used2;
+  const SceneCheck c1 = check(s, b.orders_used, &used1);
   EXPECT_TRUE(reused(c1, "truth").is_null());
   EXPECT_TRUE(reused(c1, "spectral_truth").is_null());
-  ASSERT_EQ(m1.disk_used.size(), 2u);
-  for (const auto& name : m1.disk_used) EXPECT_TRUE(std::filesystem::is_regular_file(dir / "results" / name)) << name;
+  ASSERT_EQ(used1.size(), 2u);
+  for (const auto& name : used1) EXPECT_TRUE(std::filesystem::is_regular_file(dir / "results" / name)) << name;
 
-  Memo m2;
-  m2.disk = &store;
-  const SceneCheck c2 = check(s, b.orders_used, m2);
-  EXPECT_EQ(m2.disk_used, m1.disk_used);
-  EXPECT_TRUE(m1.disk_used.count(reused(c2, "truth").get<std::string>()));
-  EXPECT_TRUE(m1.disk_used.count(reused(c2, "spectral_truth").get<std::string>()));
+  const SceneCheck c2 = check(s, b.orders_used, &used2);
+  EXPECT_EQ(used2, used1);
+  EXPECT_TRUE(used1.count(reused(c2, "truth").get<std::string>()));
+  EXPECT_TRUE(used1.count(reused(c2, "spectral_truth").get<std::string>()));
   EXPECT_EQ(c2.points_csv.bytes, c1.points_csv.bytes);
   EXPECT_EQ(c2.record.value, c1.record.value);
-  EXPECT_EQ(c2.record.details["parts"], c1.record.details["parts"]);
-  EXPECT_EQ(c2.record.details["standard_error"], c1.record.details["standard_error"]);
+  EXPECT_EQ(c2.record.details.at("parts"), c1.record.details.at("parts"));
+  EXPECT_EQ(c2.record.details.at("standard_error"), c1.record.details.at("standard_error"));
 
   AtmosphereSpec other = s;
   other.scene.seed += 1;
-  Memo m3;
-  m3.disk = &store;
-  const SceneCheck c3 = check(other, b.orders_used, m3);
+  const SceneCheck c3 = check(other, b.orders_used);
   EXPECT_TRUE(reused(c3, "truth").is_null());
   EXPECT_TRUE(reused(c3, "spectral_truth").is_null());
   EXPECT_NE(c3.points_csv.bytes, c1.points_csv.bytes);
+  AtmosphereSpec brighter = s;  // the same points, another ground: another truth
+  brighter.ground_albedo = 0.3;
+  const SceneCheck c3b = check(brighter, b.orders_used);
+  EXPECT_TRUE(reused(c3b, "truth").is_null());
+  EXPECT_TRUE(reused(c3b, "spectral_truth").is_null());
+  AtmosphereSpec finer = s;  // other texture sizes: the same truth
+  finer.scattering_mu = 64;
+  EXPECT_FALSE(reused(check(finer, b.orders_used), "truth").is_null());
 
-  Memo m4;
-  m4.disk = &store;
-  const SceneCheck c4 = check(s, b.orders_used - 1, m4);  // split at order 1: the rgb walks differ
+  const SceneCheck c4 = check(s, b.orders_used - 1);  // split at order 1: the rgb walks differ
   EXPECT_TRUE(reused(c4, "truth").is_null());
   EXPECT_FALSE(reused(c4, "spectral_truth").is_null());
 
@@ -352,15 +360,11 @@ TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
   std::string bytes = t::read_file(dir / "results" / rgb);
   bytes[bytes.size() / 2] = static_cast<char>(bytes[bytes.size() / 2] ^ 0x5a);
   t::write_file(dir / "results" / rgb, bytes);
-  Memo m5;
-  m5.disk = &store;
-  const SceneCheck c5 = check(s, b.orders_used, m5);
+  const SceneCheck c5 = check(s, b.orders_used);
   EXPECT_TRUE(reused(c5, "truth").is_null());
   EXPECT_FALSE(reused(c5, "spectral_truth").is_null());
   EXPECT_EQ(c5.points_csv.bytes, c1.points_csv.bytes);
-  Memo m6;
-  m6.disk = &store;
-  EXPECT_FALSE(reused(check(s, b.orders_used, m6), "truth").is_null());  // kept again, whole
+  EXPECT_FALSE(reused(check(s, b.orders_used), "truth").is_null());  // kept again, whole
 }
 
 // ---- the hard cases ------------------------------------------------------------------------

@@ -12,6 +12,7 @@
 #include <string>
 #include <thread>
 
+#include "io/bundle.hpp"
 #include "support/testing.hpp"
 
 namespace {
@@ -44,6 +45,14 @@ class CliUser : public ::testing::Test {
   }
   t::CliResult run(std::vector<std::string> args, const std::vector<std::string>& env = {}) {
     return t::run_cli(args, tmp_.path(), env);
+  }
+  // What `specbake ARGS` writes on a terminal (`script` gives it one); fails the test unless it exits 0.
+  std::string run_on_terminal(const std::string& args) {
+    const fs::path log = tmp_ / "tty.txt";
+    const std::string cmd =
+        "script -qec '" + std::string(SPECBAKE_EXE) + " " + args + "' /dev/null > " + log.string() + " 2>&1";
+    EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    return t::read_file(log);
   }
   t::TempDir tmp_;
 };
@@ -379,58 +388,74 @@ TEST_F(CliUser, GcDryRunAndLeftovers) {
 }
 
 // Kept results (<output>/.results): a bake's scene truth is kept there and listed in its
-// manifest; a second bake of the same atmosphere and scene (other sizes) reuses it and lists it
-// too. gc keeps every entry a remaining bundle lists and removes the others (with the dry run
-// listing the same), and a bake after the entry is gone traces the scene again.
+// manifest; a bake of the same atmosphere and scene at other sizes reuses it and lists it too;
+// another scene seed keeps other entries. gc keeps the entries a remaining bundle lists, removes
+// those only removed bundles listed and those no bundle lists (the dry run lists the same),
+// leaves them all while a run holds a job, and a bake after they are gone traces again.
 TEST_F(CliUser, GcKeepsTheResultsBundlesList) {
   const std::string sky = "  - name: sky\n    kind: atmosphere\n    preset: earth\n    orders: 2\n"
                           "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: MU, mu_s: 8, nu: 4}}\n"
-                          "    scene: {points: 6, relative_se: 0.1}\n";
-  auto sized = [&](int mu) { return std::regex_replace(sky, std::regex("MU"), std::to_string(mu)); };
-  auto find_accuracy = [](const json& list, const std::string& name) -> const json* {
-    for (const auto& a : list)
-      if (a["name"] == name) return &a;
-    return nullptr;
+                          "    scene: {points: 6, relative_se: 0.1, seed: SEED}\n";
+  auto sky_at = [&](int mu, int seed) {
+    return cfg(config(std::regex_replace(std::regex_replace(sky, std::regex("MU"), std::to_string(mu)),
+                                         std::regex("SEED"), std::to_string(seed))));
   };
-  ASSERT_EQ(run({"run", cfg(config(sized(16))).string()}).exit_code, 0);
-  const fs::path results = tmp_ / "out" / ".results";
+  auto truth_of = [](const json& manifest, const char* which) {
+    for (const auto& a : manifest.at("accuracy"))
+      if (a.at("name") == "vs_path_traced") return a.at("details").at(which).at("reused");
+    ADD_FAILURE() << "no vs_path_traced record";
+    return json();
+  };
+  const fs::path results = tmp_ / "out" / ".results", latest = tmp_ / "out" / "sky" / "latest";
   auto entries = [&] {
     std::set<std::string> names;
     for (const auto& e : fs::directory_iterator(results)) names.insert(e.path().filename().string());
     return names;
   };
-  const std::set<std::string> kept = entries();
-  ASSERT_EQ(kept.size(), 2u);  // the rgb truth and the 48-wavelength reference
-  const json first = t::read_json(tmp_ / "out" / "sky" / "latest" / "manifest.json");
-  EXPECT_EQ(first["results_kept"].get<std::set<std::string>>(), kept);
-  const json* rec = find_accuracy(first["accuracy"], "vs_path_traced");
-  ASSERT_NE(rec, nullptr);
-  EXPECT_TRUE(rec->at("details")["truth"]["reused"].is_null());
+  ASSERT_EQ(run({"run", sky_at(16, 1).string()}).exit_code, 0);
+  const std::set<std::string> first = entries();
+  ASSERT_EQ(first.size(), 2u);  // the rgb truth and the 48-wavelength reference
+  json m = t::read_json(latest / "manifest.json");
+  EXPECT_EQ(m.at("results_kept").get<std::set<std::string>>(), first);
+  EXPECT_TRUE(truth_of(m, "truth").is_null());
   // other sizes: the same scene, reused
-  ASSERT_EQ(run({"run", cfg(config(sized(32))).string()}).exit_code, 0);
-  const json second = t::read_json(tmp_ / "out" / "sky" / "latest" / "manifest.json");
-  EXPECT_EQ(second["results_kept"].get<std::set<std::string>>(), kept);
-  rec = find_accuracy(second["accuracy"], "vs_path_traced");
-  EXPECT_TRUE(kept.count(rec->at("details")["truth"]["reused"].get<std::string>()));
-  EXPECT_TRUE(kept.count(rec->at("details")["spectral_truth"]["reused"].get<std::string>()));
-  EXPECT_EQ(entries(), kept);
+  ASSERT_EQ(run({"run", sky_at(32, 1).string()}).exit_code, 0);
+  m = t::read_json(latest / "manifest.json");
+  EXPECT_EQ(m.at("results_kept").get<std::set<std::string>>(), first);
+  EXPECT_TRUE(first.count(truth_of(m, "truth").get<std::string>()));
+  EXPECT_TRUE(first.count(truth_of(m, "spectral_truth").get<std::string>()));
+  EXPECT_EQ(entries(), first);
+  // another scene seed: other points, other entries; only this (the latest) bundle lists them
+  ASSERT_EQ(run({"run", sky_at(24, 2).string()}).exit_code, 0);
+  m = t::read_json(latest / "manifest.json");
+  const std::set<std::string> second = m.at("results_kept").get<std::set<std::string>>();
+  ASSERT_EQ(second.size(), 2u);
+  for (const auto& name : second) EXPECT_FALSE(first.count(name)) << name;
   // an entry no bundle lists, and a temporary file of a writer that died
   t::write_file(results / "0123456789abcdef0123456789abcdef.zst", "stale");
   t::write_file(results / ".tmp-0123456789abcdef0123456789abcdef.zst-999999", "half");
+  {
+    // a run holding a job: gc removes old bundles of the other jobs only, and no kept result
+    specbake::JobLock held(tmp_ / "out" / "sky", "sky");
+    const auto r = run({"gc", (tmp_ / "out").string(), "--keep", "1"});
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("removed 0 bundle(s), 0 kept result(s) and 0 leftover(s)"), std::string::npos) << r.out;
+    EXPECT_EQ(entries().size(), 6u);
+  }
+  // --keep 1: the two bundles of seed 1 go, and with them the entries only they listed
   auto r = run({"gc", (tmp_ / "out").string(), "--keep", "1", "--dry-run"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.out.find("would remove 1 bundle(s), 1 kept result(s) and 1 leftover(s)"), std::string::npos) << r.out;
-  EXPECT_EQ(entries().size(), 4u);
+  EXPECT_NE(r.out.find("would remove 2 bundle(s), 3 kept result(s) and 1 leftover(s)"), std::string::npos) << r.out;
+  EXPECT_EQ(entries().size(), 6u);
   r = run({"gc", (tmp_ / "out").string(), "--keep", "1"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.out.find("removed 1 bundle(s), 1 kept result(s) and 1 leftover(s)"), std::string::npos) << r.out;
-  EXPECT_EQ(entries(), kept);
+  EXPECT_NE(r.out.find("removed 2 bundle(s), 3 kept result(s) and 1 leftover(s)"), std::string::npos) << r.out;
+  EXPECT_EQ(entries(), second);
   // without them, the next bake traces again (and keeps the same entries)
   fs::remove_all(results);
-  ASSERT_EQ(run({"run", cfg(config(sized(24))).string()}).exit_code, 0);
-  const json third = t::read_json(tmp_ / "out" / "sky" / "latest" / "manifest.json");
-  EXPECT_TRUE(find_accuracy(third["accuracy"], "vs_path_traced")->at("details")["truth"]["reused"].is_null());
-  EXPECT_EQ(entries(), kept);
+  ASSERT_EQ(run({"run", sky_at(24, 2).string(), "--force"}).exit_code, 0);
+  EXPECT_TRUE(truth_of(t::read_json(latest / "manifest.json"), "truth").is_null());
+  EXPECT_EQ(entries(), second);
 }
 
 }  // namespace
@@ -442,12 +467,7 @@ namespace {
 TEST_F(CliUser, LiveProgressOnATerminal) {
   if (std::system("command -v script > /dev/null 2>&1") != 0) GTEST_SKIP() << "no `script` to provide a terminal";
   const fs::path c = cfg(config(kSky));
-  const fs::path log = tmp_ / "tty.txt";
-  const std::string cmd = "script -qec '" + std::string(SPECBAKE_EXE) + " run " + c.string() + " --out " +
-                          (tmp_ / "out").string() + "' /dev/null > " + log.string() + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0);
-  std::ifstream in(log);
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string text = run_on_terminal("run " + c.string() + " --out " + (tmp_ / "out").string());
   EXPECT_NE(text.find("\r\033[K[1/1] sky: compute, order 2: scattering density"), std::string::npos) << text;
   EXPECT_TRUE(std::regex_search(text, std::regex("[0-9]+ %, ETA [0-9.]+ s"))) << text;
   EXPECT_NE(text.find("1 built"), std::string::npos) << text;
@@ -466,12 +486,7 @@ TEST_F(CliUser, TheFirstEtaIsTheCalibratedEstimate) {
   ASSERT_LT(m["timings_s"]["model_2core_cpu_s"].get<double>(), 60.0);
   m["timings_s"]["bake"] = 5000.0;
   t::write_file(manifest, m.dump(2));
-  const fs::path log = tmp_ / "tty.txt";
-  const std::string cmd = "script -qec '" + std::string(SPECBAKE_EXE) + " run " + c.string() + " --force --out " +
-                          (tmp_ / "out").string() + "' /dev/null > " + log.string() + " 2>&1";
-  ASSERT_EQ(std::system(cmd.c_str()), 0);
-  std::ifstream in(log);
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string text = run_on_terminal("run " + c.string() + " --force --out " + (tmp_ / "out").string());
   EXPECT_TRUE(std::regex_search(text, std::regex("sky: plan, planning +0 %, ETA 8[23] min [0-9]{2} s"))) << text;
 }
 

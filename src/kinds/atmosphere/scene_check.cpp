@@ -237,13 +237,16 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   Memo local;
   Memo& keep = memo ? *memo : local;
   // Everything a trace depends on: the model and wavelengths, the scene and its point set, the
-  // walks' options (the split among them), the tracer's program, the device and the tool.
+  // walks' options (the split among them), the tracer's program and host code, the device and
+  // the tool.
   const std::string where = "/points " + sha256_hex(truth_points_csv(points)) + "/program " +
-                            sha256_hex(expanded_program(kTruthProgram)) + "/device " +
+                            sha256_hex(expanded_program(kTruthProgram)) + "/host " + kHostSources + "/device " +
                             device_identity(dev.info()).dump() + "/version " + kVersion;
   json scene = scene_json(sc);  // the tolerances judge the truth; they do not change it
-  scene.erase("tolerance_de2000");
-  scene.erase("tolerance_relative");
+  if (scene.is_object()) {
+    scene.erase("tolerance_de2000");
+    scene.erase("tolerance_relative");
+  }
   auto key = [&](const AtmosphereSpec& traced, const char* what, const TruthOptions& o) {
     const json p = parameters_json(traced);
     const json walks = {{"paths", o.paths},         {"orders", o.orders},
@@ -267,7 +270,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
           r.reused = ResultStore::name_of(k);
           spdlog::info("atmosphere: scene check: the path-traced truth at {} reused from {} (kept by an earlier run)",
                        traced.spectral ? std::to_string(traced.count) + " wavelengths" : std::string("rgb"),
-                       (keep.disk->dir() / r.reused).string());
+                       (keep.store->dir() / r.reused).string());
           return r;
         });
   };

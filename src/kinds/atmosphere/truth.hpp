@@ -36,6 +36,10 @@ namespace fs = std::filesystem;
 // The tracer's OpenCL program (the atmosphere kind's programs: its expanded source enters the hash
 // of every atmosphere bake).
 inline constexpr const char* kTruthProgram = "kernels/atmosphere/truth_kernels.cl";
+// SHA-256 of the host sources and data this kind's results depend on (src/kinds/atmosphere/,
+// src/core/, data/; generated at build time by cmake/source_ids.cmake): with the programs'
+// expanded sources, what identifies the code of a kept truth.
+extern const char* const kHostSources;
 
 // One view: a camera at altitude_km above the ground (above the top of the atmosphere: the
 // view enters it, as GetSkyRadiance does), looking at view_zenith_deg from the local zenith,
