@@ -499,15 +499,15 @@ FN void get_irradiance(const AtmosphereParameters* a, GLOBAL const real* E, real
   texture_2d(E, a->irradiance_w, a->irradiance_h, u, v, out);
 }
 /* get_irradiance at h = 0: v is the centre of row 0, so the bilinear filter is a lerp along
- * that row at x = u·W − 0.5 = (0.5 μ_s + 0.5)(W − 1). */
-FN void get_ground_irradiance(const AtmosphereParameters* a, GLOBAL const real* E, real mu_s, real* out) {
+ * that row at x = u·W − 0.5 = (0.5 μ_s + 0.5)(W − 1): the ground irradiance at mu_s is
+ * (1 − f)·E[t0 + c] + f·E[t1 + c]. */
+FN void ground_irradiance_taps(const AtmosphereParameters* a, real mu_s, int* t0, int* t1, real* f) {
   const int w = a->irradiance_w;
   const real x = (mu_s * R(0.5) + R(0.5)) * (real)(w - 1);
   const real x0 = floor(x);
-  const real f = x - x0;
-  GLOBAL const real* t0 = E + clamp_int((int)x0, 0, w - 1) * NCH;
-  GLOBAL const real* t1 = E + clamp_int((int)x0 + 1, 0, w - 1) * NCH;
-  for (int c = 0; c < NCH; ++c) out[c] = (R(1.0) - f) * t0[c] + f * t1[c];
+  *f = x - x0;
+  *t0 = clamp_int((int)x0, 0, w - 1) * NCH;
+  *t1 = clamp_int((int)x0 + 1, 0, w - 1) * NCH;
 }
 
 /* Values of the NU slices of a scattering texture at fixed (u_mu_s, u_mu, u_r): slice s is
@@ -727,16 +727,21 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
  * scattering stored without its phase function, so the weights also carry P_R(ν_i) (for the
  * Rayleigh slices) or P_M(ν_i) (Mie): four arrays. The ground's light, T·albedo/π times the
  * ground irradiance at the ground normal's μ_s, is added per direction. The view's phase
- * functions, which do not depend on ν, are computed once per θ_l for the whole row. */
+ * functions, which do not depend on ν, are computed once per θ_l for the whole row.
+ *
+ * The row's suns are the innermost loop, in lanes of DENSITY_LANES (a fixed trip count, which
+ * the kernel compiler turns into vector instructions across the lanes; lanes past `count` get
+ * a sun at ν = μ μ_s and are discarded). Each sun's sums run over (θ, φ) in the same order as
+ * one sun at a time would, so the lane width does not change a result. */
+#ifdef __OPENCL_C_VERSION__
+#  define DENSITY_LANES 8
+#else
+#  define DENSITY_LANES 1
+#endif
 FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* incidence,
                            GLOBAL const real* delta_irradiance, real h, real mu, real mu_s, const real* nu, int count,
                            int order, real* out) {
   const real omega_x = sqrt(fmax(R(1.0) - mu * mu, R(0.0)));
-  real sun_x[NU_MAX], sun_y[NU_MAX];
-  for (int k = 0; k < count; ++k) {
-    sun_x[k] = omega_x == R(0.0) ? R(0.0) : (nu[k] - mu * mu_s) / omega_x;
-    sun_y[k] = sqrt(fmax(R(1.0) - sun_x[k] * sun_x[k] - mu_s * mu_s, R(0.0)));
-  }
   const real d_angle = ATM_PI / (real)DENSITY_SPHERE_STEPS;
   const real rho_r = profile_density(&a->rayleigh_density, h);
   const real rho_m = profile_density(&a->mie_density, h);
@@ -760,76 +765,93 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
   /* per φ of the current θ: the view's phase functions × dω, and the direction's x and y */
   real view_r[DENSITY_SPHERE_STEPS], view_m[DENSITY_SPHERE_STEPS], wx[DENSITY_SPHERE_STEPS], wy[DENSITY_SPHERE_STEPS];
   real scatter[DENSITY_SPHERE_STEPS * NCH]; /* β_R[c] view_r + β_M[c] view_m: the ground's light */
-  /* A_R, A_M of the source slices, then (order 2) of the Mie slices */
-  real weights[4 * NU_MAX];
-  real* const a_r = weights;
-  real* const a_m = weights + NU_MAX;
-  real* const a_r_mie = weights + 2 * NU_MAX;
-  real* const a_m_mie = weights + 3 * NU_MAX;
-  for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
-    for (int k = 0; k < stride; ++k) e[k] = incidence[l * stride + k];
-    const int ground = e[INC_GROUND(a)] != R(0.0);
-    const real cos_theta = e[INC_COS(a)], sin_theta = e[INC_SIN(a)];
-    const real distance = e[INC_DISTANCE(a)], n_z = e[INC_NZ(a)], inv_n = e[INC_INV_N(a)];
-    const real d_omega = d_angle * d_angle * sin_theta;
-    /* the sun's cosine to the ground normal n = r·z + distance·ω_i is (distance·ν_i + (n_z −
-     * distance·cos θ)·μ_s)/|n|, affine in ν_i */
-    const real ground_slope = distance * inv_n, ground_offset = (n_z - distance * cos_theta) * mu_s * inv_n;
-    for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
-      wx[m] = cos_phi[m] * sin_theta;
-      wy[m] = sin_phi[m] * sin_theta;
-      const real nu2 = wx[m] * omega_x + cos_theta * mu;
-      view_r[m] = rayleigh_phase(nu2) * d_omega;
-      view_m[m] = mie_phase(a->mie_g, nu2) * d_omega;
-      for (int c = 0; c < NCH; ++c) scatter[m * NCH + c] = beta_r[c] * view_r[m] + beta_m[c] * view_m[m];
+  /* per lane: the sun's x and y in the view's frame; A_R, A_M of the source slices, then
+   * (order 2) of the Mie slices, [s][lane]; the ground's light [lane][c] */
+  real sun_x[DENSITY_LANES], sun_y[DENSITY_LANES], nu_i[DENSITY_LANES], x[DENSITY_LANES];
+  real p_r[DENSITY_LANES], p_m[DENSITY_LANES], f;
+  int t0, t1; /* the ground irradiance's taps */
+  real a_r[NU_MAX * DENSITY_LANES], a_m[NU_MAX * DENSITY_LANES];
+  real a_r_mie[NU_MAX * DENSITY_LANES], a_m_mie[NU_MAX * DENSITY_LANES];
+  real ground_light[NCH * DENSITY_LANES];
+  for (int k0 = 0; k0 < count; k0 += DENSITY_LANES) {
+    for (int k = 0; k < DENSITY_LANES; ++k) {
+      const real nu_k = k0 + k < count ? nu[k0 + k] : mu * mu_s;
+      sun_x[k] = omega_x == R(0.0) ? R(0.0) : (nu_k - mu * mu_s) / omega_x;
+      sun_y[k] = sqrt(fmax(R(1.0) - sun_x[k] * sun_x[k] - mu_s * mu_s, R(0.0)));
     }
-    for (int k = 0; k < count; ++k) {
-      for (int s = 0; s < NU_SLICES(a); ++s) a_r[s] = a_m[s] = a_r_mie[s] = a_m_mie[s] = R(0.0);
-      real ground_light[NCH];
-      for (int c = 0; c < NCH; ++c) ground_light[c] = R(0.0);
+    for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
+      for (int k = 0; k < stride; ++k) e[k] = incidence[l * stride + k];
+      const int ground = e[INC_GROUND(a)] != R(0.0);
+      const real cos_theta = e[INC_COS(a)], sin_theta = e[INC_SIN(a)];
+      const real distance = e[INC_DISTANCE(a)], n_z = e[INC_NZ(a)], inv_n = e[INC_INV_N(a)];
+      const real d_omega = d_angle * d_angle * sin_theta;
+      /* the sun's cosine to the ground normal n = r·z + distance·ω_i is (distance·ν_i + (n_z −
+       * distance·cos θ)·μ_s)/|n|, affine in ν_i */
+      const real ground_slope = distance * inv_n, ground_offset = (n_z - distance * cos_theta) * mu_s * inv_n;
       for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
-        const real along = wx[m] * sun_x[k] + cos_theta * mu_s;
+        wx[m] = cos_phi[m] * sin_theta;
+        wy[m] = sin_phi[m] * sin_theta;
+        const real nu2 = wx[m] * omega_x + cos_theta * mu;
+        view_r[m] = rayleigh_phase(nu2) * d_omega;
+        view_m[m] = mie_phase(a->mie_g, nu2) * d_omega;
+        for (int c = 0; c < NCH; ++c) scatter[m * NCH + c] = beta_r[c] * view_r[m] + beta_m[c] * view_m[m];
+      }
+      for (int i = 0; i < NU_SLICES(a) * DENSITY_LANES; ++i) a_r[i] = a_m[i] = a_r_mie[i] = a_m_mie[i] = R(0.0);
+      for (int i = 0; i < NCH * DENSITY_LANES; ++i) ground_light[i] = R(0.0);
+      for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
         for (int side = 0; side < 2; ++side) {
           const real wy_s = side == 0 ? wy[m] : -wy[m];
-          const real nu_i = along + wy_s * sun_y[k];
+          for (int k = 0; k < DENSITY_LANES; ++k) {
+            nu_i[k] = wx[m] * sun_x[k] + cos_theta * mu_s + wy_s * sun_y[k];
+            x[k] = slice_position(a, nu_i[k]);
+          }
           /* slice_weights as a hat function over all slices (zero away from the two around
-           * x): a fixed-length loop without indexing by x, which the compiler vectorises */
-          const real x = slice_position(a, nu_i);
+           * x): fixed-length loops without indexing by x */
           if (single) {
-            const real p_r = rayleigh_phase(nu_i), p_m = mie_phase(a->mie_g, nu_i);
-            const real rr = view_r[m] * p_r, mr = view_m[m] * p_r, rm = view_r[m] * p_m, mm = view_m[m] * p_m;
-            for (int s = 0; s < NU_SLICES(a); ++s) {
-              const real w = hat(x, s);
-              a_r[s] += rr * w;
-              a_m[s] += mr * w;
-              a_r_mie[s] += rm * w;
-              a_m_mie[s] += mm * w;
+            for (int k = 0; k < DENSITY_LANES; ++k) {
+              p_r[k] = rayleigh_phase(nu_i[k]);
+              p_m[k] = mie_phase(a->mie_g, nu_i[k]);
             }
+            for (int s = 0; s < NU_SLICES(a); ++s)
+              for (int k = 0; k < DENSITY_LANES; ++k) {
+                const real w = hat(x[k], s);
+                a_r[s * DENSITY_LANES + k] += view_r[m] * p_r[k] * w;
+                a_m[s * DENSITY_LANES + k] += view_m[m] * p_r[k] * w;
+                a_r_mie[s * DENSITY_LANES + k] += view_r[m] * p_m[k] * w;
+                a_m_mie[s * DENSITY_LANES + k] += view_m[m] * p_m[k] * w;
+              }
           } else {
-            for (int s = 0; s < NU_SLICES(a); ++s) {
-              const real w = hat(x, s);
-              a_r[s] += view_r[m] * w;
-              a_m[s] += view_m[m] * w;
+            for (int s = 0; s < NU_SLICES(a); ++s)
+              for (int k = 0; k < DENSITY_LANES; ++k) {
+                const real w = hat(x[k], s);
+                a_r[s * DENSITY_LANES + k] += view_r[m] * w;
+                a_m[s * DENSITY_LANES + k] += view_m[m] * w;
+              }
+          }
+          if (ground)
+            for (int k = 0; k < DENSITY_LANES; ++k) {
+              ground_irradiance_taps(a, ground_slope * nu_i[k] + ground_offset, &t0, &t1, &f);
+              for (int c = 0; c < NCH; ++c)
+                ground_light[k * NCH + c] +=
+                    scatter[m * NCH + c] * ((R(1.0) - f) * delta_irradiance[t0 + c] + f * delta_irradiance[t1 + c]);
             }
-          }
-          if (ground) {
-            real g[NCH];
-            get_ground_irradiance(a, delta_irradiance, ground_slope * nu_i + ground_offset, g);
-            for (int c = 0; c < NCH; ++c) ground_light[c] += scatter[m * NCH + c] * g[c];
-          }
         }
       }
-      real* const j = out + k * NCH;
-      for (int s = 0; s < nu_n; ++s) {
-        const real* const source = e + INC_SOURCE(a) + s * NCH;
-        for (int c = 0; c < NCH; ++c) j[c] += source[c] * (beta_r[c] * a_r[s] + beta_m[c] * a_m[s]);
-        if (single) {
-          const real* const mie = e + INC_MIE(a) + s * NCH;
-          for (int c = 0; c < NCH; ++c) j[c] += mie[c] * (beta_r[c] * a_r_mie[s] + beta_m[c] * a_m_mie[s]);
+      for (int k = 0; k < DENSITY_LANES && k0 + k < count; ++k) {
+        real* const j = out + (k0 + k) * NCH;
+        for (int s = 0; s < nu_n; ++s) {
+          const real* const source = e + INC_SOURCE(a) + s * NCH;
+          const real ar = a_r[s * DENSITY_LANES + k], am = a_m[s * DENSITY_LANES + k];
+          for (int c = 0; c < NCH; ++c) j[c] += source[c] * (beta_r[c] * ar + beta_m[c] * am);
+          if (single) {
+            const real* const mie = e + INC_MIE(a) + s * NCH;
+            const real arm = a_r_mie[s * DENSITY_LANES + k], amm = a_m_mie[s * DENSITY_LANES + k];
+            for (int c = 0; c < NCH; ++c) j[c] += mie[c] * (beta_r[c] * arm + beta_m[c] * amm);
+          }
         }
+        if (ground)
+          for (int c = 0; c < NCH; ++c) j[c] += e[INC_GROUND_TERM(a) + c] * ground_light[k * NCH + c];
       }
-      if (ground)
-        for (int c = 0; c < NCH; ++c) j[c] += e[INC_GROUND_TERM(a) + c] * ground_light[c];
     }
   }
 }

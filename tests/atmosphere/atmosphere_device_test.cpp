@@ -160,6 +160,30 @@ TEST(AtmosphereDevice, SmallSizesMatchDoubleReference) {
   }
 }
 
+// The density kernel takes the suns of a ν row in lanes of 8 (DENSITY_LANES in atmosphere.cl),
+// the double host path one at a time: a row of 11 slices (a full chunk of lanes and a partial
+// one, whose unused lanes are discarded) gives the same textures, float64 device against the
+// double host within kFloat64Kernels, float32 within the chain bound.
+TEST(AtmosphereDevice, DensityRowsOfSeveralLaneChunksMatchDoubleReference) {
+  AtmosphereSpec s = small(earth());
+  s.scattering_mu_s = 4;
+  s.scattering_nu = 11;
+  const Baked host = bake_luts_reference(s);
+  const Sizes sz = model_of(s).sizes;
+  const Baked dev = bake_luts(s, device(), kQuiet, 4);
+  const SplitError es = split_rel(dev.luts.scattering, host.luts.scattering, sz, 1e-3);
+  std::printf("NU = 11, float32 vs double: S %.3g (horizon rows %.3g)\n", es.rest, es.horizon);
+  EXPECT_LE(es.rest, kFloat32Chain);
+  EXPECT_LE(es.horizon, kFloat32Chain);
+  if (device().info().fp64) {
+    s.double_precision = true;
+    const Baked dd = bake_luts(s, device(), kQuiet, 0);
+    const double ds = max_rel(dd.luts.scattering, host.luts.scattering, 1e-6);
+    std::printf("NU = 11, float64 device vs double host: S %.3g\n", ds);
+    EXPECT_LE(ds, kFloat64Kernels);
+  }
+}
+
 // Beer–Lambert: constant density, Rayleigh only: T(r, mu) = exp(−β d(r, mu)); the trapezoid
 // of a constant is exact, so only float32 rounding remains (β d ≤ ~30: ≤ 30 · 500 · 2^-24).
 TEST(AtmosphereDevice, BeerLambertConstantShell) {
