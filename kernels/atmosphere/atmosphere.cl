@@ -768,8 +768,8 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
   /* per lane: the sun's x and y in the view's frame; A_R, A_M of the source slices, then
    * (order 2) of the Mie slices, [s][lane]; the ground's light [lane][c] */
   real sun_x[DENSITY_LANES], sun_y[DENSITY_LANES], nu_i[DENSITY_LANES], x[DENSITY_LANES];
-  real p_r[DENSITY_LANES], p_m[DENSITY_LANES], f;
-  int t0, t1; /* the ground irradiance's taps */
+  real p_r[DENSITY_LANES], p_m[DENSITY_LANES], f[DENSITY_LANES];
+  int t0[DENSITY_LANES], t1[DENSITY_LANES]; /* the ground irradiance's taps */
   real a_r[NU_MAX * DENSITY_LANES], a_m[NU_MAX * DENSITY_LANES];
   real a_r_mie[NU_MAX * DENSITY_LANES], a_m_mie[NU_MAX * DENSITY_LANES];
   real ground_light[NCH * DENSITY_LANES];
@@ -828,13 +828,15 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
                 a_m[s * DENSITY_LANES + k] += view_m[m] * w;
               }
           }
-          if (ground)
-            for (int k = 0; k < DENSITY_LANES; ++k) {
-              ground_irradiance_taps(a, ground_slope * nu_i[k] + ground_offset, &t0, &t1, &f);
+          if (ground) {
+            /* the ground irradiance's taps across the lanes, then each lane's channels */
+            for (int k = 0; k < DENSITY_LANES; ++k)
+              ground_irradiance_taps(a, ground_slope * nu_i[k] + ground_offset, &t0[k], &t1[k], &f[k]);
+            for (int k = 0; k < DENSITY_LANES; ++k)
               for (int c = 0; c < NCH; ++c)
-                ground_light[k * NCH + c] +=
-                    scatter[m * NCH + c] * ((R(1.0) - f) * delta_irradiance[t0 + c] + f * delta_irradiance[t1 + c]);
-            }
+                ground_light[k * NCH + c] += scatter[m * NCH + c] * ((R(1.0) - f[k]) * delta_irradiance[t0[k] + c] +
+                                                                      f[k] * delta_irradiance[t1[k] + c]);
+          }
         }
       }
       for (int k = 0; k < DENSITY_LANES && k0 + k < count; ++k) {
