@@ -343,7 +343,7 @@ FN void texture_2d(GLOBAL const real* tex, int w, int h, real u, real v, real* o
  * scattering_slices, every texel of a row in the multiple-scattering kernel);
  * texture_3d_column, the bilinear blend of those rows at one column x; and texture_3d_at, the
  * filter along u between two columns. A caller that needs many u at the same rows can blend
- * every column once and filter along u from there (multiple_scattering_add_columns): the same
+ * every column once and filter along u from there (multiple_scattering_add_lanes): the same
  * operations in the same order. */
 typedef struct {
   int j0, j1, k0, k1; /* rows (v) and planes (w) of the taps */
@@ -466,26 +466,6 @@ FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* 
   texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + uvwz[1]) / (real)a->nu_size, v0);
   texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + R(1.0) + uvwz[1]) / (real)a->nu_size, v1);
   for (int c = 0; c < NCH; ++c) out[c] = v0[c] * (R(1.0) - f) + v1[c] * f;
-}
-/* scattering_lookup at (u_nu, u_mu_s) over columns already blended at its (u_mu, u_r) rows:
- * columns[i·NCH + c] = texture_3d_column(i) for every column i of the texture. The same
- * operations in the same order as scattering_lookup. */
-FN_HOT void scattering_lookup_columns(const AtmosphereParameters* a, LOCAL const real* columns, real u_nu,
-                                      real u_mu_s, real* out) {
-  const int wd = a->nu_size * a->mu_s_size;
-  real f;
-  const real x0 = scattering_nu_slice(a, u_nu, &f);
-  const TexelColumns s0 = texture_columns(wd, (x0 + u_mu_s) / (real)a->nu_size);
-  const TexelColumns s1 = texture_columns(wd, (x0 + R(1.0) + u_mu_s) / (real)a->nu_size);
-  LOCAL const real* c00 = columns + s0.i0 * NCH;
-  LOCAL const real* c01 = columns + s0.i1 * NCH;
-  LOCAL const real* c10 = columns + s1.i0 * NCH;
-  LOCAL const real* c11 = columns + s1.i1 * NCH;
-  for (int c = 0; c < NCH; ++c) {
-    const real v0 = (R(1.0) - s0.fx) * c00[c] + s0.fx * c01[c];
-    const real v1 = (R(1.0) - s1.fx) * c10[c] + s1.fx * c11[c];
-    out[c] = v0 * (R(1.0) - f) + v1 * f;
-  }
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -646,14 +626,40 @@ FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const 
   scattering_lookup(a, J, uvwz, j);
   for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
 }
-/* multiple_scattering_add with J's columns blended at the sample's (u_mu, u_r) rows
- * (texture_3d_column of texture_3d_rows(s[RAY_U_MU], s[RAY_U_R]) for every column): every texel
- * of a (μ, r) row shares its ray samples, so the kernel blends the columns once per sample. */
-FN_HOT void multiple_scattering_add_columns(const AtmosphereParameters* a, LOCAL const real* columns, const real* s,
-                                            real mu_s, real nu, real* out) {
-  real j[NCH];
-  scattering_lookup_columns(a, columns, scattering_u_nu_at(nu), scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s, nu)), j);
-  for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
+/* multiple_scattering_add for ROW_LANES texels of one (μ, r) row at once (lane k: mu_s[k],
+ * nu[k]; out[k·NCH + c]), with J's columns blended at the sample's (u_mu, u_r) rows
+ * (texture_3d_column of texture_3d_rows(s[RAY_U_MU], s[RAY_U_R]) for every column i, in
+ * columns[i·NCH + c]): every texel of a row shares its ray samples, so the kernel blends the
+ * columns once per sample. The lookup coordinates and column taps run across the lanes (fixed
+ * trip counts, vector instructions on a CPU), then each lane's blend over its channels; per
+ * lane, the operations and order of multiple_scattering_add's scattering_lookup. */
+#ifndef ROW_LANES
+#  define ROW_LANES 1
+#endif
+FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL const real* columns, const real* s,
+                                          const real* mu_s, const real* nu, real* out) {
+  const int wd = a->nu_size * a->mu_s_size;
+  int i00[ROW_LANES], i01[ROW_LANES], i10[ROW_LANES], i11[ROW_LANES];
+  real fx0[ROW_LANES], fx1[ROW_LANES], f[ROW_LANES];
+  for (int k = 0; k < ROW_LANES; ++k) {
+    const real u_mu_s = scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s[k], nu[k]));
+    const real x0 = scattering_nu_slice(a, scattering_u_nu_at(nu[k]), &f[k]);
+    const TexelColumns s0 = texture_columns(wd, (x0 + u_mu_s) / (real)a->nu_size);
+    const TexelColumns s1 = texture_columns(wd, (x0 + R(1.0) + u_mu_s) / (real)a->nu_size);
+    i00[k] = s0.i0 * NCH;
+    i01[k] = s0.i1 * NCH;
+    fx0[k] = s0.fx;
+    i10[k] = s1.i0 * NCH;
+    i11[k] = s1.i1 * NCH;
+    fx1[k] = s1.fx;
+  }
+  for (int k = 0; k < ROW_LANES; ++k)
+    for (int c = 0; c < NCH; ++c) {
+      const real v0 = (R(1.0) - fx0[k]) * columns[i00[k] + c] + fx0[k] * columns[i01[k] + c];
+      const real v1 = (R(1.0) - fx1[k]) * columns[i10[k] + c] + fx1[k] * columns[i11[k] + c];
+      const real j = v0 * (R(1.0) - f[k]) + v1 * f[k];
+      out[k * NCH + c] += j * s[RAY_T + c] * s[RAY_W];
+    }
 }
 /* Multiple scattering along the ray (h, mu) of length d_b to its boundary. */
 FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J, real h,

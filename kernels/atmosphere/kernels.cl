@@ -148,22 +148,27 @@ __kernel void multiple_scattering_texels(AtmosphereParameters a, __global const 
 }
 
 /* One work group per texel row (z, y) along x = ν·MU_S + μ_s (local size L; item lx takes the
- * texels x = lx, lx + L, ...). Every texel of the row samples its ray at the same (u_mu, u_r),
- * so at each sample the group blends J's rows into one value per column (texture_3d_column),
- * in local memory `columns` (MU_S·NU·NCH reals), and each texel filters along x from there:
- * multiple_scattering_ray's operations, with the row blends shared instead of repeated per
- * texel. */
+ * ROW_LANES texels x = lx·ROW_LANES + k, then the same L·ROW_LANES further on, ...). Every
+ * texel of the row samples its ray at the same (u_mu, u_r), so at each sample the group blends
+ * J's rows into one value per column (texture_3d_column), in local memory `columns`
+ * (MU_S·NU·NCH reals), and each texel filters along x from there: multiple_scattering_ray's
+ * operations, with the row blends shared instead of repeated per texel. Lanes past the row's
+ * end compute a texel at μ_s = ν = 0 that is not written. */
 __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const real* samples,
                                           __global const real* J, __global real* delta_S, __local real* columns) {
   const int wd = a.nu_size * a.mu_s_size, lx = get_local_id(0), L = get_local_size(0);
   const int row_id = get_group_id(0), y = row_id % a.mu_size, z = row_id / a.mu_size;
   __global const real* row = samples + row_id * (SCATTERING_STEPS + 1) * RAY_STRIDE;
-  for (int base = 0; base < wd; base += L) {
-    const int x = base + lx, active = x < wd;
-    real h, mu, mu_s = R(0.0), nu = R(0.0), out[NCH], s[RAY_STRIDE], v[NCH];
-    int ground;
-    if (active) scattering_params_from_texel(&a, x, y, z, &h, &mu, &mu_s, &nu, &ground);
-    for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
+  for (int base = 0; base < wd; base += L * ROW_LANES) {
+    real mu_s[ROW_LANES], nu[ROW_LANES], out[ROW_LANES * NCH], s[RAY_STRIDE], v[NCH];
+    for (int k = 0; k < ROW_LANES; ++k) {
+      const int x = base + lx * ROW_LANES + k;
+      real h, mu;
+      int ground;
+      mu_s[k] = nu[k] = R(0.0);
+      if (x < wd) scattering_params_from_texel(&a, x, y, z, &h, &mu, &mu_s[k], &nu[k], &ground);
+    }
+    for (int k = 0; k < ROW_LANES * NCH; ++k) out[k] = R(0.0);
     for (int i = 0; i <= SCATTERING_STEPS; ++i) {
       for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
       const TexelRows rows = texture_3d_rows(a.mu_size, a.r_size, s[RAY_U_MU], s[RAY_U_R]);
@@ -172,10 +177,13 @@ __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const
         for (int c = 0; c < NCH; ++c) columns[col * NCH + c] = v[c];
       }
       barrier(CLK_LOCAL_MEM_FENCE);
-      if (active) multiple_scattering_add_columns(&a, columns, s, mu_s, nu, out);
+      multiple_scattering_add_lanes(&a, columns, s, mu_s, nu, out);
       barrier(CLK_LOCAL_MEM_FENCE);
     }
-    if (active)
-      for (int c = 0; c < NCH; ++c) delta_S[(row_id * wd + x) * NCH + c] = out[c];
+    for (int k = 0; k < ROW_LANES; ++k) {
+      const int x = base + lx * ROW_LANES + k;
+      if (x < wd)
+        for (int c = 0; c < NCH; ++c) delta_S[(row_id * wd + x) * NCH + c] = out[k * NCH + c];
+    }
   }
 }

@@ -55,6 +55,12 @@ void copy_chunks(const std::vector<S>& from, std::vector<double>& to) {
 // and the other NU = 4 tests catch the NaNs on such a device).
 constexpr int kNuMaxAtLeast = 8;
 
+// Texels per work item of the multiple-scattering row kernel (ROW_LANES): on a CPU device 8,
+// whose coordinate work the kernel compiler runs as 8-wide vector instructions (PoCL does not
+// vectorise across work items there); elsewhere 1, one texel per work item as a GPU wants. The
+// texels are the same operations either way.
+std::size_t row_lanes(const cl_util::DeviceInfo& info) { return info.type == "cpu" ? 8 : 1; }
+
 // Table shapes, from atmosphere.cl's macros (visible here through reference.hpp): ray samples
 // [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][DENSITY_SPHERE_STEPS][(2 NU + 1) NCH + INC_FIXED].
 constexpr int kScatteringSteps = SCATTERING_STEPS, kDensitySphereSteps = DENSITY_SPHERE_STEPS, kRayFixed = RAY_T,
@@ -83,10 +89,11 @@ Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
 class DeviceBackend final : public PassBackend {
  public:
   DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
-      : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), block_(make_block(m, ch, width, dbl)) {
+      : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), row_lanes_(row_lanes(dev.info())),
+        block_(make_block(m, ch, width, dbl)) {
     const std::string options = std::string("-DNCH=") + std::to_string(width) + " -DNU_MAX=" +
                                 std::to_string(std::max(m.sizes.nu, kNuMaxAtLeast)) +
-                                (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
+                                " -DROW_LANES=" + std::to_string(row_lanes_) + (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
     if (dbl && !dev.info().fp64) throw DeviceError("precision: double needs a device with cl_khr_fp64");
     program_ = dev.build(kProgram, options);
     n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
@@ -108,7 +115,9 @@ class DeviceBackend final : public PassBackend {
     check_layout();
     row_group_ = choose_row_group();
     spdlog::debug("atmosphere: multiple scattering {} ({} B of local memory per row, {} B on the device)",
-                  row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row" : "per texel",
+                  row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row, " +
+                                   std::to_string(row_lanes_) + " texels per work item"
+                             : "per texel",
                   row_columns_bytes(), dev_.info().local_mem_bytes);
   }
   int channels() const override { return width_; }
@@ -197,8 +206,9 @@ class DeviceBackend final : public PassBackend {
   std::size_t row_columns_bytes() const {
     return static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s * width_ * (dbl_ ? sizeof(double) : sizeof(float));
   }
-  // Work-group size of the row kernel: the row's width, or the most the kernel allows (items
-  // then take several texels); 0 when the device's local memory cannot hold the columns.
+  // Work-group size of the row kernel: the row's width over the texels per item, or the most
+  // the kernel allows (items then take several rounds); 0 when the device's local memory cannot
+  // hold the columns.
   std::size_t choose_row_group() {
     return cl_util::checked("sizing multiple_scattering_texture", [&]() -> std::size_t {
       cl::Kernel k(program_, "multiple_scattering_texture");
@@ -206,7 +216,8 @@ class DeviceBackend final : public PassBackend {
       const std::size_t most = k.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(d);
       const unsigned long long fixed = k.getWorkGroupInfo<CL_KERNEL_LOCAL_MEM_SIZE>(d);
       if (fixed + row_columns_bytes() > dev_.info().local_mem_bytes) return 0;
-      return std::min({most, dev_.info().max_work_group_size, static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s});
+      const std::size_t row = static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s;
+      return std::min({most, dev_.info().max_work_group_size, (row + row_lanes_ - 1) / row_lanes_});
     });
   }
   // A blocking read, recorded with its wait.
@@ -267,6 +278,7 @@ class DeviceBackend final : public PassBackend {
   Sizes sizes_;
   int width_;
   bool dbl_;
+  std::size_t row_lanes_;  // texels per work item of the row kernel (ROW_LANES)
   Block block_;
   cl::Program program_;
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
