@@ -323,18 +323,33 @@ FN void scattering_params_from_texel(const AtmosphereParameters* a, int x, int y
 }
 
 /* ---- texture filtering (GPU semantics: texel centres, clamp to edge) ------------------- */
-FN void texture_2d(GLOBAL const real* tex, int w, int h, real u, real v, real* out) {
+/* Bilinear filter in two parts: the taps (offsets of the four texels' channels and the
+ * weights), then the blend of one channel; texture_2d does both. */
+typedef struct {
+  int t00, t10, t01, t11;
+  real fx, fy;
+} Taps2d;
+FN_HOT Taps2d texture_2d_taps(int w, int h, real u, real v) {
   const real x = u * (real)w - R(0.5), y = v * (real)h - R(0.5);
   const real x0 = floor(x), y0 = floor(y);
-  const real fx = x - x0, fy = y - y0;
+  Taps2d t;
+  t.fx = x - x0;
+  t.fy = y - y0;
   const int i0 = clamp_int((int)x0, 0, w - 1), i1 = clamp_int((int)x0 + 1, 0, w - 1);
   const int j0 = clamp_int((int)y0, 0, h - 1), j1 = clamp_int((int)y0 + 1, 0, h - 1);
-  GLOBAL const real* t00 = tex + (j0 * w + i0) * NCH;
-  GLOBAL const real* t10 = tex + (j0 * w + i1) * NCH;
-  GLOBAL const real* t01 = tex + (j1 * w + i0) * NCH;
-  GLOBAL const real* t11 = tex + (j1 * w + i1) * NCH;
-  for (int c = 0; c < NCH; ++c)
-    out[c] = (R(1.0) - fy) * ((R(1.0) - fx) * t00[c] + fx * t10[c]) + fy * ((R(1.0) - fx) * t01[c] + fx * t11[c]);
+  t.t00 = (j0 * w + i0) * NCH;
+  t.t10 = (j0 * w + i1) * NCH;
+  t.t01 = (j1 * w + i0) * NCH;
+  t.t11 = (j1 * w + i1) * NCH;
+  return t;
+}
+FN_HOT real texture_2d_blend(GLOBAL const real* tex, const Taps2d* t, int c) {
+  return (R(1.0) - t->fy) * ((R(1.0) - t->fx) * tex[t->t00 + c] + t->fx * tex[t->t10 + c]) +
+         t->fy * ((R(1.0) - t->fx) * tex[t->t01 + c] + t->fx * tex[t->t11 + c]);
+}
+FN void texture_2d(GLOBAL const real* tex, int w, int h, real u, real v, real* out) {
+  const Taps2d t = texture_2d_taps(w, h, u, v);
+  for (int c = 0; c < NCH; ++c) out[c] = texture_2d_blend(tex, &t, c);
 }
 
 /* Trilinear lookup at (u, v, w) in a [d][h][wd] texture, in three parts: texture_3d_rows, the
@@ -590,6 +605,34 @@ FN void single_scattering_add(const AtmosphereParameters* a, GLOBAL const real* 
     sum_m[c] += t * wm;
   }
 }
+/* single_scattering_add for ROW_LANES texels of one (μ, r) row at once (lane k: mu_s[k], nu[k];
+ * sums [k·NCH + c]): the sun's cosine, its visible fraction and the transmittance lookup's taps
+ * across the lanes (vector instructions on a CPU), then each lane's blend over its channels;
+ * per lane, the operations and order of single_scattering_add. */
+#ifndef ROW_LANES
+#  define ROW_LANES 1
+#endif
+FN_HOT void single_scattering_add_lanes(const AtmosphereParameters* a, GLOBAL const real* T, const real* s,
+                                        const real* mu_s, const real* nu, real* sum_r, real* sum_m) {
+  Taps2d taps[ROW_LANES];
+  real visible[ROW_LANES];
+  for (int k = 0; k < ROW_LANES; ++k) {
+    const real mu_s_i = ray_sample_mu_s(s, mu_s[k], nu[k]);
+    real u, v;
+    visible[k] = sun_visible_fraction(a, s[RAY_H], mu_s_i);
+    transmittance_uv(a, s[RAY_H], mu_s_i, &u, &v);
+    taps[k] = texture_2d_taps(a->transmittance_w, a->transmittance_h, u, v);
+  }
+  const real wr = s[RAY_RHO_R] * s[RAY_W], wm = s[RAY_RHO_M] * s[RAY_W];
+  for (int k = 0; k < ROW_LANES; ++k)
+    for (int c = 0; c < NCH; ++c) {
+      real t_sun = texture_2d_blend(T, &taps[k], c);
+      t_sun *= visible[k];
+      const real t = s[RAY_T + c] * t_sun;
+      sum_r[k * NCH + c] += t * wr;
+      sum_m[k * NCH + c] += t * wm;
+    }
+}
 FN void single_scattering_finish(const AtmosphereParameters* a, const real* sum_r, const real* sum_m, real* rayleigh,
                                  real* mie) {
   for (int c = 0; c < NCH; ++c) {
@@ -633,9 +676,6 @@ FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const 
  * columns once per sample. The lookup coordinates and column taps run across the lanes (fixed
  * trip counts, vector instructions on a CPU), then each lane's blend over its channels; per
  * lane, the operations and order of multiple_scattering_add's scattering_lookup. */
-#ifndef ROW_LANES
-#  define ROW_LANES 1
-#endif
 FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL const real* columns, const real* s,
                                           const real* mu_s, const real* nu, real* out) {
   const int wd = a->nu_size * a->mu_s_size;

@@ -64,24 +64,37 @@ __kernel void ray_sample_table(AtmosphereParameters a, __global const real* T, _
   for (int k = 0; k < RAY_STRIDE; ++k) samples[id * RAY_STRIDE + k] = s[k];
 }
 
+/* One work item per ROW_LANES texels of a (μ, r) row (x = chunk·ROW_LANES + k; lanes past the
+ * row's end compute a texel at μ_s = ν = 0 that is not written): every texel of the row shares
+ * its ray samples. */
 __kernel void single_scattering_texture(AtmosphereParameters a, __global const real* T,
                                         __global const real* samples, __global real* delta_R,
                                         __global real* delta_M) {
+  const int wd = a.nu_size * a.mu_s_size, chunks = (wd + ROW_LANES - 1) / ROW_LANES;
   const int id = get_global_id(0);
-  if (id >= a.r_size * a.mu_size * a.nu_size * a.mu_s_size) return;
-  real h, mu, mu_s, nu, sum_r[NCH], sum_m[NCH], s[RAY_STRIDE], ray[NCH], mie[NCH];
-  int x, y, z, ground;
-  texel_params(&a, id, &x, &y, &z, &h, &mu, &mu_s, &nu, &ground);
-  __global const real* row = samples + (z * a.mu_size + y) * (SCATTERING_STEPS + 1) * RAY_STRIDE;
-  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = R(0.0);
+  if (id >= a.r_size * a.mu_size * chunks) return;
+  const int row_id = id / chunks, x0 = (id % chunks) * ROW_LANES, y = row_id % a.mu_size, z = row_id / a.mu_size;
+  real mu_s[ROW_LANES], nu[ROW_LANES], sum_r[ROW_LANES * NCH], sum_m[ROW_LANES * NCH], s[RAY_STRIDE];
+  for (int k = 0; k < ROW_LANES; ++k) {
+    real h, mu;
+    int ground;
+    mu_s[k] = nu[k] = R(0.0);
+    if (x0 + k < wd) scattering_params_from_texel(&a, x0 + k, y, z, &h, &mu, &mu_s[k], &nu[k], &ground);
+  }
+  __global const real* row = samples + row_id * (SCATTERING_STEPS + 1) * RAY_STRIDE;
+  for (int k = 0; k < ROW_LANES * NCH; ++k) sum_r[k] = sum_m[k] = R(0.0);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
-    single_scattering_add(&a, T, s, mu_s, nu, sum_r, sum_m);
+    single_scattering_add_lanes(&a, T, s, mu_s, nu, sum_r, sum_m);
   }
-  single_scattering_finish(&a, sum_r, sum_m, ray, mie);
-  for (int c = 0; c < NCH; ++c) {
-    delta_R[id * NCH + c] = ray[c];
-    delta_M[id * NCH + c] = mie[c];
+  for (int k = 0; k < ROW_LANES && x0 + k < wd; ++k) {
+    real ray[NCH], mie[NCH];
+    single_scattering_finish(&a, sum_r + k * NCH, sum_m + k * NCH, ray, mie);
+    const int texel = row_id * wd + x0 + k;
+    for (int c = 0; c < NCH; ++c) {
+      delta_R[texel * NCH + c] = ray[c];
+      delta_M[texel * NCH + c] = mie[c];
+    }
   }
 }
 

@@ -160,27 +160,31 @@ TEST(AtmosphereDevice, SmallSizesMatchDoubleReference) {
   }
 }
 
-// The density kernel takes the suns of a ν row in lanes of 8 (DENSITY_LANES in atmosphere.cl),
-// the double host path one at a time: a row of 11 slices (a full chunk of lanes and a partial
-// one, whose unused lanes are discarded) gives the same textures, float64 device against the
-// double host within kFloat64Kernels, float32 within the chain bound.
-TEST(AtmosphereDevice, DensityRowsOfSeveralLaneChunksMatchDoubleReference) {
+// On a CPU device the density kernel takes the suns of a ν row in lanes of 8 (DENSITY_LANES in
+// atmosphere.cl) and the single- and multiple-scattering kernels 8 texels of a row per work item
+// (ROW_LANES); the double host path takes one at a time. A row of 11 slices × 4 (44 texels: full
+// chunks of lanes and a partial one, whose unused lanes are discarded) gives the same textures:
+// float64 device against the double host within kFloat64Kernels, float32 within the chain bound.
+TEST(AtmosphereDevice, RowsOfSeveralLaneChunksMatchDoubleReference) {
   AtmosphereSpec s = small(earth());
   s.scattering_mu_s = 4;
   s.scattering_nu = 11;
   const Baked host = bake_luts_reference(s);
   const Sizes sz = model_of(s).sizes;
   const Baked dev = bake_luts(s, device(), kQuiet, 4);
-  const SplitError es = split_rel(dev.luts.scattering, host.luts.scattering, sz, 1e-3);
-  std::printf("NU = 11, float32 vs double: S %.3g (horizon rows %.3g)\n", es.rest, es.horizon);
-  EXPECT_LE(es.rest, kFloat32Chain);
-  EXPECT_LE(es.horizon, kFloat32Chain);
+  const SplitError es = split_rel(dev.luts.scattering, host.luts.scattering, sz, 1e-3),
+                   em = split_rel(dev.luts.single_mie, host.luts.single_mie, sz, 1e-3);
+  std::printf("NU = 11, float32 vs double: S %.3g (horizon rows %.3g)  M %.3g (horizon rows %.3g)\n", es.rest,
+              es.horizon, em.rest, em.horizon);
+  for (const double e : {es.rest, es.horizon, em.rest, em.horizon}) EXPECT_LE(e, kFloat32Chain);
   if (device().info().fp64) {
     s.double_precision = true;
     const Baked dd = bake_luts(s, device(), kQuiet, 0);
-    const double ds = max_rel(dd.luts.scattering, host.luts.scattering, 1e-6);
-    std::printf("NU = 11, float64 device vs double host: S %.3g\n", ds);
+    const double ds = max_rel(dd.luts.scattering, host.luts.scattering, 1e-6),
+                 dm = max_rel(dd.luts.single_mie, host.luts.single_mie, 1e-6);
+    std::printf("NU = 11, float64 device vs double host: S %.3g  M %.3g\n", ds, dm);
     EXPECT_LE(ds, kFloat64Kernels);
+    EXPECT_LE(dm, kFloat64Kernels);
   }
 }
 

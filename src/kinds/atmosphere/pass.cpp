@@ -55,10 +55,10 @@ void copy_chunks(const std::vector<S>& from, std::vector<double>& to) {
 // and the other NU = 4 tests catch the NaNs on such a device).
 constexpr int kNuMaxAtLeast = 8;
 
-// Texels per work item of the multiple-scattering row kernel (ROW_LANES): on a CPU device 8,
-// whose coordinate work the kernel compiler runs as 8-wide vector instructions (PoCL does not
-// vectorise across work items there); elsewhere 1, one texel per work item as a GPU wants. The
-// texels are the same operations either way.
+// Texels per work item of the single- and multiple-scattering row kernels (ROW_LANES): on a CPU
+// device 8, whose coordinate work the kernel compiler runs as 8-wide vector instructions (PoCL
+// does not vectorise across work items there); elsewhere 1, one texel per work item as a GPU
+// wants. The texels are the same operations either way.
 std::size_t row_lanes(const cl_util::DeviceInfo& info) { return info.type == "cpu" ? 8 : 1; }
 
 // Table shapes, from atmosphere.cl's macros (visible here through reference.hpp): ray samples
@@ -127,7 +127,7 @@ class DeviceBackend final : public PassBackend {
   // The ray-sample table depends on T only: built here, reused by every multiple_scattering().
   void single_scattering() override {
     launch("ray_sample_table", 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1), {&T_, &rays_});
-    launch("single_scattering_texture", n_s_, {&T_, &rays_, &dR_, &dM_});
+    launch("single_scattering_texture", row_chunks(), {&T_, &rays_, &dR_, &dM_});
   }
   void scattering_density(int order) override {
     launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps,
@@ -202,6 +202,11 @@ class DeviceBackend final : public PassBackend {
     dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, global, local, nullptr, &ev);
     dev_.profiler().record(ev);
     dev_.profiler().wait([&] { dev_.queue().finish(); });
+  }
+  // Work items of a kernel that takes ROW_LANES texels of a (mu, r) row per item.
+  long long row_chunks() const {
+    const long long row = 1LL * sizes_.nu * sizes_.mu_s, lanes = static_cast<long long>(row_lanes_);
+    return 1LL * sizes_.r * sizes_.mu * ((row + lanes - 1) / lanes);
   }
   std::size_t row_columns_bytes() const {
     return static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s * width_ * (dbl_ ? sizeof(double) : sizeof(float));
