@@ -40,7 +40,12 @@ std::string exr_bytes(const ExrImage& img) {
     throw JobError("EXR image has inconsistent size");
   try {
     Imf::Header header(img.width, img.height);
-    header.compression() = img.zip ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
+    // Float32 data is noise-like in its low mantissa bytes, which ZIP hardly shrinks: 0.4 % of a
+    // 1024² diffraction term, 4–19 % of the default Earth's LUTs (11 % over the bundle's EXRs),
+    // at 0.3–0.4 s per 12.6 MB LUT on a 2-core CPU, against 0.09 s uncompressed. So float32 goes
+    // uncompressed (the .bin beside each EXR is the same data raw anyway); half data shrinks ~3×
+    // under ZIP and keeps it.
+    header.compression() = img.half ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
     const Imf::PixelType type = img.half ? Imf::HALF : Imf::FLOAT;
     for (const auto& c : img.channels) header.channels().insert(c, Imf::Channel(type));
     for (const auto& [k, v] : img.attributes) header.insert(k, Imf::StringAttribute(v));

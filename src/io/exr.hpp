@@ -1,5 +1,5 @@
 #pragma once
-// OpenEXR encoding of float images into bytes (ZIP or uncompressed), for bundle files.
+// OpenEXR encoding of float images into bytes, for bundle files: float32 uncompressed, half ZIP.
 #include <map>
 #include <string>
 #include <vector>
@@ -11,8 +11,6 @@ struct ExrImage {
   std::vector<std::string> channels;  // e.g. {"R", "G", "B"}; stored in this order per pixel
   std::vector<float> pixels;          // [height][width][channels.size()], row 0 at the top
   bool half = false;                  // store as 16-bit half instead of 32-bit float
-  // ZIP by default; `false` stores pixels uncompressed (for noise-like data ZIP does not shrink).
-  bool zip = true;
   std::map<std::string, std::string> attributes;  // extra string header attributes
 };
 

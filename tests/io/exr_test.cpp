@@ -27,7 +27,7 @@ TEST(Exr, FloatRoundTripIsExactAndKeepsAttributes) {
   const ExrImage b = exr_read(bytes, {"R", "G", "B"});
   EXPECT_EQ(b.width, 7);
   EXPECT_EQ(b.height, 3);
-  EXPECT_EQ(b.pixels, a.pixels);  // float32 ZIP is lossless
+  EXPECT_EQ(b.pixels, a.pixels);  // float32 is stored as it is
   EXPECT_EQ(b.attributes.at("specbake.layout"), "[row][column][R,G,B]");
 }
 
@@ -37,6 +37,20 @@ TEST(Exr, HalfRoundTripWithinHalfPrecision) {
   ASSERT_EQ(b.pixels.size(), a.pixels.size());
   // Multiples of 1/8 up to 8 in magnitude are exactly representable in half (11-bit significand).
   for (std::size_t i = 0; i < a.pixels.size(); ++i) EXPECT_EQ(b.pixels[i], a.pixels[i]) << i;
+}
+
+// The header's compression attribute ("compression\0compression\0", a 4-byte size, one byte:
+// 0 = none, 3 = ZIP): float32 goes uncompressed (ZIP hardly shrinks its noise-like low bytes,
+// at several times the encoding time), half goes ZIP.
+int compression_of(const std::string& bytes) {
+  const std::string key = std::string("compression") + '\0' + "compression" + '\0';
+  const auto pos = bytes.find(key);
+  return pos == std::string::npos ? -1 : static_cast<unsigned char>(bytes[pos + key.size() + 4]);
+}
+
+TEST(Exr, Float32IsUncompressedAndHalfIsZip) {
+  EXPECT_EQ(compression_of(exr_bytes(ramp(false))), 0);
+  EXPECT_EQ(compression_of(exr_bytes(ramp(true))), 3);
 }
 
 TEST(Exr, HugeDataWindowInHeaderIsRefusedBeforeAllocation) {

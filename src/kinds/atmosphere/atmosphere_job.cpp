@@ -765,7 +765,7 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
                       {"specbake.units", t.units},
                       {"specbake.wavelengths_nm", lambdas}};
     r.files.push_back({t.name + ".exr", exr_bytes(img), "", {t.height, t.width, n},
-                       "EXR float32 ZIP, one channel per wavelength", t.units, t.what + " (Spectral OpenEXR)"});
+                       "EXR float32, one channel per wavelength", t.units, t.what + " (Spectral OpenEXR)"});
     files.push_back(t.name + ".bin");
     files.push_back(t.name + ".exr");
     if (spec.ktx2.enabled) {
@@ -830,7 +830,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     later({"transmittance.bin", "", "float32", {s.transmittance_h, s.transmittance_w, 3}, le + "; " + lay, "1",
            "transmittance to the top of the atmosphere at 680/550/440 nm"},
           [&] { return float32_le(L.transmittance, "transmittance"); });
-    later({"transmittance.exr", "", "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32 ZIP, row j = r index",
+    later({"transmittance.exr", "", "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32, row j = r index",
            "1", "transmittance (EXR copy)"},
           [&, a = attrs(lay, "transmittance to the top boundary")] {
             return exr_of(s.transmittance_w, s.transmittance_h, L.transmittance, a);
@@ -843,7 +843,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
            "sky (indirect) irradiance on a horizontal surface, orders 1..N-1, as the reference stores "
            "it: the direct sun is NOT included (add solar_irradiance * T_sun * cos)"},
           [&] { return float32_le(L.irradiance, "irradiance"); });
-    later({"irradiance.exr", "", "", {s.irradiance_h, s.irradiance_w, 3}, "EXR float32 ZIP, row j = r index", units,
+    later({"irradiance.exr", "", "", {s.irradiance_h, s.irradiance_w, 3}, "EXR float32, row j = r index", units,
            "irradiance (EXR copy)"},
           [&, a = attrs(lay, "indirect (sky) irradiance only")] {
             return exr_of(s.irradiance_w, s.irradiance_h, L.irradiance, a);
@@ -866,7 +866,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                               std::to_string(s.nu) + "*" + std::to_string(s.mu_s) + "][RGB]; x = nu_slice*MU_S + mu_s";
       later({name + ".bin", "", "float32", {s.r, s.mu, wd, 3}, le + "; " + lay, units, t.what},
             [&, data = t.data, name] { return float32_le(*data, name); });
-      later({name + ".exr", "", "", {s.r, s.mu, wd, 3}, "EXR float32 ZIP, row = r*MU + mu", units, t.what},
+      later({name + ".exr", "", "", {s.r, s.mu, wd, 3}, "EXR float32, row = r*MU + mu", units, t.what},
             [&, data = t.data, a = attrs(lay + "; EXR rows = r*MU + mu (3D depth slices stacked)", t.what)] {
               return exr_of(wd, s.mu * s.r, *data, a);
             });
@@ -885,7 +885,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
       later({name + "_tiled2d.bin", "", "float32", {s.mu, s.r * wd, 3}, le + "; " + lay, units,
              std::string(t.what) + " (tiled 2D layout)"},
             [tiled_of, name] { return float32_le(tiled_of(), name); });
-      later({name + "_tiled2d.exr", "", "", {s.mu, s.r * wd, 3}, "EXR float32 ZIP", units,
+      later({name + "_tiled2d.exr", "", "", {s.mu, s.r * wd, 3}, "EXR float32", units,
              std::string(t.what) + " (tiled 2D, EXR)"},
             [&, tiled_of, a = attrs(lay, t.what)] { return exr_of(s.r * wd, s.mu, tiled_of(), a); });
     }

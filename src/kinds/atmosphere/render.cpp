@@ -424,10 +424,17 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
   // to a row in the order above.
   const int tile = n / 2, cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
   std::vector<float> sheet(3 * static_cast<std::size_t>(cols * tile) * rows * tile, 0.0f);
+  // each view's exposure and PNG encoding (zlib, one thread per file) on the hardware threads
+  std::vector<std::vector<float>> exposed_views(views.size());
+  std::vector<std::string> pngs(views.size());
+  parallel_for(static_cast<long long>(views.size()), [&](long long v) {
+    exposed_views[v] = exposed(views[v].image, views[v].ev100);
+    pngs[v] = png_from_linear(n, n, exposed_views[v], 1.0f);
+  });
   std::string order;
   for (std::size_t v = 0; v < views.size(); ++v) {
-    const std::vector<float> px = exposed(views[v].image, views[v].ev100);
-    files.push_back({views[v].file, png_from_linear(n, n, px, 1.0f), "", {n, n, 3}, "8-bit sRGB", "", views[v].what});
+    const std::vector<float>& px = exposed_views[v];
+    files.push_back({views[v].file, std::move(pngs[v]), "", {n, n, 3}, "8-bit sRGB", "", views[v].what});
     const int x0 = static_cast<int>(v % cols) * tile, y0 = static_cast<int>(v / cols) * tile;
     for (int y = 0; y < tile; ++y)
       for (int x = 0; x < tile; ++x)

@@ -80,9 +80,6 @@ void add_term_exrs(const std::vector<float>& values, const std::vector<Band>& ba
       img.height = height;
       img.channels = {"R", "G"};
       img.half = storage == Storage::half;
-      // Float32 terms are noise-like in their low bytes: ZIP saved 0.4 % of a 1024² field's term
-      // at 15–20× the encoding time, so they go uncompressed; half terms shrink ~3× under ZIP.
-      img.zip = img.half;
       img.pixels.assign(values.begin() + 2 * term * per, values.begin() + 2 * (term + 1) * per);
       img.attributes = {{"specbake.term", std::to_string(term)},
                         {"specbake.expansion", name(band.expansion)},
