@@ -76,6 +76,16 @@
 #ifndef NU_MAX
 #  define NU_MAX ATMOSPHERE_NU_LIMIT
 #endif
+/* LANES: how many independent computations a work item runs side by side, as the innermost
+ * loop of fixed trip count: the texels of a (μ, r) row (single and multiple scattering) and the
+ * suns of a ν row (density). A CPU device's kernel compiler turns such loops into vector
+ * instructions (PoCL does not vectorise across work items through these kernels' sample
+ * loops); a GPU runs one texel or sun per loop step. The host sets it per device (pass.cpp's
+ * `lanes`); the C++ reference, which works per texel, keeps 1. Per texel the operations and
+ * their order do not depend on it. */
+#ifndef LANES
+#  define LANES 1
+#endif
 
 #define ATM_PI R(3.14159265358979323846)
 
@@ -471,16 +481,38 @@ FN_HOT real scattering_nu_slice(const AtmosphereParameters* a, real u_nu, real* 
   *f = x - x0;
   return x0;
 }
+/* Where a scattering lookup at (u_nu, u_mu_s) reads along the texture's x = ν·MU_S + μ_s axis:
+ * the columns of its two ν slices (s0 around (x0 + u_mu_s)/NU, s1 one slice on) and the
+ * weight f of the second slice; scattering_blend filters four columns' values with them. */
+typedef struct {
+  TexelColumns s0, s1;
+  real f;
+} ScatteringColumns;
+FN_HOT ScatteringColumns scattering_columns(const AtmosphereParameters* a, real u_nu, real u_mu_s) {
+  const int wd = a->nu_size * a->mu_s_size;
+  ScatteringColumns x;
+  const real x0 = scattering_nu_slice(a, u_nu, &x.f);
+  x.s0 = texture_columns(wd, (x0 + u_mu_s) / (real)a->nu_size);
+  x.s1 = texture_columns(wd, (x0 + R(1.0) + u_mu_s) / (real)a->nu_size);
+  return x;
+}
+/* One channel of the lookup from its columns' values (s0.i0, s0.i1, s1.i0, s1.i1). */
+FN_HOT real scattering_blend(const ScatteringColumns* x, real c00, real c01, real c10, real c11) {
+  const real v0 = (R(1.0) - x->s0.fx) * c00 + x->s0.fx * c01;
+  const real v1 = (R(1.0) - x->s1.fx) * c10 + x->s1.fx * c11;
+  return v0 * (R(1.0) - x->f) + v1 * x->f;
+}
 /* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
 FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
   const int wd = a->nu_size * a->mu_s_size;
-  real f;
-  const real x0 = scattering_nu_slice(a, uvwz[0], &f);
-  real v0[NCH], v1[NCH];
+  const ScatteringColumns x = scattering_columns(a, uvwz[0], uvwz[1]);
   const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
-  texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + uvwz[1]) / (real)a->nu_size, v0);
-  texture_3d_at(tex, wd, a->mu_size, &rows, (x0 + R(1.0) + uvwz[1]) / (real)a->nu_size, v1);
-  for (int c = 0; c < NCH; ++c) out[c] = v0[c] * (R(1.0) - f) + v1[c] * f;
+  real c00[NCH], c01[NCH], c10[NCH], c11[NCH];
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i0, c00);
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i1, c01);
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
+  for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(&x, c00[c], c01[c], c10[c], c11[c]);
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -593,45 +625,44 @@ FN void ray_sample(const AtmosphereParameters* a, GLOBAL const real* T, real h, 
 FN real ray_sample_mu_s(const real* s, real mu_s, real nu) { return clamp_cosine(s[RAY_A] * mu_s + s[RAY_B] * nu); }
 
 /* ---- single scattering (paper Eq. 8–9; no phase function) ----------------------------- */
-/* One sample's contribution to the sums of single_scattering(). */
-FN void single_scattering_add(const AtmosphereParameters* a, GLOBAL const real* T, const real* s, real mu_s, real nu,
-                              real* sum_r, real* sum_m) {
-  real t_sun[NCH];
-  transmittance_to_sun(a, T, s[RAY_H], ray_sample_mu_s(s, mu_s, nu), t_sun);
+/* The sun seen from ray sample s by the texel (mu_s, nu): the transmittance lookup's taps, and
+ * the sun disc's visible fraction (transmittance_to_sun = visible × the taps' blend). */
+FN_HOT Taps2d sun_taps_at_sample(const AtmosphereParameters* a, const real* s, real mu_s, real nu, real* visible) {
+  const real mu_s_i = ray_sample_mu_s(s, mu_s, nu);
+  real u, v;
+  *visible = sun_visible_fraction(a, s[RAY_H], mu_s_i);
+  transmittance_uv(a, s[RAY_H], mu_s_i, &u, &v);
+  return texture_2d_taps(a->transmittance_w, a->transmittance_h, u, v);
+}
+/* Sample s's terms of single_scattering()'s sums, per channel: T to the sample × T to the sun ×
+ * the densities × the trapezoid weight. */
+FN_HOT void single_scattering_terms(GLOBAL const real* T, const real* s, const Taps2d* sun, real visible, real* sum_r,
+                                    real* sum_m) {
   const real wr = s[RAY_RHO_R] * s[RAY_W], wm = s[RAY_RHO_M] * s[RAY_W];
   for (int c = 0; c < NCH; ++c) {
-    const real t = s[RAY_T + c] * t_sun[c];
+    real t_sun = texture_2d_blend(T, sun, c);
+    t_sun *= visible;
+    const real t = s[RAY_T + c] * t_sun;
     sum_r[c] += t * wr;
     sum_m[c] += t * wm;
   }
 }
-/* single_scattering_add for ROW_LANES texels of one (μ, r) row at once (lane k: mu_s[k], nu[k];
- * sums [k·NCH + c]): the sun's cosine, its visible fraction and the transmittance lookup's taps
- * across the lanes (vector instructions on a CPU), then each lane's blend over its channels;
- * per lane, the operations and order of single_scattering_add. */
-#ifndef ROW_LANES
-#  define ROW_LANES 1
-#endif
+/* One sample's contribution to the sums of single_scattering(). */
+FN void single_scattering_add(const AtmosphereParameters* a, GLOBAL const real* T, const real* s, real mu_s, real nu,
+                              real* sum_r, real* sum_m) {
+  real visible;
+  const Taps2d sun = sun_taps_at_sample(a, s, mu_s, nu, &visible);
+  single_scattering_terms(T, s, &sun, visible, sum_r, sum_m);
+}
+/* single_scattering_add for LANES texels of one (μ, r) row (lane k: mu_s[k], nu[k]; sums
+ * [k·NCH + c]): the sun's taps across the lanes (vector instructions on a CPU), then each
+ * lane's terms over its channels. */
 FN_HOT void single_scattering_add_lanes(const AtmosphereParameters* a, GLOBAL const real* T, const real* s,
                                         const real* mu_s, const real* nu, real* sum_r, real* sum_m) {
-  Taps2d taps[ROW_LANES];
-  real visible[ROW_LANES];
-  for (int k = 0; k < ROW_LANES; ++k) {
-    const real mu_s_i = ray_sample_mu_s(s, mu_s[k], nu[k]);
-    real u, v;
-    visible[k] = sun_visible_fraction(a, s[RAY_H], mu_s_i);
-    transmittance_uv(a, s[RAY_H], mu_s_i, &u, &v);
-    taps[k] = texture_2d_taps(a->transmittance_w, a->transmittance_h, u, v);
-  }
-  const real wr = s[RAY_RHO_R] * s[RAY_W], wm = s[RAY_RHO_M] * s[RAY_W];
-  for (int k = 0; k < ROW_LANES; ++k)
-    for (int c = 0; c < NCH; ++c) {
-      real t_sun = texture_2d_blend(T, &taps[k], c);
-      t_sun *= visible[k];
-      const real t = s[RAY_T + c] * t_sun;
-      sum_r[k * NCH + c] += t * wr;
-      sum_m[k * NCH + c] += t * wm;
-    }
+  Taps2d sun[LANES];
+  real visible[LANES];
+  for (int k = 0; k < LANES; ++k) sun[k] = sun_taps_at_sample(a, s, mu_s[k], nu[k], &visible[k]);
+  for (int k = 0; k < LANES; ++k) single_scattering_terms(T, s, &sun[k], visible[k], sum_r + k * NCH, sum_m + k * NCH);
 }
 FN void single_scattering_finish(const AtmosphereParameters* a, const real* sum_r, const real* sum_m, real* rayleigh,
                                  real* mie) {
@@ -669,35 +700,21 @@ FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const 
   scattering_lookup(a, J, uvwz, j);
   for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
 }
-/* multiple_scattering_add for ROW_LANES texels of one (μ, r) row at once (lane k: mu_s[k],
- * nu[k]; out[k·NCH + c]), with J's columns blended at the sample's (u_mu, u_r) rows
+/* multiple_scattering_add for LANES texels of one (μ, r) row (lane k: mu_s[k], nu[k];
+ * out[k·NCH + c]), with J's columns blended at the sample's (u_mu, u_r) rows
  * (texture_3d_column of texture_3d_rows(s[RAY_U_MU], s[RAY_U_R]) for every column i, in
  * columns[i·NCH + c]): every texel of a row shares its ray samples, so the kernel blends the
- * columns once per sample. The lookup coordinates and column taps run across the lanes (fixed
- * trip counts, vector instructions on a CPU), then each lane's blend over its channels; per
- * lane, the operations and order of multiple_scattering_add's scattering_lookup. */
+ * columns once per sample. The lookup's columns across the lanes (vector instructions on a
+ * CPU), then each lane's blend over its channels: per lane, scattering_lookup's operations. */
 FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL const real* columns, const real* s,
                                           const real* mu_s, const real* nu, real* out) {
-  const int wd = a->nu_size * a->mu_s_size;
-  int i00[ROW_LANES], i01[ROW_LANES], i10[ROW_LANES], i11[ROW_LANES];
-  real fx0[ROW_LANES], fx1[ROW_LANES], f[ROW_LANES];
-  for (int k = 0; k < ROW_LANES; ++k) {
-    const real u_mu_s = scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s[k], nu[k]));
-    const real x0 = scattering_nu_slice(a, scattering_u_nu_at(nu[k]), &f[k]);
-    const TexelColumns s0 = texture_columns(wd, (x0 + u_mu_s) / (real)a->nu_size);
-    const TexelColumns s1 = texture_columns(wd, (x0 + R(1.0) + u_mu_s) / (real)a->nu_size);
-    i00[k] = s0.i0 * NCH;
-    i01[k] = s0.i1 * NCH;
-    fx0[k] = s0.fx;
-    i10[k] = s1.i0 * NCH;
-    i11[k] = s1.i1 * NCH;
-    fx1[k] = s1.fx;
-  }
-  for (int k = 0; k < ROW_LANES; ++k)
+  ScatteringColumns x[LANES];
+  for (int k = 0; k < LANES; ++k)
+    x[k] = scattering_columns(a, scattering_u_nu_at(nu[k]), scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s[k], nu[k])));
+  for (int k = 0; k < LANES; ++k)
     for (int c = 0; c < NCH; ++c) {
-      const real v0 = (R(1.0) - fx0[k]) * columns[i00[k] + c] + fx0[k] * columns[i01[k] + c];
-      const real v1 = (R(1.0) - fx1[k]) * columns[i10[k] + c] + fx1[k] * columns[i11[k] + c];
-      const real j = v0 * (R(1.0) - f[k]) + v1 * f[k];
+      const real j = scattering_blend(&x[k], columns[x[k].s0.i0 * NCH + c], columns[x[k].s0.i1 * NCH + c],
+                                      columns[x[k].s1.i0 * NCH + c], columns[x[k].s1.i1 * NCH + c]);
       out[k * NCH + c] += j * s[RAY_T + c] * s[RAY_W];
     }
 }
@@ -775,15 +792,10 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
  * ground irradiance at the ground normal's μ_s, is added per direction. The view's phase
  * functions, which do not depend on ν, are computed once per θ_l for the whole row.
  *
- * The row's suns are the innermost loop, in lanes of DENSITY_LANES (a fixed trip count, which
- * the kernel compiler turns into vector instructions across the lanes; lanes past `count` get
- * a sun at ν = μ μ_s and are discarded). Each sun's sums run over (θ, φ) in the same order as
- * one sun at a time would, so the lane width does not change a result. */
-#ifdef __OPENCL_C_VERSION__
-#  define DENSITY_LANES 8
-#else
-#  define DENSITY_LANES 1
-#endif
+ * The row's suns are the innermost loop, in lanes of LANES (a fixed trip count; lanes past
+ * `count` get a sun at ν = μ μ_s and are discarded), inside the loop over θ: each θ's incidence
+ * entry and view phase functions serve every chunk of lanes. Each sun's sums run over (θ, φ)
+ * in the same order as one sun at a time would, so the lane width does not change a result. */
 FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* incidence,
                            GLOBAL const real* delta_irradiance, real h, real mu, real mu_s, const real* nu, int count,
                            int order, real* out) {
@@ -813,87 +825,87 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
   real scatter[DENSITY_SPHERE_STEPS * NCH]; /* β_R[c] view_r + β_M[c] view_m: the ground's light */
   /* per lane: the sun's x and y in the view's frame; A_R, A_M of the source slices, then
    * (order 2) of the Mie slices, [s][lane]; the ground's light [lane][c] */
-  real sun_x[DENSITY_LANES], sun_y[DENSITY_LANES], nu_i[DENSITY_LANES], x[DENSITY_LANES];
-  real p_r[DENSITY_LANES], p_m[DENSITY_LANES], f[DENSITY_LANES];
-  int t0[DENSITY_LANES], t1[DENSITY_LANES]; /* the ground irradiance's taps */
-  real a_r[NU_MAX * DENSITY_LANES], a_m[NU_MAX * DENSITY_LANES];
-  real a_r_mie[NU_MAX * DENSITY_LANES], a_m_mie[NU_MAX * DENSITY_LANES];
-  real ground_light[NCH * DENSITY_LANES];
-  for (int k0 = 0; k0 < count; k0 += DENSITY_LANES) {
-    for (int k = 0; k < DENSITY_LANES; ++k) {
-      const real nu_k = k0 + k < count ? nu[k0 + k] : mu * mu_s;
-      sun_x[k] = omega_x == R(0.0) ? R(0.0) : (nu_k - mu * mu_s) / omega_x;
-      sun_y[k] = sqrt(fmax(R(1.0) - sun_x[k] * sun_x[k] - mu_s * mu_s, R(0.0)));
+  real sun_x[LANES], sun_y[LANES], nu_i[LANES], x[LANES];
+  real p_r[LANES], p_m[LANES], f[LANES];
+  int t0[LANES], t1[LANES]; /* the ground irradiance's taps */
+  real a_r[NU_MAX * LANES], a_m[NU_MAX * LANES];
+  real a_r_mie[NU_MAX * LANES], a_m_mie[NU_MAX * LANES];
+  real ground_light[NCH * LANES];
+  for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
+    for (int k = 0; k < stride; ++k) e[k] = incidence[l * stride + k];
+    const int ground = e[INC_GROUND(a)] != R(0.0);
+    const real cos_theta = e[INC_COS(a)], sin_theta = e[INC_SIN(a)];
+    const real distance = e[INC_DISTANCE(a)], n_z = e[INC_NZ(a)], inv_n = e[INC_INV_N(a)];
+    const real d_omega = d_angle * d_angle * sin_theta;
+    /* the sun's cosine to the ground normal n = r·z + distance·ω_i is (distance·ν_i + (n_z −
+     * distance·cos θ)·μ_s)/|n|, affine in ν_i */
+    const real ground_slope = distance * inv_n, ground_offset = (n_z - distance * cos_theta) * mu_s * inv_n;
+    for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
+      wx[m] = cos_phi[m] * sin_theta;
+      wy[m] = sin_phi[m] * sin_theta;
+      const real nu2 = wx[m] * omega_x + cos_theta * mu;
+      view_r[m] = rayleigh_phase(nu2) * d_omega;
+      view_m[m] = mie_phase(a->mie_g, nu2) * d_omega;
+      for (int c = 0; c < NCH; ++c) scatter[m * NCH + c] = beta_r[c] * view_r[m] + beta_m[c] * view_m[m];
     }
-    for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
-      for (int k = 0; k < stride; ++k) e[k] = incidence[l * stride + k];
-      const int ground = e[INC_GROUND(a)] != R(0.0);
-      const real cos_theta = e[INC_COS(a)], sin_theta = e[INC_SIN(a)];
-      const real distance = e[INC_DISTANCE(a)], n_z = e[INC_NZ(a)], inv_n = e[INC_INV_N(a)];
-      const real d_omega = d_angle * d_angle * sin_theta;
-      /* the sun's cosine to the ground normal n = r·z + distance·ω_i is (distance·ν_i + (n_z −
-       * distance·cos θ)·μ_s)/|n|, affine in ν_i */
-      const real ground_slope = distance * inv_n, ground_offset = (n_z - distance * cos_theta) * mu_s * inv_n;
-      for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
-        wx[m] = cos_phi[m] * sin_theta;
-        wy[m] = sin_phi[m] * sin_theta;
-        const real nu2 = wx[m] * omega_x + cos_theta * mu;
-        view_r[m] = rayleigh_phase(nu2) * d_omega;
-        view_m[m] = mie_phase(a->mie_g, nu2) * d_omega;
-        for (int c = 0; c < NCH; ++c) scatter[m * NCH + c] = beta_r[c] * view_r[m] + beta_m[c] * view_m[m];
+    for (int k0 = 0; k0 < count; k0 += LANES) {
+      for (int k = 0; k < LANES; ++k) {
+        const real nu_k = k0 + k < count ? nu[k0 + k] : mu * mu_s;
+        sun_x[k] = omega_x == R(0.0) ? R(0.0) : (nu_k - mu * mu_s) / omega_x;
+        sun_y[k] = sqrt(fmax(R(1.0) - sun_x[k] * sun_x[k] - mu_s * mu_s, R(0.0)));
       }
-      for (int i = 0; i < NU_SLICES(a) * DENSITY_LANES; ++i) a_r[i] = a_m[i] = a_r_mie[i] = a_m_mie[i] = R(0.0);
-      for (int i = 0; i < NCH * DENSITY_LANES; ++i) ground_light[i] = R(0.0);
+      for (int i = 0; i < NU_SLICES(a) * LANES; ++i) a_r[i] = a_m[i] = a_r_mie[i] = a_m_mie[i] = R(0.0);
+      for (int i = 0; i < NCH * LANES; ++i) ground_light[i] = R(0.0);
       for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
         for (int side = 0; side < 2; ++side) {
           const real wy_s = side == 0 ? wy[m] : -wy[m];
-          for (int k = 0; k < DENSITY_LANES; ++k) {
+          for (int k = 0; k < LANES; ++k) {
             nu_i[k] = wx[m] * sun_x[k] + cos_theta * mu_s + wy_s * sun_y[k];
             x[k] = slice_position(a, nu_i[k]);
           }
           /* slice_weights as a hat function over all slices (zero away from the two around
            * x): fixed-length loops without indexing by x */
           if (single) {
-            for (int k = 0; k < DENSITY_LANES; ++k) {
+            for (int k = 0; k < LANES; ++k) {
               p_r[k] = rayleigh_phase(nu_i[k]);
               p_m[k] = mie_phase(a->mie_g, nu_i[k]);
             }
             for (int s = 0; s < NU_SLICES(a); ++s)
-              for (int k = 0; k < DENSITY_LANES; ++k) {
+              for (int k = 0; k < LANES; ++k) {
                 const real w = hat(x[k], s);
-                a_r[s * DENSITY_LANES + k] += view_r[m] * p_r[k] * w;
-                a_m[s * DENSITY_LANES + k] += view_m[m] * p_r[k] * w;
-                a_r_mie[s * DENSITY_LANES + k] += view_r[m] * p_m[k] * w;
-                a_m_mie[s * DENSITY_LANES + k] += view_m[m] * p_m[k] * w;
+                a_r[s * LANES + k] += view_r[m] * p_r[k] * w;
+                a_m[s * LANES + k] += view_m[m] * p_r[k] * w;
+                a_r_mie[s * LANES + k] += view_r[m] * p_m[k] * w;
+                a_m_mie[s * LANES + k] += view_m[m] * p_m[k] * w;
               }
           } else {
             for (int s = 0; s < NU_SLICES(a); ++s)
-              for (int k = 0; k < DENSITY_LANES; ++k) {
+              for (int k = 0; k < LANES; ++k) {
                 const real w = hat(x[k], s);
-                a_r[s * DENSITY_LANES + k] += view_r[m] * w;
-                a_m[s * DENSITY_LANES + k] += view_m[m] * w;
+                a_r[s * LANES + k] += view_r[m] * w;
+                a_m[s * LANES + k] += view_m[m] * w;
               }
           }
           if (ground) {
             /* the ground irradiance's taps across the lanes, then each lane's channels */
-            for (int k = 0; k < DENSITY_LANES; ++k)
+            for (int k = 0; k < LANES; ++k)
               ground_irradiance_taps(a, ground_slope * nu_i[k] + ground_offset, &t0[k], &t1[k], &f[k]);
-            for (int k = 0; k < DENSITY_LANES; ++k)
+            for (int k = 0; k < LANES; ++k)
               for (int c = 0; c < NCH; ++c)
                 ground_light[k * NCH + c] += scatter[m * NCH + c] * ((R(1.0) - f[k]) * delta_irradiance[t0[k] + c] +
                                                                       f[k] * delta_irradiance[t1[k] + c]);
           }
         }
       }
-      for (int k = 0; k < DENSITY_LANES && k0 + k < count; ++k) {
+      for (int k = 0; k < LANES && k0 + k < count; ++k) {
         real* const j = out + (k0 + k) * NCH;
         for (int s = 0; s < nu_n; ++s) {
           const real* const source = e + INC_SOURCE(a) + s * NCH;
-          const real ar = a_r[s * DENSITY_LANES + k], am = a_m[s * DENSITY_LANES + k];
+          const real ar = a_r[s * LANES + k], am = a_m[s * LANES + k];
           for (int c = 0; c < NCH; ++c) j[c] += source[c] * (beta_r[c] * ar + beta_m[c] * am);
           if (single) {
             const real* const mie = e + INC_MIE(a) + s * NCH;
-            const real arm = a_r_mie[s * DENSITY_LANES + k], amm = a_m_mie[s * DENSITY_LANES + k];
+            const real arm = a_r_mie[s * LANES + k], amm = a_m_mie[s * LANES + k];
             for (int c = 0; c < NCH; ++c) j[c] += mie[c] * (beta_r[c] * arm + beta_m[c] * amm);
           }
         }

@@ -64,30 +64,30 @@ __kernel void ray_sample_table(AtmosphereParameters a, __global const real* T, _
   for (int k = 0; k < RAY_STRIDE; ++k) samples[id * RAY_STRIDE + k] = s[k];
 }
 
-/* One work item per ROW_LANES texels of a (μ, r) row (x = chunk·ROW_LANES + k; lanes past the
+/* One work item per LANES texels of a (μ, r) row (x = chunk·LANES + k; lanes past the
  * row's end compute a texel at μ_s = ν = 0 that is not written): every texel of the row shares
  * its ray samples. */
 __kernel void single_scattering_texture(AtmosphereParameters a, __global const real* T,
                                         __global const real* samples, __global real* delta_R,
                                         __global real* delta_M) {
-  const int wd = a.nu_size * a.mu_s_size, chunks = (wd + ROW_LANES - 1) / ROW_LANES;
+  const int wd = a.nu_size * a.mu_s_size, chunks = (wd + LANES - 1) / LANES;
   const int id = get_global_id(0);
   if (id >= a.r_size * a.mu_size * chunks) return;
-  const int row_id = id / chunks, x0 = (id % chunks) * ROW_LANES, y = row_id % a.mu_size, z = row_id / a.mu_size;
-  real mu_s[ROW_LANES], nu[ROW_LANES], sum_r[ROW_LANES * NCH], sum_m[ROW_LANES * NCH], s[RAY_STRIDE];
-  for (int k = 0; k < ROW_LANES; ++k) {
+  const int row_id = id / chunks, x0 = (id % chunks) * LANES, y = row_id % a.mu_size, z = row_id / a.mu_size;
+  real mu_s[LANES], nu[LANES], sum_r[LANES * NCH], sum_m[LANES * NCH], s[RAY_STRIDE];
+  for (int k = 0; k < LANES; ++k) {
     real h, mu;
     int ground;
     mu_s[k] = nu[k] = R(0.0);
     if (x0 + k < wd) scattering_params_from_texel(&a, x0 + k, y, z, &h, &mu, &mu_s[k], &nu[k], &ground);
   }
   __global const real* row = samples + row_id * (SCATTERING_STEPS + 1) * RAY_STRIDE;
-  for (int k = 0; k < ROW_LANES * NCH; ++k) sum_r[k] = sum_m[k] = R(0.0);
+  for (int k = 0; k < LANES * NCH; ++k) sum_r[k] = sum_m[k] = R(0.0);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
     single_scattering_add_lanes(&a, T, s, mu_s, nu, sum_r, sum_m);
   }
-  for (int k = 0; k < ROW_LANES && x0 + k < wd; ++k) {
+  for (int k = 0; k < LANES && x0 + k < wd; ++k) {
     real ray[NCH], mie[NCH];
     single_scattering_finish(&a, sum_r + k * NCH, sum_m + k * NCH, ray, mie);
     const int texel = row_id * wd + x0 + k;
@@ -161,7 +161,7 @@ __kernel void multiple_scattering_texels(AtmosphereParameters a, __global const 
 }
 
 /* One work group per texel row (z, y) along x = ν·MU_S + μ_s (local size L; item lx takes the
- * ROW_LANES texels x = lx·ROW_LANES + k, then the same L·ROW_LANES further on, ...). Every
+ * LANES texels x = lx·LANES + k, then the same L·LANES further on, ...). Every
  * texel of the row samples its ray at the same (u_mu, u_r), so at each sample the group blends
  * J's rows into one value per column (texture_3d_column), in local memory `columns`
  * (MU_S·NU·NCH reals), and each texel filters along x from there: multiple_scattering_ray's
@@ -172,16 +172,16 @@ __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const
   const int wd = a.nu_size * a.mu_s_size, lx = get_local_id(0), L = get_local_size(0);
   const int row_id = get_group_id(0), y = row_id % a.mu_size, z = row_id / a.mu_size;
   __global const real* row = samples + row_id * (SCATTERING_STEPS + 1) * RAY_STRIDE;
-  for (int base = 0; base < wd; base += L * ROW_LANES) {
-    real mu_s[ROW_LANES], nu[ROW_LANES], out[ROW_LANES * NCH], s[RAY_STRIDE], v[NCH];
-    for (int k = 0; k < ROW_LANES; ++k) {
-      const int x = base + lx * ROW_LANES + k;
+  for (int base = 0; base < wd; base += L * LANES) {
+    real mu_s[LANES], nu[LANES], out[LANES * NCH], s[RAY_STRIDE], v[NCH];
+    for (int k = 0; k < LANES; ++k) {
+      const int x = base + lx * LANES + k;
       real h, mu;
       int ground;
       mu_s[k] = nu[k] = R(0.0);
       if (x < wd) scattering_params_from_texel(&a, x, y, z, &h, &mu, &mu_s[k], &nu[k], &ground);
     }
-    for (int k = 0; k < ROW_LANES * NCH; ++k) out[k] = R(0.0);
+    for (int k = 0; k < LANES * NCH; ++k) out[k] = R(0.0);
     for (int i = 0; i <= SCATTERING_STEPS; ++i) {
       for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
       const TexelRows rows = texture_3d_rows(a.mu_size, a.r_size, s[RAY_U_MU], s[RAY_U_R]);
@@ -193,8 +193,8 @@ __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const
       multiple_scattering_add_lanes(&a, columns, s, mu_s, nu, out);
       barrier(CLK_LOCAL_MEM_FENCE);
     }
-    for (int k = 0; k < ROW_LANES; ++k) {
-      const int x = base + lx * ROW_LANES + k;
+    for (int k = 0; k < LANES; ++k) {
+      const int x = base + lx * LANES + k;
       if (x < wd)
         for (int c = 0; c < NCH; ++c) delta_S[(row_id * wd + x) * NCH + c] = out[k * NCH + c];
     }

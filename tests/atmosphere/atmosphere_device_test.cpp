@@ -160,9 +160,9 @@ TEST(AtmosphereDevice, SmallSizesMatchDoubleReference) {
   }
 }
 
-// On a CPU device the density kernel takes the suns of a ν row in lanes of 8 (DENSITY_LANES in
-// atmosphere.cl) and the single- and multiple-scattering kernels 8 texels of a row per work item
-// (ROW_LANES); the double host path takes one at a time. A row of 11 slices × 4 (44 texels: full
+// On a CPU device the density kernel takes the suns of a ν row in lanes of 8 and the single-
+// and multiple-scattering kernels 8 texels of a row per work item (LANES in atmosphere.cl); the
+// double host path takes one at a time. A row of 11 slices × 4 (44 texels: full
 // chunks of lanes and a partial one, whose unused lanes are discarded) gives the same textures:
 // float64 device against the double host within kFloat64Kernels, float32 within the chain bound.
 TEST(AtmosphereDevice, RowsOfSeveralLaneChunksMatchDoubleReference) {
@@ -186,6 +186,28 @@ TEST(AtmosphereDevice, RowsOfSeveralLaneChunksMatchDoubleReference) {
     EXPECT_LE(ds, kFloat64Kernels);
     EXPECT_LE(dm, kFloat64Kernels);
   }
+}
+
+// Other devices get LANES = 1: one texel per work item, one sun at a time in the density (the
+// code a GPU runs). Per texel the operations and their order do not depend on LANES (the
+// compiler fuses multiply-adds per source expression, before any vectorisation), so the same
+// device told it is a GPU must bake the same textures bit for bit, rows of 44 texels and 11
+// suns included (a partial chunk of 8 lanes).
+TEST(AtmosphereDevice, OneLaneAsOnAGpuBakesTheSameBits) {
+  cl_util::DeviceInfo info = cl_util::select_device("auto");
+  if (info.type != "cpu") GTEST_SKIP() << "the test device already runs one lane (" << info.type << ")";
+  AtmosphereSpec s = small(earth());
+  s.scattering_mu_s = 4;
+  s.scattering_nu = 11;
+  s.orders = 3;
+  const Baked lanes = bake_luts(s, device(), kQuiet, 0);
+  info.type = "gpu";
+  cl_util::Device one_lane(info);
+  const Baked one = bake_luts(s, one_lane, kQuiet, 0);
+  EXPECT_EQ(one.luts.transmittance, lanes.luts.transmittance);
+  EXPECT_EQ(one.luts.scattering, lanes.luts.scattering);
+  EXPECT_EQ(one.luts.single_mie, lanes.luts.single_mie);
+  EXPECT_EQ(one.luts.irradiance, lanes.luts.irradiance);
 }
 
 // Beer–Lambert: constant density, Rayleigh only: T(r, mu) = exp(−β d(r, mu)); the trapezoid

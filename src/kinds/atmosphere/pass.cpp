@@ -55,11 +55,12 @@ void copy_chunks(const std::vector<S>& from, std::vector<double>& to) {
 // and the other NU = 4 tests catch the NaNs on such a device).
 constexpr int kNuMaxAtLeast = 8;
 
-// Texels per work item of the single- and multiple-scattering row kernels (ROW_LANES): on a CPU
-// device 8, whose coordinate work the kernel compiler runs as 8-wide vector instructions (PoCL
-// does not vectorise across work items there); elsewhere 1, one texel per work item as a GPU
-// wants. The texels are the same operations either way.
-std::size_t row_lanes(const cl_util::DeviceInfo& info) { return info.type == "cpu" ? 8 : 1; }
+// LANES (atmosphere.cl): texels per work item of the single- and multiple-scattering row kernels,
+// and suns side by side in the density's inner loops. On a CPU device 8, whose coordinate work
+// the kernel compiler runs as 8-wide vector instructions (PoCL does not vectorise across work
+// items there); elsewhere 1, one texel per work item and one sun at a time, as a GPU wants (and
+// its private arrays stay small). The texels are the same operations either way.
+std::size_t lanes(const cl_util::DeviceInfo& info) { return info.type == "cpu" ? 8 : 1; }
 
 // Table shapes, from atmosphere.cl's macros (visible here through reference.hpp): ray samples
 // [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][DENSITY_SPHERE_STEPS][(2 NU + 1) NCH + INC_FIXED].
@@ -89,11 +90,11 @@ Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
 class DeviceBackend final : public PassBackend {
  public:
   DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
-      : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), row_lanes_(row_lanes(dev.info())),
+      : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), lanes_(lanes(dev.info())),
         block_(make_block(m, ch, width, dbl)) {
     const std::string options = std::string("-DNCH=") + std::to_string(width) + " -DNU_MAX=" +
                                 std::to_string(std::max(m.sizes.nu, kNuMaxAtLeast)) +
-                                " -DROW_LANES=" + std::to_string(row_lanes_) + (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
+                                " -DLANES=" + std::to_string(lanes_) + (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
     if (dbl && !dev.info().fp64) throw DeviceError("precision: double needs a device with cl_khr_fp64");
     program_ = dev.build(kProgram, options);
     n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
@@ -116,7 +117,7 @@ class DeviceBackend final : public PassBackend {
     row_group_ = choose_row_group();
     spdlog::debug("atmosphere: multiple scattering {} ({} B of local memory per row, {} B on the device)",
                   row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row, " +
-                                   std::to_string(row_lanes_) + " texels per work item"
+                                   std::to_string(lanes_) + " texels per work item"
                              : "per texel",
                   row_columns_bytes(), dev_.info().local_mem_bytes);
   }
@@ -203,9 +204,9 @@ class DeviceBackend final : public PassBackend {
     dev_.profiler().record(ev);
     dev_.profiler().wait([&] { dev_.queue().finish(); });
   }
-  // Work items of a kernel that takes ROW_LANES texels of a (mu, r) row per item.
+  // Work items of a kernel that takes LANES texels of a (mu, r) row per item.
   long long row_chunks() const {
-    const long long row = 1LL * sizes_.nu * sizes_.mu_s, lanes = static_cast<long long>(row_lanes_);
+    const long long row = 1LL * sizes_.nu * sizes_.mu_s, lanes = static_cast<long long>(lanes_);
     return 1LL * sizes_.r * sizes_.mu * ((row + lanes - 1) / lanes);
   }
   std::size_t row_columns_bytes() const {
@@ -222,7 +223,7 @@ class DeviceBackend final : public PassBackend {
       const unsigned long long fixed = k.getWorkGroupInfo<CL_KERNEL_LOCAL_MEM_SIZE>(d);
       if (fixed + row_columns_bytes() > dev_.info().local_mem_bytes) return 0;
       const std::size_t row = static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s;
-      return std::min({most, dev_.info().max_work_group_size, (row + row_lanes_ - 1) / row_lanes_});
+      return std::min({most, dev_.info().max_work_group_size, (row + lanes_ - 1) / lanes_});
     });
   }
   // A blocking read, recorded with its wait.
@@ -283,7 +284,7 @@ class DeviceBackend final : public PassBackend {
   Sizes sizes_;
   int width_;
   bool dbl_;
-  std::size_t row_lanes_;  // texels per work item of the row kernel (ROW_LANES)
+  std::size_t lanes_;  // LANES: texels per work item of the row kernels, suns side by side in the density
   Block block_;
   cl::Program program_;
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
