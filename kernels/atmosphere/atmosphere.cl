@@ -560,8 +560,14 @@ FN void slice_weights(const AtmosphereParameters* a, real nu, int* s0, int* s1, 
   *s0 = clamp_int((int)x0, 0, a->nu_size - 1);
   *s1 = clamp_int((int)x0 + 1, 0, a->nu_size - 1);
 }
-/* The same weights as a function of x = slice_position(ν), for slice s: 1 − |x − s|, or 0. */
-FN real hat(real x, int s) { return fmax(R(0.0), R(1.0) - fmax(x - (real)s, (real)s - x)); }
+/* The same weights as a function of x = slice_position(ν), for slice s: 1 − |x − s|, or 0 (also
+ * for a NaN x). A compare and select rather than fmax, whose NaN rules cost three more vector
+ * instructions; the same values (x − s and s − x are exact negatives, so the earlier
+ * fmax(x − s, s − x) was |x − s| too). */
+FN real hat(real x, int s) {
+  const real w = R(1.0) - fabs(x - (real)s);
+  return w > R(0.0) ? w : R(0.0);
+}
 /* The slice count as a compile-time constant in the kernels (built with NU_MAX = NU), so that
  * loops over every slice have a fixed trip count; the C++ reference reads it. */
 #ifdef __OPENCL_C_VERSION__
@@ -838,8 +844,10 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
   real scatter[DENSITY_SPHERE_STEPS * NCH]; /* β_R[c] view_r + β_M[c] view_m: the ground's light */
   /* per lane: the sun's x and y in the view's frame; A_R, A_M of the source slices, then
    * (order 2) of the Mie slices, [s][lane]; the ground's light [lane][c] */
-  real sun_x[LANES], sun_y[LANES], nu_i[LANES], x[LANES];
-  real p_r[LANES], p_m[LANES], f[LANES];
+  real sun_x[LANES], sun_y[LANES], nu_i[LANES], f[LANES];
+  /* per (φ, side) of the current θ, [2 m + side][lane]: the slice position of ν_i, and at order
+   * 2 its phase functions */
+  real x[2 * DENSITY_SPHERE_STEPS * LANES], p_r[2 * DENSITY_SPHERE_STEPS * LANES], p_m[2 * DENSITY_SPHERE_STEPS * LANES];
   int t0[LANES], t1[LANES]; /* the ground irradiance's taps */
   real a_r[NU_MAX * LANES], a_m[NU_MAX * LANES];
   real a_r_mie[NU_MAX * LANES], a_m_mie[NU_MAX * LANES];
@@ -867,38 +875,27 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
         sun_x[k] = omega_x == R(0.0) ? R(0.0) : (nu_k - mu * mu_s) / omega_x;
         sun_y[k] = sqrt(fmax(R(1.0) - sun_x[k] * sun_x[k] - mu_s * mu_s, R(0.0)));
       }
-      for (int i = 0; i < NU_SLICES(a) * LANES; ++i) a_r[i] = a_m[i] = a_r_mie[i] = a_m_mie[i] = R(0.0);
       for (int i = 0; i < NCH * LANES; ++i) ground_light[i] = R(0.0);
+      real x_lo[LANES], x_hi[LANES]; /* each lane's range of x over (φ, side) */
+      for (int k = 0; k < LANES; ++k) {
+        x_lo[k] = (real)(NU_SLICES(a) - 1);
+        x_hi[k] = R(0.0);
+      }
       for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
         for (int side = 0; side < 2; ++side) {
           const real wy_s = side == 0 ? wy[m] : -wy[m];
+          const int ms = (2 * m + side) * LANES;
           for (int k = 0; k < LANES; ++k) {
             nu_i[k] = wx[m] * sun_x[k] + cos_theta * mu_s + wy_s * sun_y[k];
-            x[k] = slice_position(a, nu_i[k]);
+            x[ms + k] = slice_position(a, nu_i[k]);
+            x_lo[k] = fmin(x_lo[k], x[ms + k]);
+            x_hi[k] = fmax(x_hi[k], x[ms + k]);
           }
-          /* slice_weights as a hat function over all slices (zero away from the two around
-           * x): fixed-length loops without indexing by x */
-          if (single) {
+          if (single)
             for (int k = 0; k < LANES; ++k) {
-              p_r[k] = rayleigh_phase(nu_i[k]);
-              p_m[k] = mie_phase(a->mie_g, nu_i[k]);
+              p_r[ms + k] = rayleigh_phase(nu_i[k]);
+              p_m[ms + k] = mie_phase(a->mie_g, nu_i[k]);
             }
-            for (int s = 0; s < NU_SLICES(a); ++s)
-              for (int k = 0; k < LANES; ++k) {
-                const real w = hat(x[k], s);
-                a_r[s * LANES + k] += view_r[m] * p_r[k] * w;
-                a_m[s * LANES + k] += view_m[m] * p_r[k] * w;
-                a_r_mie[s * LANES + k] += view_r[m] * p_m[k] * w;
-                a_m_mie[s * LANES + k] += view_m[m] * p_m[k] * w;
-              }
-          } else {
-            for (int s = 0; s < NU_SLICES(a); ++s)
-              for (int k = 0; k < LANES; ++k) {
-                const real w = hat(x[k], s);
-                a_r[s * LANES + k] += view_r[m] * w;
-                a_m[s * LANES + k] += view_m[m] * w;
-              }
-          }
           if (ground) {
             /* the ground irradiance's taps across the lanes, then each lane's channels */
             for (int k = 0; k < LANES; ++k)
@@ -908,6 +905,48 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
                 ground_light[k * NCH + c] += scatter[m * NCH + c] * ((R(1.0) - f[k]) * delta_irradiance[t0[k] + c] +
                                                                       f[k] * delta_irradiance[t1[k] + c]);
           }
+        }
+      }
+      /* The weights slice by slice, slice_weights as a hat function of x (zero away from the two
+       * slices around it: fixed-length loops across the lanes, without indexing by x). A
+       * slice's sums over (φ, side) stay in registers across that loop, in the order (m, side).
+       * ν_i spans cos θ μ_s ± sin θ |sun_xy| over φ, so near the poles of θ a few slices hold
+       * every x: the slices outside [floor(min x), floor(max x) + 1] have hat weight 0 for every
+       * x and keep their zero sums without the loop. */
+      real lo = x_lo[0], hi = x_hi[0];
+      for (int k = 1; k < LANES; ++k) {
+        lo = fmin(lo, x_lo[k]);
+        hi = fmax(hi, x_hi[k]);
+      }
+      const int s_lo = clamp_int((int)floor(lo), 0, NU_SLICES(a) - 1);
+      const int s_hi = clamp_int((int)floor(hi) + 1, 0, NU_SLICES(a) - 1);
+      for (int i = 0; i < NU_SLICES(a) * LANES; ++i) a_r[i] = a_m[i] = a_r_mie[i] = a_m_mie[i] = R(0.0);
+      for (int s = s_lo; s <= s_hi; ++s) {
+        real sr[LANES], sm[LANES], srm[LANES], smm[LANES];
+        for (int k = 0; k < LANES; ++k) sr[k] = sm[k] = srm[k] = smm[k] = R(0.0);
+        if (single) {
+          for (int ms = 0; ms < 2 * DENSITY_SPHERE_STEPS; ++ms)
+            for (int k = 0; k < LANES; ++k) {
+              const int i = ms * LANES + k;
+              const real w = hat(x[i], s);
+              sr[k] += view_r[ms / 2] * p_r[i] * w;
+              sm[k] += view_m[ms / 2] * p_r[i] * w;
+              srm[k] += view_r[ms / 2] * p_m[i] * w;
+              smm[k] += view_m[ms / 2] * p_m[i] * w;
+            }
+        } else {
+          for (int ms = 0; ms < 2 * DENSITY_SPHERE_STEPS; ++ms)
+            for (int k = 0; k < LANES; ++k) {
+              const real w = hat(x[ms * LANES + k], s);
+              sr[k] += view_r[ms / 2] * w;
+              sm[k] += view_m[ms / 2] * w;
+            }
+        }
+        for (int k = 0; k < LANES; ++k) {
+          a_r[s * LANES + k] = sr[k];
+          a_m[s * LANES + k] = sm[k];
+          a_r_mie[s * LANES + k] = srm[k];
+          a_m_mie[s * LANES + k] = smm[k];
         }
       }
       for (int k = 0; k < LANES && k0 + k < count; ++k) {
