@@ -115,6 +115,8 @@ class DeviceBackend final : public PassBackend {
     });
     check_layout();
     row_group_ = choose_row_group();
+    spdlog::debug("atmosphere: {} lane(s): single scattering {} texel(s) per work item, density {} sun(s) side by side",
+                  lanes_, lanes_, lanes_);
     spdlog::debug("atmosphere: multiple scattering {} ({} B of local memory per row, {} B on the device)",
                   row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row, " +
                                    std::to_string(lanes_) + " texels per work item"
