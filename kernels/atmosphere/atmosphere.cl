@@ -465,12 +465,6 @@ FN void transmittance_along(const AtmosphereParameters* a, GLOBAL const real* T,
 FN real sun_visible_fraction(const AtmosphereParameters* a, real h, real mu_s) {
   return sun_visible_at(a->bottom_radius, a->sun_angular_radius, h, mu_s);
 }
-/* T to the sun times the visible fraction of the sun disc above the horizon. */
-FN void transmittance_to_sun(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu_s, real* out) {
-  const real visible = sun_visible_fraction(a, h, mu_s);
-  transmittance_to_top(a, T, h, mu_s, out);
-  for (int c = 0; c < NCH; ++c) out[c] *= visible;
-}
 
 /* ---- scattering lookups -------------------------------------------------------------- */
 /* The two ν slices around u_nu (corner-sampled, divisor NU − 1): the first and the weight of
@@ -633,7 +627,7 @@ FN real ray_sample_mu_s(const real* s, real mu_s, real nu) { return clamp_cosine
 
 /* ---- single scattering (paper Eq. 8–9; no phase function) ----------------------------- */
 /* The sun seen from ray sample s by the texel (mu_s, nu): the transmittance lookup's taps, and
- * the sun disc's visible fraction (transmittance_to_sun = visible × the taps' blend). */
+ * the sun disc's visible fraction (T to the sun is visible × the taps' blend). */
 FN_HOT Taps2d sun_taps_at_sample(const AtmosphereParameters* a, const real* s, real mu_s, real nu, real* visible) {
   const real mu_s_i = ray_sample_mu_s(s, mu_s, nu);
   real u, v;
