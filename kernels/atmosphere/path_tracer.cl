@@ -35,8 +35,11 @@
  *    segment start plus a 4-point Gauss–Legendre integral of σ_t over [t_k, t] (no kink inside);
  *  - every other free path by delta tracking against a majorant (collision pdf σ_t T, weight
  *    1/σ_t), reaching the ground with probability T;
- *  - next-event estimation of the sun at every scattering event and every ground hit, with T_sun
- *    by ratio tracking (unbiased);
+ *  - the sun: at the view ray's vertex, next-event estimation (T_sun by ratio tracking,
+ *    unbiased); for every later vertex, its expectation over where the free path ends, drawn
+ *    on the sunlit part of the new direction's ray by the vertex before it
+ *    (truth_next_sun_term: T and T_sun by ratio tracking) — in twilight a free path rarely
+ *    ends in sunlit air, and the plain estimate is that rare event;
  *  - new directions: the mixture of Rayleigh (exact inversion) and Henyey–Greenstein with the
  *    same g, weighted by (β_R P_R + β_M P_M)/(β_R P_R + β_M P_HG) ∈ [0.57, 1.14] for g = 0.8;
  *    cosine-weighted after the ground (weight a);
@@ -172,30 +175,34 @@ FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real m
   return sum * half_len;
 }
 
-/* ---- shadow rays: ratio tracking ---------------------------------------------------------- */
-/* Unbiased estimate of T_sun from altitude h with sun cosine mu_s (visible fraction not
- * included): along mu_s, or along the horizon when the disc centre is below it. */
-FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu_s,
-                                PhiloxStream* rng, int* violations) {
-  const real r = radius_of(a, h);
-  const real mu = fmax(mu_s, -horizon_distance(a, h) / r);
-  const real d = distance_to_top(a, h, mu);
-  const real s_tan = mu < R(0.0) ? -r * mu : R(-1.0);
-  real h_min = truth_tangent_altitude(a, h, mu);
+/* ---- transmittance estimates: ratio tracking ----------------------------------------------- */
+/* Unbiased estimate of T over [0, s_end] of the ray (h, mu, ground): ratio tracking against
+ * TRUTH_RATIO_BOOST × the majorant of the lowest altitude left on the ray. */
+FN real truth_ratio_track(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu,
+                          int ground, real s_end, PhiloxStream* rng, int* violations) {
+  const real s_tan = (mu < R(0.0) && !ground) ? -radius_of(a, h) * mu : R(-1.0);
+  real h_min = ground ? R(0.0) : truth_tangent_altitude(a, h, mu);
   real s = R(0.0), t = R(1.0);
   for (;;) {
     const real majorant_s = TRUTH_RATIO_BOOST * truth_majorant(a, majorant, c, h_min);
     if (!(majorant_s > R(0.0))) break;
     s += -log(philox_uniform(rng)) / majorant_s;
-    if (s >= d) break;
+    if (s >= s_end) break;
     real h_s, mu_s_;
-    point_along(a, h, mu, s, 0, &h_s, &mu_s_);
+    point_along(a, h, mu, s, ground, &h_s, &mu_s_);
     const real sigma = truth_extinction(a, c, h_s);
     if (sigma * TRUTH_RATIO_BOOST > majorant_s) *violations += 1;
     t *= R(1.0) - sigma / majorant_s;
-    if (s >= s_tan) h_min = h_s;
+    if (!ground && s >= s_tan) h_min = h_s;
   }
   return t;
+}
+/* Unbiased estimate of T_sun from altitude h with sun cosine mu_s (visible fraction not
+ * included): along mu_s, or along the horizon when the disc centre is below it. */
+FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu_s,
+                                PhiloxStream* rng, int* violations) {
+  const real mu = fmax(mu_s, -horizon_distance(a, h) / radius_of(a, h));
+  return truth_ratio_track(a, c, majorant, h, mu, 0, distance_to_top(a, h, mu), rng, violations);
 }
 
 /* ---- free paths: delta tracking ------------------------------------------------------------ */
@@ -246,6 +253,139 @@ FN real sample_henyey_greenstein_cosine(real g, real u) {
   return clamp_cosine((R(1.0) + g * g - k * k) / (R(2.0) * g));
 }
 
+/* ---- the next order's sun term along a new direction ---------------------------------------- */
+/* From a vertex at altitude h (unit zenith z) that sends the walk along the unit direction w,
+ * the expected sun term of the next vertex, over where the free path would end:
+ *   ∫_0^D T(0, s) [σ_R(s) P_R(ν) + σ_M,s(s) P_M(ν)] E_sun T_sun(s) V(s) ds
+ *     + [the ray meets the ground] T(0, D) (a/π) E_sun T_sun(ground) cos_factor(ground),
+ * ν = w·sun (the same all along the ray). One point s is drawn on the part of the ray that sees
+ * the sun, with a pdf tabulated at TRUTH_LINE_SEGMENTS + 1 equal nodes: half ∝ σ_s T̂, half
+ * ∝ σ_s T̂ T̂_sun (T̂ by the trapezoid rule, T̂_sun by truth_sun_depth_guess: they only shape the
+ * pdf; the second half follows the light, the first keeps the pdf from trusting the guess);
+ * T and T_sun are ratio-tracking estimates, so the estimate is unbiased whatever the table. A segment is left out only when V = 0 at both its
+ * ends: {V = 0} = {p·sun ≤ −√(r² − r_b²) − r_b α} is convex (ρ² + 2 r_b α q ≤ r_b²(1 + α²),
+ * q = −p·sun ≥ r_b α, ρ the distance from the shadow's axis), so such a segment is dark all
+ * along. In twilight most vertices lie in the planet's shadow and a free path rarely ends in
+ * sunlit air: this draws the point there (the plain estimate — the sun at the free path's end —
+ * needs about a thousand times more walks for the same standard error at −6°). */
+#define TRUTH_LINE_SEGMENTS 16
+/* Which estimate of the sun at vertices after the first (a walk argument): the expectation
+ * along the ray (truth_next_sun_term), the sun at the free path's end (plain next-event
+ * estimation), or the first where the planet's shadow can matter (AUTO). Both are unbiased;
+ * the rule only moves cost and noise. */
+#define TRUTH_NEXT_SUN_AUTO 0
+#define TRUTH_NEXT_SUN_LINE 1
+#define TRUTH_NEXT_SUN_VERTEX 2
+/* AUTO: the line estimate for points whose sun is lower than sin(acos(r_b/r_t) + α) in
+ * cosine: for a higher sun no air within the top of the atmosphere's horizon distance from the
+ * camera (great-circle angle acos(r_b/r_t), ~9° on Earth) lies in the shadow, and the plain
+ * estimate, which costs less, is as good. */
+FN real truth_shadow_reach_cosine(const AtmosphereParameters* a) {
+  const real k = a->bottom_radius / a->top_radius, alpha = a->sun_angular_radius;
+  return sqrt(fmax(R(1.0) - k * k, R(0.0))) * cos(alpha) + k * sin(alpha);
+}
+#define TRUTH_GUESS_SCALE_KM R(8.0) /* the guess's one scale height (only shapes a pdf) */
+/* A rough optical depth towards the sun from altitude h (sun cosine mu_s, along the horizon
+ * when the disc centre is below it), only to shape a pdf: the extinction at the ray's lowest
+ * point times a Chapman-like length for one exponential of scale H, L(μ) = H / √(μ² + 2H/(πr))
+ * (H/μ for a high sun, √(πrH/2) along the horizon); a ray that first descends to its tangent
+ * point counts both sides of it less the part behind the start. */
+FN real truth_sun_depth_guess(const AtmosphereParameters* a, int c, real h, real mu_s) {
+  const real H = TRUTH_GUESS_SCALE_KM;
+  const real r = radius_of(a, h);
+  const real mu = fmax(mu_s, -horizon_distance(a, h) / r);
+  const real up = truth_extinction(a, c, h) * H / sqrt(mu * mu + R(2.0) * H / (ATM_PI * r));
+  if (mu >= R(0.0)) return up;
+  const real h_t = truth_tangent_altitude(a, h, mu);
+  const real r_t = radius_of(a, h_t);
+  return fmax(R(2.0) * truth_extinction(a, c, h_t) * sqrt(ATM_PI * r_t * H / R(2.0)) - up, R(0.0));
+}
+FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, const real* z,
+                            const real* w, const real* sun, PhiloxStream* rng, int* violations) {
+  const real mu = clamp_cosine(dot3(w, z));
+  const int ground = ray_hits_ground(a, h, mu);
+  const real d = distance_to_nearest_boundary(a, h, mu, ground);
+  const real nu = clamp_cosine(dot3(w, sun));
+  const real r0 = radius_of(a, h);
+  const real e_sun = a->solar_irradiance[c];
+  const real ds = d / (real)TRUTH_LINE_SEGMENTS;
+  /* the table: σ_s T̂ and V at the nodes, then the segments' masses */
+  real f[TRUTH_LINE_SEGMENTS + 1], g[TRUTH_LINE_SEGMENTS + 1], mass[TRUTH_LINE_SEGMENTS];
+  int lit[TRUTH_LINE_SEGMENTS + 1];
+  real tau = R(0.0), sigma_prev = R(0.0);
+  for (int k = 0; k <= TRUTH_LINE_SEGMENTS; ++k) {
+    const real s = ds * (real)k;
+    real h_k, mu_k, p[3];
+    point_along(a, h, mu, s, ground, &h_k, &mu_k);
+    for (int i = 0; i < 3; ++i) p[i] = r0 * z[i] + s * w[i];
+    const real mu_s_k = clamp_cosine(dot3(sun, p) / sqrt(dot3(p, p)));
+    const real visible = sun_visible_fraction(a, h_k, mu_s_k);
+    lit[k] = visible > R(0.0);
+    real s_r, s_m, s_t;
+    truth_coefficients(a, c, h_k, &s_r, &s_m, &s_t);
+    if (k > 0) tau += R(0.5) * (sigma_prev + s_t) * ds;
+    sigma_prev = s_t;
+    f[k] = (s_r + s_m) * exp(-tau);
+    g[k] = lit[k] ? f[k] * visible * exp(-truth_sun_depth_guess(a, c, h_k, mu_s_k)) : R(0.0);
+  }
+  real total_f = R(0.0), total_g = R(0.0);
+  int lit_segments = 0;
+  for (int k = 0; k < TRUTH_LINE_SEGMENTS; ++k) {
+    const int on = lit[k] || lit[k + 1];
+    lit_segments += on;
+    if (!on) continue;
+    total_f += R(0.5) * (f[k] + f[k + 1]);
+    total_g += R(0.5) * (g[k] + g[k + 1]);
+  }
+  real value = R(0.0);
+  if (lit_segments > 0) {
+    /* the two halves, each normalised, and a floor of 1e-3 / lit segments so that no lit
+     * segment has probability 0 (T̂ may underflow far along a long ray) */
+    real sum = R(0.0);
+    for (int k = 0; k < TRUTH_LINE_SEGMENTS; ++k) {
+      mass[k] = R(0.0);
+      if (!(lit[k] || lit[k + 1])) continue;
+      if (total_f > R(0.0)) mass[k] += R(0.5) * R(0.5) * (f[k] + f[k + 1]) / total_f;
+      if (total_g > R(0.0)) mass[k] += R(0.5) * R(0.5) * (g[k] + g[k + 1]) / total_g;
+      mass[k] += R(1e-3) / (real)lit_segments;
+      sum += mass[k];
+    }
+    const real u = philox_uniform(rng) * sum;
+    int k = 0;
+    real below = R(0.0);
+    while (k < TRUTH_LINE_SEGMENTS - 1 && (mass[k] == R(0.0) || below + mass[k] <= u)) {
+      below += mass[k];
+      ++k;
+    }
+    const real s = ds * ((real)k + philox_uniform(rng));
+    const real pdf = mass[k] / (sum * ds);
+    real h_s, mu_dummy, p[3];
+    point_along(a, h, mu, s, ground, &h_s, &mu_dummy);
+    for (int i = 0; i < 3; ++i) p[i] = r0 * z[i] + s * w[i];
+    const real mu_s = clamp_cosine(dot3(sun, p) / sqrt(dot3(p, p)));
+    const real visible = sun_visible_fraction(a, h_s, mu_s);
+    real s_r, s_m, s_t;
+    truth_coefficients(a, c, h_s, &s_r, &s_m, &s_t);
+    if (visible > R(0.0) && s_r + s_m > R(0.0) && pdf > R(0.0)) {
+      const real t_view = truth_ratio_track(a, c, majorant, h, mu, ground, s, rng, violations);
+      const real t_sun = truth_sun_transmittance(a, c, majorant, h_s, mu_s, rng, violations);
+      value += t_view * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible / pdf;
+    }
+  }
+  if (ground && a->ground_albedo[c] > R(0.0)) {
+    real p[3];
+    for (int i = 0; i < 3; ++i) p[i] = r0 * z[i] + d * w[i];
+    const real mu_s = clamp_cosine(dot3(sun, p) / sqrt(dot3(p, p)));
+    const real cos_factor = sun_horizontal_cosine(a, mu_s);
+    if (cos_factor > R(0.0)) {
+      const real t_view = truth_ratio_track(a, c, majorant, h, mu, 1, d, rng, violations);
+      const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, rng, violations);
+      value += t_view * a->ground_albedo[c] / ATM_PI * e_sun * t_sun * cos_factor;
+    }
+  }
+  return value;
+}
+
 /* ---- one walk ---------------------------------------------------------------------------- */
 /* The radiance estimate of one walk for channel c of point `pt`. node_tau and node_cdf are the
  * view-ray table of this point and channel (node distances in node_t). max_orders: 0 = all.
@@ -254,9 +394,11 @@ FN real sample_henyey_greenstein_cosine(real g, real u) {
  * random numbers, so a walk's stream and value do not depend on it. */
 FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, GLOBAL const real* node_t,
                    GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
-                   int max_orders, int split_order, PhiloxStream* rng, real* radiance_low, int* events,
-                   int* truncated, int* violations) {
+                   int max_orders, int split_order, int next_sun, PhiloxStream* rng, real* radiance_low,
+                   int* events, int* truncated, int* violations) {
   *radiance_low = R(0.0);
+  const int use_line = next_sun == TRUTH_NEXT_SUN_LINE ||
+                       (next_sun == TRUTH_NEXT_SUN_AUTO && pt[PT_MU_S] < truth_shadow_reach_cosine(a));
   const int n = (int)pt[PT_NODES];
   if (n < 2) return R(0.0);
   const real sun[3] = {pt[PT_S], pt[PT_S + 1], pt[PT_S + 2]};
@@ -295,9 +437,10 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
     *events += 1;
     const real mu_s = clamp_cosine(dot3(sun, z));
     if (on_ground) {
-      /* ground vertex: the sun, then a cosine-weighted direction */
+      /* ground vertex: the sun (unless it came with the previous vertex), then a
+       * cosine-weighted direction */
       const real albedo = a->ground_albedo[c];
-      const real cos_factor = sun_horizontal_cosine(a, mu_s);
+      const real cos_factor = use_line ? R(0.0) : sun_horizontal_cosine(a, mu_s);
       if (cos_factor > R(0.0) && albedo > R(0.0)) {
         const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, rng, violations);
         const real add = weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
@@ -311,11 +454,12 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real phi = R(2.0) * ATM_PI * philox_uniform(rng);
       truth_rotate(z, cos_t, phi, w);
     } else {
-      /* scattering vertex: the sun, then the phase function */
+      /* scattering vertex: the sun (unless it came with the previous vertex), then the phase
+       * function */
       real s_r, s_m, s_t;
       truth_coefficients(a, c, h, &s_r, &s_m, &s_t);
       const real nu = clamp_cosine(dot3(w, sun));
-      const real visible = sun_visible_fraction(a, h, mu_s);
+      const real visible = order == 1 || !use_line ? sun_visible_fraction(a, h, mu_s) : R(0.0);
       if (visible > R(0.0) && s_r + s_m > R(0.0)) {
         const real t_sun = truth_sun_transmittance(a, c, majorant, h, mu_s, rng, violations);
         const real add = weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
@@ -335,6 +479,12 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       real w1[3];
       truth_rotate(w, cos_t, R(2.0) * ATM_PI * u_phi, w1);
       for (int k = 0; k < 3; ++k) w[k] = w1[k];
+    }
+    /* the next vertex's sun term, in expectation over where the free path ends */
+    if (use_line) {
+      const real add = weight * truth_next_sun_term(a, c, majorant, on_ground ? R(0.0) : h, z, w, sun, rng, violations);
+      radiance += add;
+      if (order + 1 <= split_order) *radiance_low += add;
     }
     if (max_orders == 0 && order >= TRUTH_MAX_EVENTS) {
       *truncated += 1;
@@ -383,8 +533,8 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
 FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
                          GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
                          int nodes, int p, int point_base, int b, int paths_per_batch, int max_orders,
-                         int split_order, philox_u32 seed_lo, philox_u32 seed_hi, int channel_base, int channels,
-                         GLOBAL real* out_item) {
+                         int split_order, int next_sun, philox_u32 seed_lo, philox_u32 seed_hi, int channel_base,
+                         int channels, GLOBAL real* out_item) {
   GLOBAL const real* pt = points + p * TRUTH_POINT_STRIDE;
   int events = 0, truncated = 0, violations = 0;
   for (int c = 0; c < NCH; ++c) {
@@ -397,7 +547,7 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
                            (philox_u32)(channel_base + c));
         real low;
         const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
-                                  node_cdf + (p * NCH + c) * nodes, majorant, max_orders, split_order, &rng, &low,
+                                  node_cdf + (p * NCH + c) * nodes, majorant, max_orders, split_order, next_sun, &rng, &low,
                                   &events, &truncated, &violations);
         const real xs[TRUTH_STATS] = {x, low, x - low};
         for (int k = 0; k < TRUTH_STATS; ++k) {

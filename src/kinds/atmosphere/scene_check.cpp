@@ -252,7 +252,8 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     const json walks = {{"paths", o.paths},         {"orders", o.orders},
                         {"seed", o.seed},           {"paths_per_batch", o.paths_per_batch},
                         {"target", o.target_relative_se}, {"max_paths", o.max_paths},
-                        {"split", o.split_orders},  {"weights", o.target_weights}};
+                        {"split", o.split_orders},  {"weights", o.target_weights},
+                        {"next_sun", static_cast<int>(o.next_sun)}};
     return std::string("atmosphere.truth/") + what + "/" + p["atmosphere"].dump() + p["channels"].dump() +
            scene.dump() + "/first " + std::to_string(first) + "/walks " + walks.dump() + where;
   };

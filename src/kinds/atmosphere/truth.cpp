@@ -15,6 +15,11 @@
 
 namespace specbake::atmosphere {
 
+// TruthOptions::NextSun is the walk's next_sun argument (path_tracer.cl).
+static_assert(static_cast<int>(TruthOptions::NextSun::automatic) == TRUTH_NEXT_SUN_AUTO &&
+              static_cast<int>(TruthOptions::NextSun::along_ray) == TRUTH_NEXT_SUN_LINE &&
+              static_cast<int>(TruthOptions::NextSun::at_vertex) == TRUTH_NEXT_SUN_VERTEX);
+
 namespace {
 
 using ref3::AtmosphereParameters;
@@ -427,7 +432,8 @@ class HostEngine final : public Engine {
       if (j >= count[p]) return;
       ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.majorant.data(),
                              kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
-                             o_.split_orders, static_cast<philox_u32>(o_.seed & 0xffffffffu), static_cast<philox_u32>(o_.seed >> 32),
+                             o_.split_orders, static_cast<int>(o_.next_sun), static_cast<philox_u32>(o_.seed & 0xffffffffu),
+                             static_cast<philox_u32>(o_.seed >> 32),
                              static_cast<int>(g.first), static_cast<int>(g.count), &out[id * kStride]);
     });
     return out;
@@ -483,6 +489,7 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, static_cast<cl_int>(o_.paths_per_batch));
       k.setArg(i++, static_cast<cl_int>(o_.orders));
       k.setArg(i++, static_cast<cl_int>(o_.split_orders));
+      k.setArg(i++, static_cast<cl_int>(o_.next_sun));
       k.setArg(i++, static_cast<cl_uint>(o_.seed & 0xffffffffu));
       k.setArg(i++, static_cast<cl_uint>(o_.seed >> 32));
       k.setArg(i++, static_cast<cl_int>(g.first));
@@ -711,7 +718,9 @@ nlohmann::json TruthResult::summary() const {
   }
   return {{"method", "Monte Carlo path tracing (kernels/atmosphere/path_tracer.cl): view-ray vertex from the "
                      "tabulated optical depth, delta tracking, sun by next-event estimation with ratio "
-                     "tracking, Philox4x32-10 streams per (seed, path, point, channel)"},
+                     "tracking (at vertices after the first, for points whose sun is low enough for the "
+                     "planet's shadow to matter, its expectation along the ray drawn on the ray's sunlit "
+                     "part), Philox4x32-10 streams per (seed, path, point, channel)"},
           {"wavelengths_nm", lambda_nm},
           {"channels", channel_names},
           {"points", points},

@@ -72,6 +72,12 @@ struct TruthOptions {
   // channels each need far fewer walks than the sum's precision asks of one channel) rather
   // than to every channel. Empty: every channel.
   std::vector<double> target_weights;
+  // The sun term of every vertex after the view ray's (path_tracer.cl, TRUTH_NEXT_SUN_*):
+  // automatic (its expectation along the ray for points whose sun is low enough for the
+  // planet's shadow to matter, the plain next-event estimate at the free path's end otherwise),
+  // or one of the two everywhere (tests compare them). Same expectation; other noise and cost.
+  enum class NextSun { automatic = 0, along_ray = 1, at_vertex = 2 };
+  NextSun next_sun = NextSun::automatic;
 };
 
 // Radiance per point and traced channel, [point][channel] row-major.
