@@ -830,7 +830,7 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
     cos_phi[m] = cos(phi);
     sin_phi[m] = sin(phi);
   }
-  const int single = order == 2, nu_n = a->nu_size;
+  const int single = order == 2;
   const int stride = incidence_stride(a);
   real e[INC_MAX];
   /* per φ of the current θ: the view's phase functions × dω, and the direction's x and y */
@@ -906,7 +906,7 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
        * slice's sums over (φ, side) stay in registers across that loop, in the order (m, side).
        * ν_i spans cos θ μ_s ± sin θ |sun_xy| over φ, so near the poles of θ a few slices hold
        * every x: the slices outside [floor(min x), floor(max x) + 1] have hat weight 0 for every
-       * x and keep their zero sums without the loop. */
+       * x: neither loop below visits them. */
       real lo = x_lo[0], hi = x_hi[0];
       for (int k = 1; k < LANES; ++k) {
         lo = fmin(lo, x_lo[k]);
@@ -914,7 +914,6 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
       }
       const int s_lo = clamp_int((int)floor(lo), 0, NU_SLICES(a) - 1);
       const int s_hi = clamp_int((int)floor(hi) + 1, 0, NU_SLICES(a) - 1);
-      for (int i = 0; i < NU_SLICES(a) * LANES; ++i) a_r[i] = a_m[i] = a_r_mie[i] = a_m_mie[i] = R(0.0);
       for (int s = s_lo; s <= s_hi; ++s) {
         real sr[LANES], sm[LANES], srm[LANES], smm[LANES];
         for (int k = 0; k < LANES; ++k) sr[k] = sm[k] = srm[k] = smm[k] = R(0.0);
@@ -945,7 +944,7 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
       }
       for (int k = 0; k < LANES && k0 + k < count; ++k) {
         real* const j = out + (k0 + k) * NCH;
-        for (int s = 0; s < nu_n; ++s) {
+        for (int s = s_lo; s <= s_hi; ++s) {
           const real* const source = e + INC_SOURCE(a) + s * NCH;
           const real ar = a_r[s * LANES + k], am = a_m[s * LANES + k];
           for (int c = 0; c < NCH; ++c) j[c] += source[c] * (beta_r[c] * ar + beta_m[c] * am);

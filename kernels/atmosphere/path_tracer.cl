@@ -262,13 +262,14 @@ FN real sample_henyey_greenstein_cosine(real g, real u) {
  * the sun, with a pdf tabulated at TRUTH_LINE_SEGMENTS + 1 equal nodes: half ∝ σ_s T̂, half
  * ∝ σ_s T̂ T̂_sun (T̂ by the trapezoid rule, T̂_sun by truth_sun_depth_guess: they only shape the
  * pdf; the second half follows the light, the first keeps the pdf from trusting the guess);
- * T and T_sun are ratio-tracking estimates, so the estimate is unbiased whatever the table. A segment is left out only when V = 0 at both its
- * ends: {V = 0} = {p·sun ≤ −√(r² − r_b²) − r_b α} is convex (ρ² + 2 r_b α q ≤ r_b²(1 + α²),
- * q = −p·sun ≥ r_b α, ρ the distance from the shadow's axis), so such a segment is dark all
- * along. In twilight most vertices lie in the planet's shadow and a free path rarely ends in
+ * T and T_sun are ratio-tracking estimates, so the estimate is unbiased whatever the table.
+ * A segment is left out only when V = 0 at both its ends: {V = 0} = {p·sun ≤ −√(r² − r_b²) −
+ * r_b α} is convex (ρ² + 2 r_b α q ≤ r_b²(1 + α²), q = −p·sun ≥ r_b α, ρ the distance from the
+ * shadow's axis), so such a segment is dark all along. In twilight most vertices lie in the planet's shadow and a free path rarely ends in
  * sunlit air: this draws the point there (the plain estimate — the sun at the free path's end —
- * needs about a thousand times more walks for the same standard error at −6°). */
-#define TRUTH_LINE_SEGMENTS 16
+ * had 5–20× the variance per walk at views with the sun 3°–6° below the horizon,
+ * docs/atmosphere.md "Twilight"). */
+#define TRUTH_LINE_SEGMENTS 8
 /* Which estimate of the sun at vertices after the first (a walk argument): the expectation
  * along the ray (truth_next_sun_term), the sun at the free path's end (plain next-event
  * estimation), or the first where the planet's shadow can matter (AUTO). Both are unbiased;
@@ -432,6 +433,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
     for (int k = 0; k < 3; ++k) z[k] = z1[k];
   }
   int on_ground = 0;
+  int sun_done = 0; /* this vertex's sun term came with the previous vertex */
   real radiance = R(0.0);
   for (int order = 1;; ++order) {
     *events += 1;
@@ -440,7 +442,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       /* ground vertex: the sun (unless it came with the previous vertex), then a
        * cosine-weighted direction */
       const real albedo = a->ground_albedo[c];
-      const real cos_factor = use_line ? R(0.0) : sun_horizontal_cosine(a, mu_s);
+      const real cos_factor = sun_done ? R(0.0) : sun_horizontal_cosine(a, mu_s);
       if (cos_factor > R(0.0) && albedo > R(0.0)) {
         const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, rng, violations);
         const real add = weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
@@ -459,7 +461,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       real s_r, s_m, s_t;
       truth_coefficients(a, c, h, &s_r, &s_m, &s_t);
       const real nu = clamp_cosine(dot3(w, sun));
-      const real visible = order == 1 || !use_line ? sun_visible_fraction(a, h, mu_s) : R(0.0);
+      const real visible = sun_done ? R(0.0) : sun_visible_fraction(a, h, mu_s);
       if (visible > R(0.0) && s_r + s_m > R(0.0)) {
         const real t_sun = truth_sun_transmittance(a, c, majorant, h, mu_s, rng, violations);
         const real add = weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
@@ -481,7 +483,8 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       for (int k = 0; k < 3; ++k) w[k] = w1[k];
     }
     /* the next vertex's sun term, in expectation over where the free path ends */
-    if (use_line) {
+    sun_done = use_line;
+    if (sun_done) {
       const real add = weight * truth_next_sun_term(a, c, majorant, on_ground ? R(0.0) : h, z, w, sun, rng, violations);
       radiance += add;
       if (order + 1 <= split_order) *radiance_low += add;

@@ -17,6 +17,7 @@ jobs:
     orders: 3
     sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}
     layout: [3d, tiled2d]
+    scene: {points: 16}
 )";
 
 }  // namespace

@@ -34,7 +34,7 @@ fs::path bake(const t::TempDir& tmp, const std::string& ktx2) {
   t::write_file(tmp / "sky.yaml",
                 "specbake: 1\noutput: out\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 2\n"
                 "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
-                "    formats: [bin, exr, ktx2]\n    ktx2: " + ktx2 + "\n");
+                "    scene: {points: 16}\n    formats: [bin, exr, ktx2]\n    ktx2: " + ktx2 + "\n");
   const auto r = t::run_cli({"run", (tmp / "sky.yaml").string()}, tmp.path());
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   return fs::canonical(tmp / "out" / "sky" / "latest");

@@ -128,6 +128,21 @@ TEST(SceneCheck, SummariesUseTheNearestRankPercentile) {
   EXPECT_EQ(dark[1], 0.0);
 }
 
+// The walk cap: 32768 per point and channel at the default 1 % (and any coarser target), times
+// (1 %/relative_se)² for a finer one, at most 2²²; a spectrum's wavelengths get 3/n of it.
+TEST(SceneCheck, TheWalkCapFollowsAFinerTarget) {
+  EXPECT_EQ(scene_walk_cap(0.01), 32768);
+  EXPECT_EQ(scene_walk_cap(0.1), 32768);
+  EXPECT_EQ(scene_walk_cap(0.005), 4 * 32768);
+  EXPECT_EQ(scene_walk_cap(0.002), 25 * 32768);
+  EXPECT_EQ(scene_walk_cap(1e-4), 1LL << 22);
+  const AtmosphereSpec fine = spec_of("    preset: earth\n    scene: {relative_se: 0.005}\n");
+  EXPECT_EQ(scene_truth_options(fine, 1).max_paths, 4 * 32768);
+  const AtmosphereSpec ss = spectral_reference_of(fine);
+  EXPECT_EQ(scene_truth_options(ss, 1).max_paths, 3 * 4 * 32768 / 48);
+  EXPECT_EQ(scene_truth_options(spec_of("    preset: earth\n"), 1).max_paths, 32768);
+}
+
 // ---- the split of a walk at the bake's orders ---------------------------------------------------
 
 // The part of orders 1..N of an all-orders walk is the walk that stops after order N: the

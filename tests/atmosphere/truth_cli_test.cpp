@@ -15,6 +15,7 @@ namespace fs = std::filesystem;
 const char* kSky =
     "specbake: 1\noutput: out\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 3\n"
     "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+    "    scene: {points: 16}\n"
     "  - name: prism\n    kind: dispersion\n    samples: 4\n    material: {n_d: 1.5, v_d: 60}\n";
 
 std::string read(const fs::path& p) {

@@ -838,7 +838,8 @@ TEST(TruthScene, PointSetsAreDeterministicAndStratified) {
 TEST(TruthBundle, LutRadianceFromABundleMatchesTheBake) {
   specbake::testing::TempDir dir;
   const std::string job = "    preset: earth\n    orders: 2\n"
-                          "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n";
+                          "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+                          "    scene: {points: 16}\n";
   specbake::testing::write_file(dir / "a.yaml", "specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n" + job);
   const auto run = specbake::testing::run_cli({"run", (dir / "a.yaml").string(), "--out", (dir / "out").string()});
   ASSERT_EQ(run.exit_code, 0) << run.err;

@@ -25,7 +25,8 @@ const std::string kPrism =
     "  - name: prism\n    kind: dispersion\n    samples: 6\n    material: {glass: N-BK7}\n";
 const std::string kSky =
     "  - name: sky\n    kind: atmosphere\n    orders: 3\n"
-    "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n";
+    "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+    "    scene: {points: 16}\n";
 
 std::string config(const std::string& jobs, const std::string& output = "out") {
   return "specbake: 1\noutput: " + output + "\njobs:\n" + jobs;

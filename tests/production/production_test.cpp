@@ -331,6 +331,7 @@ TEST(Production, ByteIdenticalAcrossRunsAndDeviceSelectors) {
     kind: atmosphere
     orders: 2
     sizes: {transmittance: [16, 8], irradiance: [8, 4], scattering: {r: 4, mu: 8, mu_s: 4, nu: 2}}
+    scene: {points: 16}
 )");
   std::vector<std::map<std::string, std::string>> snaps;
   int i = 0;

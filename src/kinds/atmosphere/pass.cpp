@@ -115,12 +115,10 @@ class DeviceBackend final : public PassBackend {
     });
     check_layout();
     row_group_ = choose_row_group();
-    spdlog::debug("atmosphere: {} lane(s): single scattering {} texel(s) per work item, density {} sun(s) side by side",
-                  lanes_, lanes_, lanes_);
-    spdlog::debug("atmosphere: multiple scattering {} ({} B of local memory per row, {} B on the device)",
-                  row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row, " +
-                                   std::to_string(lanes_) + " texels per work item"
-                             : "per texel",
+    spdlog::debug("atmosphere: LANES {} (texels per work item of single and multiple scattering, suns side by side "
+                  "in the density); multiple scattering {} ({} B of local memory per row, {} B on the device)",
+                  lanes_,
+                  row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row" : "per texel",
                   row_columns_bytes(), dev_.info().local_mem_bytes);
   }
   int channels() const override { return width_; }

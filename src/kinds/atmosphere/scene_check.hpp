@@ -66,9 +66,13 @@ std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first = 
 // The walks of a check's trace of `traced` (the bake's spec, or the spectral reference of an
 // rgb bake): 1024 per point and channel first, then top-ups until the standard error is the
 // scene's relative_se of the radiance (every channel of an rgb trace; each of X, Y, Z of a
-// spectrum, whose n wavelengths then get 3/n of the walks each), at most 32768 per point and
-// channel (3 · 32768 / n per wavelength).
+// spectrum, whose n wavelengths then get 3/n of the walks each), at most scene_walk_cap per
+// point and channel (3 · cap / n per wavelength).
 TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t seed);
+// The walk cap per point and channel for a scene's relative_se: 32768 at 1 % (and above), times
+// (1 %/relative_se)² below it — a walk noisier than ~1.8 relative standard deviation stops at
+// the cap whatever the target — at most 2²².
+long long scene_walk_cap(double relative_se);
 // The spectral reference of an rgb bake: the same atmosphere at 48 wavelengths over 360–830 nm.
 AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 
