@@ -27,14 +27,20 @@ using nlohmann::json;
 namespace {
 
 // Self-check: float32 kernels against the double reference path on the same inputs, relative
-// to |reference| + 1e-3 × the channel's maximum. One stage is a quadrature of ≤ 1024 terms of
+// to |reference| + 1e-2 × the channel's maximum. One stage is a quadrature of ≤ 1024 terms of
 // one sign (≤ 1024 · 2⁻²⁴ ≈ 6e-5 relative) of lookups whose coordinates come from the
 // altitude-based geometry of atmosphere.cl (no cancellation beyond ~10 ulps: ~1e-6 in a
-// coordinate, ≲ 1e-5 in a value); the transmittance's 500-term optical depth τ carries
-// ≤ 3e-5 relative, so T carries ≤ 3e-5 τ, and where T is above the floor (T ≥ 1e-3 T_max,
-// τ ≲ 7) that is ≤ 2e-4, below it ≤ max_τ e^{−τ} τ · 3e-5 / 1e-3 ≤ 2e-4 as well. 2e-3 bounds a
-// stage with a factor > 5 to spare; wrong layouts, orders or formulas give O(1) errors.
-constexpr double kCheckFloor = 1e-3;
+// coordinate, ≲ 1e-5 in a value where the texture changes by ≲ 10× per texel). Where it
+// changes faster — the sun's edge at the horizon, a texel from ~0 to near the maximum — the
+// same 1e-6 moves a lookup by up to N × 1e-6 of the maximum (N ≤ ~150 texels per axis:
+// ~1.5e-4), and the few such lookups of a quadrature move a value near 0 by ~1e-6–1e-5 of the
+// channel's maximum (measured: 2.3e-6 in the indirect irradiance of a 16-wavelength bake with
+// 144 μ texels, at the ground with the sun just below the horizon). So values under 1 % of the
+// maximum are judged against 1 % of it: 2e-3 × 1e-2 = 2e-5 of the maximum. The transmittance's
+// 500-term optical depth τ carries ≤ 3e-5 relative, so T carries ≤ 3e-5 τ, ≤ 2e-4 where
+// T ≥ 1e-3 T_max (τ ≲ 7). 2e-3 bounds a stage with a factor > 5 to spare; wrong layouts, orders
+// or formulas give O(1) errors.
+constexpr double kCheckFloor = 1e-2;
 constexpr double kCheckTolerance = 2e-3;
 
 using MakeBackend = std::function<std::unique_ptr<PassBackend>(const Channels&, int width)>;
@@ -580,7 +586,7 @@ Accuracy judge_self_checks(const Baked& b) {
                    "sums lose their digits); `precision: double` computes in float64 on devices that have it");
   }
   return Accuracy::judged(
-      "self_check", "max relative error |device - reference| / (|reference| + 1e-3 * channel max)",
+      "self_check", "max relative error |device - reference| / (|reference| + 1e-2 * channel max)",
       b.self_check_worst, kCheckTolerance,
       "double reference path recomputing 24 texels of each stage from the device's own inputs",
       {{"stages", b.self_checks}});
