@@ -162,7 +162,7 @@ TEST(TruthMajorant, ProfileMaximaBoundTheDensities) {
 // per operation, ~1e-14 relative after a walk's ~100 operations); a walk could only diverge
 // if a uniform fell within ~1e-14 of a decision threshold (probability ~1e-14 per decision,
 // ~1e5 decisions here), so 1e-9 relative is a wide bound. A float32 device follows the same
-// walks with 24-bit uniforms: then the two agree statistically, within 4 combined se. The last
+// walks with 23-bit uniforms: then the two agree statistically, within 4 combined se. The last
 // point has the sun 5° below the horizon: its walks take the twilight estimate.
 TEST(Truth, DeviceMatchesHostReference) {
   const std::vector<TruthPoint> points = {{0, 30, 40, 60}, {5, 110, 35, 120}, {100, 98, 30, 20}, {0.5, 60, 95, 90}};
@@ -190,7 +190,7 @@ TEST(Truth, DeviceMatchesHostReference) {
 
 // A device without cl_khr_fp64 (PoCL with the capability masked) traces in float32: single
 // scattering against the quadrature as above, within 4 se + 1e-4 L. float32 costs ≤ 2e-6 in
-// T (the τ table, ≤ 30, at 6e-8 relative), ≤ 1e-5 in the view vertex's probabilities (24-bit
+// T (the τ table, ≤ 30, at 6e-8 relative), ≤ 2e-5 in the view vertex's probabilities (23-bit
 // uniforms against the segment table), ~1e-7 in altitudes: 1e-4 bounds them with room.
 TEST(Truth, FloatOnlyDeviceTracesInFloat32) {
   cl_util::DeviceInfo info = cl_util::select_device("auto");
@@ -430,16 +430,17 @@ TEST(Truth, ConstantDensityShellSecondOrderMatchesQuadrature) {
 }
 
 // Twilight on Bruneton's Earth (sun 3° to 6° below the horizon, cameras at 0.5–1.5 km): the
-// second vertex's sun by its expectation along the ray (what `automatic` picks here) and at the
-// free path's end are two unbiased estimates of the same orders 1–2; they agree within
-// 4 √(se₁² + se₂²) (independent streams: other seeds). The plain estimate needs ~16× the
-// walks for its se here (the reason for the other): it gets 8× the walks and still sets the bound.
+// later vertices' sun by its expectation along the ray (what `automatic` picks here) and at the
+// free path's end are two unbiased estimates of the same orders 1–3 (order 3 includes paths
+// through the ground); they agree within 4 √(se₁² + se₂²) (independent streams: other seeds).
+// The plain estimate needs ~16× the walks for its se here (the reason for the other): it gets
+// 8× the walks and still sets the bound.
 TEST(Truth, TwilightSunAlongTheRayAgreesWithTheSunAtTheVertex) {
   const AtmosphereSpec s = earth();
   const std::vector<TruthPoint> points = {{0.5, 30, 95, 90}, {0.5, 80, 95, 180}, {1.5, 60, 93, 45}, {1.5, 10, 96, 120}};
   TruthOptions line;
   line.paths = 16384;
-  line.orders = 2;
+  line.orders = 3;
   line.next_sun = TruthOptions::NextSun::along_ray;
   TruthOptions plain = line;
   plain.paths = 8 * line.paths;
