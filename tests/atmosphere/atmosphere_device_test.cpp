@@ -2,6 +2,7 @@
 // reference path (small sizes), analytic cases, hard cases, layouts, and the CLI.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -26,17 +27,19 @@ AtmosphereSpec earth() {
   set_earth_profiles(s);  // Bruneton's demo Earth, as `preset: earth`
   return s;
 }
-AtmosphereSpec small(AtmosphereSpec s) {
-  s.transmittance_mu = 32;
-  s.transmittance_r = 8;
-  s.irradiance_mu_s = 16;
-  s.irradiance_r = 4;
-  s.scattering_r = 5;
-  s.scattering_mu = 16;
-  s.scattering_mu_s = 8;
-  s.scattering_nu = 4;
+// s with the texture sizes: transmittance {mu, r}, irradiance {mu_s, r}, scattering {r, mu, mu_s, nu}.
+AtmosphereSpec sized(AtmosphereSpec s, std::array<int, 2> t, std::array<int, 2> e, std::array<int, 4> sc) {
+  s.transmittance_mu = t[0];
+  s.transmittance_r = t[1];
+  s.irradiance_mu_s = e[0];
+  s.irradiance_r = e[1];
+  s.scattering_r = sc[0];
+  s.scattering_mu = sc[1];
+  s.scattering_mu_s = sc[2];
+  s.scattering_nu = sc[3];
   return s;
 }
+AtmosphereSpec small(AtmosphereSpec s) { return sized(s, {32, 8}, {16, 4}, {5, 16, 8, 4}); }
 
 // max over texels of |a − b| / (|b| + floor · max_channel |b|), over 3 channels.
 double max_rel(const std::vector<double>& a, const std::vector<double>& b, double floor) {
@@ -260,15 +263,7 @@ TEST(AtmosphereDevice, ZeroCoefficientsGiveZeroScattering) {
 // than h/μ) and the 16-θ midpoint rule of the irradiance integral make the balance inexact:
 // an independent integral of the curved-shell geometry bounds their effect at 3 %.
 TEST(AtmosphereDevice, EnergyConservedForThinConservativeShell) {
-  AtmosphereSpec s = small(earth());
-  s.transmittance_mu = 64;
-  s.transmittance_r = 16;
-  s.irradiance_mu_s = 16;
-  s.irradiance_r = 4;
-  s.scattering_r = 8;
-  s.scattering_mu = 64;
-  s.scattering_mu_s = 8;
-  s.scattering_nu = 8;
+  AtmosphereSpec s = sized(earth(), {64, 16}, {16, 4}, {8, 64, 8, 8});
   s.mie = false;
   s.ozone = false;
   s.ground_albedo = 0.0;
@@ -329,14 +324,7 @@ TEST(AtmosphereDevice, TinyAndOddSizes) {
   s.transmittance_mu = s.transmittance_r = s.irradiance_mu_s = s.irradiance_r = 2;
   s.scattering_r = s.scattering_mu = s.scattering_mu_s = s.scattering_nu = 2;
   expect_all_finite(bake_luts(s, device(), kQuiet, 4));
-  s.transmittance_mu = 7;
-  s.transmittance_r = 5;
-  s.irradiance_mu_s = 5;
-  s.irradiance_r = 3;
-  s.scattering_r = 3;
-  s.scattering_mu = 6;
-  s.scattering_mu_s = 5;
-  s.scattering_nu = 3;
+  s = sized(s, {7, 5}, {5, 3}, {3, 6, 5, 3});
   const Baked b = bake_luts(s, device(), kQuiet, 4);
   expect_all_finite(b);
   EXPECT_LE(b.self_check_worst, kSelfCheckTolerance);
@@ -413,17 +401,9 @@ TEST(AtmosphereDevice, Tiled2dSamplesEqual3d) {
 // maximum, which the self-check's floor (1 % of the maximum, atmosphere_job.cpp) must allow; a
 // floor of 1e-3 failed this bake (2.3e-3 > 2e-3).
 TEST(AtmosphereDevice, SelfCheckAllowsTheSunsEdgeAtFineSizes) {
-  AtmosphereSpec s = earth();
+  AtmosphereSpec s = sized(earth(), {128, 32}, {72, 18}, {16, 144, 54, 6});
   s.spectral = true;
   s.count = 16;
-  s.transmittance_mu = 128;
-  s.transmittance_r = 32;
-  s.irradiance_mu_s = 72;
-  s.irradiance_r = 18;
-  s.scattering_r = 16;
-  s.scattering_mu = 144;
-  s.scattering_mu_s = 54;
-  s.scattering_nu = 6;
   s.orders = 4;
   const Baked b = bake_luts(s, device(), kQuiet, 4);
   std::printf("self-check worst %.3g\n", b.self_check_worst);
