@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "atmosphere/npy.hpp"
+#include "atmosphere/sized.hpp"
 #include "io/exr.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/reference.hpp"
@@ -19,24 +20,14 @@ using namespace specbake::atmosphere;
 
 namespace {
 
+using specbake::testing::sized;
+
 cl_util::Device& device() { return specbake::testing::shared_device(); }
 const Progress kQuiet = [](std::string_view, double) {};
 
 AtmosphereSpec earth() {
   AtmosphereSpec s;
   set_earth_profiles(s);  // Bruneton's demo Earth, as `preset: earth`
-  return s;
-}
-// s with the texture sizes: transmittance {mu, r}, irradiance {mu_s, r}, scattering {r, mu, mu_s, nu}.
-AtmosphereSpec sized(AtmosphereSpec s, std::array<int, 2> t, std::array<int, 2> e, std::array<int, 4> sc) {
-  s.transmittance_mu = t[0];
-  s.transmittance_r = t[1];
-  s.irradiance_mu_s = e[0];
-  s.irradiance_r = e[1];
-  s.scattering_r = sc[0];
-  s.scattering_mu = sc[1];
-  s.scattering_mu_s = sc[2];
-  s.scattering_nu = sc[3];
   return s;
 }
 AtmosphereSpec small(AtmosphereSpec s) { return sized(s, {32, 8}, {16, 4}, {5, 16, 8, 4}); }

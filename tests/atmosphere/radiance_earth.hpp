@@ -3,6 +3,7 @@
 // max_nm: 700, count: 8, store: radiance}` (two wavelength sets) and 2 orders, at small sizes.
 #include <array>
 
+#include "atmosphere/sized.hpp"
 #include "kinds/atmosphere/spec.hpp"
 
 namespace specbake::testing {
@@ -12,14 +13,7 @@ inline AtmosphereSpec radiance_earth(std::array<int, 2> transmittance, std::arra
                                      std::array<int, 4> scattering) {
   AtmosphereSpec s;
   set_earth_profiles(s);
-  s.transmittance_mu = transmittance[0];
-  s.transmittance_r = transmittance[1];
-  s.irradiance_mu_s = irradiance[0];
-  s.irradiance_r = irradiance[1];
-  s.scattering_r = scattering[0];
-  s.scattering_mu = scattering[1];
-  s.scattering_mu_s = scattering[2];
-  s.scattering_nu = scattering[3];
+  s = sized(s, transmittance, irradiance, scattering);
   s.orders = 2;
   s.spectral = s.store_radiance = true;
   s.min_nm = 400.0;
