@@ -148,6 +148,52 @@ TEST(AutoSearch, PlateausAndCaps) {
 
 // From the CLI: a scene the start already meets bakes once at half the default sizes; the record,
 // the held-out check and the bundle's textures follow the chosen sizes; plan shows them.
+// Rounds: a choice that misses the tolerance at the held-out points is searched on, judged at
+// both point sets, and judged again at a fresh set; one that passes, or a search that did not
+// meet the tolerance, ends the rounds. Found = {round, judged points, the held-out set's first point}.
+struct Round {
+  int judged = 0, first = -1;
+  bool met = true;
+};
+std::vector<Round> rounds_with(int n, std::vector<bool> met, std::vector<bool> passes) {
+  std::size_t k = 0;
+  return specbake::atmosphere::search_rounds<Round>(
+      n,
+      [&](int judged, const Round* previous) {
+        EXPECT_EQ(previous == nullptr, judged == n);  // the second round starts from the first's choice
+        return Round{judged, -1, met.at(k)};
+      },
+      [](const Round& r) { return r.met; },
+      [&](Round& r, int first) {
+        r.first = first;
+        return static_cast<bool>(passes.at(k++));
+      });
+}
+
+TEST(AutoSearch, AHeldOutMissSearchesOnAtBothPointSetsAndHoldsOutAFreshSet) {
+  const auto again = rounds_with(128, {true, true}, {false, true});
+  ASSERT_EQ(again.size(), 2u);
+  EXPECT_EQ(again[0].judged, 128);  // [0, n)
+  EXPECT_EQ(again[0].first, 128);   // held out [n, 2n)
+  EXPECT_EQ(again[1].judged, 256);  // [0, 2n): both sets the first round saw
+  EXPECT_EQ(again[1].first, 256);   // a fresh [2n, 3n)
+
+  const auto passed = rounds_with(128, {true}, {true});
+  ASSERT_EQ(passed.size(), 1u);
+  EXPECT_EQ(passed[0].first, 128);
+
+  // a search short of the tolerance at its own points is not searched again: the held-out check
+  // is reported, and the rounds end
+  const auto short_of_it = rounds_with(64, {false}, {false});
+  ASSERT_EQ(short_of_it.size(), 1u);
+  EXPECT_EQ(short_of_it[0].first, 64);
+
+  // at most kMaxRounds rounds, whatever the held-out sets say
+  const auto capped = rounds_with(16, {true, true, true}, {false, false, false});
+  EXPECT_EQ(capped.size(), static_cast<std::size_t>(specbake::atmosphere::kMaxRounds));
+  EXPECT_EQ(capped.back().first, 16 * specbake::atmosphere::kMaxRounds);
+}
+
 TEST(AutoSettingsCli, MetAtTheStartBakesHalfTheDefaultSizes) {
   t::TempDir tmp;
   t::write_file(tmp / "c.yaml",
@@ -174,6 +220,13 @@ TEST(AutoSettingsCli, MetAtTheStartBakesHalfTheDefaultSizes) {
   EXPECT_EQ(m["accuracy"][0]["name"], "vs_path_traced");
   EXPECT_EQ(m["accuracy"][1]["name"], "vs_path_traced_held_out");
   EXPECT_EQ(m["accuracy"][1]["details"]["first_point"], 8);
+  // one round: judged at [0, 8), held out at [8, 16), which passed
+  ASSERT_EQ(a["rounds"].size(), 1u);
+  EXPECT_EQ(a["rounds"][0]["judged_points"], (json{0, 8}));
+  EXPECT_EQ(a["rounds"][0]["held_out_points"], (json{8, 16}));
+  EXPECT_TRUE(a["rounds"][0]["held_out_passed"].get<bool>());
+  EXPECT_EQ(a["rounds"][0]["held_out_error"].get<double>(), m["accuracy"][1]["value"].get<double>());
+  EXPECT_EQ(a["tries"][0]["round"], 1);
   // the held-out points are other points: another error
   EXPECT_NE(m["accuracy"][1]["value"].get<double>(), m["accuracy"][0]["value"].get<double>());
   // the textures have the chosen sizes: scattering [r][mu][nu*mu_s][3]

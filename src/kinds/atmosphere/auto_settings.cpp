@@ -100,11 +100,15 @@ AtmosphereSpec search_start(const AtmosphereSpec& spec) {
   return start;
 }
 
-AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo) {
-  const AtmosphereSpec start = search_start(spec);
+namespace {
+
+// One round of the search: from `start`, every state judged at start.scene.points points.
+// `tries` counts the evaluations of all rounds (progress and the log number them).
+AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start, int round, int& tries,
+                        cl_util::Device& dev, const Progress& progress, Memo& memo) {
   const std::vector<Refinement<AtmosphereSpec>> steps = refinements(spec);
   const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
-  AtmosphereSpec defaults = start;  // the comparison: the default sizes (or the given ones)
+  AtmosphereSpec defaults = search_start(spec);  // the cost cap's scale: the default sizes (or the given ones)
   if (spec.auto_sizes)
     for (auto axis : kSizeAxes) defaults.*axis = AtmosphereSpec{}.*axis;
   const double cost_cap = kMaxCostFactor * predicted_bake_seconds(defaults);
@@ -113,7 +117,6 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
     Baked baked;
     SceneCheck check;
   };
-  int tries = 0;
   std::vector<json> measured;  // per evaluation, in order: measured bake seconds and the parts' p99
   const std::function<std::pair<double, Payload>(const AtmosphereSpec&, const std::string&)> evaluate =
       [&](const AtmosphereSpec& s, const std::string& refined) {
@@ -130,8 +133,8 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
         const double bake_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         p.check = check_scene(s, p.baked.luts, p.baked.orders_used, dev, part(0.8, 1.0), &memo);
         ++tries;
-        spdlog::debug("atmosphere: auto try {} ({}): predicted {:.1f} s, baked in {:.1f} s, error {:.4g}", tries,
-                      refined, predicted_bake_seconds(s), bake_s, p.check.record.value);
+        spdlog::debug("atmosphere: auto try {} (round {}, {}): predicted {:.1f} s, baked in {:.1f} s, error {:.4g}",
+                      tries, round, refined, predicted_bake_seconds(s), bake_s, p.check.record.value);
         json parts = json::object();
         for (const char* name : {"lut_discretisation", "order_truncation", "spectral_sampling"})
           if (const double v = p99_of(p.check, name); std::isfinite(v)) parts[name] = v;
@@ -146,11 +149,14 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
         const json& se = p.check.record.details["standard_error"];
         return spec.scene.tolerance_relative ? se["relative"].value("p99", 0.0) : se["de2000"].value("p99", 0.0);
       },
-      [](int step, const Evaluated<AtmosphereSpec, Payload>& kept) {
-        spdlog::info("atmosphere: auto step {}: refined {} -> error {} (predicted bake {:.1f} s)", step, kept.refined,
-                     format_g(kept.error), kept.cost);
+      [&](int step, const Evaluated<AtmosphereSpec, Payload>& kept) {
+        spdlog::info("atmosphere: auto round {} step {}: refined {} -> error {} (predicted bake {:.1f} s)", round, step,
+                     kept.refined, format_g(kept.error), kept.cost);
       });
-  for (std::size_t i = 0; i < found.tries.size() && i < measured.size(); ++i) found.tries[i].update(measured[i]);
+  for (std::size_t i = 0; i < found.tries.size() && i < measured.size(); ++i) {
+    found.tries[i].update(measured[i]);
+    found.tries[i]["round"] = round;
+  }
   AutoSearch out;
   out.met = found.met;
   out.resolved = found.best.state;
@@ -173,9 +179,63 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                   (largest.empty() ? "" : ", its largest cause " + largest) + truth_noise(out.check) +
                   " (-v logs every try; a sweep or a bake with the error's cause fixed shows the rest)";
   }
+  out.record = {{"tries", tries_j}, {"met", out.met}};
+  if (!stop.empty()) out.record["stopped"] = stop;
+  return out;
+}
+
+}  // namespace
+
+AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo) {
+  const int n = spec.scene.points;
+  int tries = 0;
+  std::vector<AutoSearch> rounds = search_rounds<AutoSearch>(
+      n,
+      [&](int judged, const AutoSearch* previous) {
+        AtmosphereSpec start = previous ? previous->resolved : search_start(spec);
+        start.scene.points = judged;
+        AtmosphereSpec judged_spec = spec;
+        judged_spec.scene.points = judged;
+        return search_round(judged_spec, start, static_cast<int>(judged / n), tries, dev, progress, memo);
+      },
+      [](const AutoSearch& f) { return f.met; },
+      [&](AutoSearch& f, int first) {
+        AtmosphereSpec probe = f.resolved;
+        probe.scene.points = n;
+        f.held_out = check_scene(probe, f.baked.luts, f.baked.orders_used, dev, [&](std::string_view, double frac) {
+          const double base = 1.0 - std::pow(0.9, tries), next = 1.0 - std::pow(0.9, tries + 1);
+          progress("auto: held-out check of round " + std::to_string(first / n), base + (next - base) * frac);
+        }, &memo, first);
+        f.held_out_first = first;
+        return f.held_out.record.passed;
+      });
+
+  const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
+  AtmosphereSpec defaults = search_start(spec);  // the comparison: the default sizes (or the given ones)
+  if (spec.auto_sizes)
+    for (auto axis : kSizeAxes) defaults.*axis = AtmosphereSpec{}.*axis;
+  json tries_j = json::array(), rounds_j = json::array();
+  for (std::size_t k = 0; k < rounds.size(); ++k) {
+    const AutoSearch& r = rounds[k];
+    for (const json& tj : r.record["tries"]) tries_j.push_back(tj);
+    json rj = {{"round", k + 1},
+               {"judged_points", {0, static_cast<int>(k + 1) * n}},
+               {"met", r.met},
+               {"error", r.check.record.value},
+               {"chosen", settings_json(r.resolved)},
+               {"held_out_points", {r.held_out_first, r.held_out_first + n}},
+               {"held_out_error", r.held_out.record.value},
+               {"held_out_passed", r.held_out.record.passed}};
+    if (r.record.contains("stopped")) rj["stopped"] = r.record["stopped"];
+    rounds_j.push_back(rj);
+  }
   std::vector<std::string> searched;
   if (spec.auto_sizes) searched.push_back("sizes");
   if (spec.auto_spectrum) searched.push_back("spectrum");
+  const json stopped = rounds.back().record.value("stopped", json());
+  AutoSearch out = std::move(rounds.back());
+  // the choice keeps the scene as the config gives it: its rounds' point sets are in the record
+  out.resolved.scene.points = n;
   out.record = {
       {"searched", searched},
       {"tolerance", tolerance},
@@ -185,9 +245,12 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                "second of predicted bake time (a gain under 1 % does not count; on a plateau each refinement is "
                "tried applied twice, then three times); stop when the tolerance is met, when nothing lowers the "
                "error, when the error is within the truth's own p99 standard error, after 16 steps, or beyond 16x "
-               "the default sizes' predicted time"},
-      {"start", settings_json(start)},
+               "the default sizes' predicted time. The choice is then judged at the next n points of the scene "
+               "(held out); when they miss the tolerance the round met, a second round searches on from the "
+               "choice judged at all 2n points and a fresh set of n points judges its choice"},
+      {"start", settings_json(search_start(spec))},
       {"tries", tries_j},
+      {"rounds", rounds_j},
       {"chosen", settings_json(out.resolved)},
       {"chosen_predicted_s", predicted_bake_seconds(out.resolved)},
       {"met", out.met},
@@ -197,7 +260,7 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                                    scale_sizes(twice, 2.0);
                                    return predicted_bake_seconds(twice);
                                  }()}}}};
-  if (!stop.empty()) out.record["stopped"] = stop;
+  if (!stopped.is_null()) out.record["stopped"] = stopped;
   return out;
 }
 

@@ -16,6 +16,10 @@
 // error (no gain can be measured there: twilight at the walk cap), or at kMaxSearchSteps /
 // kMaxCostFactor × the default sizes' cost. The truth is traced once (Memo); each try costs one bake and the lookups.
 // The chosen settings are then judged at an independent point set of the same scene (held out).
+// A p99 over n points is their ~n/100-th largest error (the second largest of 128), which moves
+// between point sets: when the held-out set misses the tolerance the choice met, a second round
+// searches on from it judged at both sets (2n points), and a fresh set judges its choice
+// (search_rounds).
 #include <algorithm>
 #include <functional>
 #include <optional>
@@ -125,11 +129,35 @@ SearchOutcome<State, Payload> greedy_search(
   return out;
 }
 
+// Rounds of search and validation over a scene of n points: round k searches (from round k − 1's
+// choice) judged at the points [0, k·n) and is held out at [k·n, (k + 1)·n). Another round follows
+// only when a round met the tolerance at its points and missed it at the held-out ones, up to
+// kMaxRounds. `search(judged, previous)` runs a round (previous: null in the first), `met` says
+// whether it met the tolerance, `hold_out(found, first)` judges it at [first, first + n) and says
+// whether that passed. Returns the rounds in order; the last holds the choice.
+inline constexpr int kMaxRounds = 2;
+template <class Found>
+std::vector<Found> search_rounds(int n, const std::function<Found(int judged, const Found* previous)>& search,
+                                 const std::function<bool(const Found&)>& met,
+                                 const std::function<bool(Found&, int first)>& hold_out) {
+  std::vector<Found> rounds;
+  for (int k = 1; k <= kMaxRounds; ++k) {
+    Found f = search(k * n, rounds.empty() ? nullptr : &rounds.back());
+    const bool searched_ok = met(f);
+    const bool passed = hold_out(f, k * n);
+    rounds.push_back(std::move(f));
+    if (!searched_ok || passed) break;
+  }
+  return rounds;
+}
+
 struct AutoSearch {
   AtmosphereSpec resolved;   // the spec with the chosen sizes and spectrum (auto flags cleared)
   Baked baked;               // its bake (self-checked, as a plain bake is)
-  SceneCheck check;          // its scene check at the scene's points
-  bool met = false;          // the tolerance was met at the scene's points
+  SceneCheck check;          // its scene check at the points its round judged ([0, k·n))
+  SceneCheck held_out;       // and at the round's held-out points [k·n, (k + 1)·n)
+  int held_out_first = 0;    // k·n
+  bool met = false;          // the tolerance was met at the judged points
   std::string failure;       // why the search stopped short, when it did
   nlohmann::json record;     // start, rule, every try (settings, predicted and measured seconds, error, parts), chosen
 };
@@ -143,7 +171,8 @@ AtmosphereSpec search_start(const AtmosphereSpec& spec);
 // search runs; the tries grow as the search refines, the start's scene check is traced once).
 inline constexpr double kTypicalTries = 20.0;
 
-// Runs the search (spec.auto_sizes and/or spec.auto_spectrum set). `memo` keeps the traces.
+// Runs the search's rounds with their held-out checks (spec.auto_sizes and/or spec.auto_spectrum
+// set). `memo` keeps the traces.
 AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo);
 
 // The sizes and spectrum of a spec as the manifest reports them.
