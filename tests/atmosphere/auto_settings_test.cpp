@@ -7,6 +7,7 @@
 #include <cmath>
 #include <string>
 
+#include "atmosphere/spec_of.hpp"
 #include "kinds/atmosphere/auto_settings.hpp"
 #include "support/testing.hpp"
 
@@ -192,6 +193,92 @@ TEST(AutoSearch, AHeldOutMissSearchesOnAtBothPointSetsAndHoldsOutAFreshSet) {
   const auto capped = rounds_with(16, {true, true, true}, {false, false, false});
   EXPECT_EQ(capped.size(), static_cast<std::size_t>(specbake::atmosphere::kMaxRounds));
   EXPECT_EQ(capped.back().first, 16 * specbake::atmosphere::kMaxRounds);
+}
+
+// A round that ends short of the tolerance with a measurement too noisy to judge it is searched again at the same points when the
+// measurement can be made finer (no held-out check in between); one that cannot ends the rounds
+// with its held-out check, as a round short of the tolerance does.
+TEST(AutoSearch, ARoundWithinTheTruthsNoiseIsSearchedAgainWithAFinerTruth) {
+  struct Found {
+    int judged = 0, first = -1;
+    bool met = false, unresolved = false;
+  };
+  // per search: met?, unresolved?; sharpening allowed once
+  auto run = [](std::vector<std::pair<bool, bool>> results, std::vector<bool> passes, bool can_sharpen) {
+    std::size_t s = 0, h = 0;
+    bool sharpened = false;
+    auto rounds = specbake::atmosphere::search_rounds<Found>(
+        64,
+        [&](int judged, const Found*) {
+          const auto [met, unresolved] = results.at(s++);
+          return Found{judged, -1, met, unresolved};
+        },
+        [](const Found& f) { return f.met; },
+        [&](Found& f, int first) {
+          f.first = first;
+          return static_cast<bool>(passes.at(h++));
+        },
+        [&](const Found& f) {
+          if (!f.unresolved || sharpened || !can_sharpen) return false;
+          return sharpened = true;
+        });
+    EXPECT_EQ(s, results.size());
+    EXPECT_EQ(h, passes.size());
+    return rounds;
+  };
+  // unresolved, sharpened, then met and held out
+  auto r = run({{false, true}, {true, false}}, {true}, true);
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r[0].judged, 64);
+  EXPECT_EQ(r[0].first, -1);  // not held out
+  EXPECT_EQ(r[1].judged, 64);  // the same points, a finer truth
+  EXPECT_EQ(r[1].first, 64);
+  // sharpened, met, missed at the held-out points: widened to 2n, then a fresh set
+  r = run({{false, true}, {true, false}, {true, false}}, {false, true}, true);
+  ASSERT_EQ(r.size(), 3u);
+  EXPECT_EQ(r[2].judged, 128);
+  EXPECT_EQ(r[2].first, 128);
+  // unresolved twice: sharpened once only, the second ends the rounds with its held-out check
+  r = run({{false, true}, {false, true}}, {false}, true);
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r[1].first, 64);
+  // a truth the config fixed (relative_se given) is not sharpened
+  r = run({{false, true}}, {false}, false);
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].first, 64);
+}
+
+// The search's finer truth, on the device: a tolerance far below the truth's noise ends the first
+// round short of it; with the default relative_se that round is searched again at relative_se / 2
+// (no held-out check of its own), and the second, short again, ends the rounds with its held-out
+// check. A relative_se the config gives is kept: one round.
+TEST(AutoSettingsDevice, ATruthTooNoisyForTheToleranceIsSharpenedOnce) {
+  const std::string job =
+      "    orders: 2\n"
+      "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 5, mu: 16, mu_s: 8, nu: 4}}\n"
+      "    spectrum: auto\n"
+      "    scene: {points: 6, sun_elevation_deg: [20, 60], tolerance_de2000: 0.001";
+  const auto quiet = [](std::string_view, double) {};
+  specbake::Memo memo;
+  const specbake::atmosphere::AutoSearch a =
+      specbake::atmosphere::search_settings(t::spec_of(job + "}\n"), t::shared_device(), quiet, memo);
+  const json& r = a.record["rounds"];
+  ASSERT_EQ(r.size(), 2u) << r.dump();
+  EXPECT_EQ(r[0]["truth_relative_se"], 0.01);
+  EXPECT_TRUE(r[0].contains("searched_again")) << r[0].dump();
+  EXPECT_FALSE(r[0].contains("held_out_error"));
+  EXPECT_EQ(r[1]["truth_relative_se"], 0.005);
+  EXPECT_EQ(r[1]["judged_points"], (json{0, 6}));
+  EXPECT_EQ(r[1]["held_out_points"], (json{6, 12}));
+  EXPECT_FALSE(a.met);
+  EXPECT_EQ(a.held_out_first, 6);
+  for (const json& tj : a.record["tries"]) EXPECT_TRUE(tj["round"] == 1 || tj["round"] == 2) << tj.dump();
+
+  specbake::Memo memo_given;
+  const specbake::atmosphere::AutoSearch given = specbake::atmosphere::search_settings(
+      t::spec_of(job + ", relative_se: 0.01}\n"), t::shared_device(), quiet, memo_given);
+  ASSERT_EQ(given.record["rounds"].size(), 1u) << given.record["rounds"].dump();
+  EXPECT_EQ(given.record["rounds"][0]["truth_relative_se"], 0.01);
 }
 
 TEST(AutoSettingsCli, MetAtTheStartBakesHalfTheDefaultSizes) {

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "atmosphere/single_scattering.hpp"
+#include "atmosphere/spec_of.hpp"
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
@@ -30,10 +31,7 @@ namespace t = specbake::testing;
 
 namespace {
 
-AtmosphereSpec spec_of(const std::string& job_yaml) {
-  const Config c = parse_config("specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n" + job_yaml, "scene.yaml");
-  return c.jobs.at(0).as<AtmosphereSpec>();
-}
+using specbake::testing::spec_of;
 
 // One column of a CSV text, by header name.
 std::vector<double> csv_column(const std::string& text, const std::string& name) {
@@ -141,6 +139,9 @@ TEST(SceneCheck, TheWalkCapFollowsAFinerTarget) {
   const AtmosphereSpec ss = spectral_reference_of(fine);
   EXPECT_EQ(scene_truth_options(ss, 1).max_paths, 3 * 4 * 32768 / 48);
   EXPECT_EQ(scene_truth_options(spec_of("    preset: earth\n"), 1).max_paths, 32768);
+  // an auto search may halve a default relative_se, not one the config gives
+  EXPECT_TRUE(fine.scene.relative_se_given);
+  EXPECT_FALSE(spec_of("    preset: earth\n").scene.relative_se_given);
 }
 
 // ---- the split of a walk at the bake's orders ---------------------------------------------------

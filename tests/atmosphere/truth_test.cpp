@@ -14,6 +14,7 @@
 
 #include "atmosphere/npy.hpp"
 #include "atmosphere/single_scattering.hpp"
+#include "atmosphere/spec_of.hpp"
 #include "registry/registry.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/model.hpp"
@@ -30,10 +31,7 @@ namespace {
 
 cl_util::Device& device() { return specbake::testing::shared_device(); }
 
-AtmosphereSpec spec_of(const std::string& job_yaml) {
-  const Config c = parse_config("specbake: 1\njobs:\n  - name: sky\n    kind: atmosphere\n" + job_yaml, "truth.yaml");
-  return c.jobs.at(0).as<AtmosphereSpec>();
-}
+using specbake::testing::spec_of;
 AtmosphereSpec earth() { return spec_of("    preset: earth\n"); }
 
 // A shell of constant density between 6360 and 6360.1 km (thin: curvature effects are

@@ -67,6 +67,15 @@ std::string truth_noise(const SceneCheck& c) {
          " a scene without twilight is judged finer)";
 }
 
+// The truth's own p99 standard error over the scene, in the judged measure.
+double truth_se_p99(const SceneCheck& c, const AtmosphereSpec& spec) {
+  const json& d = c.record.details;
+  if (!d.contains("standard_error")) return 0.0;
+  const json& se = d["standard_error"];
+  const char* measure = spec.scene.tolerance_relative ? "relative" : "de2000";
+  return se.contains(measure) ? se[measure].value("p99", 0.0) : 0.0;
+}
+
 double p99_of(const SceneCheck& c, const char* part) {
   const json& d = c.record.details;
   if (!d.contains("parts") || !d["parts"].contains(part)) return std::nan("");
@@ -144,11 +153,8 @@ AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start,
       };
   auto found = greedy_search<AtmosphereSpec, Payload>(
       start, steps, [](const AtmosphereSpec& s) { return predicted_bake_seconds(s); }, evaluate,
-      [](const AtmosphereSpec& s) { return settings_json(s); }, tolerance, cost_cap, [&](const Payload& p) {
-        // the truth's own p99 standard error, in the judged measure
-        const json& se = p.check.record.details["standard_error"];
-        return spec.scene.tolerance_relative ? se["relative"].value("p99", 0.0) : se["de2000"].value("p99", 0.0);
-      },
+      [](const AtmosphereSpec& s) { return settings_json(s); }, tolerance, cost_cap,
+      [&](const Payload& p) { return truth_se_p99(p.check, spec); },
       [&](int step, const Evaluated<AtmosphereSpec, Payload>& kept) {
         spdlog::info("atmosphere: auto round {} step {}: refined {} -> error {} (predicted bake {:.1f} s)", round, step,
                      kept.refined, format_g(kept.error), kept.cost);
@@ -162,6 +168,7 @@ AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start,
   out.resolved = found.best.state;
   out.baked = std::move(found.best.payload.baked);
   out.check = std::move(found.best.payload.check);
+  out.unresolved = !found.met && truth_se_p99(out.check, spec) >= kResolvable * tolerance;
   const std::string stop = found.stop;
   json tries_j = found.tries;
   if (!out.met) {
@@ -188,15 +195,21 @@ AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start,
 
 AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo) {
   const int n = spec.scene.points;
-  int tries = 0;
+  int tries = 0, round = 0;
+  // the truth's target standard error: the scene's, halved once when a search ends within the
+  // truth's noise and the config left it at its default (kTruthSharpening)
+  double relative_se = spec.scene.relative_se;
+  bool sharpened = false;
   std::vector<AutoSearch> rounds = search_rounds<AutoSearch>(
       n,
       [&](int judged, const AutoSearch* previous) {
         AtmosphereSpec start = previous ? previous->resolved : search_start(spec);
         start.scene.points = judged;
+        start.scene.relative_se = relative_se;
         AtmosphereSpec judged_spec = spec;
         judged_spec.scene.points = judged;
-        return search_round(judged_spec, start, static_cast<int>(judged / n), tries, dev, progress, memo);
+        judged_spec.scene.relative_se = relative_se;
+        return search_round(judged_spec, start, ++round, tries, dev, progress, memo);
       },
       [](const AutoSearch& f) { return f.met; },
       [&](AutoSearch& f, int first) {
@@ -208,6 +221,17 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
         }, &memo, first);
         f.held_out_first = first;
         return f.held_out.record.passed;
+      },
+      [&](const AutoSearch& f) {
+        if (!f.unresolved || sharpened || spec.scene.relative_se_given) return false;
+        sharpened = true;
+        relative_se /= kTruthSharpening;
+        spdlog::info("atmosphere: auto: stopped at {} with the truth's own p99 standard error {} at relative_se {}; "
+                     "searching on with relative_se {} ({}x the walks)",
+                     format_g(f.check.record.value), format_g(truth_se_p99(f.check, spec)),
+                     format_g(relative_se * kTruthSharpening), format_g(relative_se),
+                     format_g(kTruthSharpening * kTruthSharpening));
+        return true;
       });
 
   const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
@@ -219,13 +243,18 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
     const AutoSearch& r = rounds[k];
     for (const json& tj : r.record["tries"]) tries_j.push_back(tj);
     json rj = {{"round", k + 1},
-               {"judged_points", {0, static_cast<int>(k + 1) * n}},
+               {"judged_points", {0, r.resolved.scene.points}},
+               {"truth_relative_se", r.resolved.scene.relative_se},
                {"met", r.met},
                {"error", r.check.record.value},
-               {"chosen", settings_json(r.resolved)},
-               {"held_out_points", {r.held_out_first, r.held_out_first + n}},
-               {"held_out_error", r.held_out.record.value},
-               {"held_out_passed", r.held_out.record.passed}};
+               {"chosen", settings_json(r.resolved)}};
+    if (r.held_out_first >= 0) {
+      rj["held_out_points"] = {r.held_out_first, r.held_out_first + n};
+      rj["held_out_error"] = r.held_out.record.value;
+      rj["held_out_passed"] = r.held_out.record.passed;
+    } else {
+      rj["searched_again"] = "with a finer truth (relative_se / " + format_g(kTruthSharpening) + ")";
+    }
     if (r.record.contains("stopped")) rj["stopped"] = r.record["stopped"];
     rounds_j.push_back(rj);
   }
@@ -245,9 +274,11 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                "second of predicted bake time (a gain under 1 % does not count; on a plateau each refinement is "
                "tried applied twice, then three times); stop when the tolerance is met, when nothing lowers the "
                "error, when the error is within the truth's own p99 standard error, after 16 steps, or beyond 16x "
-               "the default sizes' predicted time. The choice is then judged at the next n points of the scene "
-               "(held out); when they miss the tolerance the round met, a second round searches on from the "
-               "choice judged at all 2n points and a fresh set of n points judges its choice"},
+               "the default sizes' predicted time. When a search ends within the truth's noise and the config "
+               "left scene.relative_se at its default, it searches on with relative_se halved (once). The choice "
+               "is then judged at the next n points of the scene (held out); when they miss the tolerance the "
+               "round met, a second round searches on from the choice judged at all 2n points and a fresh set "
+               "of n points judges its choice"},
       {"start", settings_json(search_start(spec))},
       {"tries", tries_j},
       {"rounds", rounds_j},

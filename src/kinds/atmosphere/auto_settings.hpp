@@ -15,6 +15,8 @@
 // (the rest is another cause: orders), when the error is within the truth's own p99 standard
 // error (no gain can be measured there: twilight at the walk cap), or at kMaxSearchSteps /
 // kMaxCostFactor × the default sizes' cost. The truth is traced once (Memo); each try costs one bake and the lookups.
+// A search that ends short of the tolerance with a truth too noisy to judge it (kResolvable)
+// searches on with a finer truth when the config left relative_se at its default.
 // The chosen settings are then judged at an independent point set of the same scene (held out).
 // A p99 over n points is their ~n/100-th largest error (the second largest of 128), which moves
 // between point sets: when the held-out set misses the tolerance the choice met, a second round
@@ -129,24 +131,39 @@ SearchOutcome<State, Payload> greedy_search(
   return out;
 }
 
-// Rounds of search and validation over a scene of n points: round k searches (from round k − 1's
-// choice) judged at the points [0, k·n) and is held out at [k·n, (k + 1)·n). Another round follows
-// only when a round met the tolerance at its points and missed it at the held-out ones, up to
-// kMaxRounds. `search(judged, previous)` runs a round (previous: null in the first), `met` says
-// whether it met the tolerance, `hold_out(found, first)` judges it at [first, first + n) and says
-// whether that passed. Returns the rounds in order; the last holds the choice.
+// Rounds of search and validation over a scene of n points: round k searches (from the previous
+// round's choice) judged at the points [0, k·n) and is held out at [k·n, (k + 1)·n). Another round
+// follows when a round met the tolerance at its points and missed it at the held-out ones (up to
+// kMaxRounds such widenings), or when a round ended short of the tolerance and `sharpen`
+// (optional) made the measurement finer: that round is searched again at the same
+// points, without a held-out check of its own. `search(judged, previous)` runs a round (previous:
+// null in the first), `met` says whether it met the tolerance, `hold_out(found, first)` judges it at
+// [first, first + n) and says whether that passed, `sharpen(found)` refines the measurement for the
+// rounds after it and says whether it could. Returns the rounds in order; the last holds the choice.
 inline constexpr int kMaxRounds = 2;
+// A search that ends short of the tolerance while the truth's own p99 standard error is at least
+// kResolvable × the tolerance could not have told a bake that meets it from one that does not:
+// a default relative_se is then divided by kTruthSharpening (once: 4× the walks) and the search
+// goes on from its choice.
+inline constexpr double kResolvable = 0.5;
+inline constexpr double kTruthSharpening = 2.0;
 template <class Found>
 std::vector<Found> search_rounds(int n, const std::function<Found(int judged, const Found* previous)>& search,
                                  const std::function<bool(const Found&)>& met,
-                                 const std::function<bool(Found&, int first)>& hold_out) {
+                                 const std::function<bool(Found&, int first)>& hold_out,
+                                 const std::function<bool(const Found&)>& sharpen = {}) {
   std::vector<Found> rounds;
-  for (int k = 1; k <= kMaxRounds; ++k) {
+  for (int k = 1;;) {
     Found f = search(k * n, rounds.empty() ? nullptr : &rounds.back());
     const bool searched_ok = met(f);
+    if (!searched_ok && sharpen && sharpen(f)) {
+      rounds.push_back(std::move(f));
+      continue;
+    }
     const bool passed = hold_out(f, k * n);
     rounds.push_back(std::move(f));
-    if (!searched_ok || passed) break;
+    if (!searched_ok || passed || k == kMaxRounds) break;
+    ++k;
   }
   return rounds;
 }
@@ -156,8 +173,9 @@ struct AutoSearch {
   Baked baked;               // its bake (self-checked, as a plain bake is)
   SceneCheck check;          // its scene check at the points its round judged ([0, k·n))
   SceneCheck held_out;       // and at the round's held-out points [k·n, (k + 1)·n)
-  int held_out_first = 0;    // k·n
+  int held_out_first = -1;   // k·n (-1: not held out — a round searched again with a finer truth)
   bool met = false;          // the tolerance was met at the judged points
+  bool unresolved = false;   // it ended short of the tolerance with a truth too noisy to judge it (kResolvable)
   std::string failure;       // why the search stopped short, when it did
   nlohmann::json record;     // start, rule, every try (settings, predicted and measured seconds, error, parts), chosen
 };

@@ -151,7 +151,10 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
     if (v < 1 || v > 65536) n.fail("expected an integer in [1, 65536], got " + n.shown());
     sc.points = static_cast<int>(v);
   }
-  if (at.has("relative_se")) sc.relative_se = at.child("relative_se").number_in(1e-4, 0.5, "in [1e-4, 0.5]");
+  if (at.has("relative_se")) {
+    sc.relative_se = at.child("relative_se").number_in(1e-4, 0.5, "in [1e-4, 0.5]");
+    sc.relative_se_given = true;
+  }
   if (at.has("seed")) {
     const At n = at.child("seed");
     const long long v = n.integer();

@@ -20,6 +20,7 @@ struct AtmosphereScene {
   double view_sun_azimuth_min_deg = 0.0, view_sun_azimuth_max_deg = 180.0;  // between view and sun
   int points = 128;
   double relative_se = 0.01;  // the truth's standard error at each point, relative (top-ups until met)
+  bool relative_se_given = false;  // set by the config (an auto search may halve the default)
   std::uint64_t seed = 1;
   std::optional<double> tolerance_de2000;    // judged on the p99 CIEDE2000 of the displayed colour
   std::optional<double> tolerance_relative;  // judged on the p99 relative radiance error (worst channel)
