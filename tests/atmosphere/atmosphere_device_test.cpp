@@ -321,6 +321,22 @@ TEST(AtmosphereDevice, TinyAndOddSizes) {
   EXPECT_LE(b.self_check_worst, kSelfCheckTolerance);
 }
 
+// Many items, wide channels, many ν slices: 16 channels at NU = 20 with 16 × 54 (r, μ_s) give
+// the density's incidence table 55296 items; a CPU device left to choose its work group took 3456
+// of them, whose private copies (~2.8 KB each) overran the worker thread's 8 MiB stack and killed
+// the process (SIGSEGV). A larger NU (the limit, 64) holds the most private memory per item.
+TEST(AtmosphereDevice, WideSpectralPassesWithManyNuSlicesBake) {
+  AtmosphereSpec s = sized(earth(), {32, 8}, {16, 4}, {16, 8, 54, 20});
+  s.spectral = true;
+  s.count = 16;
+  s.orders = 2;
+  const Baked b = bake_luts(s, device(), kQuiet, 4);
+  expect_all_finite(b);
+  EXPECT_LE(b.self_check_worst, kSelfCheckTolerance);
+  s = sized(s, {32, 8}, {16, 4}, {4, 8, 16, ATMOSPHERE_NU_LIMIT});
+  expect_all_finite(bake_luts(s, device(), kQuiet, 4));
+}
+
 // Hard cases on the sampling side: the horizon from both sides, r at both ends, the sun below
 // mu_s_min, nu at its limits, tangent rays: finite, non-negative, and continuous where the
 // geometry is (a hair above and at the horizon on the sky side).

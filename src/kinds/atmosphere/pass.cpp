@@ -197,7 +197,22 @@ class DeviceBackend final : public PassBackend {
     }
     return T_;
   }
-  void enqueue(cl::Kernel& k, long long n) { enqueue(k, cl::NDRange(static_cast<std::size_t>(n)), cl::NullRange); }
+  void enqueue(cl::Kernel& k, long long n) { enqueue(k, cl::NDRange(static_cast<std::size_t>(n)), group_for(n)); }
+  // Work items per group for a kernel over n items. PoCL's CPU device runs a work group on one
+  // thread and keeps a copy of each item's private arrays on that thread's stack where they live
+  // across its work-item loop; left to choose, it takes the largest divisor of n up to 4096, and
+  // the density's incidence table (16 channels, NU = 20, scattering 16 × · × 54: 3456 items of
+  // ~2.8 KB) overran the 8 MiB stack and crashed the process. On a CPU device the group is the
+  // largest divisor of n up to kCpuGroupLimit (the largest kernel, the density at NU = 64 and 16
+  // channels, holds ~35 KB per item: 2.2 MiB a group); on other devices the driver chooses. The
+  // kernels share nothing within a group, so the results do not depend on it.
+  cl::NDRange group_for(long long n) const {
+    if (dev_.info().type != "cpu") return cl::NullRange;
+    long long g = std::min<long long>(kCpuGroupLimit, n);
+    while (g > 1 && n % g != 0) --g;
+    return cl::NDRange(static_cast<std::size_t>(g));
+  }
+  static constexpr long long kCpuGroupLimit = 64;
   void enqueue(cl::Kernel& k, const cl::NDRange& global, const cl::NDRange& local) {
     cl::Event ev;
     dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, global, local, nullptr, &ev);
