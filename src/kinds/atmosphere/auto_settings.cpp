@@ -196,8 +196,9 @@ AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start,
 AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo) {
   const int n = spec.scene.points;
   int tries = 0, round = 0;
-  // the truth's target standard error: the scene's, halved once when a search ends within the
-  // truth's noise and the config left it at its default (kTruthSharpening)
+  // the truth's target standard error: the scene's, halved once when a search ends short of the
+  // tolerance with the truth's own p99 standard error at least kResolvable of it and the config
+  // left relative_se at its default (kTruthSharpening)
   double relative_se = spec.scene.relative_se;
   bool sharpened = false;
   std::vector<AutoSearch> rounds = search_rounds<AutoSearch>(
@@ -274,8 +275,9 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                "second of predicted bake time (a gain under 1 % does not count; on a plateau each refinement is "
                "tried applied twice, then three times); stop when the tolerance is met, when nothing lowers the "
                "error, when the error is within the truth's own p99 standard error, after 16 steps, or beyond 16x "
-               "the default sizes' predicted time. When a search ends within the truth's noise and the config "
-               "left scene.relative_se at its default, it searches on with relative_se halved (once). The choice "
+               "the default sizes' predicted time. When a search ends short of the tolerance with the truth's own "
+               "p99 standard error at least half the tolerance and the config left scene.relative_se at its "
+               "default, it searches on with relative_se halved (once). The choice "
                "is then judged at the next n points of the scene (held out); when they miss the tolerance the "
                "round met, a second round searches on from the choice judged at all 2n points and a fresh set "
                "of n points judges its choice"},
