@@ -58,22 +58,39 @@ std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) 
 }
 
 
+// The truth's own p99 standard error over the scene in `measure` ("de2000", "relative"); 0 without.
+double se_p99(const SceneCheck& c, const char* measure) {
+  const json& d = c.record.details;
+  if (!d.contains("standard_error") || !d["standard_error"].contains(measure)) return 0.0;
+  return d["standard_error"][measure].value("p99", 0.0);
+}
+
 // ", the truth's own p99 standard error X ΔE": a floor no bake goes under at the scene's points.
 std::string truth_noise(const SceneCheck& c) {
-  const json& d = c.record.details;
-  if (!d.contains("standard_error") || !d["standard_error"].contains("de2000")) return "";
-  return "; the truth's own p99 standard error is " + format_g(d["standard_error"]["de2000"].value("p99", 0.0)) +
+  const double se = se_p99(c, "de2000");
+  if (!(se > 0.0)) return "";
+  return "; the truth's own p99 standard error is " + format_g(se) +
          " CIEDE2000 (a lower scene.relative_se lowers it until the walk cap binds, as it does at twilight points;"
          " a scene without twilight is judged finer)";
 }
 
+// The scene's tolerance in the judged measure.
+double judged_tolerance(const AtmosphereSpec& spec) {
+  return spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
+}
+
+// The search's start with the default sizes (or the given ones): the cost cap's scale and the
+// record's comparison.
+AtmosphereSpec default_sizes_of(const AtmosphereSpec& spec) {
+  AtmosphereSpec defaults = search_start(spec);
+  if (spec.auto_sizes)
+    for (auto axis : kSizeAxes) defaults.*axis = AtmosphereSpec{}.*axis;
+  return defaults;
+}
+
 // The truth's own p99 standard error over the scene, in the judged measure.
 double truth_se_p99(const SceneCheck& c, const AtmosphereSpec& spec) {
-  const json& d = c.record.details;
-  if (!d.contains("standard_error")) return 0.0;
-  const json& se = d["standard_error"];
-  const char* measure = spec.scene.tolerance_relative ? "relative" : "de2000";
-  return se.contains(measure) ? se[measure].value("p99", 0.0) : 0.0;
+  return se_p99(c, spec.scene.tolerance_relative ? "relative" : "de2000");
 }
 
 double p99_of(const SceneCheck& c, const char* part) {
@@ -116,11 +133,8 @@ namespace {
 AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start, int round, int& tries,
                         cl_util::Device& dev, const Progress& progress, Memo& memo) {
   const std::vector<Refinement<AtmosphereSpec>> steps = refinements(spec);
-  const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
-  AtmosphereSpec defaults = search_start(spec);  // the cost cap's scale: the default sizes (or the given ones)
-  if (spec.auto_sizes)
-    for (auto axis : kSizeAxes) defaults.*axis = AtmosphereSpec{}.*axis;
-  const double cost_cap = kMaxCostFactor * predicted_bake_seconds(defaults);
+  const double tolerance = judged_tolerance(spec);
+  const double cost_cap = kMaxCostFactor * predicted_bake_seconds(default_sizes_of(spec));
 
   struct Payload {
     Baked baked;
@@ -235,10 +249,8 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
         return true;
       });
 
-  const double tolerance = spec.scene.tolerance_relative ? *spec.scene.tolerance_relative : *spec.scene.tolerance_de2000;
-  AtmosphereSpec defaults = search_start(spec);  // the comparison: the default sizes (or the given ones)
-  if (spec.auto_sizes)
-    for (auto axis : kSizeAxes) defaults.*axis = AtmosphereSpec{}.*axis;
+  const double tolerance = judged_tolerance(spec);
+  const AtmosphereSpec defaults = default_sizes_of(spec);
   json tries_j = json::array(), rounds_j = json::array();
   for (std::size_t k = 0; k < rounds.size(); ++k) {
     const AutoSearch& r = rounds[k];
