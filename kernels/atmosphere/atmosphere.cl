@@ -86,6 +86,14 @@
 #ifndef LANES
 #  define LANES 1
 #endif
+/* NOTE_TEXEL(tex, offset): every read of a texture goes through one of the three places that
+ * name it (texture_2d_blend, texture_3d_column, the density's ground taps); offset in reals
+ * from the texture's start, at a texel's first channel. Nothing in a kernel; the C++
+ * reference defines it to note the texels a recomputation reads, so that a self-check fetches
+ * only those from the device (src/kinds/atmosphere/texel_reads.hpp). */
+#ifndef NOTE_TEXEL
+#  define NOTE_TEXEL(tex, offset)
+#endif
 
 #define ATM_PI R(3.14159265358979323846)
 
@@ -354,6 +362,10 @@ FN_HOT Taps2d texture_2d_taps(int w, int h, real u, real v) {
   return t;
 }
 FN_HOT real texture_2d_blend(GLOBAL const real* tex, const Taps2d* t, int c) {
+  NOTE_TEXEL(tex, t->t00);
+  NOTE_TEXEL(tex, t->t10);
+  NOTE_TEXEL(tex, t->t01);
+  NOTE_TEXEL(tex, t->t11);
   return (R(1.0) - t->fy) * ((R(1.0) - t->fx) * tex[t->t00 + c] + t->fx * tex[t->t10 + c]) +
          t->fy * ((R(1.0) - t->fx) * tex[t->t01 + c] + t->fx * tex[t->t11 + c]);
 }
@@ -408,6 +420,10 @@ FN_HOT void texture_3d_column(GLOBAL const real* tex, int wd, int h, const Texel
   GLOBAL const real* p10 = tex + (r->k0 * plane + r->j1 * wd + i) * NCH;
   GLOBAL const real* p01 = tex + (r->k1 * plane + r->j0 * wd + i) * NCH;
   GLOBAL const real* p11 = tex + (r->k1 * plane + r->j1 * wd + i) * NCH;
+  NOTE_TEXEL(tex, p00 - tex);
+  NOTE_TEXEL(tex, p10 - tex);
+  NOTE_TEXEL(tex, p01 - tex);
+  NOTE_TEXEL(tex, p11 - tex);
   const real fy = r->fy, fz = r->fz;
   for (int c = 0; c < NCH; ++c)
     out[c] = (R(1.0) - fz) * ((R(1.0) - fy) * p00[c] + fy * p10[c]) + fz * ((R(1.0) - fy) * p01[c] + fy * p11[c]);
@@ -894,6 +910,10 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
             /* the ground irradiance's taps across the lanes, then each lane's channels */
             for (int k = 0; k < LANES; ++k)
               ground_irradiance_taps(a, ground_slope * nu_i[k] + ground_offset, &t0[k], &t1[k], &f[k]);
+            for (int k = 0; k < LANES; ++k) {
+              NOTE_TEXEL(delta_irradiance, t0[k]);
+              NOTE_TEXEL(delta_irradiance, t1[k]);
+            }
             for (int k = 0; k < LANES; ++k)
               for (int c = 0; c < NCH; ++c)
                 ground_light[k * NCH + c] += scatter[m * NCH + c] * ((R(1.0) - f[k]) * delta_irradiance[t0[k] + c] +

@@ -200,3 +200,34 @@ __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const
     }
   }
 }
+
+/* ---- a self-check's fetches: texels gathered, textures scanned --------------------------- */
+
+/* Texels ids[k] (k < n) of tex, NCH values each, into out[k·NCH + c]: what a self-check
+ * recomputes and the inputs its recomputation reads, and nothing else. */
+__kernel void gather_texels(AtmosphereParameters a, __global const real* tex, __global const int* ids, int n,
+                            __global real* out) {
+  const int k = get_global_id(0);
+  if (k >= n) return;
+  const long at = (long)ids[k] * NCH;
+  for (int c = 0; c < NCH; ++c) out[k * NCH + c] = tex[at + c];
+}
+
+/* Work item g of G scans texels g, g + G, g + 2G, … of tex: per channel the largest |value| of
+ * its finite values, max_abs[g·NCH + c], and the count of values that are NaN or ±inf, bad[g].
+ * The host takes the maximum and the sum over g (both independent of the order). */
+__kernel void scan_texture(AtmosphereParameters a, __global const real* tex, int texels, __global real* max_abs,
+                           __global int* bad) {
+  const int g = get_global_id(0), G = get_global_size(0);
+  real m[NCH];
+  int count = 0;
+  for (int c = 0; c < NCH; ++c) m[c] = R(0.0);
+  for (int t = g; t < texels; t += G)
+    for (int c = 0; c < NCH; ++c) {
+      const real v = tex[(long)t * NCH + c];
+      if (isfinite(v)) m[c] = fmax(m[c], fabs(v));
+      else ++count;
+    }
+  for (int c = 0; c < NCH; ++c) max_abs[g * NCH + c] = m[c];
+  bad[g] = count;
+}

@@ -8,7 +8,8 @@
 #include <cmath>
 #include <limits>
 #include <optional>
-#include <set>
+#include <array>
+#include <stdexcept>
 
 #include "kinds/atmosphere/reference_widths.hpp"
 
@@ -160,18 +161,43 @@ class DeviceBackend final : public PassBackend {
   }
 
   void read_into(Tex t, std::vector<double>& out) override {
-    const long long n = texels(t) * width_;
-    out.resize(n);
     cl_util::checked("reading an atmosphere texture", [&] {
-      if (dbl_) {
-        read_buffer(buffer(t), n * sizeof(double), out.data());
-      } else {
-        staging_.resize(n);  // kept between reads: no fresh pages for every texture read
-        read_buffer(buffer(t), n * sizeof(float), staging_.data());
-        copy_chunks(staging_, out);
+      read_reals(buffer(t), texels(t) * width_, out);
+      return 0;
+    });
+  }
+  void gather(Tex t, const std::vector<int>& ids, std::vector<double>& out) override {
+    out.clear();
+    if (ids.empty()) return;
+    cl_util::checked("gathering atmosphere texels", [&] {
+      const int n = static_cast<int>(ids.size());
+      cl::Buffer at(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, ids.size() * sizeof(int),
+                    const_cast<int*>(ids.data()));
+      cl::Buffer values = alloc_reals(1LL * n * width_);
+      launch("gather_texels", n, {&buffer(t), &at, n, &values});
+      read_reals(values, 1LL * n * width_, out);
+      return 0;
+    });
+  }
+  Scan scan(Tex t) override {
+    Scan s{std::vector<double>(width_, 0.0), 0};
+    cl_util::checked("scanning an atmosphere texture", [&] {
+      const long long n = texels(t);
+      const int items = static_cast<int>(std::min<long long>(n, kScanItems));
+      cl::Buffer max_abs = alloc_reals(1LL * items * width_);
+      cl::Buffer bad(dev_.context(), CL_MEM_READ_WRITE, items * sizeof(int));
+      launch("scan_texture", items, {&buffer(t), static_cast<int>(n), &max_abs, &bad});
+      std::vector<double> m;
+      read_reals(max_abs, 1LL * items * width_, m);
+      std::vector<int> b(items);
+      read_buffer(bad, items * sizeof(int), b.data());
+      for (int g = 0; g < items; ++g) {
+        s.non_finite += b[g];
+        for (int c = 0; c < width_; ++c) s.max_abs[c] = std::max(s.max_abs[c], m[1LL * g * width_ + c]);
       }
       return 0;
     });
+    return s;
   }
   cl_util::Profiler* profiler() override { return &dev_.profiler(); }
 
@@ -241,6 +267,20 @@ class DeviceBackend final : public PassBackend {
       return std::min({most, dev_.info().max_work_group_size, (row + lanes_ - 1) / lanes_});
     });
   }
+  // n reals of a buffer into `out` as double (float buffers through a staging copy kept between reads).
+  void read_reals(const cl::Buffer& b, long long n, std::vector<double>& out) {
+    out.resize(n);
+    if (dbl_) {
+      read_buffer(b, n * sizeof(double), out.data());
+    } else {
+      staging_.resize(n);
+      read_buffer(b, n * sizeof(float), staging_.data());
+      copy_chunks(staging_, out);
+    }
+  }
+  // Work items of a texture scan (each takes every kScanItems-th texel): enough for a GPU's
+  // lanes, few enough that the partial maxima are a small read.
+  static constexpr long long kScanItems = 4096;
   // A blocking read, recorded with its wait.
   void read_buffer(const cl::Buffer& b, std::size_t bytes, void* to) {
     cl::Event ev;
@@ -360,90 +400,99 @@ class HostStageChecker final : public StageChecker {
   StageCheck check(PassBackend& b, PassStage stage, int order) override {
     const int w = b.channels();
     const StageTextures io = textures_of(stage, order);
-    // the stage just rewrote its outputs; inputs come from the checks of the stages that wrote
-    // them (read here only if that stage went unchecked)
-    for (Tex t : io.outputs) held_.erase(t);
-    for (Tex t : io.inputs)
-      if (held_.insert(t).second) b.read_into(t, h_.texture(t));
-    // the device's outputs go straight into the reference's copies (no stage's recomputation
-    // reads its own output texture), where later checks find them as inputs
-    std::vector<const std::vector<double>*> dev;
-    for (Tex t : io.outputs) {
-      b.read_into(t, h_.texture(t));
-      held_.insert(t);
-      dev.push_back(&h_.texture(t));
-    }
-    const long long n = static_cast<long long>(dev[0]->size()) / w;
-    const int k_out = static_cast<int>(io.outputs.size());
-    // per output and channel the largest |value|, and the values that are not finite: chunks of
-    // texels on the host's threads (a maximum and a count do not depend on the order)
-    const std::size_t chunks = (static_cast<std::size_t>(n) + kSumChunk - 1) / kSumChunk;
-    std::vector<double> chunk_scale(chunks * k_out * w, 0.0);
-    std::vector<long long> chunk_bad(chunks, 0);
-    parallel_chunks(static_cast<std::size_t>(n), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
-      double* sc = chunk_scale.data() + k * k_out * w;
-      for (int o = 0; o < k_out; ++o)
-        for (std::size_t i = first; i < last; ++i)
-          for (int c = 0; c < w; ++c) {
-            const double v = (*dev[o])[i * w + c];
-            if (!std::isfinite(v)) ++chunk_bad[k];
-            else sc[o * w + c] = std::max(sc[o * w + c], std::fabs(v));
-          }
-    });
-    std::vector<double> scale(k_out * w, 0.0);
+    // per output and channel the largest |value| and the values that are not finite, over the
+    // whole texture where it is
+    std::vector<double> scale;
     long long non_finite = 0;
-    for (std::size_t k = 0; k < chunks; ++k) {
-      non_finite += chunk_bad[k];
-      for (int j = 0; j < k_out * w; ++j) scale[j] = std::max(scale[j], chunk_scale[k * k_out * w + j]);
+    for (Tex t : io.outputs) {
+      const PassBackend::Scan sc = b.scan(t);
+      scale.insert(scale.end(), sc.max_abs.begin(), sc.max_abs.end());
+      non_finite += sc.non_finite;
     }
+    const long long n = h_.texels(io.outputs[0]);
     StageCheck r{to_string(stage), order, static_cast<int>(std::min<long long>(count_, n)), 0.0, non_finite};
     if (non_finite > 0) r.max_rel = std::numeric_limits<double>::infinity();
-    else r.max_rel = sampled_error(stage, order, n, w, dev, scale, r.texels);
-    // Free the copies whose last reader in run_pass's order has been checked: ΔR and ΔM after
-    // the indirect irradiance of order 1 (the density of order 2 runs before it), J after the
-    // multiple scattering it feeds. Memory only: a check that needs a freed texture reads it again.
-    if (stage == PassStage::indirect_irradiance && order == 1) release({Tex::delta_rayleigh, Tex::delta_mie});
-    if (stage == PassStage::multiple_scattering) release({Tex::density});
+    else r.max_rel = sampled_error(b, stage, order, io, w, n, scale, r.texels);
     return r;
   }
 
-  const std::vector<double>* held(Tex t) override { return held_.count(t) ? &h_.texture(t) : nullptr; }
-
  private:
-  // The largest relative error of `texels` texels spread over the texture, recomputed in double.
-  double sampled_error(PassStage stage, int order, long long n, int w, const std::vector<const std::vector<double>*>& dev,
-                       const std::vector<double>& scale, int texels) const {
-    const int k_out = static_cast<int>(dev.size());
-    std::vector<double> errs(texels, 0.0);
+  // The largest relative error of `texels` texels spread over the texture, recomputed in double
+  // from the input texels the recomputation reads, gathered from the device.
+  double sampled_error(PassBackend& b, PassStage stage, int order, const StageTextures& io, int w, long long n,
+                       const std::vector<double>& scale, int texels) {
+    std::vector<int> ids(texels);
+    for (int k = 0; k < texels; ++k)  // spread over the texture: a fixed multiplicative stride
+      ids[k] = static_cast<int>((k * 2654435761LL + 12345) % n);
+    // The inputs at full size, for the lookups' arithmetic (memory only where texels are put).
+    std::array<const double*, TexelReads::kTextures> bases{};
+    for (Tex t : io.inputs) {
+      h_.texture(t).resize(static_cast<std::size_t>(h_.texels(t)) * w);
+      bases[static_cast<int>(t)] = h_.texture(t).data();
+    }
+    // Which input texels each recomputation reads (on whatever the copies hold: the coordinates
+    // of a lookup do not depend on the values) ...
+    std::vector<TexelReads> reads(texels, TexelReads(bases, w));
+    std::vector<double> want(static_cast<std::size_t>(texels) * 2 * w);
     parallel_for(texels, [&](long long k) {
-      // spread over the texture: a fixed multiplicative stride (coprime with most sizes)
-      const long long id = (k * 2654435761LL + 12345) % n;
-      std::vector<double> want(2 * w);
-      h_.texel(stage, order, id, want.data());
+      TexelReads::Scope scope(reads[k]);
+      h_.texel(stage, order, ids[k], &want[k * 2 * w]);
+    });
+    // ... fetched from the device, every input texel once, into the copies ...
+    std::vector<std::array<std::vector<long long>, TexelReads::kTextures>> read_by(texels);
+    for (int k = 0; k < texels; ++k) read_by[k] = reads[k].sorted();
+    std::vector<double> values;
+    long long gathered = 0;
+    for (Tex t : io.inputs) {
+      std::vector<long long> all;
+      for (const auto& rd : read_by) all.insert(all.end(), rd[static_cast<int>(t)].begin(), rd[static_cast<int>(t)].end());
+      std::sort(all.begin(), all.end());
+      all.erase(std::unique(all.begin(), all.end()), all.end());
+      const std::vector<int> at(all.begin(), all.end());
+      b.gather(t, at, values);
+      gathered += static_cast<long long>(at.size());
+      HostTexture& copy = h_.texture(t);
+      for (std::size_t i = 0; i < at.size(); ++i)
+        for (int c = 0; c < w; ++c) copy[static_cast<std::size_t>(at[i]) * w + c] = values[i * w + c];
+    }
+    // ... and the sampled texels of the outputs.
+    std::vector<std::vector<double>> got;
+    for (Tex t : io.outputs) {
+      got.emplace_back();
+      b.gather(t, ids, got.back());
+    }
+    spdlog::debug("atmosphere: self-check of {} (order {}): {} texels gathered", to_string(stage), order,
+                  gathered + static_cast<long long>(ids.size() * io.outputs.size()));
+    // The recomputations on the fetched values, which must read the same texels.
+    const int k_out = static_cast<int>(io.outputs.size());
+    std::vector<double> errs(texels, 0.0);
+    std::vector<char> same(texels, 1);
+    parallel_for(texels, [&](long long k) {
+      TexelReads again(bases, w);
+      {
+        TexelReads::Scope scope(again);
+        h_.texel(stage, order, ids[k], &want[k * 2 * w]);
+      }
+      same[k] = again.sorted() == read_by[k];
       double e = 0.0;
       for (int o = 0; o < k_out; ++o)
         for (int c = 0; c < w; ++c) {
-          const double ref = want[o * w + c], got = (*dev[o])[id * w + c];
-          e = std::max(e, std::fabs(got - ref) / (std::fabs(ref) + floor_ * scale[o * w + c] + 1e-300));
+          const double ref = want[k * 2 * w + o * w + c], dev = got[o][k * w + c];
+          e = std::max(e, std::fabs(dev - ref) / (std::fabs(ref) + floor_ * scale[o * w + c] + 1e-300));
         }
       errs[k] = e;
     });
+    if (std::find(same.begin(), same.end(), 0) != same.end())
+      throw std::logic_error(std::string("self-check of ") + to_string(stage) +
+                             ": the recomputation read other texels on the fetched values than before");
     double worst = 0.0;
     for (double e : errs) worst = std::max(worst, e);
     return worst;
   }
 
-  void release(std::initializer_list<Tex> textures) {
-    for (Tex t : textures) {
-      held_.erase(t);
-      std::vector<double>().swap(h_.texture(t));
-    }
-  }
-
   HB h_;
   int count_;
   double floor_;
-  std::set<Tex> held_;  // textures h_ holds as the device has them now
 };
 
 }  // namespace
@@ -539,19 +588,12 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
       if (on_check) on_check(c);
     });
   };
-  // A texture as the device has it now: the checker's copy when it holds one (read once per
-  // stage for both), else read into `scratch`.
+  // A texture as the device has it now, read into `scratch`.
   auto texture = [&](Tex t, std::vector<double>& scratch) -> const std::vector<double>& {
-    if (checker)
-      if (const std::vector<double>* h = checker->held(t)) return *h;
     b.read_into(t, scratch);
     return scratch;
   };
-  // A texture the result keeps: copied (on the host's threads) from the checker's copy, or read.
-  auto keep = [&](Tex t, std::vector<double>& into) {
-    const std::vector<double>& v = texture(t, into);
-    if (&v != &into) copy_chunks(v, into);
-  };
+  auto keep = [&](Tex t, std::vector<double>& into) { b.read_into(t, into); };
   auto timed = [&](PassStage what, int order, auto&& f) { run_stage(to_string(what), order, f); };
 
   timed(PassStage::transmittance, 0, [&] { b.transmittance(); });

@@ -58,6 +58,16 @@ class PassBackend {
     read_into(t, out);
     return out;
   }
+  // Texels ids[k] of t, [ids.size()][channels()], into `out`: a gather, so only those texels
+  // leave the device (the self-checks' fetches).
+  virtual void gather(Tex t, const std::vector<int>& ids, std::vector<double>& out) = 0;
+  // Over every texel of t: per channel the largest |value| of its finite values, and how many
+  // values (texel × channel) are NaN or ±inf (a reduction where the texture is).
+  struct Scan {
+    std::vector<double> max_abs;
+    long long non_finite = 0;
+  };
+  virtual Scan scan(Tex t) = 0;
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
   virtual cl_util::Profiler* profiler() { return nullptr; }
 };
@@ -142,9 +152,10 @@ std::vector<double> inverse_rayleigh_phase(const Model& m);
 // Self-checks of one pass: after each stage, recomputes `count` texels of its output in double
 // from the backend's own inputs and returns the largest |device − reference| / (|reference| +
 // floor·max|device|), or +inf with the count when any value of the outputs, anywhere in the
-// texture, is not finite. The checker keeps, in double, each texture as the check of the stage that
-// wrote it read it, so a texture is read from the device once per stage that writes it, not
-// again by every later check that uses it as an input. run_pass calls it after every stage.
+// texture, is not finite. Only what a check recomputes leaves the device: the maxima and the
+// non-finite count come from scans where the texture is (PassBackend::scan), and the sampled
+// texels with exactly the input texels their recomputation reads from gathers
+// (PassBackend::gather; texel_reads.hpp). run_pass calls it after every stage.
 struct StageCheck {
   std::string stage;
   int order = 0;
@@ -156,9 +167,6 @@ class StageChecker {
  public:
   virtual ~StageChecker() = default;
   virtual StageCheck check(PassBackend& b, PassStage stage, int order) = 0;
-  // The texture as the device has it now, in double, when the checks hold that copy (else
-  // null): run_pass takes its sums from it instead of reading the texture again.
-  virtual const std::vector<double>* held(Tex t) = 0;
 };
 std::unique_ptr<StageChecker> make_stage_checker(const Model& m, const Channels& ch, int width, int count,
                                                  double floor);
@@ -166,8 +174,7 @@ std::unique_ptr<StageChecker> make_stage_checker(const Model& m, const Channels&
 // Called with each stage's check when run_pass is given a checker.
 using CheckHook = std::function<void(const StageCheck& check)>;
 
-// Runs the pass; with a checker, checks every stage after it runs (reported through on_check)
-// and reads each texture once: the sums use the checker's copies.
+// Runs the pass; with a checker, checks every stage after it runs (reported through on_check).
 PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
                     double progress_from, double progress_to, StageChecker* checker = nullptr,
                     const CheckHook& on_check = {}, const OrderHook& on_order = {});

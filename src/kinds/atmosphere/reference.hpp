@@ -7,14 +7,40 @@
 #include <stdexcept>
 #include <cstddef>
 #include <cstring>
+#include <memory>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "core/parallel.hpp"
 #include "kinds/atmosphere/pass.hpp"
+#include "kinds/atmosphere/texel_reads.hpp"
 
 namespace specbake::atmosphere {
 
+
+// A texture of the double reference: sized without writing its values (default-initialised
+// elements), so that a self-check's copy of a device texture, the size of the whole texture for
+// the lookups' arithmetic, takes memory only where the check has put the texels it fetched.
+template <class T>
+struct UninitialisedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitialisedAllocator<U>;
+  };
+  UninitialisedAllocator() = default;
+  template <class U>
+  UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+  }
+};
+using HostTexture = std::vector<double, UninitialisedAllocator<double>>;
 
 #define SPECBAKE_ATMOSPHERE_REF_PROLOGUE                                                                    \
   using real = double;                                                                                    \
