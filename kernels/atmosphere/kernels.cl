@@ -231,3 +231,74 @@ __kernel void scan_texture(AtmosphereParameters a, __global const real* tex, int
   for (int c = 0; c < NCH; ++c) max_abs[g * NCH + c] = m[c];
   bad[g] = count;
 }
+
+/* ---- the sums (Algorithm 4.1's accumulation; pass.hpp's Sums) ------------------------------
+ * A pass's sums are [texels][NCH] like its textures; the bake's R,G,B sums and each order's
+ * R,G,B additions are [texels][3]. Reductions run in G work items, item g over texels g, g + G,
+ * …; the host combines the G partial results in the order of g (the same bytes every run). */
+
+/* The multiple scattering of an order into the pass's scattering: add = ΔS / P_R(ν), the
+ * reference's scattering storing Rayleigh without its phase function, with 1/P_R(ν) of ν as the
+ * texel decodes it given per texel (the host decodes it in double: near μ = ±1 the float decode
+ * moves ν by up to ~1e-4), scattering += add. */
+__kernel void add_multiple_scattering(AtmosphereParameters a, __global const real* delta_S,
+                                      __global const real* inverse_phase, __global real* scattering,
+                                      __global real* add) {
+  const int id = get_global_id(0);
+  if (id >= a.r_size * a.mu_size * a.mu_s_size * a.nu_size) return;
+  for (int c = 0; c < NCH; ++c) {
+    const real v = delta_S[id * NCH + c] * inverse_phase[id];
+    add[id * NCH + c] = v;
+    scattering[id * NCH + c] += v;
+  }
+}
+
+/* sum += x over n values. */
+__kernel void add_values(AtmosphereParameters a, __global const real* x, int n, __global real* sum) {
+  const int id = get_global_id(0);
+  if (id < n) sum[id] += x[id];
+}
+
+/* rgb[t][k] += Σ_c w[k·NCH + c] x[t][c] for the n texels of x ([texels][NCH]). */
+__kernel void add_rgb(AtmosphereParameters a, __global const real* x, __constant real* w, int n, __global real* rgb) {
+  const int t = get_global_id(0);
+  if (t >= n) return;
+  for (int k = 0; k < 3; ++k) {
+    real v = R(0.0);
+    for (int c = 0; c < NCH; ++c) v += w[k * NCH + c] * x[t * NCH + c];
+    rgb[t * 3 + k] += v;
+  }
+}
+
+/* Partial channel statistics of x ([n][channels], channels ≤ NCH): max(0, largest value) and
+ * the sum, per channel, of item g's texels; mx[g·channels + c], sum[g·channels + c]. */
+__kernel void channel_stats_partial(AtmosphereParameters a, __global const real* x, int n, int channels,
+                                    __global real* mx, __global real* sum) {
+  const int g = get_global_id(0), G = get_global_size(0);
+  real m[NCH], s[NCH];
+  for (int c = 0; c < channels; ++c) m[c] = s[c] = R(0.0);
+  for (int t = g; t < n; t += G)
+    for (int c = 0; c < channels; ++c) {
+      const real v = x[(long)t * channels + c];
+      m[c] = fmax(m[c], v);
+      s[c] += v;
+    }
+  for (int c = 0; c < channels; ++c) {
+    mx[g * channels + c] = m[c];
+    sum[g * channels + c] = s[c];
+  }
+}
+
+/* Partial relative change: the largest |add| / sum of item g's texels and channels where the sum
+ * exceeds floor[c] (kAutoFloor × the channel's maximum) and 0. */
+__kernel void relative_change_partial(AtmosphereParameters a, __global const real* add, __global const real* sum,
+                                      __constant real* floor, int n, __global real* out) {
+  const int g = get_global_id(0), G = get_global_size(0);
+  real r = R(0.0);
+  for (int t = g; t < n; t += G)
+    for (int c = 0; c < NCH; ++c) {
+      const real s = sum[(long)t * NCH + c];
+      if (s > floor[c] && s > R(0.0)) r = fmax(r, fabs(add[(long)t * NCH + c]) / s);
+    }
+  out[g] = r;
+}

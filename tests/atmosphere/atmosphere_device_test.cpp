@@ -452,7 +452,7 @@ TEST(AtmosphereDevice, PassWidthDoesNotChangeAChannel) {
   std::vector<PassResult> results;
   for (int w : kPassWidths) {
     auto b = make_device_backend(device(), m, ch, w, false);
-    results.push_back(run_pass(*b, m, plan, kQuiet, 0.0, 1.0));
+    results.push_back(run_pass(*b, plan, kQuiet, 0.0, 1.0));
   }
   auto channels = [](const std::vector<double>& v, int w) {
     std::vector<double> out;
@@ -542,7 +542,8 @@ TEST(AtmosphereDevice, RowGroupsMatchPerTexelMultipleScattering) {
 class Corrupting final : public PassBackend {
  public:
   using Corrupt = std::function<void(PassStage, int, ref3::HostBackend&)>;
-  Corrupting(const Model& m, const Channels& ch, Corrupt corrupt) : b_(m, ch), corrupt_(std::move(corrupt)) {}
+  Corrupting(const Model& m, const Channels& ch, Corrupt corrupt)
+      : b_(m, ch), corrupt_(std::move(corrupt)), sums_(make_host_sums(*this, m)) {}
   int channels() const override { return b_.channels(); }
   void transmittance() override { run(PassStage::transmittance, 0, [&] { b_.transmittance(); }); }
   void direct_irradiance() override { run(PassStage::direct_irradiance, 0, [&] { b_.direct_irradiance(); }); }
@@ -567,6 +568,8 @@ class Corrupting final : public PassBackend {
     ++scans;
     return b_.scan(t);
   }
+  Sums& sums() override { return *sums_; }  // the host's, reading through read_into (counted)
+  void use_channels(const Channels& ch) override { b_.use_channels(ch); }
   int reads = 0;             // whole-texture reads, by anyone
   long long gathered = 0;    // texels gathered
   int scans = 0;             // whole-texture scans
@@ -579,6 +582,7 @@ class Corrupting final : public PassBackend {
   }
   ref3::HostBackend b_;
   Corrupt corrupt_;
+  std::unique_ptr<Sums> sums_;
   int order_ = 0;
 };
 
@@ -592,7 +596,7 @@ TEST(AtmosphereSelfCheck, EachStageIsJudgedOnTheInputsTheDeviceUsed) {
   });
   auto checker = make_stage_checker(m, ch, 3, 64, 1e-3);
   std::vector<StageCheck> checks;
-  run_pass(b, m, PassPlan{4, false, 1e-3}, kQuiet, 0.0, 1.0, checker.get(),
+  run_pass(b, PassPlan{4, false, 1e-3}, kQuiet, 0.0, 1.0, checker.get(),
            [&](const StageCheck& c) { checks.push_back(c); });
   int corrupted = 0;
   for (const StageCheck& c : checks) {
@@ -623,12 +627,14 @@ TEST(AtmosphereSelfCheck, ChecksGatherWhatTheyRecomputeAndReadNoWholeTexture) {
   auto checker = make_stage_checker(m, ch, 3, 16, 1e-3);
   int checks = 0;
   const PassPlan plan{3, false, 1e-3};
-  const PassResult a = run_pass(checked, m, plan, kQuiet, 0.0, 1.0, checker.get(), [&](const StageCheck&) { ++checks; });
-  const PassResult b = run_pass(plain, m, plan, kQuiet, 0.0, 1.0);
+  const PassResult a = run_pass(checked, plan, kQuiet, 0.0, 1.0, checker.get(), [&](const StageCheck&) { ++checks; });
+  const PassResult b = run_pass(plain, plan, kQuiet, 0.0, 1.0);
   EXPECT_EQ(checks, 9);  // 3 stages, then 3 per order n = 2, 3
   EXPECT_EQ(checked.scans, 10);
   EXPECT_EQ(checked.reads, plain.reads);
-  EXPECT_EQ(plain.reads, 8);  // the sums' own reads: T, ΔE, ΔR, ΔM, then ΔE and ΔS per order
+  // the host sums' own reads: T and the direct ΔE kept, ΔR, ΔE and ΔS per order n = 2, 3, ΔM into
+  // the R,G,B sums and kept
+  EXPECT_EQ(plain.reads, 9);
   EXPECT_EQ(plain.gathered, 0);
   EXPECT_GT(checked.gathered, 9 * 16);  // the sampled texels and the inputs they read
   // against reading each texture once per stage that writes it (T, ΔE, ΔR, ΔM, then J, ΔE, ΔS
@@ -643,13 +649,101 @@ TEST(AtmosphereSelfCheck, ChecksGatherWhatTheyRecomputeAndReadNoWholeTexture) {
   EXPECT_EQ(a.scattering, b.scattering);
   EXPECT_EQ(a.single_mie, b.single_mie);
   ASSERT_EQ(a.orders.size(), b.orders.size());
-  for (std::size_t i = 0; i < a.orders.size(); ++i) {
-    EXPECT_EQ(a.orders[i].scattering_max, b.orders[i].scattering_max);
-    EXPECT_EQ(a.orders[i].scattering_mean, b.orders[i].scattering_mean);
-    EXPECT_EQ(a.orders[i].irradiance_max, b.orders[i].irradiance_max);
-    EXPECT_EQ(a.orders[i].irradiance_mean, b.orders[i].irradiance_mean);
-    EXPECT_EQ(a.orders[i].relative, b.orders[i].relative);
+  for (std::size_t i = 0; i < a.orders.size(); ++i) EXPECT_EQ(a.orders[i].relative, b.orders[i].relative);
+}
+
+// The device's sums (kernels.cl, "The sums") against the same sums in double on the host
+// (make_host_sums) over the same device textures: a spectral bake of 6 wavelengths in two passes
+// of 4 channels (the second with two dark channels), 3 orders, CIE weights into R,G,B. The device
+// adds in float: a pass's sum of ≤ 3 non-negative terms (× 1/P_R rounded to float) carries ≤ ~4
+// roundings, ≤ 4 · 2⁻²⁴ ≈ 2.4e-7 relative; the maxima, means and relative changes are taken from
+// such values (the means' partial sums of ≤ 2560 / 4096 texels each) and keep that size. An R,G,B
+// value is a 4-term dot product per pass with CIE weights of both signs, summed over 2 passes: its
+// error is ≲ 6 · 2⁻²⁴ Σ|w x|, which cancels to ~0 in places, so it is judged against the
+// channel's largest value (Σ|w x| stays within ~2× that for these weights: ≲ 7e-7). 2e-6
+// bounds every comparison with room; a wrong texel, weight or pass gives O(1).
+class HostSummed final : public PassBackend {
+ public:
+  HostSummed(std::unique_ptr<PassBackend> b, const Model& m) : b_(std::move(b)), sums_(make_host_sums(*this, m)) {}
+  int channels() const override { return b_->channels(); }
+  void transmittance() override { b_->transmittance(); }
+  void direct_irradiance() override { b_->direct_irradiance(); }
+  void single_scattering() override { b_->single_scattering(); }
+  void scattering_density(int order) override { b_->scattering_density(order); }
+  void indirect_irradiance(int order) override { b_->indirect_irradiance(order); }
+  void multiple_scattering() override { b_->multiple_scattering(); }
+  void read_into(Tex t, std::vector<double>& out) override { b_->read_into(t, out); }
+  void gather(Tex t, const std::vector<int>& ids, std::vector<double>& out) override { b_->gather(t, ids, out); }
+  Scan scan(Tex t) override { return b_->scan(t); }
+  Sums& sums() override { return *sums_; }
+  void use_channels(const Channels& ch) override { b_->use_channels(ch); }
+
+ private:
+  std::unique_ptr<PassBackend> b_;
+  std::unique_ptr<Sums> sums_;
+};
+
+TEST(AtmosphereDevice, DeviceSumsMatchTheHostsDoubleSums) {
+  AtmosphereSpec s = small(earth());
+  s.spectral = true;
+  s.count = 6;
+  const Model m = model_of(s);
+  const Spectrum sp = spectrum_of(s);
+  const Channels all = channels_at(s, sp.lambda_nm);
+  constexpr int kWidth = 4;
+  auto on_device = make_device_backend(device(), m, all.slice(0, kWidth), kWidth, false);
+  HostSummed on_host(make_device_backend(device(), m, all.slice(0, kWidth), kWidth, false), m);
+  const int n = static_cast<int>(all.size());
+  // relative to |value| + floor × the channel's largest |value|
+  auto rel = [](const std::vector<double>& a, const std::vector<double>& b, int w, double floor = 1e-6) {
+    EXPECT_EQ(a.size(), b.size());
+    std::vector<double> mx(w, 0.0);
+    for (std::size_t i = 0; i < b.size(); ++i) mx[i % w] = std::max(mx[i % w], std::fabs(b[i]));
+    double e = 0.0;
+    for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+      e = std::max(e, std::fabs(a[i] - b[i]) / (std::fabs(b[i]) + floor * mx[i % w] + 1e-300));
+    return e;
+  };
+  double worst = 0.0, worst_relative = 0.0;
+  for (int first = 0; first < n; first += kWidth) {
+    const int count = std::min(kWidth, n - first);
+    PassPlan plan{3, false, 1e-3};
+    plan.to_rgb.assign(3 * kWidth, 0.0);
+    for (int k = 0; k < 3; ++k)
+      for (int i = 0; i < count; ++i) plan.to_rgb[k * kWidth + i] = sp.to_rgb[k * n + first + i];
+    if (first > 0) {
+      on_device->use_channels(all.slice(first, count));
+      on_host.use_channels(all.slice(first, count));
+    }
+    const PassResult d = run_pass(*on_device, plan, kQuiet, 0.0, 1.0);
+    const PassResult h = run_pass(on_host, plan, kQuiet, 0.0, 1.0);
+    EXPECT_EQ(d.transmittance, h.transmittance);  // the same kernels: the textures are the same bits
+    worst = std::max({worst, rel(d.scattering, h.scattering, kWidth), rel(d.irradiance, h.irradiance, kWidth),
+                      rel(d.single_mie, h.single_mie, kWidth)});
+    ASSERT_EQ(d.orders.size(), h.orders.size());
+    for (std::size_t i = 0; i < d.orders.size(); ++i)
+      worst_relative = std::max(worst_relative, std::fabs(d.orders[i].relative - h.orders[i].relative) /
+                                                    std::max(h.orders[i].relative, 1e-30));
   }
+  for (Sum sum : {Sum::scattering, Sum::irradiance, Sum::single_mie}) {
+    SCOPED_TRACE(to_string(sum));
+    std::vector<double> d, h;
+    on_device->sums().read_rgb(sum, d);
+    on_host.sums().read_rgb(sum, h);
+    worst = std::max(worst, rel(d, h, 3, 1.0));
+  }
+  for (int order = 1; order <= 3; ++order) {
+    const OrderRgb d = on_device->sums().order_rgb(order), h = on_host.sums().order_rgb(order);
+    for (auto field : {&OrderRgb::scattering_max, &OrderRgb::scattering_mean, &OrderRgb::irradiance_max,
+                       &OrderRgb::irradiance_mean}) {
+      ASSERT_EQ((d.*field).size(), (h.*field).size()) << "order " << order;
+      worst = std::max(worst, rel(d.*field, h.*field, 1));
+    }
+    EXPECT_EQ(d.irradiance_max.empty(), order == 3);  // the last order's light lights nothing yet
+  }
+  std::printf("device sums against the host's double: %.3g (relative changes %.3g)\n", worst, worst_relative);
+  EXPECT_LE(worst, 2e-6);
+  EXPECT_LE(worst_relative, 2e-6);
 }
 
 // The job's verdict on its self-checks: a stage that wrote values that are not finite stops the
@@ -697,7 +791,7 @@ TEST(AtmosphereSelfCheck, NonFiniteValuesAnywhereFailTheStage) {
   for (long long k = 0; k < kSampled; ++k) ASSERT_NE((k * 2654435761LL + 12345) % n, 1) << "texel 1 is sampled";
   auto checker = make_stage_checker(m, ch, 3, kSampled, 1e-3);
   std::vector<StageCheck> checks;
-  run_pass(b, m, PassPlan{3, false, 1e-3}, kQuiet, 0.0, 1.0, checker.get(),
+  run_pass(b, PassPlan{3, false, 1e-3}, kQuiet, 0.0, 1.0, checker.get(),
            [&](const StageCheck& c) { checks.push_back(c); });
   bool seen = false;
   for (const StageCheck& c : checks) {

@@ -45,51 +45,6 @@ constexpr double kCheckTolerance = 2e-3;
 
 using MakeBackend = std::function<std::unique_ptr<PassBackend>(const Channels&, int width)>;
 
-struct OrderAccumulator {
-  bool single_pass = true;
-  std::size_t n_s = 0, n_e = 0;
-  std::map<int, std::vector<float>> s, e;  // several passes: per-order sums in R,G,B
-  std::map<int, std::array<std::vector<double>, 4>> stats;  // single pass: s max/mean, e max/mean
-  std::map<int, double> relative;
-
-  void add(int order, bool irradiance, const std::vector<double>& rgb) {
-    if (single_pass) {
-      const ChannelStats mm = channel_stats(rgb, 3);
-      stats[order][irradiance ? 2 : 0] = mm.max;
-      stats[order][irradiance ? 3 : 1] = mm.mean;
-      return;
-    }
-    auto& buf = (irradiance ? e : s)[order];
-    if (buf.empty()) buf.assign(rgb.size(), 0.0f);
-    parallel_chunks(rgb.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
-      for (std::size_t i = first; i < last; ++i) buf[i] += static_cast<float>(rgb[i]);
-    });
-  }
-  json to_json() {
-    if (!single_pass) {
-      for (auto& [o, b] : s) {
-        const ChannelStats mm = channel_stats(b, 3);
-        stats[o][0] = mm.max;
-        stats[o][1] = mm.mean;
-      }
-      for (auto& [o, b] : e) {
-        const ChannelStats mm = channel_stats(b, 3);
-        stats[o][2] = mm.max;
-        stats[o][3] = mm.mean;
-      }
-    }
-    json out = json::array();
-    for (auto& [o, st] : stats) {
-      json j = {{"order", o},
-                {"scattering", {{"max", st[0]}, {"mean", st[1]}}},
-                {"irradiance", st[2].empty() ? json(nullptr) : json{{"max", st[2]}, {"mean", st[3]}}},
-                {"relative_change", o == 1 ? json(nullptr) : json(relative[o])}};
-      out.push_back(j);
-    }
-    return out;
-  }
-};
-
 // Channels [first, first + count) of a pass's textures ([texels][width]) into the spectral store
 // (`store: radiance`): set g / 4, channel g % 4 of wavelength g; scattering and single Mie from the
 // 3D texel order [r][mu][x] to the tiled 2D one [mu][r][x].
@@ -124,36 +79,25 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   out.spectrum = sp;
   out.luts.model = m;
   out.luts.rgb = rgb;
-  const PassPlan plan{spec.orders.value_or(kMaxAutoOrders), !spec.orders.has_value(), spec.tolerance};
   const int n = static_cast<int>(all.size());
   const int width = channels_per_pass(spec);
   const int passes = (n + width - 1) / width;
   const Sizes& s = m.sizes;
-  const std::size_t n_t = 1ULL * s.transmittance_w * s.transmittance_h, n_e = 1ULL * s.irradiance_w * s.irradiance_h,
-                    n_s = s.scattering_texels();
-  out.luts.irradiance.assign(3 * n_e, 0.0);
-  out.luts.scattering.assign(3 * n_s, 0.0);
-  out.luts.single_mie.assign(3 * n_s, 0.0);
-  OrderAccumulator acc;
-  acc.single_pass = passes == 1;
+  const std::size_t n_t = 1ULL * s.transmittance_w * s.transmittance_h;
   out.passes = json::array();
   out.self_checks = json::array();
   std::map<std::string, cl_util::StageSeconds> stage_total;
   std::map<int, std::map<std::string, cl_util::StageSeconds>> per_order;
-
-  // pass channels → R,G,B: identity in rgb mode, the CIE weights in spectral mode
-  auto to_rgb = [&](int first, int count, const std::vector<double>& v, std::size_t texels) {
-    std::vector<double> o(3 * texels, 0.0);
-    parallel_chunks(texels, kSumChunk, [&](std::size_t t0, std::size_t t1, std::size_t) {
-      for (std::size_t t = t0; t < t1; ++t)
-        for (int i = 0; i < count; ++i)
-          for (int c = 0; c < 3; ++c) {
-            const double k = sp.spectral ? sp.to_rgb[c * n + first + i] : (c == i ? 1.0 : 0.0);
-            o[3 * t + c] += k * v[t * width + i];
-          }
-    });
-    return o;
+  std::map<int, double> relative;  // per order, the largest over passes
+  // host-only steps of the job: the backend's set-up (program build, allocations, layout check)
+  const auto host_stage = [&](const char* stage, auto&& f) {
+    cl_util::accumulate(stage_total[stage], cl_util::host_only(stage, f));
   };
+  // One backend serves every pass (its sums over passes stay where it is).
+  std::unique_ptr<PassBackend> backend;
+  host_stage("setup", [&] { backend = make(all.slice(0, std::min(width, n)), width); });
+  cl_util::Profiler own;  // a host backend enqueues nothing
+  cl_util::Profiler& prof = backend->profiler() ? *backend->profiler() : own;
   if (spec.store_radiance) {
     out.radiance.lambda_nm = all.lambda_nm;
     out.radiance.solar_irradiance = all.solar_irradiance;
@@ -161,13 +105,7 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   for (int p = 0; p < passes; ++p) {
     const int first = p * width, count = std::min(width, n - first);
     const Channels ch = all.slice(first, count);
-    // host-only steps of the job: the backend's set-up (program build, allocations, layout
-    // check) and the combination of a pass into the bundle's textures
-    const auto host_stage = [&](const char* stage, auto&& f) {
-      cl_util::accumulate(stage_total[stage], cl_util::host_only(stage, f));
-    };
-    std::unique_ptr<PassBackend> backend;
-    host_stage("setup", [&] { backend = make(ch, width); });
+    if (p > 0) backend->use_channels(ch);
     std::unique_ptr<StageChecker> checker;
     if (check_texels > 0) checker = make_stage_checker(m, ch, width, check_texels, kCheckFloor);
     const CheckHook on_check = [&](const StageCheck& c) {
@@ -177,46 +115,58 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
       // stop here: later stages would only spread the NaN
       if (c.non_finite > 0) throw non_finite_error({c.stage, c.order, p, c.non_finite});
     };
-    const OrderHook on_order = [&](int order, const std::vector<double>& s_add, const std::vector<double>& e_add) {
-      if (!s_add.empty()) acc.add(order, false, to_rgb(first, count, s_add, n_s));
-      if (!e_add.empty()) acc.add(order, true, to_rgb(first, count, e_add, n_e));
-    };
+    // pass channels → R,G,B: identity in rgb mode, the CIE weights in spectral mode
+    PassPlan plan{spec.orders.value_or(kMaxAutoOrders), !spec.orders.has_value(), spec.tolerance};
+    plan.to_rgb.assign(3 * width, 0.0);
+    for (int k = 0; k < 3; ++k)
+      for (int i = 0; i < count; ++i) plan.to_rgb[k * width + i] = sp.spectral ? sp.to_rgb[k * n + first + i] : (k == i);
+    plan.keep_textures = spec.store_radiance;
     const double p0 = 0.9 * p / passes, p1 = 0.9 * (p + 1) / passes;
-    const PassResult r = run_pass(*backend, m, plan, progress, p0, p1, checker.get(), on_check, on_order);
+    const PassResult r = run_pass(*backend, plan, progress, p0, p1, checker.get(), on_check);
     for (const StageTime& t : r.timings) {
       cl_util::accumulate(stage_total[t.stage], t.seconds);
       cl_util::accumulate(per_order[t.order][t.stage], t.seconds);
     }
-    for (const auto& o : r.orders) acc.relative[o.order] = std::max(acc.relative[o.order], o.relative);
-    const auto add_into = [&](std::vector<double>& dst, const std::vector<double>& src, std::size_t texels) {
-      const auto v = to_rgb(first, count, src, texels);
-      parallel_chunks(v.size(), kSumChunk, [&](std::size_t i0, std::size_t i1, std::size_t) {
-        for (std::size_t i = i0; i < i1; ++i) dst[i] += v[i];
-      });
-    };
-    host_stage("combine", [&] {
-      add_into(out.luts.irradiance, r.irradiance, n_e);
-      add_into(out.luts.scattering, r.scattering, n_s);
-      add_into(out.luts.single_mie, r.single_mie, n_s);
-      if (!sp.spectral) out.luts.transmittance = r.transmittance;
-      if (spec.store_radiance) keep_radiance(out.radiance, s, first, count, width, r);
-    });
+    for (const auto& o : r.orders) relative[o.order] = std::max(relative[o.order], o.relative);
+    if (spec.store_radiance) host_stage("combine", [&] { keep_radiance(out.radiance, s, first, count, width, r); });
     out.orders_used = std::max(out.orders_used, r.orders_used);
     out.converged = out.converged && r.converged;
     out.passes.push_back({{"wavelengths_nm", ch.lambda_nm}, {"orders_used", r.orders_used}, {"converged", r.converged}});
+  }
+  // The bake's R,G,B textures and each order's statistics, from the sums over the passes.
+  {
+    cl_util::Profiler::Stage st(prof, "combine");
+    Sums& sums = backend->sums();
+    sums.read_rgb(Sum::irradiance, out.luts.irradiance);
+    sums.read_rgb(Sum::scattering, out.luts.scattering);
+    sums.read_rgb(Sum::single_mie, out.luts.single_mie);
+    if (!sp.spectral) out.luts.transmittance = backend->read(Tex::transmittance);
+    out.orders = json::array();
+    for (const auto& [o, rel] : relative) {
+      const OrderRgb st_o = sums.order_rgb(o);
+      out.orders.push_back(
+          {{"order", o},
+           {"scattering", {{"max", st_o.scattering_max}, {"mean", st_o.scattering_mean}}},
+           {"irradiance", st_o.irradiance_max.empty() ? json(nullptr)
+                                                      : json{{"max", st_o.irradiance_max}, {"mean", st_o.irradiance_mean}}},
+           {"relative_change", o == 1 ? json(nullptr) : json(rel)}});
+    }
+    st.close();
+    prof.settle();
+    cl_util::accumulate(stage_total["combine"], *st.record());
   }
   if (sp.spectral) {
     // The render-time transmittance is at 680/550/440 nm, as the GPU model's luminance mode.
     std::unique_ptr<PassBackend> b;
     cl_util::accumulate(stage_total["transmittance_rgb"],  // the 3-channel program's build
                         cl_util::host_only("transmittance_rgb", [&] { b = make(rgb, 3); }));
-    cl_util::Profiler own;
-    cl_util::Profiler& prof = b->profiler() ? *b->profiler() : own;
-    cl_util::Profiler::Stage st(prof, "transmittance_rgb");
+    cl_util::Profiler own3;
+    cl_util::Profiler& prof3 = b->profiler() ? *b->profiler() : own3;
+    cl_util::Profiler::Stage st(prof3, "transmittance_rgb");
     b->transmittance();
     out.luts.transmittance = b->read(Tex::transmittance);
     st.close();
-    prof.settle();
+    prof3.settle();
     cl_util::accumulate(stage_total["transmittance_rgb"], *st.record());
   }
   out.timings = {{"total", json::object()}, {"per_order", json::array()}};
@@ -228,7 +178,6 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     out.timings["per_order"].push_back(o);
   }
   if (out.luts.transmittance.size() != 3 * n_t) throw JobError("atmosphere: transmittance texture has the wrong size");
-  out.orders = acc.to_json();
   return out;
 }
 
@@ -544,7 +493,7 @@ void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& 
   const Channels ch = channels_at(spec, lambdas);
   const int width = pass_width_for(lambdas.size());
   auto backend = make_device_backend(ctx.device, m, ch, width, spec.double_precision);
-  const PassResult pass = run_pass(*backend, m, PassPlan{b.orders_used, false, spec.tolerance},
+  const PassResult pass = run_pass(*backend, PassPlan{b.orders_used, false, spec.tolerance},
                                    [](std::string_view, double) {}, 0.0, 1.0);
   SpectralLuts exact;
   exact.lambda_nm = ch.lambda_nm;

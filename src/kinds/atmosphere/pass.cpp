@@ -9,6 +9,7 @@
 #include <limits>
 #include <optional>
 #include <array>
+#include <map>
 #include <stdexcept>
 
 #include "kinds/atmosphere/reference_widths.hpp"
@@ -36,6 +37,8 @@ const char* to_string(Tex t) {
 }
 
 namespace {
+
+std::vector<double> inverse_rayleigh_phase(const Model& m);
 
 // `to` = `from` converted to double, in chunks on the host's threads.
 template <class S>
@@ -88,10 +91,10 @@ Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
   });
 }
 
-class DeviceBackend final : public PassBackend {
+class DeviceBackend final : public PassBackend, private Sums {
  public:
   DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
-      : dev_(dev), sizes_(m.sizes), width_(width), dbl_(dbl), lanes_(lanes(dev.info())),
+      : dev_(dev), model_(m), sizes_(m.sizes), width_(width), dbl_(dbl), lanes_(lanes(dev.info())),
         block_(make_block(m, ch, width, dbl)) {
     const std::string options = std::string("-DNCH=") + std::to_string(width) + " -DNU_MAX=" +
                                 std::to_string(std::max(m.sizes.nu, kNuMaxAtLeast)) +
@@ -112,6 +115,13 @@ class DeviceBackend final : public PassBackend {
       dM_ = alloc(n_s_);
       dS_ = alloc(n_s_);
       J_ = alloc(n_s_);
+      S_ = alloc(n_s_);
+      E_ = alloc(n_e_);
+      add_ = alloc(n_s_);
+      for (cl::Buffer& b : rgb_) b = alloc_reals(3 * std::max(n_s_, n_e_));
+      zero(rgb_[0], 3 * n_s_);
+      zero(rgb_[1], 3 * n_e_);
+      zero(rgb_[2], 3 * n_s_);
       return 0;
     });
     check_layout();
@@ -200,6 +210,77 @@ class DeviceBackend final : public PassBackend {
     return s;
   }
   cl_util::Profiler* profiler() override { return &dev_.profiler(); }
+  Sums& sums() override { return *this; }
+  void use_channels(const Channels& ch) override { block_ = make_block(model_, ch, width_, dbl_); }
+
+  // ---- the sums, by kernels where the textures are (kernels.cl, "The sums") ----
+  void begin_pass(const std::vector<double>& to_rgb) override {
+    cl_util::checked("atmosphere sums", [&] {
+      to_rgb_ = upload(to_rgb);
+      return 0;
+    });
+  }
+  void single() override {
+    cl_util::checked("atmosphere sums", [&] {
+      copy(dR_, S_, n_s_ * width_);
+      zero(E_, n_e_ * width_);
+      return 0;
+    });
+    add_order(1, 0, dR_, n_s_);
+  }
+  double add_irradiance(int order) override {
+    launch("add_values", n_e_ * width_, {&dE_, static_cast<int>(n_e_ * width_), &E_});
+    add_order(order, 1, dE_, n_e_);
+    return relative_change(dE_, E_, n_e_);
+  }
+  double add_scattering(int order) override {
+    if (!has_inverse_phase_) {  // 1/P_R(ν) of every texel, decoded in double (as the host's reference does)
+      cl_util::checked("atmosphere sums", [&] {
+        inverse_phase_ = upload(inverse_rayleigh_phase(model_));
+        return 0;
+      });
+      has_inverse_phase_ = true;
+    }
+    launch("add_multiple_scattering", n_s_, {&dS_, &inverse_phase_, &S_, &add_});
+    add_order(order, 0, add_, n_s_);
+    return relative_change(add_, S_, n_s_);
+  }
+  void end_pass() override {
+    add_rgb(S_, n_s_, rgb_[0]);
+    add_rgb(E_, n_e_, rgb_[1]);
+    add_rgb(dM_, n_s_, rgb_[2]);
+  }
+  void read_pass(Sum s, std::vector<double>& out) override {
+    cl_util::checked("reading an atmosphere sum", [&] {
+      if (s == Sum::scattering) read_reals(S_, n_s_ * width_, out);
+      else if (s == Sum::irradiance) read_reals(E_, n_e_ * width_, out);
+      else read_reals(dM_, n_s_ * width_, out);
+      return 0;
+    });
+  }
+  void read_rgb(Sum s, std::vector<double>& out) override {
+    cl_util::checked("reading an atmosphere sum", [&] {
+      read_reals(rgb_[static_cast<int>(s)], 3 * (s == Sum::irradiance ? n_e_ : n_s_), out);
+      return 0;
+    });
+  }
+  OrderRgb order_rgb(int order) override {
+    OrderRgb o;
+    const auto it = orders_.find(order);
+    if (it == orders_.end()) return o;
+    auto& [buf, has] = it->second;
+    if (has[0]) {
+      const ChannelStats st = stats(buf[0], n_s_, 3);
+      o.scattering_max = st.max;
+      o.scattering_mean = st.mean;
+    }
+    if (has[1]) {
+      const ChannelStats st = stats(buf[1], n_e_, 3);
+      o.irradiance_max = st.max;
+      o.irradiance_mean = st.mean;
+    }
+    return o;
+  }
 
  private:
   cl::Buffer alloc(long long texels) { return alloc_reals(texels * width_); }
@@ -266,6 +347,79 @@ class DeviceBackend final : public PassBackend {
       const std::size_t row = static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s;
       return std::min({most, dev_.info().max_work_group_size, (row + lanes_ - 1) / lanes_});
     });
+  }
+  // The values as the device's reals, in a new read-only buffer.
+  cl::Buffer upload(const std::vector<double>& v) {
+    if (dbl_)
+      return cl::Buffer(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, v.size() * sizeof(double),
+                        const_cast<double*>(v.data()));
+    std::vector<float> f(v.begin(), v.end());
+    return cl::Buffer(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, f.size() * sizeof(float), f.data());
+  }
+  void zero(cl::Buffer& b, long long n) {
+    cl::Event ev;
+    if (dbl_) dev_.queue().enqueueFillBuffer(b, 0.0, 0, n * sizeof(double), nullptr, &ev);
+    else dev_.queue().enqueueFillBuffer(b, 0.0f, 0, n * sizeof(float), nullptr, &ev);
+    dev_.profiler().record(ev);
+  }
+  void copy(const cl::Buffer& from, cl::Buffer& to, long long n) {
+    cl::Event ev;
+    dev_.queue().enqueueCopyBuffer(from, to, 0, 0, n * (dbl_ ? sizeof(double) : sizeof(float)), nullptr, &ev);
+    dev_.profiler().record(ev);
+  }
+  // rgb ([texels][3]) += to_rgb · x ([texels][width]).
+  void add_rgb(cl::Buffer& x, long long texels, cl::Buffer& rgb) {
+    launch("add_rgb", texels, {&x, &to_rgb_, static_cast<int>(texels), &rgb});
+  }
+  // What `order` adds ([texels][width]) into its R,G,B sum over passes (which: 0 scattering, 1 irradiance).
+  void add_order(int order, int which, cl::Buffer& x, long long texels) {
+    auto& [buf, has] = orders_[order];
+    if (!has[which]) {
+      cl_util::checked("allocating an order's sums", [&] {
+        buf[which] = alloc_reals(3 * texels);
+        zero(buf[which], 3 * texels);
+        return 0;
+      });
+      has[which] = true;
+    }
+    add_rgb(x, texels, buf[which]);
+  }
+  // Per channel max (floored at 0) and mean of x ([texels][channels]): partial results of
+  // kScanItems work items, combined on the host in item order.
+  ChannelStats stats(cl::Buffer& x, long long texels, int channels) {
+    const int items = static_cast<int>(std::min<long long>(texels, kScanItems));
+    ChannelStats st{std::vector<double>(channels, 0.0), std::vector<double>(channels, 0.0)};
+    cl_util::checked("atmosphere sums", [&] {
+      cl::Buffer mx = alloc_reals(1LL * items * channels), sum = alloc_reals(1LL * items * channels);
+      launch("channel_stats_partial", items, {&x, static_cast<int>(texels), channels, &mx, &sum});
+      std::vector<double> m, t;
+      read_reals(mx, 1LL * items * channels, m);
+      read_reals(sum, 1LL * items * channels, t);
+      for (int g = 0; g < items; ++g)
+        for (int c = 0; c < channels; ++c) {
+          st.max[c] = std::max(st.max[c], m[1LL * g * channels + c]);
+          st.mean[c] += t[1LL * g * channels + c];
+        }
+      for (double& v : st.mean) v /= static_cast<double>(std::max<long long>(texels, 1));
+      return 0;
+    });
+    return st;
+  }
+  // The largest |add| / sum where the sum exceeds kAutoFloor × its channel's maximum (Sums).
+  double relative_change(cl::Buffer& add, cl::Buffer& sum, long long texels) {
+    std::vector<double> floor = stats(sum, texels, width_).max;
+    for (double& f : floor) f *= kAutoFloor;
+    const int items = static_cast<int>(std::min<long long>(texels, kScanItems));
+    double out = 0.0;
+    cl_util::checked("atmosphere sums", [&] {
+      cl::Buffer fl = upload(floor), partial = alloc_reals(items);
+      launch("relative_change_partial", items, {&add, &sum, &fl, static_cast<int>(texels), &partial});
+      std::vector<double> r;
+      read_reals(partial, items, r);
+      for (double v : r) out = std::max(out, v);
+      return 0;
+    });
+    return out;
   }
   // n reals of a buffer into `out` as double (float buffers through a staging copy kept between reads).
   void read_reals(const cl::Buffer& b, long long n, std::vector<double>& out) {
@@ -336,6 +490,7 @@ class DeviceBackend final : public PassBackend {
   }
 
   Device& dev_;
+  Model model_;
   Sizes sizes_;
   int width_;
   bool dbl_;
@@ -345,6 +500,13 @@ class DeviceBackend final : public PassBackend {
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
   std::size_t row_group_ = 0;
   cl::Buffer T_, dE_, dR_, dM_, dS_, J_, rays_, incidence_;
+  // the sums: the pass's scattering and irradiance, an order's scattering addition, the
+  // channels → R,G,B weights, the bake's R,G,B textures (as Sum numbers them) and per order its
+  // R,G,B additions (scattering, irradiance; whether each is there yet)
+  cl::Buffer S_, E_, add_, to_rgb_, inverse_phase_;
+  bool has_inverse_phase_ = false;
+  std::array<cl::Buffer, 3> rgb_;
+  std::map<int, std::pair<std::array<cl::Buffer, 2>, std::array<bool, 2>>> orders_;
   std::vector<float> staging_;
 };
 
@@ -368,6 +530,106 @@ double relative_change(const std::vector<double>& add, const std::vector<double>
   for (double r : rel) out = std::max(out, r);
   return out;
 }
+
+// 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it).
+std::vector<double> inverse_rayleigh_phase(const Model& m) {
+  const auto a = ref3::make_parameters(m, Channels{});
+  const Sizes& s = m.sizes;
+  const int wd = s.scattering_width();
+  std::vector<double> out(s.scattering_texels());
+  parallel_for(static_cast<long long>(out.size()), [&](long long id) {
+    double h, mu, mu_s, nu;
+    int ground;
+    ref3::scattering_params_from_texel(&a, static_cast<int>(id % wd), static_cast<int>((id / wd) % s.mu),
+                                       static_cast<int>(id / (1LL * wd * s.mu)), &h, &mu, &mu_s, &nu, &ground);
+    out[id] = 1.0 / ref3::rayleigh_phase(nu);
+  });
+  return out;
+}
+
+// x ([texels][w]) → R,G,B ([texels][3]) by W (3 × w), added into rgb (sized on first use).
+void add_rgb(const std::vector<double>& x, int w, const std::vector<double>& W, std::vector<double>& rgb) {
+  const std::size_t n = x.size() / w;
+  if (rgb.empty()) rgb.assign(3 * n, 0.0);
+  parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
+    for (std::size_t t = first; t < last; ++t)
+      for (int k = 0; k < 3; ++k) {
+        double v = 0.0;
+        for (int c = 0; c < w; ++c) v += W[k * w + c] * x[t * w + c];
+        rgb[3 * t + k] += v;
+      }
+  });
+}
+
+// The identity on the first three channels (PassPlan::to_rgb left empty).
+std::vector<double> first_three(int w) {
+  std::vector<double> W(3 * w, 0.0);
+  for (int k = 0; k < 3 && k < w; ++k) W[k * w + k] = 1.0;
+  return W;
+}
+
+// Sums in double on the host, from the backend's textures (the reference of the device's).
+class HostSums final : public Sums {
+ public:
+  HostSums(PassBackend& b, const Model& m) : b_(b), m_(m), w_(b.channels()) {}
+  void begin_pass(const std::vector<double>& to_rgb) override { W_ = to_rgb; }
+  void single() override {
+    b_.read_into(Tex::delta_rayleigh, scattering_);
+    irradiance_.assign(static_cast<std::size_t>(m_.sizes.irradiance_w) * m_.sizes.irradiance_h * w_, 0.0);
+    add_rgb(scattering_, w_, W_, orders_[1][0]);
+  }
+  double add_irradiance(int order) override {
+    b_.read_into(Tex::delta_irradiance, add_);
+    for (std::size_t i = 0; i < add_.size(); ++i) irradiance_[i] += add_[i];
+    add_rgb(add_, w_, W_, orders_[order][1]);
+    return relative_change(add_, irradiance_, w_);
+  }
+  double add_scattering(int order) override {
+    if (inv_phase_.empty()) inv_phase_ = inverse_rayleigh_phase(m_);
+    b_.read_into(Tex::delta_multiple, add_);
+    for (std::size_t i = 0; i < add_.size(); ++i) {
+      add_[i] *= inv_phase_[i / w_];
+      scattering_[i] += add_[i];
+    }
+    add_rgb(add_, w_, W_, orders_[order][0]);
+    return relative_change(add_, scattering_, w_);
+  }
+  void end_pass() override {
+    add_rgb(scattering_, w_, W_, rgb_[0]);
+    add_rgb(irradiance_, w_, W_, rgb_[1]);
+    b_.read_into(Tex::delta_mie, add_);
+    add_rgb(add_, w_, W_, rgb_[2]);
+  }
+  void read_pass(Sum s, std::vector<double>& out) override {
+    if (s == Sum::scattering) out = scattering_;
+    else if (s == Sum::irradiance) out = irradiance_;
+    else b_.read_into(Tex::delta_mie, out);
+  }
+  void read_rgb(Sum s, std::vector<double>& out) override { out = rgb_[static_cast<int>(s)]; }
+  OrderRgb order_rgb(int order) override {
+    OrderRgb o;
+    const auto& x = orders_[order];
+    if (!x[0].empty()) {
+      const ChannelStats st = channel_stats(x[0], 3);
+      o.scattering_max = st.max;
+      o.scattering_mean = st.mean;
+    }
+    if (!x[1].empty()) {
+      const ChannelStats st = channel_stats(x[1], 3);
+      o.irradiance_max = st.max;
+      o.irradiance_mean = st.mean;
+    }
+    return o;
+  }
+
+ private:
+  PassBackend& b_;
+  Model m_;
+  int w_;
+  std::vector<double> W_, scattering_, irradiance_, add_, inv_phase_;
+  std::array<std::vector<double>, 3> rgb_;                     // as Sum numbers them
+  std::map<int, std::array<std::vector<double>, 2>> orders_;   // per order: scattering, irradiance (R,G,B)
+};
 
 // The textures a stage reads and writes, as the reference recomputes them.
 struct StageTextures {
@@ -508,26 +770,22 @@ std::unique_ptr<PassBackend> make_host_backend(const Model& m, const Channels& c
   });
 }
 
+std::unique_ptr<Sums> make_host_sums(PassBackend& b, const Model& m) { return std::make_unique<HostSums>(b, m); }
+
+const char* to_string(Sum s) {
+  switch (s) {
+    case Sum::scattering: return "scattering";
+    case Sum::irradiance: return "irradiance";
+    case Sum::single_mie: return "single_mie";
+  }
+  return "?";
+}
+
 std::unique_ptr<StageChecker> make_stage_checker(const Model& m, const Channels& ch, int width, int count,
                                                  double floor) {
   return with_width(width, [&](auto ref) -> std::unique_ptr<StageChecker> {
     return std::make_unique<HostStageChecker<typename decltype(ref)::Backend>>(m, ch, count, floor);
   });
-}
-
-std::vector<double> inverse_rayleigh_phase(const Model& m) {
-  const auto a = ref3::make_parameters(m, Channels{});
-  const Sizes& s = m.sizes;
-  const int wd = s.scattering_width();
-  std::vector<double> out(s.scattering_texels());
-  parallel_for(static_cast<long long>(out.size()), [&](long long id) {
-    double h, mu, mu_s, nu;
-    int ground;
-    ref3::scattering_params_from_texel(&a, static_cast<int>(id % wd), static_cast<int>((id / wd) % s.mu),
-                                       static_cast<int>(id / (1LL * wd * s.mu)), &h, &mu, &mu_s, &nu, &ground);
-    out[id] = 1.0 / ref3::rayleigh_phase(nu);
-  });
-  return out;
 }
 
 const char* to_string(PassStage s) {
@@ -542,9 +800,8 @@ const char* to_string(PassStage s) {
   return "?";
 }
 
-PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
-                    double p0, double p1, StageChecker* checker, const CheckHook& on_check,
-                    const OrderHook& on_order) {
+PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progress,
+                    double p0, double p1, StageChecker* checker, const CheckHook& on_check) {
   const int w = b.channels();
   const int cap = plan.auto_orders ? kMaxAutoOrders : plan.orders;
   // rough relative cost of the stages, for progress only
@@ -557,7 +814,8 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   PassResult r;
   r.width = w;
   // Every moment of the pass belongs to one stage: a timed stage, a hook ("self_check") or
-  // the host work in between ("host": reads and sums, with the order of the stage after it).
+  // the work in between ("sums": the sums' kernels on a device, on the host's threads for the
+  // host backend, and reads; with the order of the stage after it).
   cl_util::Profiler own;  // the host backend enqueues nothing: device_s stays 0
   cl_util::Profiler& prof = b.profiler() ? *b.profiler() : own;
   std::vector<cl_util::Profiler::Record> records;
@@ -566,7 +824,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     spdlog::debug("atmosphere: {} (order {}): device {:.3f} s, host {:.3f} s (wall {:.3f} s)", s.stage, s.order,
                   s.device_s, s.host_s(), s.wall_s);
   };
-  std::optional<cl_util::Profiler::Stage> gap(std::in_place, prof, "host", 0);
+  std::optional<cl_util::Profiler::Stage> gap(std::in_place, prof, "sums", 0);
   auto run_stage = [&](const std::string& stage, int order, auto&& f) {
     gap->record()->order = order;
     records.push_back(gap->close());
@@ -579,7 +837,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
     }
     logged.push_back(records.back()->pending == 0);  // the stage's commands are done: log now
     if (logged.back()) log(*records.back());
-    gap.emplace(prof, "host", order);
+    gap.emplace(prof, "sums", order);
   };
   auto hook = [&](PassStage stage, int order) {
     if (!checker) return;
@@ -588,85 +846,51 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
       if (on_check) on_check(c);
     });
   };
-  // A texture as the device has it now, read into `scratch`.
-  auto texture = [&](Tex t, std::vector<double>& scratch) -> const std::vector<double>& {
-    b.read_into(t, scratch);
-    return scratch;
-  };
-  auto keep = [&](Tex t, std::vector<double>& into) { b.read_into(t, into); };
   auto timed = [&](PassStage what, int order, auto&& f) { run_stage(to_string(what), order, f); };
+  Sums& sums = b.sums();
+  sums.begin_pass(plan.to_rgb.empty() ? first_three(w) : plan.to_rgb);
 
   timed(PassStage::transmittance, 0, [&] { b.transmittance(); });
   hook(PassStage::transmittance, 0);
   timed(PassStage::direct_irradiance, 0, [&] { b.direct_irradiance(); });
   hook(PassStage::direct_irradiance, 0);
-  keep(Tex::transmittance, r.transmittance);
-  keep(Tex::delta_irradiance, r.direct_irradiance);
+  if (plan.keep_textures) {
+    b.read_into(Tex::transmittance, r.transmittance);
+    b.read_into(Tex::delta_irradiance, r.direct_irradiance);
+  }
   step("transmittance", 0.02);
   timed(PassStage::single_scattering, 1, [&] { b.single_scattering(); });
   hook(PassStage::single_scattering, 1);
-  keep(Tex::delta_rayleigh, r.scattering);
-  keep(Tex::delta_mie, r.single_mie);
-  r.irradiance.assign(r.direct_irradiance.size(), 0.0);
+  sums.single();
   step("single scattering", 0.1);
-  {
-    OrderStats o;
-    o.order = 1;
-    const auto s = channel_stats(r.scattering, w);
-    o.scattering_max = s.max;
-    o.scattering_mean = s.mean;
-    o.relative = 1.0;
-    r.orders.push_back(o);
-    if (on_order) on_order(1, r.scattering, {});
-  }
+  r.orders.push_back({1, 1.0});
   r.orders_used = 1;
   r.converged = !plan.auto_orders;
-  const std::vector<double> inv_phase = cap >= 2 ? inverse_rayleigh_phase(m) : std::vector<double>{};
-  std::vector<double> add;      // what order n adds, reused across orders
-  std::vector<double> dE_read;  // ΔE when read here (no checker's copy), reused across orders
   for (int n = 2; n <= cap; ++n) {
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
     hook(PassStage::scattering_density, n);
     step("order " + std::to_string(n) + ": scattering density", 0.55);
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
     hook(PassStage::indirect_irradiance, n - 1);
-    const std::vector<double>& dE = texture(Tex::delta_irradiance, dE_read);
-    parallel_chunks(dE.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
-      for (std::size_t i = first; i < last; ++i) r.irradiance[i] += dE[i];
-    });
-    {
-      const auto s = channel_stats(dE, w);
-      r.orders[n - 2].irradiance_max = s.max;
-      r.orders[n - 2].irradiance_mean = s.mean;
-      if (on_order) on_order(n - 1, {}, dE);
-    }
+    const double rel_e = sums.add_irradiance(n - 1);
     step("order " + std::to_string(n) + ": indirect irradiance", 0.02);
     timed(PassStage::multiple_scattering, n, [&] { b.multiple_scattering(); });
     hook(PassStage::multiple_scattering, n);
-    // ΔS / P_R: from the checker's copy, or read into `add` and scaled in place
-    const std::vector<double>& dS = texture(Tex::delta_multiple, add);
-    add.resize(dS.size());
-    parallel_chunks(add.size(), kSumChunk, [&](std::size_t first, std::size_t last, std::size_t) {
-      for (std::size_t i = first; i < last; ++i) {
-        add[i] = dS[i] * inv_phase[i / w];
-        r.scattering[i] += add[i];
-      }
-    });
-    OrderStats o;
-    o.order = n;
-    const auto s = channel_stats(add, w);
-    o.scattering_max = s.max;
-    o.scattering_mean = s.mean;
-    o.relative = std::max(relative_change(add, r.scattering, w), relative_change(dE, r.irradiance, w));
-    r.orders.push_back(o);
-    if (on_order) on_order(n, add, {});
+    const double rel_s = sums.add_scattering(n);
+    r.orders.push_back({n, std::max(rel_s, rel_e)});
     r.orders_used = n;
     step("order " + std::to_string(n) + ": multiple scattering", 0.15);
-    spdlog::debug("atmosphere: order {} adds at most {:.3e} (relative)", n, o.relative);
-    if (plan.auto_orders && o.relative < plan.tolerance) {
+    spdlog::debug("atmosphere: order {} adds at most {:.3e} (relative)", n, r.orders.back().relative);
+    if (plan.auto_orders && r.orders.back().relative < plan.tolerance) {
       r.converged = true;
       break;
     }
+  }
+  sums.end_pass();
+  if (plan.keep_textures) {
+    sums.read_pass(Sum::scattering, r.scattering);
+    sums.read_pass(Sum::irradiance, r.irradiance);
+    sums.read_pass(Sum::single_mie, r.single_mie);
   }
   gap->record()->order = r.orders_used;
   records.push_back(gap->close());
@@ -675,7 +899,7 @@ PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const 
   for (std::size_t i = 0; i < records.size(); ++i) {
     const cl_util::StageSeconds& s = *records[i];
     if (!logged[i]) log(s);
-    if (s.stage == "host" && s.wall_s == 0.0 && s.commands == 0) continue;
+    if (s.stage == "sums" && s.wall_s == 0.0 && s.commands == 0) continue;
     r.timings.push_back({s.stage, s.order, s});
   }
   return r;

@@ -41,6 +41,47 @@ int pass_width_for(std::size_t channels);  // smallest of kPassWidths ≥ channe
 enum class Tex { transmittance, delta_irradiance, delta_rayleigh, delta_mie, delta_multiple, density };
 const char* to_string(Tex t);
 
+enum class Sum { scattering, irradiance, single_mie };
+const char* to_string(Sum s);
+
+// Per order, the R,G,B maximum (floored at 0) and mean over texels of what it adds to the
+// scattering and to the irradiance (empty: nothing added to the irradiance — the last order's light).
+struct OrderRgb {
+  std::vector<double> scattering_max, scattering_mean, irradiance_max, irradiance_mean;
+};
+
+// The sums of a bake (Algorithm 4.1's accumulation, the bundle's R,G,B textures, each order's
+// statistics), kept by the backend where its textures are: on a device by kernels
+// (kernels.cl, "The sums"), on the host in double (make_host_sums, their reference). run_pass
+// calls them in this order per pass: begin_pass, single, then per order n ≥ 2 add_irradiance(n − 1)
+// and add_scattering(n), then end_pass. The relative change of a sum is the largest
+// |what was added| / sum over texels and channels where the sum exceeds kAutoFloor × the
+// channel's maximum.
+class Sums {
+ public:
+  virtual ~Sums() = default;
+  // A pass begins; its channels map to R, G, B by to_rgb (3 × channels, R's weights first).
+  virtual void begin_pass(const std::vector<double>& to_rgb) = 0;
+  // After single scattering: scattering ← ΔR, irradiance ← 0; order 1 adds to_rgb·ΔR.
+  virtual void single() = 0;
+  // irradiance += ΔE, the indirect irradiance of the light of `order`; its relative change.
+  virtual double add_irradiance(int order) = 0;
+  // add ← ΔS / P_R(ν of the texel), scattering += add, of `order`; its relative change.
+  virtual double add_scattering(int order) = 0;
+  // The pass ends: the bake's R,G,B textures += to_rgb·(scattering, irradiance, ΔM).
+  virtual void end_pass() = 0;
+  // The pass's sums in its channels, [texels][channels] (single_mie: ΔM).
+  virtual void read_pass(Sum s, std::vector<double>& out) = 0;
+  // The bake's R,G,B textures over the passes so far, [texels][3].
+  virtual void read_rgb(Sum s, std::vector<double>& out) = 0;
+  // What `order` added over the passes so far, in R,G,B.
+  virtual OrderRgb order_rgb(int order) = 0;
+};
+
+class PassBackend;
+// The sums in double on the host, from the backend's textures as read_into reads them.
+std::unique_ptr<Sums> make_host_sums(PassBackend& b, const Model& m);
+
 class PassBackend {
  public:
   virtual ~PassBackend() = default;
@@ -68,6 +109,11 @@ class PassBackend {
     long long non_finite = 0;
   };
   virtual Scan scan(Tex t) = 0;
+  // The bake's sums, kept where the textures are (below).
+  virtual Sums& sums() = 0;
+  // The channels of the next pass (same count): a backend serves every pass of a bake, so that
+  // its sums over passes stay where they are.
+  virtual void use_channels(const Channels& ch) = 0;
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
   virtual cl_util::Profiler* profiler() { return nullptr; }
 };
@@ -80,15 +126,13 @@ std::unique_ptr<PassBackend> make_host_backend(const Model& m, const Channels& c
 
 struct OrderStats {
   int order = 0;
-  std::vector<double> scattering_max, scattering_mean;  // of what this order adds to `scattering`
-  std::vector<double> irradiance_max, irradiance_mean;  // of what this order's light adds to `irradiance`
-  double relative = 0.0;  // max over texels of (what this order adds)/(accumulated), see docs
+  double relative = 0.0;  // the larger relative change of the scattering and irradiance sums (Sums)
 };
 
 // Seconds of one stage as cl_util::StageSeconds defines them: device_s from the profiling
 // events of its commands, host_s = wall_s minus the time the host waited for the device.
 struct StageTime {
-  std::string stage;  // "transmittance", ..., "self_check" (the hooks), "host" (reads and sums between stages)
+  std::string stage;  // "transmittance", ..., "self_check" (the hooks), "sums" (the sums and reads between stages)
   int order = 0;
   cl_util::StageSeconds seconds;
 };
@@ -106,6 +150,8 @@ struct PassPlan {
   int orders = 4;           // fixed count, or the cap when auto
   bool auto_orders = false;
   double tolerance = 1e-3;
+  std::vector<double> to_rgb;  // the pass's channels → R, G, B (Sums::begin_pass); empty: channel c → c
+  bool keep_textures = true;   // PassResult's textures read back at the end
 };
 inline constexpr int kMaxAutoOrders = 40;
 // Texels whose accumulated value is below this fraction of their channel's maximum do not
@@ -141,14 +187,6 @@ ChannelStats channel_stats(const std::vector<T>& v, int w) {
   return s;
 }
 
-// Called with each order's additions (scattering [texels][w], irradiance [texels][w] or
-// empty for the last order), so that callers can convert and combine passes.
-using OrderHook = std::function<void(int order, const std::vector<double>& scattering_add,
-                                     const std::vector<double>& irradiance_add)>;
-
-// 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it).
-std::vector<double> inverse_rayleigh_phase(const Model& m);
-
 // Self-checks of one pass: after each stage, recomputes `count` texels of its output in double
 // from the backend's own inputs and returns the largest |device − reference| / (|reference| +
 // floor·max|device|), or +inf with the count when any value of the outputs, anywhere in the
@@ -174,9 +212,10 @@ std::unique_ptr<StageChecker> make_stage_checker(const Model& m, const Channels&
 // Called with each stage's check when run_pass is given a checker.
 using CheckHook = std::function<void(const StageCheck& check)>;
 
-// Runs the pass; with a checker, checks every stage after it runs (reported through on_check).
-PassResult run_pass(PassBackend& b, const Model& m, const PassPlan& plan, const Progress& progress,
+// Runs the pass, its sums in b.sums(); with a checker, checks every stage after it runs
+// (reported through on_check).
+PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progress,
                     double progress_from, double progress_to, StageChecker* checker = nullptr,
-                    const CheckHook& on_check = {}, const OrderHook& on_order = {});
+                    const CheckHook& on_check = {});
 
 }  // namespace specbake::atmosphere

@@ -291,19 +291,23 @@ std::vector<float> exposed(const Image& img, double ev100) {
 }
 
 // An n × n image: shade(x, y) at every pixel centre, x right and y up, both in (−1, 1); pixels on
-// the hardware threads.
+// the hardware threads. symmetric_in_y: shade(x, −y) = shade(x, y) (a view symmetric about the
+// plane through the zenith and the sun), so the lower half is the upper one mirrored (n is even).
 template <class Shade>
-Image render_image(int n, Shade shade) {
+Image render_image(int n, Shade shade, bool symmetric_in_y = false) {
   Image img{n, std::vector<double>(3 * static_cast<std::size_t>(n) * n, 0.0)};
+  const std::size_t rows = symmetric_in_y ? static_cast<std::size_t>(n / 2) : static_cast<std::size_t>(n);
   // rows of pixels on the host's threads (each thread writes whole rows: no cache line shared
   // between threads, as interleaved pixels would)
-  parallel_chunks(static_cast<std::size_t>(n) * n, static_cast<std::size_t>(n),
-                  [&](std::size_t first, std::size_t last, std::size_t) {
-                    for (std::size_t p = first; p < last; ++p) {
-                      const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
-                      for (int c = 0; c < 3; ++c) img.rgb[3 * p + c] = v[c];
-                    }
-                  });
+  parallel_chunks(rows * n, static_cast<std::size_t>(n), [&](std::size_t first, std::size_t last, std::size_t) {
+    for (std::size_t p = first; p < last; ++p) {
+      const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
+      for (int c = 0; c < 3; ++c) img.rgb[3 * p + c] = v[c];
+    }
+  });
+  const std::size_t row = 3 * static_cast<std::size_t>(n);
+  for (std::size_t j = rows; j < static_cast<std::size_t>(n); ++j)
+    std::copy_n(img.rgb.begin() + (n - 1 - j) * row, row, img.rgb.begin() + j * row);
   return img;
 }
 
@@ -373,7 +377,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       const bool on_sun = view[0] * sun[0] + view[1] * sun[1] + view[2] * sun[2] > disc;
       for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c] + (on_sun ? t[c] * sun_radiance[c] : 0.0);
       return lum;
-    });
+    }, /*symmetric_in_y=*/true);  // the sun at azimuth 0: the sky mirrors across the picture's x axis
     char name[64];
     std::snprintf(name, sizeof name, "preview/sky_fisheye_sun_%+03.0fdeg.png", fv.sun_elevation_deg);
     views.push_back({name, fv.ev100,
