@@ -1,6 +1,9 @@
 #include "kinds/atmosphere/render.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -356,6 +359,7 @@ Vec3 PlanetView::direction(double x, double y) const {
 
 std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
                                       const std::array<double, 3>& k_sun, int n) {
+  const auto t_render = std::chrono::steady_clock::now();
   const Renderer render(luts);
   const Model& m = luts.model;
   const double alpha = m.sun_angular_radius_rad;
@@ -423,6 +427,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
                      std::move(img)});
   }
 
+  const auto t_encode = std::chrono::steady_clock::now();
   std::vector<OutputFile> files;
   // The contact sheet: every view at half size (2 × 2 box filter of the exposed values), three
   // to a row in the order above.
@@ -452,6 +457,9 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
   files.push_back({"preview/contact_sheet.png", png_from_linear(cols * tile, rows * tile, sheet, 1.0f), "",
                    {rows * tile, cols * tile, 3}, "8-bit sRGB", "",
                    "every preview at half size, left to right and top to bottom: " + order});
+  const auto seconds = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
+  spdlog::debug("atmosphere: previews: {} views of {} x {} rendered in {:.3f} s, exposed and encoded in {:.3f} s",
+                views.size(), n, n, seconds(t_render, t_encode), seconds(t_encode, std::chrono::steady_clock::now()));
   return files;
 }
 
