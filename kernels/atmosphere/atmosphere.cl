@@ -326,18 +326,29 @@ FN void scattering_ray_of_texel(const AtmosphereParameters* a, int y, int z, rea
                          hits_ground);
 }
 
+/* u_ν of ν slice `slice` (corner-sampled: slice / (NU − 1); 0.5 for a single slice). */
+FN real scattering_u_nu_of_slice(const AtmosphereParameters* a, int slice) {
+  return a->nu_size > 1 ? (real)slice / (real)(a->nu_size - 1) : R(0.5);
+}
+/* ν of a texel of slice `slice` whose row and column decode to (mu, mu_s): the slice's ν clamped
+ * to [μμ_s − √((1−μ²)(1−μ_s²)), μμ_s + √…], the cosines a view and a sun at those zenith angles
+ * can make. Every texel of a (μ, μ_s) column shares mu and mu_s. */
+FN real scattering_nu_of_slice(const AtmosphereParameters* a, int slice, real mu, real mu_s) {
+  const real nu = clamp_cosine(scattering_u_nu_of_slice(a, slice) * R(2.0) - R(1.0));
+  const real s = sqrt((R(1.0) - mu * mu) * (R(1.0) - mu_s * mu_s));
+  return clamp_real(nu, mu * mu_s - s, mu * mu_s + s);
+}
 /* Texel (x, y, z) of the 3D scattering texture (x = nu_slice·MU_S + mu_s_index, y = mu
- * index, z = r index) → its parameters; nu is clamped to [μμ_s − √((1−μ²)(1−μ_s²)), μμ_s + √…]. */
+ * index, z = r index) → its parameters (nu as scattering_nu_of_slice clamps it). */
 FN void scattering_params_from_texel(const AtmosphereParameters* a, int x, int y, int z, real* h, real* mu,
                                      real* mu_s, real* nu, int* hits_ground) {
   real uvwz[4];
-  uvwz[0] = a->nu_size > 1 ? (real)(x / a->mu_s_size) / (real)(a->nu_size - 1) : R(0.5);
+  uvwz[0] = scattering_u_nu_of_slice(a, x / a->mu_s_size);
   uvwz[1] = ((real)(x % a->mu_s_size) + R(0.5)) / (real)a->mu_s_size;
   uvwz[2] = ((real)y + R(0.5)) / (real)a->mu_size;
   uvwz[3] = ((real)z + R(0.5)) / (real)a->r_size;
   scattering_params_from_uvwz(a, uvwz, h, mu, mu_s, nu, hits_ground);
-  const real s = sqrt((R(1.0) - *mu * *mu) * (R(1.0) - *mu_s * *mu_s));
-  *nu = clamp_real(*nu, *mu * *mu_s - s, *mu * *mu_s + s);
+  *nu = scattering_nu_of_slice(a, x / a->mu_s_size, *mu, *mu_s);
 }
 
 /* ---- texture filtering (GPU semantics: texel centres, clamp to edge) ------------------- */

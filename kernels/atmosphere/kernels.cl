@@ -259,14 +259,16 @@ __kernel void add_values(AtmosphereParameters a, __global const real* x, int n, 
   if (id < n) sum[id] += x[id];
 }
 
-/* rgb[t][k] += Σ_c w[k·NCH + c] x[t][c] for the n texels of x ([texels][NCH]). */
-__kernel void add_rgb(AtmosphereParameters a, __global const real* x, __constant real* w, int n, __global real* rgb) {
+/* rgb[t][k] += Σ_c w[k·NCH + c] x[t][c] for the n texels of x ([texels][NCH]); `= ` instead of
+ * `+=` where first is 1 (the first addition into a sum, which then needs no zeroing). */
+__kernel void add_rgb(AtmosphereParameters a, __global const real* x, __constant real* w, int n, int first,
+                      __global real* rgb) {
   const int t = get_global_id(0);
   if (t >= n) return;
   for (int k = 0; k < 3; ++k) {
     real v = R(0.0);
     for (int c = 0; c < NCH; ++c) v += w[k * NCH + c] * x[t * NCH + c];
-    rgb[t * 3 + k] += v;
+    rgb[t * 3 + k] = first ? v : rgb[t * 3 + k] + v;
   }
 }
 

@@ -118,10 +118,9 @@ class DeviceBackend final : public PassBackend, private Sums {
       S_ = alloc(n_s_);
       E_ = alloc(n_e_);
       add_ = alloc(n_s_);
-      for (cl::Buffer& b : rgb_) b = alloc_reals(3 * std::max(n_s_, n_e_));
-      zero(rgb_[0], 3 * n_s_);
-      zero(rgb_[1], 3 * n_e_);
-      zero(rgb_[2], 3 * n_s_);
+      rgb_[0] = alloc_reals(3 * n_s_);
+      rgb_[1] = alloc_reals(3 * n_e_);
+      rgb_[2] = alloc_reals(3 * n_s_);
       return 0;
     });
     check_layout();
@@ -246,9 +245,10 @@ class DeviceBackend final : public PassBackend, private Sums {
     return relative_change(add_, S_, n_s_);
   }
   void end_pass() override {
-    add_rgb(S_, n_s_, rgb_[0]);
-    add_rgb(E_, n_e_, rgb_[1]);
-    add_rgb(dM_, n_s_, rgb_[2]);
+    add_rgb(S_, n_s_, rgb_[0], !rgb_written_);
+    add_rgb(E_, n_e_, rgb_[1], !rgb_written_);
+    add_rgb(dM_, n_s_, rgb_[2], !rgb_written_);
+    rgb_written_ = true;
   }
   void read_pass(Sum s, std::vector<double>& out) override {
     cl_util::checked("reading an atmosphere sum", [&] {
@@ -367,22 +367,22 @@ class DeviceBackend final : public PassBackend, private Sums {
     dev_.queue().enqueueCopyBuffer(from, to, 0, 0, n * (dbl_ ? sizeof(double) : sizeof(float)), nullptr, &ev);
     dev_.profiler().record(ev);
   }
-  // rgb ([texels][3]) += to_rgb · x ([texels][width]).
-  void add_rgb(cl::Buffer& x, long long texels, cl::Buffer& rgb) {
-    launch("add_rgb", texels, {&x, &to_rgb_, static_cast<int>(texels), &rgb});
+  // rgb ([texels][3]) += to_rgb · x ([texels][width]), or = where first.
+  void add_rgb(cl::Buffer& x, long long texels, cl::Buffer& rgb, bool first) {
+    launch("add_rgb", texels, {&x, &to_rgb_, static_cast<int>(texels), first ? 1 : 0, &rgb});
   }
   // What `order` adds ([texels][width]) into its R,G,B sum over passes (which: 0 scattering, 1 irradiance).
   void add_order(int order, int which, cl::Buffer& x, long long texels) {
     auto& [buf, has] = orders_[order];
-    if (!has[which]) {
+    const bool first = !has[which];
+    if (first) {
       cl_util::checked("allocating an order's sums", [&] {
         buf[which] = alloc_reals(3 * texels);
-        zero(buf[which], 3 * texels);
         return 0;
       });
       has[which] = true;
     }
-    add_rgb(x, texels, buf[which]);
+    add_rgb(x, texels, buf[which], first);
   }
   // Per channel max (floored at 0) and mean of x ([texels][channels]): partial results of
   // kScanItems work items, combined on the host in item order.
@@ -506,6 +506,7 @@ class DeviceBackend final : public PassBackend, private Sums {
   cl::Buffer S_, E_, add_, to_rgb_, inverse_phase_;
   bool has_inverse_phase_ = false;
   std::array<cl::Buffer, 3> rgb_;
+  bool rgb_written_ = false;  // by a pass's end
   std::map<int, std::pair<std::array<cl::Buffer, 2>, std::array<bool, 2>>> orders_;
   std::vector<float> staging_;
 };
@@ -531,18 +532,22 @@ double relative_change(const std::vector<double>& add, const std::vector<double>
   return out;
 }
 
-// 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it).
+// 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it): each (μ, μ_s)
+// column decoded once, its NU slices' ν from that (scattering_nu_of_slice, as the texel's decode).
 std::vector<double> inverse_rayleigh_phase(const Model& m) {
   const auto a = ref3::make_parameters(m, Channels{});
   const Sizes& s = m.sizes;
   const int wd = s.scattering_width();
   std::vector<double> out(s.scattering_texels());
-  parallel_for(static_cast<long long>(out.size()), [&](long long id) {
-    double h, mu, mu_s, nu;
-    int ground;
-    ref3::scattering_params_from_texel(&a, static_cast<int>(id % wd), static_cast<int>((id / wd) % s.mu),
-                                       static_cast<int>(id / (1LL * wd * s.mu)), &h, &mu, &mu_s, &nu, &ground);
-    out[id] = 1.0 / ref3::rayleigh_phase(nu);
+  parallel_for(1LL * s.r * s.mu, [&](long long row) {  // row = z·MU + y
+    const int y = static_cast<int>(row % s.mu), z = static_cast<int>(row / s.mu);
+    for (int i = 0; i < s.mu_s; ++i) {
+      double h, mu, mu_s, nu;
+      int ground;
+      ref3::scattering_params_from_texel(&a, i, y, z, &h, &mu, &mu_s, &nu, &ground);
+      for (int k = 0; k < s.nu; ++k)
+        out[row * wd + k * s.mu_s + i] = 1.0 / ref3::rayleigh_phase(ref3::scattering_nu_of_slice(&a, k, mu, mu_s));
+    }
   });
   return out;
 }

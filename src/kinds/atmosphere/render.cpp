@@ -433,17 +433,14 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
   // to a row in the order above.
   const int tile = n / 2, cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
   std::vector<float> sheet(3 * static_cast<std::size_t>(cols * tile) * rows * tile, 0.0f);
-  // each view's exposure and PNG encoding (zlib, one thread per file) on the hardware threads
+  // each view's exposure on the hardware threads, the contact sheet from them, then every PNG
+  // encoding (zlib, one thread per file) on the hardware threads
   std::vector<std::vector<float>> exposed_views(views.size());
-  std::vector<std::string> pngs(views.size());
-  parallel_for(static_cast<long long>(views.size()), [&](long long v) {
-    exposed_views[v] = exposed(views[v].image, views[v].ev100);
-    pngs[v] = png_from_linear(n, n, exposed_views[v], 1.0f);
-  });
+  parallel_for(static_cast<long long>(views.size()),
+               [&](long long v) { exposed_views[v] = exposed(views[v].image, views[v].ev100); });
   std::string order;
   for (std::size_t v = 0; v < views.size(); ++v) {
     const std::vector<float>& px = exposed_views[v];
-    files.push_back({views[v].file, std::move(pngs[v]), "", {n, n, 3}, "8-bit sRGB", "", views[v].what});
     const int x0 = static_cast<int>(v % cols) * tile, y0 = static_cast<int>(v / cols) * tile;
     for (int y = 0; y < tile; ++y)
       for (int x = 0; x < tile; ++x)
@@ -454,9 +451,15 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
         }
     order += (v ? ", " : "") + views[v].file.substr(8);
   }
-  files.push_back({"preview/contact_sheet.png", png_from_linear(cols * tile, rows * tile, sheet, 1.0f), "",
-                   {rows * tile, cols * tile, 3}, "8-bit sRGB", "",
-                   "every preview at half size, left to right and top to bottom: " + order});
+  std::vector<std::string> pngs(views.size() + 1);
+  parallel_for(static_cast<long long>(pngs.size()), [&](long long v) {
+    pngs[v] = v < static_cast<long long>(views.size()) ? png_from_linear(n, n, exposed_views[v], 1.0f)
+                                                        : png_from_linear(cols * tile, rows * tile, sheet, 1.0f);
+  });
+  for (std::size_t v = 0; v < views.size(); ++v)
+    files.push_back({views[v].file, std::move(pngs[v]), "", {n, n, 3}, "8-bit sRGB", "", views[v].what});
+  files.push_back({"preview/contact_sheet.png", std::move(pngs.back()), "", {rows * tile, cols * tile, 3}, "8-bit sRGB",
+                   "", "every preview at half size, left to right and top to bottom: " + order});
   const auto seconds = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
   spdlog::debug("atmosphere: previews: {} views of {} x {} rendered in {:.3f} s, exposed and encoded in {:.3f} s",
                 views.size(), n, n, seconds(t_render, t_encode), seconds(t_encode, std::chrono::steady_clock::now()));
