@@ -708,6 +708,7 @@ TEST(AtmosphereDevice, DeviceSumsMatchTheHostsDoubleSums) {
   for (int first = 0; first < n; first += kWidth) {
     const int count = std::min(kWidth, n - first);
     PassPlan plan{3, false, 1e-3};
+    plan.last_pass = first + kWidth >= n;
     plan.to_rgb.assign(3 * kWidth, 0.0);
     for (int k = 0; k < 3; ++k)
       for (int i = 0; i < count; ++i) plan.to_rgb[k * kWidth + i] = sp.to_rgb[k * n + first + i];

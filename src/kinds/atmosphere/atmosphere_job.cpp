@@ -116,11 +116,15 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
       if (c.non_finite > 0) throw non_finite_error({c.stage, c.order, p, c.non_finite});
     };
     // pass channels → R,G,B: identity in rgb mode, the CIE weights in spectral mode
-    PassPlan plan{spec.orders.value_or(kMaxAutoOrders), !spec.orders.has_value(), spec.tolerance};
+    PassPlan plan;
+    plan.orders = spec.orders.value_or(kMaxAutoOrders);
+    plan.auto_orders = !spec.orders.has_value();
+    plan.tolerance = spec.tolerance;
     plan.to_rgb.assign(3 * width, 0.0);
     for (int k = 0; k < 3; ++k)
       for (int i = 0; i < count; ++i) plan.to_rgb[k * width + i] = sp.spectral ? sp.to_rgb[k * n + first + i] : (k == i);
     plan.keep_textures = spec.store_radiance;
+    plan.last_pass = p + 1 == passes;
     const double p0 = 0.9 * p / passes, p1 = 0.9 * (p + 1) / passes;
     const PassResult r = run_pass(*backend, plan, progress, p0, p1, checker.get(), on_check);
     for (const StageTime& t : r.timings) {
@@ -493,8 +497,10 @@ void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& 
   const Channels ch = channels_at(spec, lambdas);
   const int width = pass_width_for(lambdas.size());
   auto backend = make_device_backend(ctx.device, m, ch, width, spec.double_precision);
-  const PassResult pass = run_pass(*backend, PassPlan{b.orders_used, false, spec.tolerance},
-                                   [](std::string_view, double) {}, 0.0, 1.0);
+  PassPlan plan;  // the stored bake's order count, all textures kept
+  plan.orders = b.orders_used;
+  plan.tolerance = spec.tolerance;
+  const PassResult pass = run_pass(*backend, plan, [](std::string_view, double) {}, 0.0, 1.0);
   SpectralLuts exact;
   exact.lambda_nm = ch.lambda_nm;
   exact.solar_irradiance = ch.solar_irradiance;

@@ -13,11 +13,15 @@ namespace specbake::atmosphere {
 namespace {
 
 MemoryEstimate device_memory(const AtmosphereSpec& s) {
-  // One pass of w channels (channels_per_pass) keeps four 4D textures on the device (the two
-  // single-scattering deltas, the multiple-scattering delta and the density), a ray-sample table
-  // per (r, mu) texel row (SCATTERING_STEPS + 1 samples of RAY_FIXED + w values) and a density
-  // incidence table per (r, mu_s) (DENSITY_SPHERE_STEPS directions of (2·nu + 1)·w + INC_FIXED
-  // values), plus the small 2D textures.
+  // One pass of w channels (channels_per_pass) keeps six 4D textures on the device (the two
+  // single-scattering deltas, the multiple-scattering delta, the density, the pass's scattering
+  // sum and an order's addition to it), a ray-sample table per (r, mu) texel row
+  // (SCATTERING_STEPS + 1 samples of RAY_FIXED + w values) and a density incidence table per
+  // (r, mu_s) (DENSITY_SPHERE_STEPS directions of (2·nu + 1)·w + INC_FIXED values), plus the
+  // small 2D textures; the sums over passes (pass.hpp's Sums) add the bundle's two R,G,B 4D
+  // textures, 1/P_R per texel and each order's R,G,B addition while later passes add to it (all
+  // orders' with several passes: the order count, or for `orders: auto` its cap; one at a time
+  // with one pass).
   const std::uint64_t w = channels_per_pass(s);
   const std::uint64_t real = s.double_precision ? 8 : 4;
   const std::uint64_t texels = std::uint64_t(s.scattering_r) * s.scattering_mu * s.scattering_mu_s * s.scattering_nu;
@@ -25,14 +29,17 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
   const std::uint64_t rays = std::uint64_t(s.scattering_r) * s.scattering_mu * (SCATTERING_STEPS + 1) * (RAY_FIXED + w) * real;
   const std::uint64_t incidence = std::uint64_t(s.scattering_r) * s.scattering_mu_s * DENSITY_SPHERE_STEPS *
                                   ((2 * s.scattering_nu + 1) * w + INC_FIXED) * real;
-  // Host: the final textures and a pass's read-backs in double (scattering and single Mie,
-  // 3 channels; a pass's accumulations and reads, w channels, with the self-checks' copies of
-  // up to three 4D textures), the float32 staging of a read, the 2D textures likewise, and the
-  // encoded files (float32 + EXR) of the 4D textures.
+  const std::uint64_t channels = s.spectral ? s.count : 3, passes = (channels + w - 1) / w;
+  const std::uint64_t orders_kept = passes > 1 ? std::uint64_t(s.orders.value_or(kMaxAutoOrders)) : 1;
+  const std::uint64_t sums = texels * real * (2 * 3 + 1 + 3 * orders_kept);
+  // Host: the bundle's R,G,B textures in double (scattering and single Mie) and the float32
+  // staging of their reads, 1/P_R per texel in double, the 2D textures likewise, the encoded files
+  // (float32 + EXR) of the 4D textures; with `store: radiance` a pass's textures read in double.
   const std::uint64_t t2d = std::uint64_t(s.transmittance_mu) * s.transmittance_r +
                             std::uint64_t(s.irradiance_mu_s) * s.irradiance_r;
-  std::uint64_t host = texels * 8 * (2 * 3 + 6 * w) + texels * 4 * w + t2d * 8 * (3 * 3 + 4 * w) +
+  std::uint64_t host = texels * 8 * (2 * 3 + 1) + texels * 4 * 3 + t2d * 8 * (3 * 3 + 4 * w) +
                        texels * 3 * 4 * 4 + (std::uint64_t{1} << 26);
+  if (s.store_radiance) host += texels * 8 * 3 * w;
   // store: radiance: the float32 textures at every wavelength, and their files (.bin, the Spectral
   // OpenEXR and its pixel copy, KTX2), all alive until the bundle is written
   if (s.store_radiance)
@@ -45,7 +52,7 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
     const TruthMemory a = truth_memory(points, s.spectral ? s.count : 3), b = truth_memory(points, 48);
     check = {std::max(a.host, b.host), std::max(a.device, b.device), std::max(a.largest_buffer, b.largest_buffer)};
   }
-  return MemoryEstimate{4 * texture + rays + incidence + (std::uint64_t{1} << 24) + check.device,
+  return MemoryEstimate{6 * texture + sums + rays + incidence + (std::uint64_t{1} << 24) + check.device,
                         std::max({texture, rays, incidence, check.largest_buffer}), host + check.host};
 }
 

@@ -1,17 +1,17 @@
 #include "kinds/atmosphere/pass.hpp"
 
-#include <variant>
-
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
-#include <optional>
-#include <array>
 #include <map>
+#include <optional>
 #include <stdexcept>
+#include <variant>
 
+#include "core/parallel.hpp"
 #include "kinds/atmosphere/reference_widths.hpp"
 
 namespace specbake::atmosphere {
@@ -37,6 +37,32 @@ const char* to_string(Tex t) {
 }
 
 namespace {
+
+// Per-channel maximum (floored at 0) and mean of a [texels][w] texture, reduced in chunks of
+// kSumChunk texels on the host's threads and combined in chunk order.
+struct ChannelStats {
+  std::vector<double> max, mean;
+};
+template <class T>
+ChannelStats channel_stats(const std::vector<T>& v, int w) {
+  const std::size_t n = v.size() / w, chunks = (n + kSumChunk - 1) / kSumChunk;
+  std::vector<double> mx(chunks * w, 0.0), sum(chunks * w, 0.0);
+  parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
+    for (std::size_t i = first; i < last; ++i)
+      for (int c = 0; c < w; ++c) {
+        mx[k * w + c] = std::max(mx[k * w + c], static_cast<double>(v[i * w + c]));
+        sum[k * w + c] += v[i * w + c];
+      }
+  });
+  ChannelStats s{std::vector<double>(w, 0.0), std::vector<double>(w, 0.0)};
+  for (std::size_t k = 0; k < chunks; ++k)
+    for (int c = 0; c < w; ++c) {
+      s.max[c] = std::max(s.max[c], mx[k * w + c]);
+      s.mean[c] += sum[k * w + c];
+    }
+  for (int c = 0; c < w; ++c) s.mean[c] /= std::max<std::size_t>(n, 1);
+  return s;
+}
 
 std::vector<double> inverse_rayleigh_phase(const Model& m);
 
@@ -90,6 +116,13 @@ Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
     return b;
   });
 }
+
+// An order's R,G,B additions (scattering, irradiance) over the passes so far.
+struct OrderSum {
+  std::array<cl::Buffer, 2> rgb;
+  std::array<bool, 2> has{}, done{};  // added to; statistics taken (and the buffer freed)
+  std::array<ChannelStats, 2> stats;
+};
 
 class DeviceBackend final : public PassBackend, private Sums {
  public:
@@ -213,11 +246,12 @@ class DeviceBackend final : public PassBackend, private Sums {
   void use_channels(const Channels& ch) override { block_ = make_block(model_, ch, width_, dbl_); }
 
   // ---- the sums, by kernels where the textures are (kernels.cl, "The sums") ----
-  void begin_pass(const std::vector<double>& to_rgb) override {
+  void begin_pass(const std::vector<double>& to_rgb, bool last) override {
     cl_util::checked("atmosphere sums", [&] {
       to_rgb_ = upload(to_rgb);
       return 0;
     });
+    last_pass_ = last;
   }
   void single() override {
     cl_util::checked("atmosphere sums", [&] {
@@ -268,16 +302,12 @@ class DeviceBackend final : public PassBackend, private Sums {
     OrderRgb o;
     const auto it = orders_.find(order);
     if (it == orders_.end()) return o;
-    auto& [buf, has] = it->second;
-    if (has[0]) {
-      const ChannelStats st = stats(buf[0], n_s_, 3);
-      o.scattering_max = st.max;
-      o.scattering_mean = st.mean;
-    }
-    if (has[1]) {
-      const ChannelStats st = stats(buf[1], n_e_, 3);
-      o.irradiance_max = st.max;
-      o.irradiance_mean = st.mean;
+    OrderSum& sum = it->second;
+    for (int which : {0, 1}) {
+      if (!sum.has[which]) continue;
+      if (!sum.done[which]) finish(sum, which);
+      (which == 0 ? o.scattering_max : o.irradiance_max) = sum.stats[which].max;
+      (which == 0 ? o.scattering_mean : o.irradiance_mean) = sum.stats[which].mean;
     }
     return o;
   }
@@ -371,18 +401,25 @@ class DeviceBackend final : public PassBackend, private Sums {
   void add_rgb(cl::Buffer& x, long long texels, cl::Buffer& rgb, bool first) {
     launch("add_rgb", texels, {&x, &to_rgb_, static_cast<int>(texels), first ? 1 : 0, &rgb});
   }
-  // What `order` adds ([texels][width]) into its R,G,B sum over passes (which: 0 scattering, 1 irradiance).
+  // What `order` adds ([texels][width]) into its R,G,B sum over passes (which: 0 scattering, 1
+  // irradiance); in the last pass the sum is complete: its statistics are taken and it is freed.
   void add_order(int order, int which, cl::Buffer& x, long long texels) {
-    auto& [buf, has] = orders_[order];
-    const bool first = !has[which];
+    OrderSum& sum = orders_[order];
+    const bool first = !sum.has[which];
     if (first) {
       cl_util::checked("allocating an order's sums", [&] {
-        buf[which] = alloc_reals(3 * texels);
+        sum.rgb[which] = alloc_reals(3 * texels);
         return 0;
       });
-      has[which] = true;
+      sum.has[which] = true;
     }
-    add_rgb(x, texels, buf[which], first);
+    add_rgb(x, texels, sum.rgb[which], first);
+    if (last_pass_) finish(sum, which);
+  }
+  void finish(OrderSum& sum, int which) {
+    sum.stats[which] = stats(sum.rgb[which], which == 0 ? n_s_ : n_e_, 3);
+    sum.rgb[which] = cl::Buffer();
+    sum.done[which] = true;
   }
   // Per channel max (floored at 0) and mean of x ([texels][channels]): partial results of
   // kScanItems work items, combined on the host in item order.
@@ -507,7 +544,8 @@ class DeviceBackend final : public PassBackend, private Sums {
   bool has_inverse_phase_ = false;
   std::array<cl::Buffer, 3> rgb_;
   bool rgb_written_ = false;  // by a pass's end
-  std::map<int, std::pair<std::array<cl::Buffer, 2>, std::array<bool, 2>>> orders_;
+  std::map<int, OrderSum> orders_;
+  bool last_pass_ = true;
   std::vector<float> staging_;
 };
 
@@ -577,7 +615,7 @@ std::vector<double> first_three(int w) {
 class HostSums final : public Sums {
  public:
   HostSums(PassBackend& b, const Model& m) : b_(b), m_(m), w_(b.channels()) {}
-  void begin_pass(const std::vector<double>& to_rgb) override { W_ = to_rgb; }
+  void begin_pass(const std::vector<double>& to_rgb, bool) override { W_ = to_rgb; }
   void single() override {
     b_.read_into(Tex::delta_rayleigh, scattering_);
     irradiance_.assign(static_cast<std::size_t>(m_.sizes.irradiance_w) * m_.sizes.irradiance_h * w_, 0.0);
@@ -853,7 +891,7 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
   };
   auto timed = [&](PassStage what, int order, auto&& f) { run_stage(to_string(what), order, f); };
   Sums& sums = b.sums();
-  sums.begin_pass(plan.to_rgb.empty() ? first_three(w) : plan.to_rgb);
+  sums.begin_pass(plan.to_rgb.empty() ? first_three(w) : plan.to_rgb, plan.last_pass);
 
   timed(PassStage::transmittance, 0, [&] { b.transmittance(); });
   hook(PassStage::transmittance, 0);

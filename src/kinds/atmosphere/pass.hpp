@@ -5,8 +5,8 @@
 // scattering of order n, accumulated exactly as the reference does:
 //   irradiance += ΔE_{n−1} (indirect only; the direct sun is never added),
 //   scattering  = single Rayleigh + Σ_n ΔS_n / P_R(ν_texel)   (ν clamped to its valid range),
-//   single_mie  = single Mie.
-// The same driver runs the OpenCL kernels (DeviceBackend) or the double reference
+//   single_mie  = single Mie,
+// in the backend's Sums (on a device by kernels). The same driver runs the OpenCL kernels (DeviceBackend) or the double reference
 // (host backend, reference.hpp) through the PassBackend interface.
 #include <functional>
 #include <memory>
@@ -14,7 +14,6 @@
 #include <vector>
 
 #include "cl/device.hpp"
-#include "core/parallel.hpp"
 #include "kinds/atmosphere/model.hpp"
 #include "job/kind.hpp"
 
@@ -60,8 +59,10 @@ struct OrderRgb {
 class Sums {
  public:
   virtual ~Sums() = default;
-  // A pass begins; its channels map to R, G, B by to_rgb (3 × channels, R's weights first).
-  virtual void begin_pass(const std::vector<double>& to_rgb) = 0;
+  // A pass begins; its channels map to R, G, B by to_rgb (3 × channels, R's weights first). In
+  // the bake's last pass an order's R,G,B addition is complete as it comes: the device takes its
+  // statistics then and frees it (it keeps one per order only while later passes will add to it).
+  virtual void begin_pass(const std::vector<double>& to_rgb, bool last) = 0;
   // After single scattering: scattering ← ΔR, irradiance ← 0; order 1 adds to_rgb·ΔR.
   virtual void single() = 0;
   // irradiance += ΔE, the indirect irradiance of the light of `order`; its relative change.
@@ -151,6 +152,7 @@ struct PassPlan {
   bool auto_orders = false;
   double tolerance = 1e-3;
   std::vector<double> to_rgb;  // the pass's channels → R, G, B (Sums::begin_pass); empty: channel c → c
+  bool last_pass = true;       // the bake's last pass (Sums::begin_pass)
   bool keep_textures = true;   // PassResult's textures read back at the end
 };
 inline constexpr int kMaxAutoOrders = 40;
@@ -160,32 +162,6 @@ inline constexpr double kAutoFloor = 1e-4;
 // Elements per chunk of the host's sums over a texture (parallel_chunks: the same bytes whatever
 // the thread count).
 inline constexpr std::size_t kSumChunk = 1 << 14;
-
-// Per-channel maximum (floored at 0) and mean of a [texels][w] texture, reduced in chunks of
-// kSumChunk texels on the host's threads and combined in chunk order.
-struct ChannelStats {
-  std::vector<double> max, mean;
-};
-template <class T>
-ChannelStats channel_stats(const std::vector<T>& v, int w) {
-  const std::size_t n = v.size() / w, chunks = (n + kSumChunk - 1) / kSumChunk;
-  std::vector<double> mx(chunks * w, 0.0), sum(chunks * w, 0.0);
-  parallel_chunks(n, kSumChunk, [&](std::size_t first, std::size_t last, std::size_t k) {
-    for (std::size_t i = first; i < last; ++i)
-      for (int c = 0; c < w; ++c) {
-        mx[k * w + c] = std::max(mx[k * w + c], static_cast<double>(v[i * w + c]));
-        sum[k * w + c] += v[i * w + c];
-      }
-  });
-  ChannelStats s{std::vector<double>(w, 0.0), std::vector<double>(w, 0.0)};
-  for (std::size_t k = 0; k < chunks; ++k)
-    for (int c = 0; c < w; ++c) {
-      s.max[c] = std::max(s.max[c], mx[k * w + c]);
-      s.mean[c] += sum[k * w + c];
-    }
-  for (int c = 0; c < w; ++c) s.mean[c] /= std::max<std::size_t>(n, 1);
-  return s;
-}
 
 // Self-checks of one pass: after each stage, recomputes `count` texels of its output in double
 // from the backend's own inputs and returns the largest |device − reference| / (|reference| +
