@@ -4,7 +4,7 @@
 // |ours − ref| / (|ref| + 1e-3 max|ref|), against Bruneton's reference implementation (rgb
 // runs, sky_max_rel_err) and against a higher-resolution run of ours (vs_finer_run: the 200 %
 // sizes for rgb, 48 wavelengths for spectral). process_cpu_s counts every thread (PoCL's
-// workers too).
+// workers too). AroundKernels: what a bake spends beside its kernels (sums, self-checks, reads).
 //   build-atmosphere/scripts/bench/atmosphere_bench --benchmark_filter='Rgb/4/1'
 #include <benchmark/benchmark.h>
 
@@ -184,6 +184,37 @@ BENCHMARK(Spectral)
     ->Args({48, 100})
     ->Args({16, 100})
     ->Args({16, 50})
+    ->Unit(benchmark::kSecond)
+    ->UseRealTime()
+    ->Iterations(1);
+
+// The work around the kernels of a bake with its self-checks (24 texels a stage, as a job runs
+// them), from the bake's own stage records: `kernels_s` the kernel stages' device seconds,
+// `sums_s` and `self_check_s` those stages' wall seconds (their device part in `_device_s`),
+// `combine_s` the final reads. Args: wavelengths (3 = rgb), size percent (4 orders).
+void AroundKernels(benchmark::State& state) {
+  AtmosphereSpec s = earth(static_cast<int>(state.range(1)));
+  s.spectral = state.range(0) != 3;
+  s.count = static_cast<int>(state.range(0));
+  s.orders = 4;
+  nlohmann::json total;
+  for (auto _ : state) total = bake_luts(s, device(), kQuiet, 24).timings["total"];
+  double kernels = 0.0;
+  for (const auto& [stage, sec] : total.items())
+    if (stage != "sums" && stage != "self_check" && stage != "combine" && stage != "setup")
+      kernels += sec.value("device_s", 0.0);
+  const auto wall = [&](const char* stage, const char* field) { return total.contains(stage) ? total[stage].value(field, 0.0) : 0.0; };
+  state.counters["kernels_s"] = kernels;
+  state.counters["sums_s"] = wall("sums", "wall_s");
+  state.counters["sums_device_s"] = wall("sums", "device_s");
+  state.counters["self_check_s"] = wall("self_check", "wall_s");
+  state.counters["self_check_device_s"] = wall("self_check", "device_s");
+  state.counters["combine_s"] = wall("combine", "wall_s");
+}
+BENCHMARK(AroundKernels)
+    ->Args({3, 100})
+    ->Args({48, 100})
+    ->Args({3, 200})
     ->Unit(benchmark::kSecond)
     ->UseRealTime()
     ->Iterations(1);
