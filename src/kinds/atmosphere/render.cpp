@@ -277,49 +277,37 @@ Vec3 normalize(Vec3 v) {
   return {v[0] / l, v[1] / l, v[2] / l};
 }
 
-// A rendered view: linear sRGB luminance (cd/m²), n × n, RGB innermost, row 0 at the top.
-struct Image {
-  int n = 0;
-  std::vector<double> rgb;
-};
-
-// Exposure as a camera's (ISO 100 exposure value): the luminance 1.2·2^EV100 cd/m² maps to 1,
-// then 1 − exp(−x) and the sRGB curve.
-std::vector<float> exposed(const Image& img, double ev100) {
-  const double k = 1.0 / (1.2 * std::exp2(ev100));
-  std::vector<float> out(img.rgb.size());
-  for (std::size_t i = 0; i < out.size(); ++i)
-    out[i] = static_cast<float>(1.0 - std::exp(-std::max(0.0, img.rgb[i]) * k));
-  return out;
-}
-
-// An n × n image: shade(x, y) at every pixel centre, x right and y up, both in (−1, 1); pixels on
-// the hardware threads. symmetric_in_y: shade(x, −y) = shade(x, y) (a view symmetric about the
-// plane through the zenith and the sun), so the lower half is the upper one mirrored (n is even).
+// An n × n view, exposed as a camera's (ISO 100 exposure value `ev100`: the luminance
+// 1.2·2^EV100 cd/m² maps to 1, then 1 − exp(−x); the sRGB curve comes with the PNG): shade(x, y),
+// linear sRGB luminance in cd/m², at every pixel centre, x right and y up, both in (−1, 1); RGB
+// innermost, row 0 at the top; pixels on the hardware threads. symmetric_in_y: shade(x, −y) =
+// shade(x, y) (a view symmetric about the plane through the zenith and the sun), so the lower
+// half is the upper one mirrored (n is even).
 template <class Shade>
-Image render_image(int n, Shade shade, bool symmetric_in_y = false) {
-  Image img{n, std::vector<double>(3 * static_cast<std::size_t>(n) * n, 0.0)};
+std::vector<float> render_exposed(int n, double ev100, Shade shade, bool symmetric_in_y = false) {
+  const double k = 1.0 / (1.2 * std::exp2(ev100));
+  std::vector<float> px(3 * static_cast<std::size_t>(n) * n, 0.0f);
   const std::size_t rows = symmetric_in_y ? static_cast<std::size_t>(n / 2) : static_cast<std::size_t>(n);
   // rows of pixels on the host's threads (each thread writes whole rows: no cache line shared
   // between threads, as interleaved pixels would)
   parallel_chunks(rows * n, static_cast<std::size_t>(n), [&](std::size_t first, std::size_t last, std::size_t) {
     for (std::size_t p = first; p < last; ++p) {
       const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
-      for (int c = 0; c < 3; ++c) img.rgb[3 * p + c] = v[c];
+      for (int c = 0; c < 3; ++c)
+        px[3 * p + c] = v[c] > 0.0 ? static_cast<float>(1.0 - std::exp(-v[c] * k)) : 0.0f;
     }
   });
   const std::size_t row = 3 * static_cast<std::size_t>(n);
   for (std::size_t j = rows; j < static_cast<std::size_t>(n); ++j)
-    std::copy_n(img.rgb.begin() + (n - 1 - j) * row, row, img.rgb.begin() + j * row);
-  return img;
+    std::copy_n(px.begin() + (n - 1 - j) * row, row, px.begin() + j * row);
+  return px;
 }
 
 // The views, their fixed exposures (EV100, docs/atmosphere.md "Previews") and descriptions.
 struct PreviewView {
   std::string file;
-  double ev100;
   std::string what;
-  Image image;
+  std::vector<float> exposed;  // render_exposed's
 };
 
 }  // namespace
@@ -373,7 +361,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     const Vec3 sun = fisheye_sun(fv);
     const Vec3 camera{0.0, 0.0, m.bottom_radius_km + kFisheyeAltitudeKm};
     const double disc = std::cos(std::max(alpha, M_PI / n));  // a pixel spans π/n of zenith angle
-    Image img = render_image(n, [&](double dx, double dy) {
+    std::vector<float> img = render_exposed(n, fv.ev100, [&](double dx, double dy) {
       Vec3 lum{}, view{};
       if (!fisheye_direction(dx, dy, view)) return lum;
       Vec3 t{};
@@ -384,7 +372,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     }, /*symmetric_in_y=*/true);  // the sun at azimuth 0: the sky mirrors across the picture's x axis
     char name[64];
     std::snprintf(name, sizeof name, "preview/sky_fisheye_sun_%+03.0fdeg.png", fv.sun_elevation_deg);
-    views.push_back({name, fv.ev100,
+    views.push_back({name,
                      "sky and sun seen from 1 m above the ground (equidistant fisheye, zenith at the centre, sun at "
                      "the right, elevation " + std::to_string(static_cast<int>(fv.sun_elevation_deg)) + " deg), EV100 " +
                          format_g(fv.ev100) + ", from the baked LUTs through sampling.glsl's functions",
@@ -399,7 +387,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     const Vec3& sun = pv.sun;
     const double dist = std::sqrt(camera[0] * camera[0] + camera[1] * camera[1] + camera[2] * camera[2]);
     const double albedo = luts.rgb.ground_albedo.empty() ? 0.1 : luts.rgb.ground_albedo[0];
-    Image img = render_image(n, [&](double x, double y) {
+    std::vector<float> img = render_exposed(n, pv.ev100, [&](double x, double y) {
       const Vec3 view = pv.direction(x, y);
       const double b = camera[0] * view[0] + camera[1] * view[1] + camera[2] * view[2];
       const double disc = b * b - (dist * dist - rb * rb);
@@ -419,7 +407,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       }
       return lum;
     });
-    views.push_back({"preview/planet_from_space.png", pv.ev100,
+    views.push_back({"preview/planet_from_space.png",
                      "the planet seen from 3.2 radii away: ground (albedo " + format_g(albedo) +
                          ") lit by sun and sky through the atmosphere, and the limb, EV100 " + format_g(pv.ev100) +
                          ", from the baked LUTs "
@@ -433,14 +421,11 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
   // to a row in the order above.
   const int tile = n / 2, cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
   std::vector<float> sheet(3 * static_cast<std::size_t>(cols * tile) * rows * tile, 0.0f);
-  // each view's exposure on the hardware threads, the contact sheet from them, then every PNG
-  // encoding (zlib, one thread per file) on the hardware threads
-  std::vector<std::vector<float>> exposed_views(views.size());
-  parallel_for(static_cast<long long>(views.size()),
-               [&](long long v) { exposed_views[v] = exposed(views[v].image, views[v].ev100); });
+  // the contact sheet from the exposed views, then every PNG encoding (zlib, one thread per file)
+  // on the hardware threads
   std::string order;
   for (std::size_t v = 0; v < views.size(); ++v) {
-    const std::vector<float>& px = exposed_views[v];
+    const std::vector<float>& px = views[v].exposed;
     const int x0 = static_cast<int>(v % cols) * tile, y0 = static_cast<int>(v / cols) * tile;
     for (int y = 0; y < tile; ++y)
       for (int x = 0; x < tile; ++x)
@@ -453,7 +438,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
   }
   std::vector<std::string> pngs(views.size() + 1);
   parallel_for(static_cast<long long>(pngs.size()), [&](long long v) {
-    pngs[v] = v < static_cast<long long>(views.size()) ? png_from_linear(n, n, exposed_views[v], 1.0f)
+    pngs[v] = v < static_cast<long long>(views.size()) ? png_from_linear(n, n, views[v].exposed, 1.0f)
                                                         : png_from_linear(cols * tile, rows * tile, sheet, 1.0f);
   });
   for (std::size_t v = 0; v < views.size(); ++v)
@@ -461,7 +446,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
   files.push_back({"preview/contact_sheet.png", std::move(pngs.back()), "", {rows * tile, cols * tile, 3}, "8-bit sRGB",
                    "", "every preview at half size, left to right and top to bottom: " + order});
   const auto seconds = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
-  spdlog::debug("atmosphere: previews: {} views of {} x {} rendered in {:.3f} s, exposed and encoded in {:.3f} s",
+  spdlog::debug("atmosphere: previews: {} views of {} x {} rendered and exposed in {:.3f} s, encoded in {:.3f} s",
                 views.size(), n, n, seconds(t_render, t_encode), seconds(t_encode, std::chrono::steady_clock::now()));
   return files;
 }
