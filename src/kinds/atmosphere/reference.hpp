@@ -6,7 +6,9 @@
 #include <cmath>
 #include <stdexcept>
 #include <cstddef>
+#include <cstdlib>
 #include <cstring>
+#include <new>
 #include <memory>
 #include <thread>
 #include <utility>
@@ -19,18 +21,22 @@
 namespace specbake::atmosphere {
 
 
-// A texture of the double reference: sized without writing its values (default-initialised
-// elements), so that a self-check's copy of a device texture, the size of the whole texture for
-// the lookups' arithmetic, takes memory only where the check has put the texels it fetched.
+// A texture of the double reference: its storage from calloc, which hands large blocks over as
+// the kernel's zero pages without writing them, and elements created without a write
+// (default-initialised), so that a self-check's copy of a device texture, the size of the whole
+// texture for the lookups' arithmetic, takes memory only where the check puts the texels it
+// fetched, and reads 0 elsewhere.
 template <class T>
-struct UninitialisedAllocator : std::allocator<T> {
+struct LazyZeroAllocator {
+  using value_type = T;
+  LazyZeroAllocator() = default;
   template <class U>
-  struct rebind {
-    using other = UninitialisedAllocator<U>;
-  };
-  UninitialisedAllocator() = default;
-  template <class U>
-  UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+  LazyZeroAllocator(const LazyZeroAllocator<U>&) noexcept {}
+  T* allocate(std::size_t n) {
+    if (void* p = std::calloc(n, sizeof(T))) return static_cast<T*>(p);
+    throw std::bad_alloc();
+  }
+  void deallocate(T* p, std::size_t) noexcept { std::free(p); }
   template <class U>
   void construct(U* p) noexcept {
     ::new (static_cast<void*>(p)) U;
@@ -39,8 +45,16 @@ struct UninitialisedAllocator : std::allocator<T> {
   void construct(U* p, A&&... a) {
     ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
   }
+  template <class U>
+  bool operator==(const LazyZeroAllocator<U>&) const noexcept {
+    return true;
+  }
+  template <class U>
+  bool operator!=(const LazyZeroAllocator<U>&) const noexcept {
+    return false;
+  }
 };
-using HostTexture = std::vector<double, UninitialisedAllocator<double>>;
+using HostTexture = std::vector<double, LazyZeroAllocator<double>>;
 
 #define SPECBAKE_ATMOSPHERE_REF_PROLOGUE                                                                    \
   using real = double;                                                                                    \
