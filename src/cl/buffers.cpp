@@ -3,9 +3,13 @@
 namespace specbake::cl_util {
 
 cl::Buffer upload_real(Device& dev, const std::vector<double>& values) {
+  return upload_real(dev, values, dev.info().fp64);
+}
+
+cl::Buffer upload_real(Device& dev, const std::vector<double>& values, bool as_double) {
   return checked("uploading a buffer", [&] {
     const std::size_t n = std::max<std::size_t>(values.size(), 1);
-    if (dev.info().fp64) {
+    if (as_double) {
       std::vector<double> v(values);
       v.resize(n);
       return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(double), v.data());

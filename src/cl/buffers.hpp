@@ -10,6 +10,9 @@
 namespace specbake::cl_util {
 
 cl::Buffer upload_real(Device& dev, const std::vector<double>& values);
+// The same for kernels whose real is double exactly when as_double (a program built in float on
+// a device with fp64, or in double by choice).
+cl::Buffer upload_real(Device& dev, const std::vector<double>& values, bool as_double);
 cl::Buffer device_real(Device& dev, std::size_t count);  // uninitialised, read-write
 std::vector<double> download_real(Device& dev, const cl::Buffer& buf, std::size_t count);
 void set_real_arg(Device& dev, cl::Kernel& k, cl_uint index, double value);

@@ -31,6 +31,13 @@ AtmosphereSpec earth() {
   return s;
 }
 AtmosphereSpec small(AtmosphereSpec s) { return sized(s, {32, 8}, {16, 4}, {5, 16, 8, 4}); }
+// s at 16 wavelengths (one pass of 16 channels), `orders` orders.
+AtmosphereSpec sixteen_wavelengths(AtmosphereSpec s, int orders) {
+  s.spectral = true;
+  s.count = 16;
+  s.orders = orders;
+  return s;
+}
 
 // max over texels of |a − b| / (|b| + floor · max_channel |b|), over 3 channels.
 double max_rel(const std::vector<double>& a, const std::vector<double>& b, double floor) {
@@ -326,10 +333,7 @@ TEST(AtmosphereDevice, TinyAndOddSizes) {
 // of them, whose private copies (~2.8 KB each) overran the worker thread's 8 MiB stack and killed
 // the process (SIGSEGV). A larger NU (the limit, 64) holds the most private memory per item.
 TEST(AtmosphereDevice, WideSpectralPassesWithManyNuSlicesBake) {
-  AtmosphereSpec s = sized(earth(), {32, 8}, {16, 4}, {16, 8, 54, 20});
-  s.spectral = true;
-  s.count = 16;
-  s.orders = 2;
+  AtmosphereSpec s = sixteen_wavelengths(sized(earth(), {32, 8}, {16, 4}, {16, 8, 54, 20}), 2);
   const Baked b = bake_luts(s, device(), kQuiet, 4);
   expect_all_finite(b);
   EXPECT_LE(b.self_check_worst, kSelfCheckTolerance);
@@ -408,10 +412,7 @@ TEST(AtmosphereDevice, Tiled2dSamplesEqual3d) {
 // maximum, which the self-check's floor (1 % of the maximum, atmosphere_job.cpp) must allow; a
 // floor of 1e-3 failed this bake (2.3e-3 > 2e-3).
 TEST(AtmosphereDevice, SelfCheckAllowsTheSunsEdgeAtFineSizes) {
-  AtmosphereSpec s = sized(earth(), {128, 32}, {72, 18}, {16, 144, 54, 6});
-  s.spectral = true;
-  s.count = 16;
-  s.orders = 4;
+  const AtmosphereSpec s = sixteen_wavelengths(sized(earth(), {128, 32}, {72, 18}, {16, 144, 54, 6}), 4);
   const Baked b = bake_luts(s, device(), kQuiet, 4);
   std::printf("self-check worst %.3g\n", b.self_check_worst);
   EXPECT_LE(b.self_check_worst, kSelfCheckTolerance);

@@ -93,11 +93,19 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
   const auto host_stage = [&](const char* stage, auto&& f) {
     cl_util::accumulate(stage_total[stage], cl_util::host_only(stage, f));
   };
+  // a step with device commands, on b's profiler (a host backend enqueues nothing)
+  const auto device_stage = [&](PassBackend& b, const char* stage, auto&& f) {
+    cl_util::Profiler own;
+    cl_util::Profiler& prof = b.profiler() ? *b.profiler() : own;
+    cl_util::Profiler::Stage st(prof, stage);
+    f();
+    st.close();
+    prof.settle();
+    cl_util::accumulate(stage_total[stage], *st.record());
+  };
   // One backend serves every pass (its sums over passes stay where it is).
   std::unique_ptr<PassBackend> backend;
   host_stage("setup", [&] { backend = make(all.slice(0, std::min(width, n)), width); });
-  cl_util::Profiler own;  // a host backend enqueues nothing
-  cl_util::Profiler& prof = backend->profiler() ? *backend->profiler() : own;
   if (spec.store_radiance) {
     out.radiance.lambda_nm = all.lambda_nm;
     out.radiance.solar_irradiance = all.solar_irradiance;
@@ -138,8 +146,7 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
     out.passes.push_back({{"wavelengths_nm", ch.lambda_nm}, {"orders_used", r.orders_used}, {"converged", r.converged}});
   }
   // The bake's R,G,B textures and each order's statistics, from the sums over the passes.
-  {
-    cl_util::Profiler::Stage st(prof, "combine");
+  device_stage(*backend, "combine", [&] {
     Sums& sums = backend->sums();
     sums.read_rgb(Sum::irradiance, out.luts.irradiance);
     sums.read_rgb(Sum::scattering, out.luts.scattering);
@@ -155,23 +162,16 @@ Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progr
                                                       : json{{"max", st_o.irradiance_max}, {"mean", st_o.irradiance_mean}}},
            {"relative_change", o == 1 ? json(nullptr) : json(rel)}});
     }
-    st.close();
-    prof.settle();
-    cl_util::accumulate(stage_total["combine"], *st.record());
-  }
+  });
   if (sp.spectral) {
     // The render-time transmittance is at 680/550/440 nm, as the GPU model's luminance mode.
     std::unique_ptr<PassBackend> b;
     cl_util::accumulate(stage_total["transmittance_rgb"],  // the 3-channel program's build
                         cl_util::host_only("transmittance_rgb", [&] { b = make(rgb, 3); }));
-    cl_util::Profiler own3;
-    cl_util::Profiler& prof3 = b->profiler() ? *b->profiler() : own3;
-    cl_util::Profiler::Stage st(prof3, "transmittance_rgb");
-    b->transmittance();
-    out.luts.transmittance = b->read(Tex::transmittance);
-    st.close();
-    prof3.settle();
-    cl_util::accumulate(stage_total["transmittance_rgb"], *st.record());
+    device_stage(*b, "transmittance_rgb", [&] {
+      b->transmittance();
+      out.luts.transmittance = b->read(Tex::transmittance);
+    });
   }
   out.timings = {{"total", json::object()}, {"per_order", json::array()}};
   for (const auto& [stage, sec] : stage_total) out.timings["total"][stage] = cl_util::seconds_json(sec);

@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <variant>
 
+#include "cl/buffers.hpp"
 #include "core/parallel.hpp"
 #include "kinds/atmosphere/reference_widths.hpp"
 
@@ -117,12 +118,27 @@ Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
   });
 }
 
-// An order's R,G,B additions (scattering, irradiance) over the passes so far.
+// An order's R,G,B additions (scattering, irradiance) over the passes so far, until their
+// statistics are taken (and the buffer freed).
 struct OrderSum {
   std::array<cl::Buffer, 2> rgb;
-  std::array<bool, 2> has{}, done{};  // added to; statistics taken (and the buffer freed)
-  std::array<ChannelStats, 2> stats;
+  std::array<std::optional<ChannelStats>, 2> stats;
+  bool added(int which) const { return rgb[which]() != nullptr || stats[which].has_value(); }
 };
+
+// OrderRgb from an order's statistics (scattering, irradiance; absent: nothing added).
+OrderRgb order_rgb_of(const ChannelStats* scattering, const ChannelStats* irradiance) {
+  OrderRgb o;
+  if (scattering) {
+    o.scattering_max = scattering->max;
+    o.scattering_mean = scattering->mean;
+  }
+  if (irradiance) {
+    o.irradiance_max = irradiance->max;
+    o.irradiance_mean = irradiance->mean;
+  }
+  return o;
+}
 
 class DeviceBackend final : public PassBackend, private Sums {
  public:
@@ -148,12 +164,6 @@ class DeviceBackend final : public PassBackend, private Sums {
       dM_ = alloc(n_s_);
       dS_ = alloc(n_s_);
       J_ = alloc(n_s_);
-      S_ = alloc(n_s_);
-      E_ = alloc(n_e_);
-      add_ = alloc(n_s_);
-      rgb_[0] = alloc_reals(3 * n_s_);
-      rgb_[1] = alloc_reals(3 * n_e_);
-      rgb_[2] = alloc_reals(3 * n_s_);
       return 0;
     });
     check_layout();
@@ -247,10 +257,8 @@ class DeviceBackend final : public PassBackend, private Sums {
 
   // ---- the sums, by kernels where the textures are (kernels.cl, "The sums") ----
   void begin_pass(const std::vector<double>& to_rgb, bool last) override {
-    cl_util::checked("atmosphere sums", [&] {
-      to_rgb_ = upload(to_rgb);
-      return 0;
-    });
+    if (!S_()) allocate_sums();
+    to_rgb_ = cl_util::upload_real(dev_, to_rgb, dbl_);
     last_pass_ = last;
   }
   void single() override {
@@ -267,13 +275,8 @@ class DeviceBackend final : public PassBackend, private Sums {
     return relative_change(dE_, E_, n_e_);
   }
   double add_scattering(int order) override {
-    if (!has_inverse_phase_) {  // 1/P_R(ν) of every texel, decoded in double (as the host's reference does)
-      cl_util::checked("atmosphere sums", [&] {
-        inverse_phase_ = upload(inverse_rayleigh_phase(model_));
-        return 0;
-      });
-      has_inverse_phase_ = true;
-    }
+    if (!inverse_phase_())  // 1/P_R(ν) of every texel, decoded in double (as the host's reference does)
+      inverse_phase_ = cl_util::upload_real(dev_, inverse_rayleigh_phase(model_), dbl_);
     launch("add_multiple_scattering", n_s_, {&dS_, &inverse_phase_, &S_, &add_});
     add_order(order, 0, add_, n_s_);
     return relative_change(add_, S_, n_s_);
@@ -299,17 +302,12 @@ class DeviceBackend final : public PassBackend, private Sums {
     });
   }
   OrderRgb order_rgb(int order) override {
-    OrderRgb o;
     const auto it = orders_.find(order);
-    if (it == orders_.end()) return o;
+    if (it == orders_.end()) return {};
     OrderSum& sum = it->second;
-    for (int which : {0, 1}) {
-      if (!sum.has[which]) continue;
-      if (!sum.done[which]) finish(sum, which);
-      (which == 0 ? o.scattering_max : o.irradiance_max) = sum.stats[which].max;
-      (which == 0 ? o.scattering_mean : o.irradiance_mean) = sum.stats[which].mean;
-    }
-    return o;
+    for (int which : {0, 1})
+      if (sum.added(which) && !sum.stats[which]) finish(sum, which);
+    return order_rgb_of(sum.stats[0] ? &*sum.stats[0] : nullptr, sum.stats[1] ? &*sum.stats[1] : nullptr);
   }
 
  private:
@@ -378,13 +376,17 @@ class DeviceBackend final : public PassBackend, private Sums {
       return std::min({most, dev_.info().max_work_group_size, (row + lanes_ - 1) / lanes_});
     });
   }
-  // The values as the device's reals, in a new read-only buffer.
-  cl::Buffer upload(const std::vector<double>& v) {
-    if (dbl_)
-      return cl::Buffer(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, v.size() * sizeof(double),
-                        const_cast<double*>(v.data()));
-    std::vector<float> f(v.begin(), v.end());
-    return cl::Buffer(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, f.size() * sizeof(float), f.data());
+  // The sums' buffers, on a pass's first use (a backend that only computes T needs none).
+  void allocate_sums() {
+    cl_util::checked("allocating the atmosphere sums", [&] {
+      S_ = alloc(n_s_);
+      E_ = alloc(n_e_);
+      add_ = alloc(n_s_);
+      rgb_[0] = alloc_reals(3 * n_s_);
+      rgb_[1] = alloc_reals(3 * n_e_);
+      rgb_[2] = alloc_reals(3 * n_s_);
+      return 0;
+    });
   }
   void zero(cl::Buffer& b, long long n) {
     cl::Event ev;
@@ -405,21 +407,18 @@ class DeviceBackend final : public PassBackend, private Sums {
   // irradiance); in the last pass the sum is complete: its statistics are taken and it is freed.
   void add_order(int order, int which, cl::Buffer& x, long long texels) {
     OrderSum& sum = orders_[order];
-    const bool first = !sum.has[which];
-    if (first) {
+    const bool first = !sum.added(which);
+    if (first)
       cl_util::checked("allocating an order's sums", [&] {
         sum.rgb[which] = alloc_reals(3 * texels);
         return 0;
       });
-      sum.has[which] = true;
-    }
     add_rgb(x, texels, sum.rgb[which], first);
     if (last_pass_) finish(sum, which);
   }
   void finish(OrderSum& sum, int which) {
     sum.stats[which] = stats(sum.rgb[which], which == 0 ? n_s_ : n_e_, 3);
     sum.rgb[which] = cl::Buffer();
-    sum.done[which] = true;
   }
   // Per channel max (floored at 0) and mean of x ([texels][channels]): partial results of
   // kScanItems work items, combined on the host in item order.
@@ -449,7 +448,7 @@ class DeviceBackend final : public PassBackend, private Sums {
     const int items = static_cast<int>(std::min<long long>(texels, kScanItems));
     double out = 0.0;
     cl_util::checked("atmosphere sums", [&] {
-      cl::Buffer fl = upload(floor), partial = alloc_reals(items);
+      cl::Buffer fl = cl_util::upload_real(dev_, floor, dbl_), partial = alloc_reals(items);
       launch("relative_change_partial", items, {&add, &sum, &fl, static_cast<int>(texels), &partial});
       std::vector<double> r;
       read_reals(partial, items, r);
@@ -540,8 +539,7 @@ class DeviceBackend final : public PassBackend, private Sums {
   // the sums: the pass's scattering and irradiance, an order's scattering addition, the
   // channels → R,G,B weights, the bake's R,G,B textures (as Sum numbers them) and per order its
   // R,G,B additions (scattering, irradiance; whether each is there yet)
-  cl::Buffer S_, E_, add_, to_rgb_, inverse_phase_;
-  bool has_inverse_phase_ = false;
+  cl::Buffer S_, E_, add_, to_rgb_, inverse_phase_;  // null until first used
   std::array<cl::Buffer, 3> rgb_;
   bool rgb_written_ = false;  // by a pass's end
   std::map<int, OrderSum> orders_;
@@ -650,19 +648,9 @@ class HostSums final : public Sums {
   }
   void read_rgb(Sum s, std::vector<double>& out) override { out = rgb_[static_cast<int>(s)]; }
   OrderRgb order_rgb(int order) override {
-    OrderRgb o;
     const auto& x = orders_[order];
-    if (!x[0].empty()) {
-      const ChannelStats st = channel_stats(x[0], 3);
-      o.scattering_max = st.max;
-      o.scattering_mean = st.mean;
-    }
-    if (!x[1].empty()) {
-      const ChannelStats st = channel_stats(x[1], 3);
-      o.irradiance_max = st.max;
-      o.irradiance_mean = st.mean;
-    }
-    return o;
+    const ChannelStats s = channel_stats(x[0], 3), e = channel_stats(x[1], 3);
+    return order_rgb_of(x[0].empty() ? nullptr : &s, x[1].empty() ? nullptr : &e);
   }
 
  private:
