@@ -20,6 +20,9 @@
 #define DIFFRACTION_CHEBYSHEV 1
 /* Most terms one kernel call produces per sample (a private array of this size). */
 #define DIFFRACTION_MAX_BATCH 32
+/* Grid points a table's Kaiser–Bessel spread visits per target frequency (kernel width 10 + 1;
+ * src/kinds/diffraction/table.cpp). */
+#define DIFFRACTION_TAPS 11
 
 /* g^n for n >= 0 by binary powering (exact zero stays zero; 0^0 = 1). */
 FN real ipow(real g, int n) {

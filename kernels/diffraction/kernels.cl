@@ -64,6 +64,86 @@ __kernel void diffraction_table_row_inputs(__global const real* h, int width, in
   }
 }
 
+/* The spread of the table's non-uniform FFT (src/kinds/diffraction/table.cpp): one target frequency
+ * from one transformed array b (n_pad interleaved float pairs), over the Kaiser–Bessel kernel's
+ * DIFFRACTION_TAPS grid points from k0 (0 ≤ k0 < n_pad, wrapping: b is periodic),
+ *   Σ_j wt_j·b[(k0 + j) mod n_pad],   wt_j = φ(n t − k)·e^{2πikc/n} (real pairs, from the host),
+ * summed in j order in `real`. */
+void spread_sum(__global const float* b, int n_pad, int k0, __global const real* wt, real* sr, real* si) {
+  real ar = R(0.0), ai = R(0.0);
+  int k = k0;
+  for (int j = 0; j < DIFFRACTION_TAPS; ++j) {
+    const real br = b[2 * k], bi = b[2 * k + 1], wr = wt[2 * j], wi = wt[2 * j + 1];
+    ar += wr * br - wi * bi;
+    ai += wr * bi + wi * br;
+    if (++k == n_pad) k = 0;
+  }
+  *sr = ar;
+  *si = ai;
+}
+
+/* The row stage's spread: one work item per (table column `col` < sum_n, transformed row a <
+ * n_terms·rows), a = j·rows + r for term j of the group and kept row row_first + r. Column col's
+ * k0 and weights (every table of the pass, concatenated) give the row's value at the column's
+ * f_u, stored as float complex in out[j·per_term + (row_first + r)·sum_n + col]: the rows the
+ * column stage gathers. */
+__kernel void diffraction_table_spread_rows(__global const float* b, int n_pad, int rows, int n_terms,
+                                            __global const int* k0, __global const real* wt, int sum_n,
+                                            long per_term, int row_first, __global float* out) {
+  const int col = get_global_id(0), a = get_global_id(1);
+  if (col >= sum_n || a >= n_terms * rows) return;
+  const int j = a / rows, r = a % rows;
+  real sr, si;
+  spread_sum(b + (size_t)2 * a * n_pad, n_pad, k0[col], wt + (size_t)2 * DIFFRACTION_TAPS * col, &sr, &si);
+  const size_t at = (size_t)j * per_term + (size_t)(row_first + r) * sum_n + col;
+  out[2 * at] = (float)sr;
+  out[2 * at + 1] = (float)si;
+}
+
+/* The column stage's inputs: one work item per (column i < n_cols of the batch from column c0,
+ * kept row l < n_pad). Column ci = c0 + i is term j = ci / sum_n's table column ci mod sum_n of
+ * the row stage's results; its samples are multiplied by the y axis's deconvolution 1/φ̂ and
+ * zero-padded (l ≥ count_y), into col[i·n_pad + l] (float complex): the arrays the column
+ * transforms take next. */
+__kernel void diffraction_table_gather_columns(__global const float* rows, int sum_n, long per_term, int count_y,
+                                               int n_pad, __global const real* deconv_y, long c0, int n_cols,
+                                               __global float* col) {
+  const int i = get_global_id(0), l = get_global_id(1);
+  if (i >= n_cols || l >= n_pad) return;
+  const size_t at = (size_t)i * n_pad + l;
+  if (l >= count_y) {
+    col[2 * at] = 0.0f;
+    col[2 * at + 1] = 0.0f;
+    return;
+  }
+  const long ci = c0 + i;
+  const size_t from = (size_t)(ci / sum_n) * per_term + (size_t)l * sum_n + (size_t)(ci % sum_n);
+  col[2 * at] = (float)(rows[2 * from] * deconv_y[l]);
+  col[2 * at + 1] = (float)(rows[2 * from + 1] * deconv_y[l]);
+}
+
+/* The column stage's spread for one table of the pass (its columns offset … offset+size−1 of
+ * each term's sum_n, its f_v spreads at offset … in k0, wt): one work item per (column i of the
+ * batch, texel row iv < size); items whose column belongs to another table return. Writes
+ *   F[term_first + j][iv][iu] = inv·Σ_taps,   j = ci / sum_n, iu = ci mod sum_n − offset,
+ * as float complex into out (the table's [T][size][size] pairs). */
+__kernel void diffraction_table_spread_columns(__global const float* col, int n_pad, long c0, int n_cols, int sum_n,
+                                               int offset, int size, __global const int* k0,
+                                               __global const real* wt, int term_first, real inv,
+                                               __global float* out) {
+  const int i = get_global_id(0), iv = get_global_id(1);
+  if (i >= n_cols || iv >= size) return;
+  const long ci = c0 + i;
+  const int iu = (int)(ci % sum_n) - offset;
+  if (iu < 0 || iu >= size) return;
+  real sr, si;
+  spread_sum(col + (size_t)2 * i * n_pad, n_pad, k0[offset + iv], wt + (size_t)2 * DIFFRACTION_TAPS * (offset + iv),
+             &sr, &si);
+  const size_t at = ((size_t)(term_first + ci / sum_n) * size + iv) * size + iu;
+  out[2 * at] = (float)(sr * inv);
+  out[2 * at + 1] = (float)(si * inv);
+}
+
 /* The windowed field of `rows` field rows from iy_first (the exact transform's input; host twin
  * direct_transform_grid in src/kinds/diffraction/table.cpp): one work item per sample,
  *   a[r][ix] = wx[ix]·wy[iy]·e^{iκh[iy][ix]},   iy = iy_first + r,

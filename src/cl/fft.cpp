@@ -115,24 +115,4 @@ void fft_rows(Device& dev, cl::Buffer& rows, std::size_t n, std::size_t count) {
   for (std::size_t g = 0; g * batch < count; ++g) fft.forward(rows, g * batch);
 }
 
-void fft_rows(Device& dev, std::vector<float>& data, std::size_t n, std::size_t count) {
-  if (count == 0) return;
-  const std::size_t bytes = count * n * 2 * sizeof(float);
-  cl::Buffer buf = fft_rows_buffer(dev, n, count);
-  checked("FFT rows: upload", [&] {
-    cl::Event ev;
-    dev.queue().enqueueWriteBuffer(buf, CL_FALSE, 0, bytes, data.data(), nullptr, &ev);
-    dev.profiler().record(ev);
-    return CL_SUCCESS;
-  });
-  fft_rows(dev, buf, n, count);
-  checked("FFT rows: download", [&] {
-    cl::Event ev;
-    dev.queue().enqueueReadBuffer(buf, CL_FALSE, 0, bytes, data.data(), nullptr, &ev);
-    dev.profiler().record(ev);
-    dev.profiler().wait([&] { dev.queue().finish(); });
-    return CL_SUCCESS;
-  });
-}
-
 }  // namespace specbake::cl_util

@@ -52,7 +52,5 @@ Fft2d& shared_fft(Device& dev, std::size_t width, std::size_t height, std::size_
 cl::Buffer fft_rows_buffer(Device& dev, std::size_t n, std::size_t count);
 // The rows of a buffer from fft_rows_buffer(dev, n, count), on the device.
 void fft_rows(Device& dev, cl::Buffer& rows, std::size_t n, std::size_t count);
-// The caller's count·n·2 floats: uploaded, transformed, read back.
-void fft_rows(Device& dev, std::vector<float>& data, std::size_t n, std::size_t count);
 
 }  // namespace specbake::cl_util

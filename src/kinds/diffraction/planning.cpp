@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "core/parallel.hpp"
 #include "core/text.hpp"
 #include "kinds/diffraction/reference.hpp"
 
@@ -46,10 +47,11 @@ Field make_field(const DiffractionSpec& spec) {
   hf.width = hf.height = p.size;
   hf.dx_um = p.dx_um;
   hf.h_um.resize(static_cast<std::size_t>(p.size) * p.size);
-  for (int iy = 0; iy < p.size; ++iy)
+  parallel_for(p.size, [&](long long iy) {  // each sample on its own: the same heights on any thread count
     for (int ix = 0; ix < p.size; ++ix)
-      hf.h_um[static_cast<std::size_t>(iy) * p.size + ix] =
-          ref::procedural_height(procedural_type(p.type), ix, iy, p.dx_um, p.period_um, p.amplitude_um);
+      hf.h_um[static_cast<std::size_t>(iy) * p.size + ix] = ref::procedural_height(
+          procedural_type(p.type), ix, static_cast<int>(iy), p.dx_um, p.period_um, p.amplitude_um);
+  });
   return centre_field(std::move(hf), spec.center);
 }
 

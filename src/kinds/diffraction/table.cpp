@@ -233,42 +233,29 @@ Axis make_axis(const std::vector<double>& window, double beta) {
   return a;
 }
 
-// Per target frequency: the first grid index and kKernelWidth + 1 complex weights φ·e^{2πikc/n}.
-struct Spread {
-  std::vector<long long> k0;
-  std::vector<cplx> wt;
+// Per target frequency of one axis: the first grid index (reduced mod n) and kKernelWidth + 1
+// complex weights φ(u − k)·e^{2πikc/n} as (re, im) pairs, for every table of a pass concatenated
+// in table order (diffraction_table_spread_rows / _columns read them on the device).
+static_assert(kKernelWidth + 1 == DIFFRACTION_TAPS, "the kernels' tap count");
+struct Spreads {
+  std::vector<int> k0;
+  std::vector<double> wt;
 };
-constexpr int kTaps = kKernelWidth + 1;
-Spread make_spread(const Axis& a, const TableGeometry& g, double dx, double beta) {
-  Spread s;
-  s.k0.resize(g.size);
-  s.wt.resize(static_cast<std::size_t>(g.size) * kTaps);
+void add_spread(const Axis& a, const TableGeometry& g, double dx, double beta, Spreads& s) {
   for (int i = 0; i < g.size; ++i) {
     const double u = a.n * g.freq(i) * dx;
     const long long k0 = static_cast<long long>(std::ceil(u - 0.5 * kKernelWidth));
-    s.k0[i] = k0;
-    for (int j = 0; j < kTaps; ++j) {
+    long long first = k0 % a.n;
+    if (first < 0) first += a.n;
+    s.k0.push_back(static_cast<int>(first));
+    for (int j = 0; j < DIFFRACTION_TAPS; ++j) {
       const long long k = k0 + j;
       const double cyc = std::fmod(static_cast<double>(k) * a.c, static_cast<double>(a.n)) / a.n;
-      s.wt[static_cast<std::size_t>(i) * kTaps + j] = kb(u - static_cast<double>(k), beta) * std::polar(1.0, kTwoPi * cyc);
+      const cplx w = kb(u - static_cast<double>(k), beta) * std::polar(1.0, kTwoPi * cyc);
+      s.wt.push_back(w.real());
+      s.wt.push_back(w.imag());
     }
   }
-  return s;
-}
-
-// Σ_j wt_j·B[(k0 + j) mod n] over one transformed array B (interleaved float).
-cplx spread_at(const Spread& s, int i, const float* b, int n) {
-  long long k = s.k0[i] % n;
-  if (k < 0) k += n;
-  const cplx* wt = s.wt.data() + static_cast<std::size_t>(i) * kTaps;
-  double sr = 0, si = 0;
-  for (int j = 0; j < kTaps; ++j) {
-    const double br = b[2 * k], bi = b[2 * k + 1];
-    sr += wt[j].real() * br - wt[j].imag() * bi;
-    si += wt[j].real() * bi + wt[j].imag() * br;
-    if (++k == n) k = 0;
-  }
-  return {sr, si};
 }
 
 constexpr std::size_t kRowChunkBytes = 128u << 20;  // device buffer per batch of transformed rows
@@ -296,51 +283,62 @@ AxisExtent fft_extent(int m, double dx_um, double sigma_um) {
   return {a.count, a.n};
 }
 
-std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
-                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
-                                               const std::function<void(double)>& progress) {
+std::vector<std::vector<float>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
+                                                const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
+                                                const std::function<void(double)>& progress) {
   const double beta = kb_beta();
   const Axis ax = make_axis(w.wx, beta), ay = make_axis(w.wy, beta);
   int total = 0;
   for (const auto& b : bands) total = std::max(total, b.first_term + b.terms);
-  std::vector<Spread> su, sv;
-  std::vector<std::size_t> offset;  // each table's columns in the row-stage results
-  std::size_t sum_n = 0;
-  std::vector<std::vector<cplx>> out;
+  Spreads su, sv;
+  std::vector<int> offset;  // each table's columns among the sum_n of a term's row-stage results
+  int sum_n = 0;
   for (const auto& g : tables) {
-    su.push_back(make_spread(ax, g, f.dx_um, beta));
-    sv.push_back(make_spread(ay, g, f.dx_um, beta));
+    add_spread(ax, g, f.dx_um, beta, su);
+    add_spread(ay, g, f.dx_um, beta, sv);
     offset.push_back(sum_n);
     sum_n += g.size;
-    out.emplace_back(static_cast<std::size_t>(total) * g.size * g.size);
   }
   const double inv = 1.0 / (static_cast<double>(f.width) * f.height);
   const double inv_s = f.s > 0 ? 1.0 / f.s : 0.0;
-  // Row-stage results are held as float32 pairs (they feed a float32 transform next).
-  const std::size_t per_term = static_cast<std::size_t>(ay.count) * sum_n;
-  const int group = static_cast<int>(
-      std::clamp<std::size_t>(kGroupBytes / (per_term * 2 * sizeof(float)), 1, DIFFRACTION_MAX_BATCH));
-  // The row stage's inputs on the device: the field, the x axis's kept-sample weights (window ×
-  // deconvolution) and the y window.
-  cl::Program program = dev.build(kProgram, dev.real_options());
-  cl::Kernel row_inputs = cl_util::checked("table row inputs", [&] { return cl::Kernel(program, "diffraction_table_row_inputs"); });
-  std::vector<double> weight_x(ax.count);
-  for (int l = 0; l < ax.count; ++l) weight_x[l] = w.wx[ax.lo + l] * ax.deconv[l];
-  const cl::Buffer h_dev = cl_util::upload_real(dev, f.h_um), wx_dev = cl_util::upload_real(dev, weight_x),
-                   wy_dev = cl_util::upload_real(dev, w.wy);
-  for (const auto& band : bands)
-    for (int t0 = 0; t0 < band.terms; t0 += group) {
-      const int g = std::min(group, band.terms - t0);
-      std::vector<std::complex<float>> rows(per_term * g);  // [term][kept row][table columns]
-      const int chunk = static_cast<int>(std::clamp<std::size_t>(
-          kRowChunkBytes / (static_cast<std::size_t>(g) * ax.n * 2 * sizeof(float)), 1, ay.count));
-      std::vector<float> buf;
-      for (int r0 = 0; r0 < ay.count; r0 += chunk) {
-        const int c = std::min(chunk, ay.count - r0);
-        const std::size_t arrays = static_cast<std::size_t>(g) * c, bytes = arrays * ax.n * 2 * sizeof(float);
-        buf.resize(arrays * ax.n * 2);
-        cl_util::checked("table rows", [&] {
-          // Term inputs q_n·w / φ̂ of the kept samples, [term][row][n] (zero-padded), transformed.
+  // Row-stage results are held on the device as float32 pairs (they feed a float32 transform next).
+  const std::size_t per_term = static_cast<std::size_t>(ay.count) * sum_n, pair = 2 * sizeof(float);
+  const std::size_t max_alloc = dev.info().max_alloc_bytes ? dev.info().max_alloc_bytes : kGroupBytes;
+  const std::size_t group_bytes = std::min<std::size_t>(kGroupBytes, max_alloc);
+  const int group = static_cast<int>(std::clamp<std::size_t>(group_bytes / (per_term * pair), 1, DIFFRACTION_MAX_BATCH));
+  std::vector<std::vector<float>> out;
+  for (const auto& g : tables) out.emplace_back(2 * static_cast<std::size_t>(total) * g.size * g.size);
+  return cl_util::checked("table terms", [&] {
+    cl::Program program = dev.build(kProgram, dev.real_options());
+    cl::Kernel row_inputs(program, "diffraction_table_row_inputs"), spread_rows(program, "diffraction_table_spread_rows"),
+        gather(program, "diffraction_table_gather_columns"), spread_columns(program, "diffraction_table_spread_columns");
+    const auto run = [&](cl::Kernel& k, std::size_t x, std::size_t y) {
+      cl::Event ev;
+      dev.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(x, y), cl::NullRange, nullptr, &ev);
+      dev.profiler().record(ev);
+    };
+    // The field, the x axis's kept-sample weights (window × deconvolution), the y window and
+    // deconvolution, the spreads; the tables' terms, filled term group by term group.
+    std::vector<double> weight_x(ax.count);
+    for (int l = 0; l < ax.count; ++l) weight_x[l] = w.wx[ax.lo + l] * ax.deconv[l];
+    const cl::Buffer h_dev = cl_util::upload_real(dev, f.h_um), wx_dev = cl_util::upload_real(dev, weight_x),
+                     wy_dev = cl_util::upload_real(dev, w.wy), deconv_y = cl_util::upload_real(dev, ay.deconv),
+                     wt_u = cl_util::upload_real(dev, su.wt), wt_v = cl_util::upload_real(dev, sv.wt);
+    const cl::Buffer k0_u(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, su.k0.size() * sizeof(int), su.k0.data()),
+        k0_v(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, sv.k0.size() * sizeof(int), sv.k0.data());
+    std::vector<cl::Buffer> out_dev;
+    for (const auto& o : out) out_dev.emplace_back(dev.context(), CL_MEM_READ_WRITE, o.size() * sizeof(float));
+    for (const auto& band : bands)
+      for (int t0 = 0; t0 < band.terms; t0 += group) {
+        const int g = std::min(group, band.terms - t0);
+        const cl::Buffer rows(dev.context(), CL_MEM_READ_WRITE, per_term * g * pair);  // [term][kept row][sum_n]
+        const int chunk = static_cast<int>(
+            std::clamp<std::size_t>(kRowChunkBytes / (static_cast<std::size_t>(g) * ax.n * pair), 1, ay.count));
+        for (int r0 = 0; r0 < ay.count; r0 += chunk) {
+          const int c = std::min(chunk, ay.count - r0);
+          const std::size_t arrays = static_cast<std::size_t>(g) * c;
+          // Term inputs q_n·w / φ̂ of the kept samples, [term][row][n] (zero-padded), transformed,
+          // then spread to every table's f_u columns.
           cl::Buffer q = cl_util::fft_rows_buffer(dev, ax.n, arrays);
           int arg = 0;
           row_inputs.setArg(arg++, h_dev);
@@ -360,60 +358,70 @@ std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field
           row_inputs.setArg(arg++, t0);
           row_inputs.setArg(arg++, g);
           row_inputs.setArg(arg++, q);
-          cl::Event ev;
-          dev.queue().enqueueNDRangeKernel(row_inputs, cl::NullRange, cl::NDRange(ax.n, c), cl::NullRange, nullptr,
-                                           &ev);
-          dev.profiler().record(ev);
+          run(row_inputs, ax.n, c);
           cl_util::fft_rows(dev, q, ax.n, arrays);
-          cl::Event read;
-          dev.queue().enqueueReadBuffer(q, CL_FALSE, 0, bytes, buf.data(), nullptr, &read);
-          dev.profiler().record(read);
+          arg = 0;
+          spread_rows.setArg(arg++, q);
+          spread_rows.setArg(arg++, ax.n);
+          spread_rows.setArg(arg++, c);
+          spread_rows.setArg(arg++, g);
+          spread_rows.setArg(arg++, k0_u);
+          spread_rows.setArg(arg++, wt_u);
+          spread_rows.setArg(arg++, sum_n);
+          spread_rows.setArg(arg++, static_cast<cl_long>(per_term));
+          spread_rows.setArg(arg++, r0);
+          spread_rows.setArg(arg++, rows);
+          run(spread_rows, sum_n, arrays);
           dev.profiler().wait([&] { dev.queue().finish(); });
-          return 0;
-        });
-        if (progress) progress((band.first_term + t0 + g * 0.8 * (r0 + c) / ay.count) / total);
-        parallel_for(static_cast<long long>(g) * c, [&](long long idx) {
-          const long long j = idx / c, r = idx % c;
-          const float* b = buf.data() + static_cast<std::size_t>(idx) * ax.n * 2;
-          auto* dst = rows.data() + static_cast<std::size_t>(j) * per_term + static_cast<std::size_t>(r0 + r) * sum_n;
-          for (std::size_t k = 0; k < tables.size(); ++k)
-            for (int iu = 0; iu < tables[k].size; ++iu)
-              dst[offset[k] + iu] = std::complex<float>(spread_at(su[k], iu, b, ax.n));
-        });
-      }
-      // Columns: for each table column iu, Σ over the kept rows, by the y axis's transform; the
-      // columns of all tables and terms of the group in batches.
-      const std::size_t columns = sum_n * g;
-      const std::size_t batch = std::clamp<std::size_t>(kRowChunkBytes / (ay.n * 2 * sizeof(float)), 1, columns);
-      std::vector<float> col;
-      for (std::size_t c0 = 0; c0 < columns; c0 += batch) {
-        const std::size_t cn = std::min(batch, columns - c0);
-        col.assign(cn * ay.n * 2, 0.0f);
-        // Column index ci = j·sum_n + (offset of table k) + iu.
-        parallel_for(static_cast<long long>(cn), [&](long long i) {
-          const std::size_t ci = c0 + static_cast<std::size_t>(i), j = ci / sum_n, rest = ci % sum_n;
-          const auto* src = rows.data() + j * per_term + rest;
-          float* dst = col.data() + static_cast<std::size_t>(i) * ay.n * 2;
-          for (int l = 0; l < ay.count; ++l) {
-            const std::complex<float> v = src[static_cast<std::size_t>(l) * sum_n];
-            dst[2 * l] = static_cast<float>(v.real() * ay.deconv[l]);
-            dst[2 * l + 1] = static_cast<float>(v.imag() * ay.deconv[l]);
+          if (progress) progress((band.first_term + t0 + g * 0.8 * (r0 + c) / ay.count) / total);
+        }
+        // Columns: for each table column, Σ over the kept rows by the y axis's transform; the
+        // columns of all tables and terms of the group in batches.
+        const std::size_t columns = static_cast<std::size_t>(sum_n) * g;
+        const std::size_t batch = std::clamp<std::size_t>(kRowChunkBytes / (ay.n * pair), 1, columns);
+        for (std::size_t c0 = 0; c0 < columns; c0 += batch) {
+          const int cn = static_cast<int>(std::min(batch, columns - c0));
+          cl::Buffer col = cl_util::fft_rows_buffer(dev, ay.n, cn);
+          int arg = 0;
+          gather.setArg(arg++, rows);
+          gather.setArg(arg++, sum_n);
+          gather.setArg(arg++, static_cast<cl_long>(per_term));
+          gather.setArg(arg++, ay.count);
+          gather.setArg(arg++, ay.n);
+          gather.setArg(arg++, deconv_y);
+          gather.setArg(arg++, static_cast<cl_long>(c0));
+          gather.setArg(arg++, cn);
+          gather.setArg(arg++, col);
+          run(gather, cn, ay.n);
+          cl_util::fft_rows(dev, col, ay.n, cn);
+          for (std::size_t k = 0; k < tables.size(); ++k) {
+            arg = 0;
+            spread_columns.setArg(arg++, col);
+            spread_columns.setArg(arg++, ay.n);
+            spread_columns.setArg(arg++, static_cast<cl_long>(c0));
+            spread_columns.setArg(arg++, cn);
+            spread_columns.setArg(arg++, sum_n);
+            spread_columns.setArg(arg++, offset[k]);
+            spread_columns.setArg(arg++, tables[k].size);
+            spread_columns.setArg(arg++, k0_v);
+            spread_columns.setArg(arg++, wt_v);
+            spread_columns.setArg(arg++, band.first_term + t0);
+            cl_util::set_real_arg(dev, spread_columns, arg++, inv);
+            spread_columns.setArg(arg++, out_dev[k]);
+            run(spread_columns, cn, tables[k].size);
           }
-        });
-        cl_util::fft_rows(dev, col, ay.n, cn);
-        if (progress) progress((band.first_term + t0 + g * (0.8 + 0.2 * static_cast<double>(c0 + cn) / columns)) / total);
-        parallel_for(static_cast<long long>(cn), [&](long long i) {
-          const std::size_t ci = c0 + static_cast<std::size_t>(i), j = ci / sum_n, rest = ci % sum_n;
-          std::size_t k = 0;
-          while (rest >= offset[k] + tables[k].size) ++k;
-          const int n = tables[k].size, iu = static_cast<int>(rest - offset[k]);
-          const float* b = col.data() + static_cast<std::size_t>(i) * ay.n * 2;
-          cplx* term = out[k].data() + static_cast<std::size_t>(band.first_term + t0 + j) * n * n;
-          for (int iv = 0; iv < n; ++iv) term[static_cast<std::size_t>(iv) * n + iu] = spread_at(sv[k], iv, b, ay.n) * inv;
-        });
+          dev.profiler().wait([&] { dev.queue().finish(); });
+          if (progress) progress((band.first_term + t0 + g * (0.8 + 0.2 * static_cast<double>(c0 + cn) / columns)) / total);
+        }
       }
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      cl::Event read;
+      dev.queue().enqueueReadBuffer(out_dev[k], CL_FALSE, 0, out[k].size() * sizeof(float), out[k].data(), nullptr, &read);
+      dev.profiler().record(read);
     }
-  return out;
+    dev.profiler().wait([&] { dev.queue().finish(); });
+    return out;
+  });
 }
 
 std::vector<cplx> windowed_field(const Field& f, const Window& w, double kappa) {

@@ -71,14 +71,17 @@ Window make_window(const Field& f, double sigma_um);
 std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g);
 
 // The same terms for every table in `tables` at once, by the separable non-uniform FFT on `dev`
-// (the header's method): out[k] is [T][iv][iu] for tables[k]. One pass over the field serves all
-// sizes; its error against table_terms is float32 FFT rounding (≈ 1e-7 of the window's sum) plus
-// the gridding's (below 1e-9; tests/diffraction/diffraction_table_test.cpp).
+// (the header's method), as the bundle stores them: out[k] is float32 [T][iv][iu][re, im] for
+// tables[k]. One pass over the field serves all sizes; everything between the field's upload and
+// the tables' download runs on the device (term inputs, row transforms, row spreads, column
+// gather, column transforms, column spreads). Its error against table_terms is float32 FFT
+// rounding (≈ 1e-7 of the window's sum) plus the gridding's (below 1e-9) and the float32 storage
+// (tests/diffraction/diffraction_table_test.cpp).
 // `progress` is called with the fraction done after every batch of transforms (a safe point: it
 // may throw to stop the bake).
-std::vector<std::vector<cplx>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
-                                               const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
-                                               const std::function<void(double)>& progress = {});
+std::vector<std::vector<float>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
+                                                const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
+                                                const std::function<void(double)>& progress = {});
 
 // The window's samples the FFT path keeps: per axis, those with weight ≥ kWindowFloor, |x| ≤ 5.68σ
 // (a patch narrower than the window keeps every sample). What the rest hold, as a fraction of

@@ -52,15 +52,6 @@ std::vector<int> candidate_sizes(const DiffractionSpec& spec, int terms) {
   return out;
 }
 
-std::vector<float> to_float32(const std::vector<cplx>& v) {
-  std::vector<float> out(2 * v.size());
-  for (std::size_t i = 0; i < v.size(); ++i) {
-    out[2 * i] = static_cast<float>(v[i].real());
-    out[2 * i + 1] = static_cast<float>(v[i].imag());
-  }
-  return out;
-}
-
 // Exposure that maps the 99.5th percentile of the lit pixels' luminance to 1.
 float percentile_exposure(const std::vector<float>& rgb) {
   std::vector<double> lum;
@@ -243,7 +234,7 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
       });
       for (std::size_t k = first; k < last && !met; ++k) {
         chosen = k;
-        values = to_float32(tables[k - first]);
+        values = tables[k - first];
         const double between = tm.time("error measurement", [&] { return meas.between_max(p.bands, geoms[k], values); });
         attempts.push_back({{"target", target}, {"terms", p.total_terms}, {"size", sizes[k]}, {"between_texels_max", between}});
         spdlog::debug("table {}: {} terms, error between texels {:.3g}", sizes[k], p.total_terms, between);

@@ -335,11 +335,17 @@ std::vector<cplx> reconstruct_with(Get get, const Bins& bins, const Band& band, 
   ref::expansion_coefficients(expansion_id(band.expansion), kappa, band.kappa0, band.delta, f.s, band.terms,
                               coef.data());
   const std::size_t per = static_cast<std::size_t>(bins.ku_count()) * bins.kv_count();
-  std::vector<cplx> p(per, 0.0);
-  for (int n = 0; n < band.terms; ++n)
-    for (std::size_t i = 0; i < per; ++i) p[i] += coef[n] * get(band.first_term + n, i);
+  std::vector<cplx> p(per);
   const cplx front = static_cast<double>(f.count()) * std::polar(1.0, kappa * f.c);
-  for (auto& v : p) v *= front;
+  // Runs of bins on the hardware threads; each bin's sum in term order (any split, same values).
+  constexpr std::size_t kRun = 4096;
+  parallel_for(static_cast<long long>((per + kRun - 1) / kRun), [&](long long run) {
+    const std::size_t lo = static_cast<std::size_t>(run) * kRun, hi = std::min(per, lo + kRun);
+    for (std::size_t i = lo; i < hi; ++i) p[i] = 0.0;
+    for (int n = 0; n < band.terms; ++n)
+      for (std::size_t i = lo; i < hi; ++i) p[i] += coef[n] * get(band.first_term + n, i);
+    for (std::size_t i = lo; i < hi; ++i) p[i] *= front;
+  });
   return p;
 }
 }  // namespace
