@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cctype>
 #include <cstdlib>
 
@@ -202,7 +203,10 @@ std::string common_build_options(const DeviceInfo& info) {
 cl::Program Device::build(const std::string& kernel_path, const std::string& options) {
   const std::string key = kernel_path + "\n" + options;
   if (auto it = programs_.find(key); it != programs_.end()) return it->second;
+  const auto start = std::chrono::steady_clock::now();
   cl::Program program = build_source(kernel_path, kernel_source(kernel_path), options);
+  spdlog::debug("OpenCL build of {}: {:.3f} s", kernel_path,
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   programs_.emplace(key, program);
   return program;
 }

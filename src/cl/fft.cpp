@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <chrono>
 #include <string>
 
 #define VKFFT_BACKEND 3
@@ -43,6 +44,7 @@ Fft2d::Fft2d(Device& dev, std::size_t width, std::size_t height, std::size_t bat
   config.doublePrecision = precision == FftPrecision::double_ ? 1 : 0;
   config.makeForwardPlanOnly = 1;
   config.specifyOffsetsAtLaunch = 1;
+  const auto start = std::chrono::steady_clock::now();
   const VkFFTResult r = initializeVkFFT(&impl_->app, config);
   if (r != VKFFT_SUCCESS) {
     clReleaseMemObject(impl_->plan_buffer);
@@ -51,8 +53,9 @@ Fft2d::Fft2d(Device& dev, std::size_t width, std::size_t height, std::size_t bat
                       " FFT (VkFFTResult " + std::to_string(static_cast<int>(r)) + ")");
   }
   impl_->initialised = true;
-  spdlog::debug("VkFFT plan {}x{} batch {} ({})", width, height, batch,
-                precision == FftPrecision::double_ ? "double" : "float");
+  spdlog::debug("VkFFT plan {}x{} batch {} ({}): {:.3f} s", width, height, batch,
+                precision == FftPrecision::double_ ? "double" : "float",
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
 }
 
 Fft2d::~Fft2d() {

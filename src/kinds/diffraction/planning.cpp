@@ -30,11 +30,22 @@ Field centre_field(Heightfield hf, Centre centre) {
   f.height = hf.height;
   f.dx_um = hf.dx_um;
   f.h_um = std::move(hf.h_um);
-  f.h_min = *std::min_element(f.h_um.begin(), f.h_um.end());
-  f.h_max = *std::max_element(f.h_um.begin(), f.h_um.end());
-  double sum = 0.0;
-  for (double v : f.h_um) sum += v;
-  f.h_mean = sum / static_cast<double>(f.h_um.size());
+  // Per row on the hardware threads, combined in row order: the same values on any thread count.
+  std::vector<double> lo(f.height), hi(f.height), sum(f.height);
+  parallel_for(f.height, [&](long long iy) {
+    const auto row = f.h_um.begin() + iy * static_cast<std::ptrdiff_t>(f.width);
+    const auto [mn, mx] = std::minmax_element(row, row + f.width);
+    lo[iy] = *mn;
+    hi[iy] = *mx;
+    double s = 0.0;
+    for (auto it = row; it != row + f.width; ++it) s += *it;
+    sum[iy] = s;
+  });
+  f.h_min = *std::min_element(lo.begin(), lo.end());
+  f.h_max = *std::max_element(hi.begin(), hi.end());
+  double total = 0.0;
+  for (double s : sum) total += s;
+  f.h_mean = total / static_cast<double>(f.h_um.size());
   f.c = centre == Centre::mid_range ? 0.5 * (f.h_min + f.h_max) : centre == Centre::mean ? f.h_mean : 0.0;
   f.s = std::max(std::fabs(f.h_max - f.c), std::fabs(f.h_min - f.c));
   return f;
