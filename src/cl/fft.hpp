@@ -27,6 +27,9 @@ class Fft2d {
   // `first_array` (the buffer holds at least (first_array + batch) arrays); waits for completion.
   // Recorded in dev.profiler() as a marker span (VkFFT's launches carry no events).
   void forward(cl::Buffer& buffer, std::size_t first_array = 0);
+  // The same transform enqueued without waiting: the caller finishes the queue before it reads
+  // the buffer on the host or releases it.
+  void append(cl::Buffer& buffer, std::size_t first_array = 0);
   std::size_t bytes() const;  // batch·W·H·2·sizeof(element)
   std::size_t width() const { return width_; }
   std::size_t height() const { return height_; }
@@ -50,7 +53,8 @@ Fft2d& shared_fft(Device& dev, std::size_t width, std::size_t height, std::size_
 // A device buffer for fft_rows: `count` rows rounded up to whole batches, the rows past `count`
 // zeroed (they are transformed with the last batch and never read).
 cl::Buffer fft_rows_buffer(Device& dev, std::size_t n, std::size_t count);
-// The rows of a buffer from fft_rows_buffer(dev, n, count), on the device.
+// The rows of a buffer from fft_rows_buffer(dev, n, count), on the device (every batch enqueued,
+// then one wait).
 void fft_rows(Device& dev, cl::Buffer& rows, std::size_t n, std::size_t count);
 
 }  // namespace specbake::cl_util
