@@ -8,15 +8,15 @@ cl::Buffer upload_real(Device& dev, const std::vector<double>& values) {
 
 cl::Buffer upload_real(Device& dev, const std::vector<double>& values, bool as_double) {
   return checked("uploading a buffer", [&] {
-    const std::size_t n = std::max<std::size_t>(values.size(), 1);
-    if (as_double) {
-      std::vector<double> v(values);
-      v.resize(n);
-      return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(double), v.data());
-    }
-    std::vector<float> v(values.begin(), values.end());
-    v.resize(n);
-    return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n * sizeof(float), v.data());
+    // Copied by the driver as the buffer is made (CL_MEM_COPY_HOST_PTR reads the host memory only):
+    // doubles straight from the caller's vector, floats narrowed first; an empty vector gives one zero.
+    static const std::vector<double> kZero(1, 0.0);
+    const std::vector<double>& src = values.empty() ? kZero : values;
+    if (as_double)
+      return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, src.size() * sizeof(double),
+                        const_cast<double*>(src.data()));
+    std::vector<float> v(src.begin(), src.end());
+    return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, v.size() * sizeof(float), v.data());
   });
 }
 

@@ -143,7 +143,7 @@ void expect_fft_matches_direct(const DiffractionSpec& spec, const std::vector<in
   const Window w = make_window(f, coherence_length_um(spec) / std::sqrt(2.0));
   std::vector<TableGeometry> geoms;
   for (int n : sizes) geoms.push_back(table_geometry(spec, n));
-  const auto fft = table_terms_fft(tst::shared_device(), f, w, p.bands, geoms);
+  const auto fft = table_terms_fft(DeviceHeights(tst::shared_device(), f), f, w, p.bands, geoms);
   const auto pad = [](int m) { return std::log2(3.0 * m); };  // n ≤ 2·(1.5m) after rounding up to a smooth length
   const double u = std::ldexp(1.0, -24), logs = pad(f.width) + pad(f.height) + 2.0;
   for (std::size_t k = 0; k < sizes.size(); ++k) {
@@ -211,7 +211,8 @@ TEST(DiffractionTable, ExactGridOnTheDeviceMatchesHostAndSinglePointSums) {
   const Window w = make_window(f, 1.5);
   cl_util::Device& dev = tst::shared_device();
   if (!dev.info().fp64) GTEST_SKIP() << "the device has no fp64: the exact sums stay on the host";
-  const ExactGrid grid(&dev, f, w);
+  const DeviceHeights heights(dev, f);
+  const ExactGrid grid(&heights, f, w);
   ASSERT_TRUE(grid.on_device());
   std::vector<double> fu, fv;
   for (int k = 0; k < 37; ++k) fu.push_back(-3.7 + 0.23 * k);

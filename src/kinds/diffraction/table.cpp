@@ -283,9 +283,12 @@ AxisExtent fft_extent(int m, double dx_um, double sigma_um) {
   return {a.count, a.n};
 }
 
-std::vector<std::vector<float>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
+DeviceHeights::DeviceHeights(cl_util::Device& d, const Field& f) : dev(d), h(cl_util::upload_real(d, f.h_um)) {}
+
+std::vector<std::vector<float>> table_terms_fft(const DeviceHeights& on, const Field& f, const Window& w,
                                                 const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
                                                 const std::function<void(double)>& progress) {
+  cl_util::Device& dev = on.dev;
   const double beta = kb_beta();
   const Axis ax = make_axis(w.wx, beta), ay = make_axis(w.wy, beta);
   int total = 0;
@@ -317,11 +320,12 @@ std::vector<std::vector<float>> table_terms_fft(cl_util::Device& dev, const Fiel
       dev.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(x, y), cl::NullRange, nullptr, &ev);
       dev.profiler().record(ev);
     };
-    // The field, the x axis's kept-sample weights (window × deconvolution), the y window and
-    // deconvolution, the spreads; the tables' terms, filled term group by term group.
+    // The x axis's kept-sample weights (window × deconvolution), the y window and deconvolution,
+    // the spreads; the tables' terms, filled term group by term group.
     std::vector<double> weight_x(ax.count);
     for (int l = 0; l < ax.count; ++l) weight_x[l] = w.wx[ax.lo + l] * ax.deconv[l];
-    const cl::Buffer h_dev = cl_util::upload_real(dev, f.h_um), wx_dev = cl_util::upload_real(dev, weight_x),
+    const cl::Buffer& h_dev = on.h;
+    const cl::Buffer wx_dev = cl_util::upload_real(dev, weight_x),
                      wy_dev = cl_util::upload_real(dev, w.wy), deconv_y = cl_util::upload_real(dev, ay.deconv),
                      wt_u = cl_util::upload_real(dev, su.wt), wt_v = cl_util::upload_real(dev, sv.wt);
     const cl::Buffer k0_u(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, su.k0.size() * sizeof(int), su.k0.data()),
@@ -505,19 +509,20 @@ struct ExactGrid::Impl {
 // Rows of the windowed field held on the device at once (two double arrays of W each).
 constexpr std::size_t kExactChunkBytes = 64u << 20;
 
-ExactGrid::ExactGrid(cl_util::Device* dev, const Field& f, const Window& w)
+ExactGrid::ExactGrid(const DeviceHeights* on, const Field& f, const Window& w)
     : f_(f), w_(w), impl_(std::make_shared<Impl>()) {
-  if (!dev || !dev->info().fp64) return;
+  if (!on || !on->dev.info().fp64) return;
+  cl_util::Device& dev = on->dev;
   cl_util::checked("exact transform: device set-up", [&] {
-    const cl::Program program = dev->build(kProgram, dev->real_options());
+    const cl::Program program = dev.build(kProgram, dev.real_options());
     impl_->windowed = cl::Kernel(program, "diffraction_windowed_rows");
     impl_->rows = cl::Kernel(program, "diffraction_exact_rows");
-    impl_->h = cl_util::upload_real(*dev, f.h_um);
-    impl_->wx = cl_util::upload_real(*dev, w.wx);
-    impl_->wy = cl_util::upload_real(*dev, w.wy);
+    impl_->h = on->h;
+    impl_->wx = cl_util::upload_real(dev, w.wx);
+    impl_->wy = cl_util::upload_real(dev, w.wy);
     return 0;
   });
-  impl_->dev = dev;
+  impl_->dev = &dev;
 }
 
 bool ExactGrid::on_device() const { return impl_->dev != nullptr; }
@@ -665,13 +670,13 @@ int random_count(const Field& f, int fixed, int lo, int hi) {
 
 }  // namespace
 
-cl_util::Device* TableMeasurement::exact_device(cl_util::Device* dev) {
-  return dev && dev->info().fp64 && dev->info().type != "cpu" ? dev : nullptr;
+const DeviceHeights* TableMeasurement::exact_device(const DeviceHeights* on) {
+  return on && on->dev.info().fp64 && on->dev.info().type != "cpu" ? on : nullptr;
 }
 
-TableMeasurement::TableMeasurement(cl_util::Device* dev, const Field& f, const Window& w, const TableGeometry& shape,
+TableMeasurement::TableMeasurement(const DeviceHeights* on, const Field& f, const Window& w, const TableGeometry& shape,
                                    std::vector<double> kappas)
-    : f_(f), w_(w), kappas_(std::move(kappas)), exact_grid_(exact_device(dev), f, w) {
+    : f_(f), w_(w), kappas_(std::move(kappas)), exact_grid_(exact_device(on), f, w) {
   // s-values: 8 around the centre spanning ±0.08 (the specular peak; not on any ladder size's
   // texel centres or cell edges), then pseudo-random ones in (−1, 1).
   random_per_axis_ = random_count(f, 8, 4, 24);

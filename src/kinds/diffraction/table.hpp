@@ -57,6 +57,14 @@ struct TableGeometry {
 };
 TableGeometry table_geometry(const DiffractionSpec& spec, int size);
 
+// A field's heights on a device, as the device's `real`: uploaded once per bake and read by every
+// pass that needs them (the table's terms, the exact sums of its error measurement).
+struct DeviceHeights {
+  DeviceHeights(cl_util::Device& dev, const Field& f);
+  cl_util::Device& dev;
+  cl::Buffer h;
+};
+
 // The separable amplitude window over the samples (σ in µm; wx[ix]·wy[iy]).
 struct Window {
   double sigma_um = 0.0;
@@ -70,8 +78,8 @@ Window make_window(const Field& f, double sigma_um);
 // by direct sums in double (the reference; O(N·W·H) per term).
 std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector<Band>& bands, const TableGeometry& g);
 
-// The same terms for every table in `tables` at once, by the separable non-uniform FFT on `dev`
-// (the header's method), as the bundle stores them: out[k] is float32 [T][iv][iu][re, im] for
+// The same terms for every table in `tables` at once, by the separable non-uniform FFT on the
+// heights' device (the header's method), as the bundle stores them: out[k] is float32 [T][iv][iu][re, im] for
 // tables[k]. One pass over the field serves all sizes; everything between the field's upload and
 // the tables' download runs on the device (term inputs, row transforms, row spreads, column
 // gather, column transforms, column spreads). Its error against table_terms is float32 FFT
@@ -79,7 +87,7 @@ std::vector<cplx> table_terms(const Field& f, const Window& w, const std::vector
 // (tests/diffraction/diffraction_table_test.cpp).
 // `progress` is called with the fraction done after every batch of transforms (a safe point: it
 // may throw to stop the bake).
-std::vector<std::vector<float>> table_terms_fft(cl_util::Device& dev, const Field& f, const Window& w,
+std::vector<std::vector<float>> table_terms_fft(const DeviceHeights& on, const Field& f, const Window& w,
                                                 const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
                                                 const std::function<void(double)>& progress = {});
 
@@ -104,15 +112,15 @@ cplx direct_transform(const std::vector<cplx>& a, const Field& f, double fu, dou
 std::vector<cplx> direct_transform_grid(const Field& f, const Window& w, double kappa, const std::vector<double>& fu,
                                         const std::vector<double>& fv);
 
-// The same grid sums for many κ over one field: on `dev` when given and it has fp64 (the windowed
-// field by diffraction_windowed_rows, each row's sums by diffraction_exact_rows, one work item per
-// frequency and row, in four interleaved partial sums; the field and window uploaded once), else
+// The same grid sums for many κ over one field: on the heights' device when given and it has fp64
+// (the windowed field by diffraction_windowed_rows, each row's sums by diffraction_exact_rows, one
+// work item per frequency and row, in four interleaved partial sums; the window uploaded once), else
 // direct_transform_grid on the host's threads (each row summed in ix order). The rows are then
 // combined on the host in iy order. The two differ by rounding only (the device's cos/sin,
 // contractions and summation order: a few units of 1e-16 of Σw per row and column).
 class ExactGrid {
  public:
-  ExactGrid(cl_util::Device* dev, const Field& f, const Window& w);  // dev may be null
+  ExactGrid(const DeviceHeights* on, const Field& f, const Window& w);  // on may be null: the host
   std::vector<cplx> operator()(double kappa, const std::vector<double>& fu, const std::vector<double>& fv) const;
   bool on_device() const;
 
@@ -150,16 +158,16 @@ struct TableError {
 class TableMeasurement {
  public:
   // `shape`: the mapping (power, f_max) every measured table shares; its size is not used. The
-  // direct sums run on `dev` (ExactGrid) when exact_device says so, else on the host.
-  TableMeasurement(cl_util::Device* dev, const Field& f, const Window& w, const TableGeometry& shape,
+  // direct sums run on the heights' device (ExactGrid) when exact_device says so, else on the host.
+  TableMeasurement(const DeviceHeights* on, const Field& f, const Window& w, const TableGeometry& shape,
                    std::vector<double> kappas);
   // Between-texel error only (what `size: auto` compares), max over the points and κ.
   double between_max(const std::vector<Band>& bands, const TableGeometry& g, const std::vector<float>& terms) const;
   // Everything: texels (direct sums made now), between texels, energy.
   TableError measure(const std::vector<Band>& bands, const TableGeometry& g, const std::vector<float>& terms) const;
-  // `dev` when it has fp64 and is not a CPU, else null (the host): on a CPU device (PoCL) the
+  // `on` when its device has fp64 and is not a CPU, else null (the host): on a CPU device (PoCL) the
   // host's threads and libm do these sums 2-3x faster (docs/diffraction.md, "Where the work runs").
-  static cl_util::Device* exact_device(cl_util::Device* dev);
+  static const DeviceHeights* exact_device(const DeviceHeights* on);
 
  private:
   std::vector<double> between_errors(const std::vector<Band>& bands, const TableGeometry& g,

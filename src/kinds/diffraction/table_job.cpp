@@ -200,6 +200,7 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   const Window win = make_window(f, length / std::sqrt(2.0));
 
   ctx.enter(Stage::compute);
+  const DeviceHeights heights = tm.time("field upload", [&] { return DeviceHeights(ctx.device, f); });
   Plan p;
   TableGeometry g;
   std::vector<float> values;
@@ -220,7 +221,7 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
     // none of an earlier phase did. The chosen table is then measured at texels and for energy.
     ctx.progress("error measurement", 0.1);
     const TableMeasurement meas =
-        tm.time("error measurement", [&] { return TableMeasurement(&ctx.device, f, win, geoms.front(), measurement_kappas(p)); });
+        tm.time("error measurement", [&] { return TableMeasurement(&heights, f, win, geoms.front(), measurement_kappas(p)); });
     std::size_t chosen = 0;
     bool met = false;
     for (std::size_t first = 0; first < sizes.size() && !met;) {
@@ -229,7 +230,7 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
       const std::vector<TableGeometry> phase(geoms.begin() + first, geoms.begin() + last);
       const double at = static_cast<double>(first) / sizes.size(), span = static_cast<double>(last - first) / sizes.size();
       const auto tables = tm.time("table terms", [&] {
-        return table_terms_fft(ctx.device, f, win, p.bands, phase,
+        return table_terms_fft(heights, f, win, p.bands, phase,
                                [&](double done) { ctx.progress("table terms", 0.2 + 0.6 * (at + span * done)); });
       });
       for (std::size_t k = first; k < last && !met; ++k) {
