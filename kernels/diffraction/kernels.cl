@@ -1,6 +1,8 @@
 /* kernels.cl — OpenCL entry points of the diffraction job; the maths is in diffraction.cl.
  * Complex arrays are interleaved float pairs (re, im), the layout VkFFT transforms. */
 #include "diffraction/diffraction.cl"
+#include "diffraction/brdf.cl"
+#include "diffraction/table.cl"
 
 /* One work item per sample i of a W×H field (row-major [iy][ix]): writes the term inputs
  * q_n for n = n_first … n_first+n_count−1, times `scale` (1/(W·H), so that the unnormalised
@@ -188,4 +190,25 @@ __kernel void diffraction_exact_rows(__global const real* ar, __global const rea
   }
   rr[(size_t)(iy_first + r) * nu + a] = (sr[0] + sr[1]) + (sr[2] + sr[3]);
   ri[(size_t)(iy_first + r) * nu + a] = (si[0] + si[1]) + (si[2] + si[3]);
+}
+
+/* The BRDF previews (src/kinds/diffraction/brdf.hpp, BrdfPictures): one work item per pair of
+ * directions i < n_pairs (six reals in `pairs`: ω_i, then ω_o), its CIE XYZ into xyz[3i … 3i+2]:
+ * table_xyz over the n_wl wavelengths of `wl` (variant 0), or table_xyz_fast_specular with the
+ * n_few of `few` and the n_wl of `wl` (variant 1). */
+__kernel void diffraction_brdf_xyz(__global const float* terms, int size, real f_max, real power, int n_bands,
+                                   __global const real* bands, int expansion, real s, real p_scale, real ior,
+                                   real sigma_um, int variant, int n_pairs, __global const real* pairs, int n_wl,
+                                   __global const real* wl, int n_few, __global const real* few, __global real* xyz) {
+  const int i = get_global_id(0);
+  if (i >= n_pairs) return;
+  __global const real* d = pairs + 6 * (size_t)i;
+  real out[3];
+  if (variant == 0)
+    table_xyz(terms, size, f_max, power, n_bands, bands, expansion, s, p_scale, ior, d[0], d[1], d[2], d[3], d[4], d[5],
+              n_wl, wl, out);
+  else
+    table_xyz_fast_specular(terms, size, f_max, power, n_bands, bands, expansion, s, p_scale, ior, sigma_um, d[0], d[1],
+                            d[2], d[3], d[4], d[5], n_few, few, n_wl, wl, out);
+  for (int c = 0; c < 3; ++c) xyz[3 * (size_t)i + c] = out[c];
 }

@@ -1,7 +1,7 @@
 // The shipped diffraction shader (shader/diffraction_brdf.glsl) run on a real GL implementation:
 // Mesa's llvmpipe through EGL surfaceless (GLES 3.2), the table and spectrum uploaded as a shader
 // would, the outgoing hemisphere drawn for one light direction and every pixel compared with the
-// host's double evaluation of the same BRDF from the same float32 table (brdf_lobes, what the
+// host's double evaluation of the same BRDF from the same float32 table (BrdfPictures::lobes, what the
 // bundle's preview draws). Skipped, with the reason, only when no EGL device can be opened.
 #include <gtest/gtest.h>
 
@@ -105,14 +105,15 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
   const std::vector<float> pixels_full = draw(0), pixels_fast = draw(1), pixels_specular = draw(2);
   ASSERT_EQ(glGetError(), static_cast<GLenum>(GL_NO_ERROR));
 
-  // The host's evaluation: brdf_lobes' pixel centres match gl_FragCoord's, its row 0 at the top.
+  // The host's evaluation: BrdfPictures::lobes' pixel centres match gl_FragCoord's, its row 0 at the top.
   const BrdfTable t{f, p.bands, g, values, w.sum, 1.5, w.sigma_um};
   // The variant drawn: 0 diffraction_srgb (every 10 nm), 1 diffraction_srgb_fast, 2
   // diffraction_srgb_fast_specular.
   const auto compare = [&](const std::vector<float>& pixels, int variant, const char* what) {
   const Wavelengths& wl = variant == 0 ? full : fast;
-  const auto host = variant == 2 ? brdf_lobes_fast_specular(t, fast, full, {light_deg}, kPanel)
-                                 : brdf_lobes(t, wl, {light_deg}, kPanel);
+  const BrdfPictures pictures(t);
+  const auto host = variant == 2 ? pictures.lobes_fast_specular(fast, full, {light_deg}, kPanel)
+                                 : pictures.lobes(wl, {light_deg}, kPanel);
 
   // The bound, per pixel and channel, from the host's own lookups. Per wavelength, with P_i/Σw at
   // the four texels the fetch blends: the filter's weights carry 8 fractional bits (D3D11's
@@ -226,7 +227,7 @@ TEST(DiffractionGl, ShippedShaderMatchesTheHostBrdfOnLlvmpipe) {
       host_rgb, over_bound,
       {{"title", std::string(what) + ", light at 30 deg"},
        {"gl", "llvmpipe, GLES 3.2"},
-       {"host", "brdf_lobes in double"},
+       {"host", "BrdfPictures::lobes in double"},
        {"bound", "|GL - host| / bound, worst channel"}});
   RecordProperty(std::string(what) + "_worst_over_peak", std::to_string(worst / peak));
   RecordProperty(std::string(what) + "_worst_over_bound", std::to_string(worst_ratio));

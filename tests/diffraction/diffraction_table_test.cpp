@@ -390,6 +390,58 @@ TEST(DiffractionTable, FastSpecularSplitLosesNoLightAndFollowsThePeak) {
   EXPECT_GT(largest_peak_share, 1e-3) << "near the mirror direction the peak's finer spectral sum must show";
 }
 
+TEST(DiffractionTable, PreviewsOnTheDeviceMatchTheHostsDoubleEvaluation) {
+  // The bake draws its BRDF previews on the device (diffraction_brdf_xyz over table.cl); the host
+  // evaluates the same functions in double. With fp64 both run in double and differ by rounding
+  // only: contractions and libm's pow/exp/sqrt, ~1e-15 relative per value, times the cancellation
+  // in Σ coef_n·F_n, which the planner keeps within the float32 roundoff budget (tolerance/u_f32 ≈
+  // 1e3 here): 1e-9 of the picture's peak leaves 1e3 of margin (and is 1e-7 of an 8-bit step).
+  // Without fp64 the kernel runs in float: (4T + 8)·2^-24·1e3 ≈ 1e-2 of the peak.
+  auto spec = grating(ProceduralField::Type::blazed_grating, 48, 0.1, 1.2, 0.25, 32, 3.0, 3.0);
+  spec.expansion = Expansion::chebyshev;
+  const Baked b = bake_table_terms(spec);
+  const BrdfTable t{b.f, b.p.bands, b.g, b.values, b.w.sum, 1.5, b.w.sigma_um};
+  double y_norm = 0;
+  const auto rows = spectrum_rows(spec.range_nm, y_norm);
+  const Wavelengths few = bins(rows, 8), all = every_nm(rows, 10);
+  cl_util::Device& dev = tst::shared_device();
+  const BrdfPictures host(t), device(t, &dev);
+  ASSERT_FALSE(host.on_device());
+  ASSERT_TRUE(device.on_device());
+  const double tol = dev.info().fp64 ? 1e-9 : 1e-2;
+  const std::vector<double> angles = {0.0, 45.0};
+  const std::vector<std::pair<std::vector<float>, std::vector<float>>> pictures = {
+      {host.lobes(all, angles, 48), device.lobes(all, angles, 48)},
+      {host.lobes_fast_specular(few, all, angles, 48), device.lobes_fast_specular(few, all, angles, 48)},
+      {host.sphere(all, {2.0, 1.5, 3.0}, 64), device.sphere(all, {2.0, 1.5, 3.0}, 64)}};
+  for (std::size_t k = 0; k < pictures.size(); ++k) {
+    const auto& [h, d] = pictures[k];
+    ASSERT_EQ(h.size(), d.size()) << k;
+    double peak = 0, worst = 0;
+    for (std::size_t i = 0; i < h.size(); ++i) {
+      peak = std::max(peak, static_cast<double>(std::fabs(h[i])));
+      worst = std::max(worst, static_cast<double>(std::fabs(h[i] - d[i])));
+    }
+    EXPECT_GT(peak, 0.0) << k;
+    EXPECT_LE(worst, tol * peak) << "picture " << k;
+  }
+  // A different table (f_u mirrored: the blazed grating's orders are not symmetric) must show:
+  // the comparison can fail.
+  std::vector<float> mirrored(b.values.size());
+  const std::size_t n = b.g.size;
+  for (std::size_t row = 0; row < b.values.size() / (2 * n); ++row)
+    for (std::size_t iu = 0; iu < n; ++iu)
+      for (int c = 0; c < 2; ++c) mirrored[2 * (row * n + iu) + c] = b.values[2 * (row * n + n - 1 - iu) + c];
+  const BrdfTable m{b.f, b.p.bands, b.g, mirrored, b.w.sum, 1.5, b.w.sigma_um};
+  const auto h = host.lobes(all, angles, 48), d = BrdfPictures(m, &dev).lobes(all, angles, 48);
+  double peak = 0, worst = 0;
+  for (std::size_t i = 0; i < h.size(); ++i) {
+    peak = std::max(peak, static_cast<double>(std::fabs(h[i])));
+    worst = std::max(worst, static_cast<double>(std::fabs(h[i] - d[i])));
+  }
+  EXPECT_GT(worst, 1e-3 * peak) << "the blazed grating's mirrored table must draw differently";
+}
+
 TEST(DiffractionTable, TableBakesFromEveryHeightfieldSource) {
   // size: auto from every source the job reads: a grey PNG, a single-channel EXR, a non-square raw
   // float32 field and a procedural binary grating; each must meet both tolerances at the measured

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "cl/buffers.hpp"
 #include "core/colour_space.hpp"
 #include "core/parallel.hpp"
 #include "kinds/diffraction/reference.hpp"
@@ -22,28 +23,42 @@ Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 
-// Σ_λ ρ·weight_λ (CIE XYZ), for one pair of directions.
-std::array<double, 3> xyz_sum(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const Wavelengths& wl) {
-  std::array<double, 3> xyz{0, 0, 0};
-  for (std::size_t k = 0; k < wl.lambda_um.size(); ++k) {
-    const double rho = brdf(t, wi, wo, wl.lambda_um[k]);
-    for (int c = 0; c < 3; ++c) xyz[c] += rho * wl.xyz[k][c];
-  }
-  return xyz;
+// The bands as table.cl takes them: κ_hi, first term, term count, κ_0, Δ per band.
+std::vector<double> packed_bands(const std::vector<Band>& bands) {
+  std::vector<double> b;
+  for (const auto& band : bands)
+    b.insert(b.end(), {band.kappa_hi, static_cast<double>(band.first_term), static_cast<double>(band.terms), band.kappa0,
+                       band.delta});
+  return b;
 }
-std::array<float, 3> to_srgb(const std::array<double, 3>& xyz, const Mat3& m) {
-  std::array<float, 3> rgb{};
-  for (int r = 0; r < 3; ++r)
-    rgb[r] = static_cast<float>(m[3 * r] * xyz[0] + m[3 * r + 1] * xyz[1] + m[3 * r + 2] * xyz[2]);
-  return rgb;
+// Wavelength rows as table.cl takes them: λ µm, then the X, Y, Z weights.
+std::vector<double> packed_rows(const Wavelengths& wl) {
+  std::vector<double> r;
+  for (std::size_t k = 0; k < wl.lambda_um.size(); ++k)
+    r.insert(r.end(), {wl.lambda_um[k], wl.xyz[k][0], wl.xyz[k][1], wl.xyz[k][2]});
+  return r;
 }
+int expansion_of(const BrdfTable& t) { return t.bands.front().expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV; }
+double p_scale_of(const BrdfTable& t) { return static_cast<double>(t.f.count()) / t.window_sum; }
 
-// The lobes picture (brdf_lobes) of pixel(wi, wo), three floats per pixel.
-template <class Pixel>
-std::vector<float> lobes(const std::vector<double>& light_deg, int panel, Pixel pixel) {
-  const int width = panel * static_cast<int>(light_deg.size());
-  std::vector<float> rgb(3 * static_cast<std::size_t>(width) * panel, 0.0f);
-  parallel_for(panel, [&](long long py) {
+// The lit pixels of a picture: each one's directions (ω_i, ω_o: six reals) and its index.
+struct Pairs {
+  int width = 0, height = 0;
+  std::vector<double> dirs;
+  std::vector<std::size_t> pixel;
+  void add(std::size_t at, const Vec3& wi, const Vec3& wo) {
+    dirs.insert(dirs.end(), {wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]});
+    pixel.push_back(at);
+  }
+};
+
+// The lobes picture (BrdfPictures::lobes): for each light angle a panel, the outgoing hemisphere
+// seen from above, pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²)).
+Pairs lobe_pairs(const std::vector<double>& light_deg, int panel) {
+  Pairs p;
+  p.width = panel * static_cast<int>(light_deg.size());
+  p.height = panel;
+  for (int py = 0; py < panel; ++py) {
     const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / panel;
     for (std::size_t k = 0; k < light_deg.size(); ++k) {
       const double a = light_deg[k] * kPi / 180.0;
@@ -51,59 +66,152 @@ std::vector<float> lobes(const std::vector<double>& light_deg, int panel, Pixel 
       for (int px = 0; px < panel; ++px) {
         const double x = -1.0 + (px + 0.5) * 2.0 / panel, r2 = x * x + y * y;
         if (r2 >= 1.0) continue;
-        const std::array<float, 3> c = pixel(wi, Vec3{x, y, std::sqrt(1.0 - r2)});
-        float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * width + k * panel + px);
-        for (int i = 0; i < 3; ++i) dst[i] = c[i];
+        p.add(static_cast<std::size_t>(py) * p.width + k * panel + px, wi, {x, y, std::sqrt(1.0 - r2)});
       }
     }
-  });
+  }
+  return p;
+}
+
+// The sphere picture: a unit sphere seen along −z (orthographic), the tangent x along the latitude
+// circle about the view axis (any direction at the pole), lit by a point light at `light`.
+Pairs sphere_pairs(const Vec3& light, int size) {
+  Pairs p;
+  p.width = p.height = size;
+  const Vec3 view = {0.0, 0.0, 1.0};
+  for (int py = 0; py < size; ++py) {
+    const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / size;
+    for (int px = 0; px < size; ++px) {
+      const double x = -1.0 + (px + 0.5) * 2.0 / size, r2 = x * x + y * y;
+      if (r2 >= 1.0) continue;
+      const Vec3 n = {x, y, std::sqrt(1.0 - r2)};
+      const Vec3 tx = r2 > 1e-12 ? normalize({-y, x, 0.0}) : Vec3{1.0, 0.0, 0.0};
+      const Vec3 ty = cross(n, tx);
+      const Vec3 l = normalize({light[0] - n[0], light[1] - n[1], light[2] - n[2]});
+      p.add(static_cast<std::size_t>(py) * size + px, {dot(l, tx), dot(l, ty), dot(l, n)},
+            {dot(view, tx), dot(view, ty), dot(view, n)});
+    }
+  }
+  return p;
+}
+
+// Linear sRGB pixels (3 floats each, 0 where no pair) from each pair's CIE XYZ.
+std::vector<float> to_picture(const Pairs& p, const std::vector<double>& xyz) {
+  const Mat3 m = xyz_to_srgb();
+  std::vector<float> rgb(3 * static_cast<std::size_t>(p.width) * p.height, 0.0f);
+  for (std::size_t i = 0; i < p.pixel.size(); ++i)
+    for (int r = 0; r < 3; ++r)
+      rgb[3 * p.pixel[i] + r] = static_cast<float>(m[3 * r] * xyz[3 * i] + m[3 * r + 1] * xyz[3 * i + 1] +
+                                                   m[3 * r + 2] * xyz[3 * i + 2]);
   return rgb;
 }
 }  // namespace
 
+struct BrdfPictures::OnDevice {
+  cl_util::Device& dev;
+  cl::Kernel kernel;
+  cl::Buffer terms, bands;
+};
+
+BrdfPictures::BrdfPictures(const BrdfTable& t, cl_util::Device* dev)
+    : t_(t), bands_(packed_bands(t.bands)) {
+  if (!dev) return;
+  cl_util::checked("BRDF previews: device set-up", [&] {
+    const cl::Program program = dev->build(kProgram, dev->real_options());
+    device_ = std::make_shared<OnDevice>(OnDevice{
+        *dev, cl::Kernel(program, "diffraction_brdf_xyz"),
+        cl::Buffer(dev->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, t.terms.size() * sizeof(float),
+                   const_cast<float*>(t.terms.data())),
+        cl_util::upload_real(*dev, bands_)});
+    return 0;
+  });
+}
+
+bool BrdfPictures::on_device() const { return device_ != nullptr; }
+
+std::vector<double> BrdfPictures::shade(const std::vector<double>& dirs, const Wavelengths& wl,
+                                        const Wavelengths* few) const {
+  const std::size_t n = dirs.size() / 6;
+  const auto rows = packed_rows(wl), few_rows = few ? packed_rows(*few) : std::vector<double>{};
+  const int n_wl = static_cast<int>(wl.lambda_um.size()), n_few = few ? static_cast<int>(few->lambda_um.size()) : 0;
+  if (!device_) {
+    std::vector<double> xyz(3 * n);
+    parallel_for(static_cast<long long>(n), [&](long long i) {
+      const double* d = dirs.data() + 6 * i;
+      if (few)
+        ref::table_xyz_fast_specular(t_.terms.data(), t_.g.size, t_.g.f_max, t_.g.power, static_cast<int>(t_.bands.size()),
+                                     bands_.data(), expansion_of(t_), t_.f.s, p_scale_of(t_), t_.ior, t_.sigma_um, d[0],
+                                     d[1], d[2], d[3], d[4], d[5], n_few, few_rows.data(), n_wl, rows.data(),
+                                     xyz.data() + 3 * i);
+      else
+        ref::table_xyz(t_.terms.data(), t_.g.size, t_.g.f_max, t_.g.power, static_cast<int>(t_.bands.size()),
+                       bands_.data(), expansion_of(t_), t_.f.s, p_scale_of(t_), t_.ior, d[0], d[1], d[2], d[3], d[4],
+                       d[5], n_wl, rows.data(), xyz.data() + 3 * i);
+    });
+    return xyz;
+  }
+  cl_util::Device& dev = device_->dev;
+  return cl_util::checked("BRDF previews", [&] {
+    const cl::Buffer pairs = cl_util::upload_real(dev, dirs), wl_dev = cl_util::upload_real(dev, rows),
+                     few_dev = cl_util::upload_real(dev, few_rows), out = cl_util::device_real(dev, 3 * n);
+    cl::Kernel& k = device_->kernel;
+    int arg = 0;
+    k.setArg(arg++, device_->terms);
+    k.setArg(arg++, t_.g.size);
+    cl_util::set_real_arg(dev, k, arg++, t_.g.f_max);
+    cl_util::set_real_arg(dev, k, arg++, t_.g.power);
+    k.setArg(arg++, static_cast<int>(t_.bands.size()));
+    k.setArg(arg++, device_->bands);
+    k.setArg(arg++, expansion_of(t_));
+    cl_util::set_real_arg(dev, k, arg++, t_.f.s);
+    cl_util::set_real_arg(dev, k, arg++, p_scale_of(t_));
+    cl_util::set_real_arg(dev, k, arg++, t_.ior);
+    cl_util::set_real_arg(dev, k, arg++, t_.sigma_um);
+    k.setArg(arg++, few ? 1 : 0);
+    k.setArg(arg++, static_cast<int>(n));
+    k.setArg(arg++, pairs);
+    k.setArg(arg++, n_wl);
+    k.setArg(arg++, wl_dev);
+    k.setArg(arg++, n_few);
+    k.setArg(arg++, few_dev);
+    k.setArg(arg++, out);
+    cl_util::run_1d(dev, k, n);
+    return cl_util::download_real(dev, out, 3 * n);
+  });
+}
+
+std::vector<float> BrdfPictures::lobes(const Wavelengths& wl, const std::vector<double>& light_deg, int panel) const {
+  const Pairs p = lobe_pairs(light_deg, panel);
+  return to_picture(p, shade(p.dirs, wl, nullptr));
+}
+
+std::vector<float> BrdfPictures::lobes_fast_specular(const Wavelengths& few, const Wavelengths& all,
+                                                     const std::vector<double>& light_deg, int panel) const {
+  const Pairs p = lobe_pairs(light_deg, panel);
+  return to_picture(p, shade(p.dirs, all, &few));
+}
+
+std::vector<float> BrdfPictures::sphere(const Wavelengths& wl, const Vec3& light, int size) const {
+  const Pairs p = sphere_pairs(light, size);
+  return to_picture(p, shade(p.dirs, wl, nullptr));
+}
+
 std::array<double, 3> xyz_fast_specular(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const Wavelengths& few,
                                         const Wavelengths& all) {
-  std::array<double, 3> xyz{0, 0, 0};
-  const double ci = wi[2], co = wo[2];
-  if (ci <= 0.0 || co <= 0.0) return xyz;
-  const Vec3 h = normalize({wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]});
-  const double gain = ref::stam_gain(ci, co, dot(wi, wo), dot(wi, h), t.ior);
-  const double du = -(wi[0] + wo[0]), dv = -(wi[1] + wo[1]);
-  const auto peak = [&](double lambda_um) {  // G(f), 0 beyond the table's reach (as P)
-    if (std::fabs(du / lambda_um) > t.g.f_max || std::fabs(dv / lambda_um) > t.g.f_max) return 0.0;
-    return ref::specular_peak(du * du + dv * dv, lambda_um, t.sigma_um);
-  };
-  const double t0 = t.g.texel_of(0.0);
-  std::vector<double> chi2(few.lambda_um.size());
-  for (std::size_t k = 0; k < few.lambda_um.size(); ++k) {
-    const double lambda = few.lambda_um[k], kappa = 2.0 * kPi * (ci + co) / lambda;
-    const Band& band = band_for(t.bands, kappa);
-    chi2[k] = std::norm(table_bilinear(t.terms, t.g, t.f, band, kappa, t0, t0) / t.window_sum);
-    const double rest = brdf(t, wi, wo, lambda) - gain * chi2[k] * peak(lambda);
-    for (int c = 0; c < 3; ++c) xyz[c] += rest * few.xyz[k][c];
-  }
-  for (std::size_t i = 0; i < all.lambda_um.size(); ++i) {
-    const double lambda = all.lambda_um[i];
-    // |χ|² at λ: linear between the few wavelengths (ascending), clamped
-    std::size_t k = 0;
-    while (k + 2 < few.lambda_um.size() && lambda > few.lambda_um[k + 1]) ++k;
-    const double w = ref::lerp_weight(lambda, few.lambda_um[k], few.lambda_um[k + 1]);
-    const double spec = gain * (chi2[k] * (1.0 - w) + chi2[k + 1] * w) * peak(lambda);
-    for (int c = 0; c < 3; ++c) xyz[c] += spec * all.xyz[i][c];
-  }
+  const auto bands = packed_bands(t.bands), few_rows = packed_rows(few), all_rows = packed_rows(all);
+  std::array<double, 3> xyz{};
+  ref::table_xyz_fast_specular(t.terms.data(), t.g.size, t.g.f_max, t.g.power, static_cast<int>(t.bands.size()),
+                               bands.data(), expansion_of(t), t.f.s, p_scale_of(t), t.ior, t.sigma_um, wi[0], wi[1],
+                               wi[2], wo[0], wo[1], wo[2], static_cast<int>(few.lambda_um.size()), few_rows.data(),
+                               static_cast<int>(all.lambda_um.size()), all_rows.data(), xyz.data());
   return xyz;
 }
 
 double brdf(const BrdfTable& t, const Vec3& wi, const Vec3& wo, double lambda_um) {
-  const double ci = wi[2], co = wo[2];
-  if (ci <= 0.0 || co <= 0.0) return 0.0;
-  const double fu = -(wi[0] + wo[0]) / lambda_um, fv = -(wi[1] + wo[1]) / lambda_um;
-  if (std::fabs(fu) > t.g.f_max || std::fabs(fv) > t.g.f_max) return 0.0;
-  const double kappa = 2.0 * kPi * (ci + co) / lambda_um;
-  const Band& band = band_for(t.bands, kappa);
-  const cplx p = table_bilinear(t.terms, t.g, t.f, band, kappa, t.g.texel_of(fu), t.g.texel_of(fv)) / t.window_sum;
-  const Vec3 h = normalize({wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]});
-  return ref::stam_gain(ci, co, dot(wi, wo), dot(wi, h), t.ior) * std::norm(p);
+  const auto bands = packed_bands(t.bands);
+  return ref::table_brdf(t.terms.data(), t.g.size, t.g.f_max, t.g.power, static_cast<int>(t.bands.size()), bands.data(),
+                         expansion_of(t), t.f.s, p_scale_of(t), t.ior, wi[0], wi[1], wi[2], wo[0], wo[1], wo[2],
+                         lambda_um);
 }
 
 Wavelengths every_nm(const std::vector<double>& spectrum, int step_nm) {
@@ -131,48 +239,17 @@ Wavelengths bins(const std::vector<double>& spectrum, int count) {
   return wl;
 }
 
-std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel) {
-  const Mat3 m = xyz_to_srgb();
-  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) { return to_srgb(xyz_sum(t, wi, wo, wl), m); });
-}
-
-std::vector<float> brdf_lobes_fast_specular(const BrdfTable& t, const Wavelengths& few, const Wavelengths& all,
-                                            const std::vector<double>& light_deg, int panel) {
-  const Mat3 m = xyz_to_srgb();
-  return lobes(light_deg, panel,
-               [&](const Vec3& wi, const Vec3& wo) { return to_srgb(xyz_fast_specular(t, wi, wo, few, all), m); });
-}
-
 std::vector<float> brdf_lobes_specular_peak(const BrdfTable& t, const std::vector<double>& light_deg, int panel,
                                             double lambda_um) {
-  return lobes(light_deg, panel, [&](const Vec3& wi, const Vec3& wo) {
-    const double du = wi[0] + wo[0], dv = wi[1] + wo[1];
-    const auto g = static_cast<float>(ref::specular_peak(du * du + dv * dv, lambda_um, t.sigma_um));
-    return std::array<float, 3>{g, g, g};
-  });
-}
-
-std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const Vec3& light, int size) {
-  std::vector<float> rgb(3 * static_cast<std::size_t>(size) * size, 0.0f);
-  const Mat3 m = xyz_to_srgb();
-  const Vec3 view = {0.0, 0.0, 1.0};
-  parallel_for(size, [&](long long py) {
-    const double y = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / size;
-    for (int px = 0; px < size; ++px) {
-      const double x = -1.0 + (px + 0.5) * 2.0 / size, r2 = x * x + y * y;
-      if (r2 >= 1.0) continue;
-      const Vec3 n = {x, y, std::sqrt(1.0 - r2)};
-      // Tangent along the latitude circle about the view axis (any direction at the pole).
-      const Vec3 tx = r2 > 1e-12 ? normalize({-y, x, 0.0}) : Vec3{1.0, 0.0, 0.0};
-      const Vec3 ty = cross(n, tx);
-      const Vec3 l = normalize({light[0] - n[0], light[1] - n[1], light[2] - n[2]});
-      const Vec3 wi = {dot(l, tx), dot(l, ty), dot(l, n)}, wo = {dot(view, tx), dot(view, ty), dot(view, n)};
-      const auto c = to_srgb(xyz_sum(t, wi, wo, wl), m);
-      float* dst = rgb.data() + 3 * (static_cast<std::size_t>(py) * size + px);
-      for (int i = 0; i < 3; ++i) dst[i] = c[i];
-    }
-  });
-  return rgb;
+  const Pairs p = lobe_pairs(light_deg, panel);
+  std::vector<float> g(3 * static_cast<std::size_t>(p.width) * p.height, 0.0f);
+  for (std::size_t i = 0; i < p.pixel.size(); ++i) {
+    const double* d = p.dirs.data() + 6 * i;
+    const double du = d[0] + d[3], dv = d[1] + d[4];
+    const auto v = static_cast<float>(ref::specular_peak(du * du + dv * dv, lambda_um, t.sigma_um));
+    for (int c = 0; c < 3; ++c) g[3 * p.pixel[i] + c] = v;
+  }
+  return g;
 }
 
 }  // namespace specbake::diffraction

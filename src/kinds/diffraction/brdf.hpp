@@ -13,6 +13,7 @@
 // f = 0, so ρ = 1 there: a mirror reflects the light source's spectrum unchanged. The table is
 // fetched bilinearly (a shader's filtered fetch); beyond f_max it reads 0.
 #include <array>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -57,19 +58,38 @@ Wavelengths bins(const std::vector<double>& spectrum, int count);
 std::array<double, 3> xyz_fast_specular(const BrdfTable& t, const std::array<double, 3>& wi,
                                         const std::array<double, 3>& wo, const Wavelengths& few, const Wavelengths& all);
 
-// Linear sRGB images (row-major, 3 floats per pixel) of the radiance ρ·D65 summed over `wl`:
+// Linear sRGB images (row-major, 3 floats per pixel, 0 outside the lit pixels) of the radiance
+// ρ·D65 summed over the wavelengths, from one table:
 //  - lobes: for each light angle (degrees from the normal, in the x–z plane), the outgoing
 //    hemisphere seen from above (pixel (x, y) ↦ ω_o = (x, y, √(1 − x² − y²))), panels side by side;
+//  - lobes_fast_specular: the same picture through xyz_fast_specular;
 //  - sphere: a unit sphere seen along −z (orthographic), tangent x along the lines of latitude
 //    around the view axis, lit by a point light at `light` (sphere radii) of D65 spectrum.
-std::vector<float> brdf_lobes(const BrdfTable& t, const Wavelengths& wl, const std::vector<double>& light_deg, int panel);
-// The specular peak's shape G (specular_peak, brdf.cl) at `lambda_um` over the same picture's
+// Each lit pixel's CIE XYZ is table.cl's table_xyz / table_xyz_fast_specular: on `dev` when given
+// (diffraction_brdf_xyz, one work item per pixel, the table uploaded once; what a bake draws), else
+// on the host's threads in double (the reference the tests compare with).
+class BrdfPictures {
+ public:
+  explicit BrdfPictures(const BrdfTable& t, cl_util::Device* dev = nullptr);
+  std::vector<float> lobes(const Wavelengths& wl, const std::vector<double>& light_deg, int panel) const;
+  std::vector<float> lobes_fast_specular(const Wavelengths& few, const Wavelengths& all,
+                                         const std::vector<double>& light_deg, int panel) const;
+  std::vector<float> sphere(const Wavelengths& wl, const std::array<double, 3>& light, int size) const;
+  bool on_device() const;
+
+ private:
+  // CIE XYZ of each pair of directions (six reals each): table_xyz over `wl`, or with `few`
+  // table_xyz_fast_specular over few and wl.
+  std::vector<double> shade(const std::vector<double>& dirs, const Wavelengths& wl, const Wavelengths* few) const;
+  struct OnDevice;
+  const BrdfTable& t_;
+  std::vector<double> bands_;
+  std::shared_ptr<OnDevice> device_;
+};
+
+// The specular peak's shape G (specular_peak, brdf.cl) at `lambda_um` over the lobes picture's
 // pixels (in all three channels): where the peak lies.
 std::vector<float> brdf_lobes_specular_peak(const BrdfTable& t, const std::vector<double>& light_deg, int panel,
                                             double lambda_um);
-// The same picture through xyz_fast_specular.
-std::vector<float> brdf_lobes_fast_specular(const BrdfTable& t, const Wavelengths& few, const Wavelengths& all,
-                                            const std::vector<double>& light_deg, int panel);
-std::vector<float> brdf_sphere(const BrdfTable& t, const Wavelengths& wl, const std::array<double, 3>& light, int size);
 
 }  // namespace specbake::diffraction

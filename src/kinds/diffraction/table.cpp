@@ -597,25 +597,16 @@ struct Evaluator {
   const std::vector<float>& terms;
   const TableGeometry& g;
   const Band& band;
-  // The coefficients on the stack for the usual term counts (this runs per pixel and wavelength
-  // in the previews), on the heap beyond.
-  static constexpr int kSmall = 64;
-  double small[kSmall];
-  std::vector<double> big;
-  double* coef;
+  double kappa, s;
+  std::vector<double> coef;
   cplx scale;
-  Evaluator(const Evaluator&) = delete;
-  Evaluator& operator=(const Evaluator&) = delete;
-  Evaluator(const std::vector<float>& t, const TableGeometry& geo, const Field& f, const Band& b, double kappa)
-      : terms(t), g(geo), band(b), coef(small) {
-    if (b.terms > kSmall) {
-      big.resize(b.terms);
-      coef = big.data();
-    }
-    ref::expansion_coefficients(b.expansion == Expansion::taylor ? 0 : 1, kappa, b.kappa0, b.delta, f.s, b.terms,
-                                coef);
-    scale = static_cast<double>(f.count()) * std::polar(1.0, kappa * f.c);
+  Evaluator(const std::vector<float>& t, const TableGeometry& geo, const Field& f, const Band& b, double k)
+      : terms(t), g(geo), band(b), kappa(k), s(f.s), coef(b.terms) {
+    ref::expansion_coefficients(b.expansion == Expansion::taylor ? 0 : 1, k, b.kappa0, b.delta, f.s, b.terms,
+                                coef.data());
+    scale = static_cast<double>(f.count()) * std::polar(1.0, k * f.c);
   }
+  // The value at texel (iu, iv): Σ_n coef_n·F_n there, the coefficients made once.
   cplx at(int iu, int iv) const {
     const std::size_t per = static_cast<std::size_t>(g.size) * g.size, at = static_cast<std::size_t>(iv) * g.size + iu;
     double sr = 0, si = 0;
@@ -626,13 +617,13 @@ struct Evaluator {
     }
     return scale * cplx(sr, si);
   }
+  // A shader's filtered fetch (table.cl, the previews' lookup).
   cplx bilinear(double tu, double tv) const {
-    const double cu = std::clamp(tu, 0.0, g.size - 1.0), cv = std::clamp(tv, 0.0, g.size - 1.0);
-    const int u0 = std::min(static_cast<int>(std::floor(cu)), g.size - 2);
-    const int v0 = std::min(static_cast<int>(std::floor(cv)), g.size - 2);
-    const double a = cu - u0, b = cv - v0;
-    return (1 - a) * (1 - b) * at(u0, v0) + a * (1 - b) * at(u0 + 1, v0) + (1 - a) * b * at(u0, v0 + 1) +
-           a * b * at(u0 + 1, v0 + 1);
+    double re, im;
+    ref::table_bilinear_sum(terms.data(), g.size, band.first_term, band.terms,
+                            band.expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV, kappa,
+                            band.kappa0, band.delta, s, tu, tv, &re, &im);
+    return scale * cplx(re, im);
   }
 };
 }  // namespace

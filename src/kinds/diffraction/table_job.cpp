@@ -69,9 +69,10 @@ float percentile_exposure(const std::vector<float>& rgb) {
 // (every 10 nm); and the two fast shader variants' errors (the lobes over `fast`, and with the
 // specular peak apart over `fast` and `wl`) against those, as fractions of the picture's peak
 // (max and rms over the pixels and channels, and the max near the peak).
-void add_brdf_previews(const BrdfTable& t, const Wavelengths& wl, const Wavelengths& fast, BakeResult& r) {
+void add_brdf_previews(const BrdfPictures& pictures, const BrdfTable& t, const Wavelengths& wl, const Wavelengths& fast,
+                       BakeResult& r) {
   const std::vector<double> angles = {0.0, 30.0, 60.0};
-  const auto lobes = brdf_lobes(t, wl, angles, kLobePanel);
+  const auto lobes = pictures.lobes(wl, angles, kLobePanel);
   const float el = percentile_exposure(lobes);
   const int width = kLobePanel * static_cast<int>(angles.size());
   r.files.push_back({"preview/brdf_lobes.png", png_from_linear(width, kLobePanel, lobes, el), "",
@@ -79,7 +80,7 @@ void add_brdf_previews(const BrdfTable& t, const Wavelengths& wl, const Waveleng
                      "Stam's diffraction BRDF from the table (Fresnel n = 1.5 and geometry factor, docs/diffraction.md) "
                      "times D65 over the outgoing hemisphere seen from above, light at 0, 30 and 60 degrees from the "
                      "normal in the x-z plane; exposure " + format_g(el) + " (99.5th percentile of the lit pixels)"});
-  const auto sphere = brdf_sphere(t, wl, kSphereLight, kSpherePixels);
+  const auto sphere = pictures.sphere(wl, kSphereLight, kSpherePixels);
   const float es = percentile_exposure(sphere);
   r.files.push_back({"preview/sphere.png", png_from_linear(kSpherePixels, kSpherePixels, sphere, es), "",
                      {kSpherePixels, kSpherePixels, 3}, "", "",
@@ -111,9 +112,9 @@ void add_brdf_previews(const BrdfTable& t, const Wavelengths& wl, const Waveleng
          {"near_specular", "pixels where the specular peak's exp(-4 pi^2 sigma^2 |f|^2) at 550 nm is >= 1e-2"}}));
   };
   const std::string few = std::to_string(fast.lambda_um.size()) + " wavelengths";
-  record("shader_fast_vs_full", "diffraction_srgb_fast", brdf_lobes(t, fast, angles, kLobePanel), few);
+  record("shader_fast_vs_full", "diffraction_srgb_fast", pictures.lobes(fast, angles, kLobePanel), few);
   record("shader_fast_specular_vs_full", "diffraction_srgb_fast_specular",
-         brdf_lobes_fast_specular(t, fast, wl, angles, kLobePanel),
+         pictures.lobes_fast_specular(fast, wl, angles, kLobePanel),
          few + " for the diffracted part, the specular peak every 10 nm");
 }
 
@@ -335,7 +336,11 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
                      "", "", "GLSL: the table's lookup and the BRDF the previews draw (Stam, relative form)"});
   ctx.progress("preview", 0.95);
   tm.time("preview", [&] {
-    add_brdf_previews(BrdfTable{f, p.bands, g, values, win.sum, kPreviewIor, win.sigma_um}, every_nm(spectrum, kBrdfStepNm), fast, r);
+    const BrdfTable table{f, p.bands, g, values, win.sum, kPreviewIor, win.sigma_um};
+    // On a GPU the device draws them; on a CPU device (PoCL) the host's threads are faster (3.3 s
+    // against 2.3 s for the 8192² benchmark's previews on 2 cores; docs/diffraction.md).
+    cl_util::Device* on = ctx.device.info().type == "cpu" ? nullptr : &ctx.device;
+    add_brdf_previews(BrdfPictures(table, on), table, every_nm(spectrum, kBrdfStepNm), fast, r);
   });
   block["timings_s"] = tm.json();
   r.manifest_blocks["diffraction"] = block;

@@ -1,0 +1,163 @@
+/* table.cl — the diffraction BRDF evaluated from a baked table (docs/diffraction.md, "The BRDF the
+ * previews draw"), shared by the previews' kernel (kernels/diffraction/kernels.cl) and the C++
+ * double-precision reference (src/kinds/diffraction/brdf.cpp and table.cpp, via reference.hpp).
+ * The bundle's GLSL shader evaluates the same maths with a sampler2DArray in place of `terms`
+ * (src/kinds/diffraction/shader.cpp); its scalar parts are brdf.cl's, which this file uses.
+ *
+ * Table: float32 terms [T][size][size][re, im] (table_terms.bin), texel i's centre at continuous
+ * coordinate i on each axis. A band b is five reals in `bands`: κ_hi, first term, term count,
+ * expansion point κ_0 (κ_m), half-width Δ; the band holding κ is the first whose κ_hi ≥ κ, else
+ * the last (terms.hpp, band_for). Units: λ in µm, κ in rad/µm, s (the field's scale) in µm.
+ * P(f; κ) = W·H·e^{iκc}·Σ_n coef_n(κ)·F_n(f), so |P/Σw| = p_scale·|Σ_n coef_n·F_n| with
+ * p_scale = W·H/Σw.
+ */
+#include "common/real.h"
+
+#define DIFFRACTION_BAND_REALS 5
+/* Most wavelengths the fast variants' few may hold (a private array of this size). */
+#define DIFFRACTION_MAX_FEW 32
+
+/* Σ_n coef_n(κ)·F_{first+n} of one band, bilinearly interpolated at continuous texel coordinates
+ * (tu, tv) clamped to the table (a shader's CLAMP_TO_EDGE filtered fetch): the four texels' sums in
+ * one pass over the terms, the coefficients by expansion_coefficients' recurrences as the pass
+ * runs (taylor c_n = c_{n−1}·y/n, y = (κ − κ_0)·s; chebyshev T_n = 2t·T_{n−1} − T_{n−2},
+ * t = (κ − κ_m)/Δ), then the bilinear weights. */
+FN void table_bilinear_sum(GLOBAL const float* terms, int size, int first, int count, int expansion, real kappa,
+                           real kappa0, real delta, real s, real tu, real tv, real* re, real* im) {
+  real cu = fmin(fmax(tu, R(0.0)), (real)(size - 1));
+  real cv = fmin(fmax(tv, R(0.0)), (real)(size - 1));
+  int u0 = (int)floor(cu);
+  int v0 = (int)floor(cv);
+  if (u0 > size - 2) u0 = size - 2;
+  if (v0 > size - 2) v0 = size - 2;
+  real a = cu - (real)u0;
+  real b = cv - (real)v0;
+  long per = (long)size * size;
+  long i00 = 2 * ((long)v0 * size + u0);
+  long i01 = i00 + 2 * (long)size;
+  real y = (kappa - kappa0) * s;
+  real t = delta > R(0.0) ? (kappa - kappa0) / delta : R(0.0);
+  real c = R(1.0);
+  real previous = R(0.0);
+  real r00 = R(0.0), j00 = R(0.0), r10 = R(0.0), j10 = R(0.0), r01 = R(0.0), j01 = R(0.0), r11 = R(0.0),
+       j11 = R(0.0);
+  for (int n = 0; n < count; ++n) {
+    if (n > 0) {
+      real next = expansion == DIFFRACTION_TAYLOR ? c * y / (real)n : (n == 1 ? t : R(2.0) * t * c - previous);
+      previous = c;
+      c = next;
+    }
+    long at = 2 * (long)(first + n) * per;
+    r00 += c * terms[at + i00];
+    j00 += c * terms[at + i00 + 1];
+    r10 += c * terms[at + i00 + 2];
+    j10 += c * terms[at + i00 + 3];
+    r01 += c * terms[at + i01];
+    j01 += c * terms[at + i01 + 1];
+    r11 += c * terms[at + i01 + 2];
+    j11 += c * terms[at + i01 + 3];
+  }
+  *re = (R(1.0) - a) * (R(1.0) - b) * r00 + a * (R(1.0) - b) * r10 + (R(1.0) - a) * b * r01 + a * b * r11;
+  *im = (R(1.0) - a) * (R(1.0) - b) * j00 + a * (R(1.0) - b) * j10 + (R(1.0) - a) * b * j01 + a * b * j11;
+}
+
+/* The index of the band holding κ. */
+FN int table_band(int n_bands, GLOBAL const real* bands, real kappa) {
+  int b = 0;
+  while (b + 1 < n_bands && kappa > bands[DIFFRACTION_BAND_REALS * b]) ++b;
+  return b;
+}
+
+/* |P(f; κ)/Σw|² at f (cycles/µm) for κ: 0 beyond f_max on either axis (the table's reach). */
+FN real table_intensity(GLOBAL const float* terms, int size, real f_max, real power, int n_bands,
+                        GLOBAL const real* bands, int expansion, real s, real p_scale, real fu, real fv, real kappa) {
+  if (fabs(fu) > f_max || fabs(fv) > f_max) return R(0.0);
+  GLOBAL const real* band = bands + DIFFRACTION_BAND_REALS * table_band(n_bands, bands, kappa);
+  real re, im;
+  table_bilinear_sum(terms, size, (int)band[1], (int)band[2], expansion, kappa, band[3], band[4], s,
+                     diffraction_texel(fu, f_max, power, (real)size), diffraction_texel(fv, f_max, power, (real)size),
+                     &re, &im);
+  return p_scale * p_scale * (re * re + im * im);
+}
+
+/* Stam's gain C(ω_i, ω_o) of brdf.cl from the two unit vectors (tangent frame, z the normal). */
+FN real table_gain(real wix, real wiy, real wiz, real wox, real woy, real woz, real ior) {
+  real hx = wix + wox;
+  real hy = wiy + woy;
+  real hz = wiz + woz;
+  real l = sqrt(hx * hx + hy * hy + hz * hz);
+  return stam_gain(wiz, woz, wix * wox + wiy * woy + wiz * woz, (wix * hx + wiy * hy + wiz * hz) / l, ior);
+}
+
+/* ρ_λ(ω_i, ω_o) = C·|P(f; κ)/Σw|², f = −(ω_i + ω_o)_xy/λ, κ = 2π(cos θ_i + cos θ_o)/λ; 0 below
+ * either horizon. */
+FN real table_brdf(GLOBAL const float* terms, int size, real f_max, real power, int n_bands, GLOBAL const real* bands,
+                   int expansion, real s, real p_scale, real ior, real wix, real wiy, real wiz, real wox, real woy,
+                   real woz, real lambda_um) {
+  if (wiz <= R(0.0) || woz <= R(0.0)) return R(0.0);
+  real p2 = table_intensity(terms, size, f_max, power, n_bands, bands, expansion, s, p_scale,
+                            -(wix + wox) / lambda_um, -(wiy + woy) / lambda_um,
+                            R(6.283185307179586) * (wiz + woz) / lambda_um);
+  return table_gain(wix, wiy, wiz, wox, woy, woz, ior) * p2;
+}
+
+/* CIE XYZ of one pair of directions: Σ_λ ρ_λ·(X, Y, Z)_λ over `n_wl` wavelengths, `wl` holding
+ * four reals per wavelength (λ µm, then the X, Y, Z weights). */
+FN void table_xyz(GLOBAL const float* terms, int size, real f_max, real power, int n_bands, GLOBAL const real* bands,
+                  int expansion, real s, real p_scale, real ior, real wix, real wiy, real wiz, real wox, real woy,
+                  real woz, int n_wl, GLOBAL const real* wl, real* xyz) {
+  xyz[0] = R(0.0);
+  xyz[1] = R(0.0);
+  xyz[2] = R(0.0);
+  for (int k = 0; k < n_wl; ++k) {
+    real rho = table_brdf(terms, size, f_max, power, n_bands, bands, expansion, s, p_scale, ior, wix, wiy, wiz, wox,
+                          woy, woz, wl[4 * k]);
+    xyz[0] += rho * wl[4 * k + 1];
+    xyz[1] += rho * wl[4 * k + 2];
+    xyz[2] += rho * wl[4 * k + 3];
+  }
+}
+
+/* The fast variant with the specular peak apart (brdf.hpp, xyz_fast_specular): the diffracted
+ * remainder C·(|P/Σw|² − |χ|²·G) over the `n_few` wavelengths of `few` (ascending, 2 ≤ n_few ≤
+ * DIFFRACTION_MAX_FEW), χ(κ) = P(0; κ)/Σw, G = exp(−4π²σ²|f|²) (0 beyond the table's reach); the
+ * peak C·|χ|²·G over the `n_all` wavelengths of `all`, |χ|² linear in λ between its values at
+ * `few` (clamped at the ends). Wavelength rows as table_xyz's. */
+FN void table_xyz_fast_specular(GLOBAL const float* terms, int size, real f_max, real power, int n_bands,
+                                GLOBAL const real* bands, int expansion, real s, real p_scale, real ior, real sigma_um,
+                                real wix, real wiy, real wiz, real wox, real woy, real woz, int n_few,
+                                GLOBAL const real* few, int n_all, GLOBAL const real* all, real* xyz) {
+  REQUIRE(n_few >= 2 && n_few <= DIFFRACTION_MAX_FEW);
+  xyz[0] = R(0.0);
+  xyz[1] = R(0.0);
+  xyz[2] = R(0.0);
+  if (wiz <= R(0.0) || woz <= R(0.0)) return;
+  real gain = table_gain(wix, wiy, wiz, wox, woy, woz, ior);
+  real du = -(wix + wox);
+  real dv = -(wiy + woy);
+  real chi2[DIFFRACTION_MAX_FEW];
+  for (int k = 0; k < n_few; ++k) {
+    real lambda = few[4 * k];
+    real kappa = R(6.283185307179586) * (wiz + woz) / lambda;
+    chi2[k] = table_intensity(terms, size, f_max, power, n_bands, bands, expansion, s, p_scale, R(0.0), R(0.0), kappa);
+    real beyond = fabs(du / lambda) > f_max || fabs(dv / lambda) > f_max ? R(0.0) : R(1.0);
+    real rest = table_brdf(terms, size, f_max, power, n_bands, bands, expansion, s, p_scale, ior, wix, wiy, wiz, wox,
+                           woy, woz, lambda) -
+                gain * chi2[k] * beyond * specular_peak(du * du + dv * dv, lambda, sigma_um);
+    xyz[0] += rest * few[4 * k + 1];
+    xyz[1] += rest * few[4 * k + 2];
+    xyz[2] += rest * few[4 * k + 3];
+  }
+  for (int i = 0; i < n_all; ++i) {
+    real lambda = all[4 * i];
+    int k = 0;
+    while (k + 2 < n_few && lambda > few[4 * (k + 1)]) ++k;
+    real w = lerp_weight(lambda, few[4 * k], few[4 * (k + 1)]);
+    real beyond = fabs(du / lambda) > f_max || fabs(dv / lambda) > f_max ? R(0.0) : R(1.0);
+    real spec = gain * (chi2[k] * (R(1.0) - w) + chi2[k + 1] * w) * beyond *
+                specular_peak(du * du + dv * dv, lambda, sigma_um);
+    xyz[0] += spec * all[4 * i + 1];
+    xyz[1] += spec * all[4 * i + 2];
+    xyz[2] += spec * all[4 * i + 3];
+  }
+}
