@@ -146,6 +146,18 @@ __kernel void diffraction_table_spread_columns(__global const float* col, int n_
   out[2 * at + 1] = (float)(si * inv);
 }
 
+/* The exact transform's input e^{iκh} of every sample i < count (src/kinds/diffraction/terms.cpp,
+ * ExactDft; host twin: std::polar), interleaved (re, im) into p, the layout the double VkFFT
+ * transforms. Built in double only (SPECBAKE_REAL_DOUBLE): it feeds a ground truth. */
+__kernel void diffraction_phase_field(__global const real* h, int count, real kappa, __global real* p) {
+  const int i = get_global_id(0);
+  if (i >= count) return;
+  real c;
+  const real sn = sincos(kappa * h[i], &c);
+  p[2 * (size_t)i] = c;
+  p[2 * (size_t)i + 1] = sn;
+}
+
 /* The windowed field of `rows` field rows from iy_first (the exact transform's input; host twin
  * direct_transform_grid in src/kinds/diffraction/table.cpp): one work item per sample,
  *   a[r][ix] = wx[ix]·wy[iy]·e^{iκh[iy][ix]},   iy = iy_first + r,

@@ -273,14 +273,22 @@ struct ExactDft::Impl {
   const Field* f = nullptr;
   Bins bins;
   cl_util::Fft2d* fft = nullptr;  // the device's shared double-precision plan
+  cl::Kernel phase;               // diffraction_phase_field
+  cl::Buffer h, p;                // the heights (uploaded once) and the transformed array
 };
 
 ExactDft::ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins) : impl_(std::make_unique<Impl>()) {
   impl_->f = &f;
   impl_->bins = bins;
   if (dev && dev->info().fp64) {
-    impl_->dev = dev;
     impl_->fft = &cl_util::shared_fft(*dev, f.width, f.height, 1, cl_util::FftPrecision::double_);
+    cl_util::checked("exact DFT: device set-up", [&] {
+      impl_->phase = cl::Kernel(dev->build(kProgram, dev->real_options()), "diffraction_phase_field");
+      impl_->h = cl_util::upload_real(*dev, f.h_um);
+      impl_->p = cl::Buffer(dev->context(), CL_MEM_READ_WRITE, static_cast<std::size_t>(f.count()) * sizeof(cplx));
+      return 0;
+    });
+    impl_->dev = dev;
   }
 }
 ExactDft::~ExactDft() = default;
@@ -297,19 +305,27 @@ std::vector<cplx> ExactDft::operator()(double kappa) {
       out[static_cast<std::size_t>(-bins.kv_min) * bins.ku_count() - bins.ku_min] = static_cast<double>(m);
     return out;
   }
-  std::vector<cplx> p(m);
-  parallel_for(f.height, [&](long long iy) {
-    for (std::size_t i = iy * static_cast<std::size_t>(f.width), e = i + f.width; i < e; ++i)
-      p[i] = std::polar(1.0, kappa * f.h_um[i]);
-  });
   if (!impl_->fft) {
+    std::vector<cplx> p(m);
+    parallel_for(f.height, [&](long long iy) {
+      for (std::size_t i = iy * static_cast<std::size_t>(f.width), e = i + f.width; i < e; ++i)
+        p[i] = std::polar(1.0, kappa * f.h_um[i]);
+    });
     auto out = host_dft(p, f.width, f.height, bins);
     for (auto& v : out) v *= static_cast<double>(m);
     return out;
   }
   cl_util::Device& dev = *impl_->dev;
   return cl_util::checked("exact DFT", [&] {
-    cl::Buffer buf(dev.context(), CL_MEM_READ_WRITE | CL_MEM_COPY_HOST_PTR, m * sizeof(cplx), p.data());
+    // e^{iκh} formed on the device from the heights uploaded once, transformed in place.
+    cl::Buffer& buf = impl_->p;
+    impl_->phase.setArg(0, impl_->h);
+    impl_->phase.setArg(1, static_cast<int>(m));
+    impl_->phase.setArg(2, kappa);
+    impl_->phase.setArg(3, buf);
+    cl::Event ev;
+    dev.queue().enqueueNDRangeKernel(impl_->phase, cl::NullRange, cl::NDRange(m), cl::NullRange, nullptr, &ev);
+    dev.profiler().record(ev);
     impl_->fft->forward(buf);
     // Read only the bins, as rectangles of the unshifted transform.
     const std::size_t nu = bins.ku_count(), nv = bins.kv_count(), pair = sizeof(cplx);

@@ -80,7 +80,8 @@ std::vector<cplx> reference_terms_at(const Field& f, const std::vector<Band>& ba
                                      const std::vector<std::pair<int, int>>& bins);
 
 // Exact P(k;κ) = Σ e^{iκh}·e^{−2πi(...)} over the bins ([kv][ku], not divided by M²), in double
-// precision: VkFFT double on the device when it has fp64 (dev != nullptr), else the host DFT;
+// precision: VkFFT double on the device when it has fp64 (dev != nullptr; e^{iκh} formed there by
+// diffraction_phase_field from the heights, uploaded once), else the host DFT;
 // κ = 0 needs no transform (M² at the DC bin, 0 elsewhere).
 class ExactDft {
  public:
