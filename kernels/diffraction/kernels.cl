@@ -158,6 +158,38 @@ __kernel void diffraction_phase_field(__global const real* h, int count, real ka
   p[2 * (size_t)i + 1] = sn;
 }
 
+/* The error of a reconstruction from stored terms (src/kinds/diffraction/terms.cpp, ExactDft::max_error;
+ * host twin: reconstruct and a maximum): work item g < n_items visits the bins j = g, g + n_items, …
+ * < ku_count·kv_count of the cropped terms (float32 [T][kv][ku][re, im], bin (ku_min + j mod ku_count,
+ * kv_min + j / ku_count)), forms P_rec = front·Σ_n coef[n]·F_{first+n}[j] (in term order) and takes
+ * P_exact from the unshifted W×H transform p (interleaved double) at (ku mod W, kv mod H); out[g] =
+ * max_j |P_rec − P_exact|. Built in double only: it measures against a ground truth. */
+__kernel void diffraction_reconstruction_error(__global const float* terms, int ku_min, int kv_min, int ku_count,
+                                               int kv_count, int width, int height, int first, int count,
+                                               __global const real* coef, real front_re, real front_im,
+                                               __global const real* p, int n_items, __global real* out) {
+  const int g = get_global_id(0);
+  if (g >= n_items) return;
+  const size_t per = (size_t)ku_count * kv_count;
+  real worst = R(0.0);
+  for (size_t j = g; j < per; j += n_items) {
+    real sr = R(0.0), si = R(0.0);
+    for (int n = 0; n < count; ++n) {
+      const size_t at = 2 * ((size_t)(first + n) * per + j);
+      sr += coef[n] * terms[at];
+      si += coef[n] * terms[at + 1];
+    }
+    int ku = ku_min + (int)(j % ku_count), kv = kv_min + (int)(j / ku_count);
+    ku %= width;
+    kv %= height;
+    if (ku < 0) ku += width;
+    if (kv < 0) kv += height;
+    const size_t e = 2 * ((size_t)kv * width + ku);
+    worst = fmax(worst, hypot(front_re * sr - front_im * si - p[e], front_re * si + front_im * sr - p[e + 1]));
+  }
+  out[g] = worst;
+}
+
 /* The windowed field of `rows` field rows from iy_first (the exact transform's input; host twin
  * direct_transform_grid in src/kinds/diffraction/table.cpp): one work item per sample,
  *   a[r][ix] = wx[ix]·wy[iy]·e^{iκh[iy][ix]},   iy = iy_first + r,

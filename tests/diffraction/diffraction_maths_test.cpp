@@ -336,6 +336,46 @@ TEST(DiffractionMaths, DeviceMatchesDoubleReferenceNonSquarePrimeSizes) {
   EXPECT_LE(worst, 1e3 * 1.1102230246251565e-16 * f.count());
 }
 
+TEST(DiffractionMaths, ReconstructionErrorOnTheDeviceMatchesTheHost) {
+  // The error measurement's maximum over the bins (ExactDft::max_error): on the device the exact
+  // transform stays there and each work item reduces its bins; on the host, reconstruct and a
+  // maximum. Both reconstruct in double from the same float32 terms, so they differ by the exact
+  // transforms' difference (≤ 1e3·2^-53·N, the bound above) plus the reconstruction's rounding
+  // (≤ (T + 4)·2^-53·Σ_n|coef_n·F_n|·M² per bin, below 1e-12·M² here): 1e3·2^-53·N + 1e-12·M².
+  // Cropped, non-symmetric bins (negative and positive ku, kv wrap around the unshifted array) and
+  // a prime width (Bluestein). A shifted crop must give a different maximum: the bin mapping shows.
+  const Field f = centre_field(asymmetric_field(37, 29), Centre::mid_range);
+  if (!device().info().fp64) GTEST_SKIP() << "no fp64: the exact transform and its error stay on the host";
+  Plan p;
+  p.kappa_hi = 33.0;
+  p.bands = make_bands(Expansion::chebyshev, 0.0, 33.0, f.s, 2, 12, kU);
+  p.total_terms = 24;
+  p.bins = Bins{-7, 11, -9, 5};
+  const Terms t = device_terms(device(), f, p, kQuiet);
+  ExactDft on_dev(&device(), f, p.bins), on_host(nullptr, f, p.bins);
+  ASSERT_TRUE(on_dev.on_device());
+  on_dev.prepare(t, true);
+  on_host.prepare(t, false);
+  const double m2 = static_cast<double>(f.count()), bound = 1e3 * 0x1p-53 * m2 + 1e-12 * m2;
+  for (double kappa : {0.0, 9.0, 20.0, 33.0}) {
+    on_dev.transform(kappa);
+    on_host.transform(kappa);
+    const Band& band = band_for(p.bands, kappa);
+    const double dev_err = on_dev.max_error(band), host_err = on_host.max_error(band);
+    EXPECT_NEAR(dev_err, host_err, bound) << "kappa " << kappa;
+    EXPECT_GT(host_err, 0.0) << "kappa " << kappa;
+  }
+  // The same terms read as if their bins started one column later: the maximum must move.
+  Terms shifted = t;
+  shifted.bins = Bins{-6, 12, -9, 5};
+  ExactDft moved(&device(), f, shifted.bins);
+  moved.prepare(shifted, true);
+  moved.transform(20.0);
+  on_host.transform(20.0);
+  EXPECT_GT(std::fabs(moved.max_error(band_for(p.bands, 20.0)) - on_host.max_error(band_for(p.bands, 20.0))),
+            1e3 * bound);
+}
+
 TEST(DiffractionMaths, SharedFftPlansAreReusedAndGiveTheSameTerms) {
   auto& a = cl_util::shared_fft(device(), 48, 40, 1, cl_util::FftPrecision::single);
   EXPECT_EQ(&a, &cl_util::shared_fft(device(), 48, 40, 1, cl_util::FftPrecision::single));

@@ -275,6 +275,25 @@ struct ExactDft::Impl {
   cl_util::Fft2d* fft = nullptr;  // the device's shared double-precision plan
   cl::Kernel phase;               // diffraction_phase_field
   cl::Buffer h, p;                // the heights (uploaded once) and the transformed array
+  // The error of a reconstruction (prepare, transform, max_error).
+  cl::Kernel error;               // diffraction_reconstruction_error
+  const Terms* terms = nullptr;
+  cl::Buffer terms_dev;
+  double kappa = 0.0;
+  bool errors_on_device = false;  // prepare's choice
+  bool exact_on_device = false;   // the last transform is in p, else in `exact`
+  std::vector<cplx> exact;
+  // e^{iκh} formed on the device from the heights, transformed in place into p.
+  void transform_on_device(double k) {
+    phase.setArg(0, h);
+    phase.setArg(1, static_cast<int>(f->count()));
+    phase.setArg(2, k);
+    phase.setArg(3, p);
+    cl::Event ev;
+    dev->queue().enqueueNDRangeKernel(phase, cl::NullRange, cl::NDRange(f->count()), cl::NullRange, nullptr, &ev);
+    dev->profiler().record(ev);
+    fft->forward(p);
+  }
 };
 
 ExactDft::ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins) : impl_(std::make_unique<Impl>()) {
@@ -283,7 +302,9 @@ ExactDft::ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins) : imp
   if (dev && dev->info().fp64) {
     impl_->fft = &cl_util::shared_fft(*dev, f.width, f.height, 1, cl_util::FftPrecision::double_);
     cl_util::checked("exact DFT: device set-up", [&] {
-      impl_->phase = cl::Kernel(dev->build(kProgram, dev->real_options()), "diffraction_phase_field");
+      const cl::Program program = dev->build(kProgram, dev->real_options());
+      impl_->phase = cl::Kernel(program, "diffraction_phase_field");
+      impl_->error = cl::Kernel(program, "diffraction_reconstruction_error");
       impl_->h = cl_util::upload_real(*dev, f.h_um);
       impl_->p = cl::Buffer(dev->context(), CL_MEM_READ_WRITE, static_cast<std::size_t>(f.count()) * sizeof(cplx));
       return 0;
@@ -317,16 +338,8 @@ std::vector<cplx> ExactDft::operator()(double kappa) {
   }
   cl_util::Device& dev = *impl_->dev;
   return cl_util::checked("exact DFT", [&] {
-    // e^{iκh} formed on the device from the heights uploaded once, transformed in place.
+    impl_->transform_on_device(kappa);
     cl::Buffer& buf = impl_->p;
-    impl_->phase.setArg(0, impl_->h);
-    impl_->phase.setArg(1, static_cast<int>(m));
-    impl_->phase.setArg(2, kappa);
-    impl_->phase.setArg(3, buf);
-    cl::Event ev;
-    dev.queue().enqueueNDRangeKernel(impl_->phase, cl::NullRange, cl::NDRange(m), cl::NullRange, nullptr, &ev);
-    dev.profiler().record(ev);
-    impl_->fft->forward(buf);
     // Read only the bins, as rectangles of the unshifted transform.
     const std::size_t nu = bins.ku_count(), nv = bins.kv_count(), pair = sizeof(cplx);
     std::vector<cplx> out(nu * nv);
@@ -380,6 +393,82 @@ std::vector<cplx> reconstruct(const std::vector<cplx>& terms, const Bins& bins, 
                               double kappa) {
   const std::size_t per = static_cast<std::size_t>(bins.ku_count()) * bins.kv_count();
   return reconstruct_with([&](int n, std::size_t i) { return terms[n * per + i]; }, bins, band, f, kappa);
+}
+
+namespace {
+// max_j |a_j − b_j| over runs of elements on the hardware threads (a maximum: the same in any order).
+double max_abs_difference(const std::vector<cplx>& a, const std::vector<cplx>& b) {
+  constexpr std::size_t kRun = 1 << 16;
+  const std::size_t runs = (a.size() + kRun - 1) / kRun;
+  std::vector<double> worst(runs, 0.0);
+  parallel_for(static_cast<long long>(runs), [&](long long r) {
+    double m = 0.0;
+    for (std::size_t j = static_cast<std::size_t>(r) * kRun, e = std::min(a.size(), j + kRun); j < e; ++j)
+      m = std::max(m, std::abs(a[j] - b[j]));
+    worst[r] = m;
+  });
+  return worst.empty() ? 0.0 : *std::max_element(worst.begin(), worst.end());
+}
+constexpr std::size_t kErrorItems = 1 << 15;  // work items of diffraction_reconstruction_error
+}  // namespace
+
+void ExactDft::prepare(const Terms& terms, bool on_device) {
+  impl_->terms = &terms;
+  impl_->errors_on_device = impl_->fft && on_device;
+  if (!impl_->errors_on_device) return;
+  cl_util::Device& dev = *impl_->dev;
+  impl_->terms_dev = cl_util::checked("reconstruction error: terms upload", [&] {
+    return cl::Buffer(dev.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, terms.values.size() * sizeof(float),
+                      const_cast<float*>(terms.values.data()));
+  });
+}
+
+void ExactDft::transform(double kappa) {
+  impl_->kappa = kappa;
+  impl_->exact_on_device = impl_->errors_on_device && kappa != 0.0;
+  if (impl_->exact_on_device)
+    cl_util::checked("exact DFT", [&] {
+      impl_->transform_on_device(kappa);
+      return 0;
+    });
+  else
+    impl_->exact = (*this)(kappa);
+}
+
+double ExactDft::max_error(const Band& band) {
+  const Terms& t = *impl_->terms;
+  const Field& f = *impl_->f;
+  const double kappa = impl_->kappa;
+  if (!impl_->exact_on_device) return max_abs_difference(reconstruct(t, band, f, kappa), impl_->exact);
+  cl_util::Device& dev = *impl_->dev;
+  std::vector<double> coef(band.terms);
+  ref::expansion_coefficients(expansion_id(band.expansion), kappa, band.kappa0, band.delta, f.s, band.terms,
+                              coef.data());
+  const cplx front = static_cast<double>(f.count()) * std::polar(1.0, kappa * f.c);
+  const std::size_t items = std::min<std::size_t>(kErrorItems, t.per_term());
+  return cl_util::checked("reconstruction error", [&] {
+    const cl::Buffer coef_dev = cl_util::upload_real(dev, coef), out = cl_util::device_real(dev, items);
+    cl::Kernel& k = impl_->error;
+    int arg = 0;
+    k.setArg(arg++, impl_->terms_dev);
+    k.setArg(arg++, t.bins.ku_min);
+    k.setArg(arg++, t.bins.kv_min);
+    k.setArg(arg++, t.bins.ku_count());
+    k.setArg(arg++, t.bins.kv_count());
+    k.setArg(arg++, f.width);
+    k.setArg(arg++, f.height);
+    k.setArg(arg++, band.first_term);
+    k.setArg(arg++, band.terms);
+    k.setArg(arg++, coef_dev);
+    k.setArg(arg++, front.real());
+    k.setArg(arg++, front.imag());
+    k.setArg(arg++, impl_->p);
+    k.setArg(arg++, static_cast<int>(items));
+    k.setArg(arg++, out);
+    cl_util::run_1d(dev, k, items);
+    const auto worst = cl_util::download_real(dev, out, items);
+    return *std::max_element(worst.begin(), worst.end());
+  });
 }
 
 }  // namespace specbake::diffraction

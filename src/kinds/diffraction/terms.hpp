@@ -90,6 +90,17 @@ class ExactDft {
   std::vector<cplx> operator()(double kappa);
   bool on_device() const;
 
+  // The error of a reconstruction: prepare(terms) once (terms must outlive the calls), then per κ
+  // transform(κ) and, for each band holding κ, max_error(band): max over the bins of |P_rec −
+  // P_exact(κ)| with P_rec = reconstruct(terms, band, f, κ). With `on_device` and the transform on
+  // the device: the terms uploaded once, P_exact never read back, each work item's maximum over
+  // its bins by diffraction_reconstruction_error (κ = 0 excepted: its exact values need no
+  // transform); else on the host's threads. A maximum: the same whatever the split. The bake asks
+  // for the device on a GPU only: on a CPU device (PoCL) the host's threads are ~4x faster.
+  void prepare(const Terms& terms, bool on_device);
+  void transform(double kappa);
+  double max_error(const Band& band);
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
