@@ -256,3 +256,20 @@ __kernel void diffraction_brdf_xyz(__global const float* terms, int size, real f
                             d[2], d[3], d[4], d[5], n_few, few, n_wl, wl, out);
   for (int c = 0; c < 3; ++c) xyz[3 * (size_t)i + c] = out[c];
 }
+
+/* The non-table job's preview (src/kinds/diffraction/diffraction_job.cpp): one work item per pixel
+ * of a size × size picture of the unit disk (pixel centres, row 0 at v = 1), bins_preview_xyz over
+ * the bundle's [T][kv][ku] terms, CIE XYZ into xyz[3·(py·size + px) …]. */
+__kernel void diffraction_bins_preview(__global const float* terms, int ku_min, int kv_min, int ku_count, int kv_count,
+                                       int n_bands, __global const real* bands, int expansion, real s, int width,
+                                       int height, real dx, real w_max, int n_rows, __global const real* rows,
+                                       real step_nm, int size, __global real* xyz) {
+  const int px = get_global_id(0), py = get_global_id(1);
+  if (px >= size || py >= size) return;
+  const real v = R(1.0) - ((real)py + R(0.5)) * R(2.0) / (real)size;
+  const real u = R(-1.0) + ((real)px + R(0.5)) * R(2.0) / (real)size;
+  real out[3];
+  bins_preview_xyz(terms, 2 * (long)ku_count * kv_count, 2, ku_min, kv_min, ku_count, kv_count, n_bands, bands,
+                   expansion, s, width, height, dx, u, v, w_max, n_rows, rows, step_nm, out);
+  for (int c = 0; c < 3; ++c) xyz[3 * ((size_t)py * size + px) + c] = out[c];
+}

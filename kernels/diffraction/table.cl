@@ -1,6 +1,7 @@
-/* table.cl — the diffraction BRDF evaluated from a baked table (docs/diffraction.md, "The BRDF the
- * previews draw"), shared by the previews' kernel (kernels/diffraction/kernels.cl) and the C++
- * double-precision reference (src/kinds/diffraction/brdf.cpp and table.cpp, via reference.hpp).
+/* table.cl — the previews' lookups of stored terms: the diffraction BRDF evaluated from a baked
+ * table (docs/diffraction.md, "The BRDF the previews draw") and the non-table job's preview from its
+ * bins, shared by the previews' kernels (kernels/diffraction/kernels.cl) and the C++ double
+ * reference (src/kinds/diffraction/brdf.cpp, table.cpp and diffraction_job.cpp, via reference.hpp).
  * The bundle's GLSL shader evaluates the same maths with a sampler2DArray in place of `terms`
  * (src/kinds/diffraction/shader.cpp); its scalar parts are brdf.cl's, which this file uses.
  *
@@ -159,5 +160,74 @@ FN void table_xyz_fast_specular(GLOBAL const float* terms, int size, real f_max,
     xyz[0] += spec * all[4 * i + 1];
     xyz[1] += spec * all[4 * i + 2];
     xyz[2] += spec * all[4 * i + 3];
+  }
+}
+
+/* ---- The non-table job's preview from its bins (src/kinds/diffraction/diffraction_job.cpp) ----
+ * Bins: float32 F_n at integer bins ku_min ≤ ku < ku_min + ku_count (kv likewise), term n of bin
+ * (a, b) at terms[n·term_stride + (b·ku_count + a)·bin_stride] (re, then im): the bundle's
+ * [T][kv][ku] (term_stride = 2·bins, bin_stride = 2) or regrouped per bin (2, 2T). */
+
+/* |P/M²|² bilinear between the four bins around continuous bin coordinates (fu, fv) (bins outside
+ * weigh 0), |P/M²| = |Σ_n coef_n(κ)·F_n| over the band's terms, the coefficients by
+ * expansion_coefficients' recurrences. */
+FN real bins_power(GLOBAL const float* terms, long term_stride, long bin_stride, int ku_min, int kv_min, int ku_count,
+                   int kv_count, int first, int count, int expansion, real kappa, real kappa0, real delta, real s,
+                   real fu, real fv) {
+  int u0 = (int)floor(fu);
+  int v0 = (int)floor(fv);
+  real power = R(0.0);
+  for (int c = 0; c < 4; ++c) {
+    int du = c & 1;
+    int dv = c >> 1;
+    int a = u0 + du - ku_min;
+    int b = v0 + dv - kv_min;
+    if (a < 0 || a >= ku_count || b < 0 || b >= kv_count) continue;
+    real wt = (du ? fu - (real)u0 : R(1.0) - (fu - (real)u0)) * (dv ? fv - (real)v0 : R(1.0) - (fv - (real)v0));
+    GLOBAL const float* q = terms + ((long)b * ku_count + a) * bin_stride + (long)first * term_stride;
+    real y = (kappa - kappa0) * s;
+    real t = delta > R(0.0) ? (kappa - kappa0) / delta : R(0.0);
+    real coef = R(1.0);
+    real previous = R(0.0);
+    real re = R(0.0), im = R(0.0);
+    for (int n = 0; n < count; ++n) {
+      if (n > 0) {
+        real next = expansion == DIFFRACTION_TAYLOR ? coef * y / (real)n : (n == 1 ? t : R(2.0) * t * coef - previous);
+        previous = coef;
+        coef = next;
+      }
+      re += coef * q[n * term_stride];
+      im += coef * q[n * term_stride + 1];
+    }
+    power += wt * (re * re + im * im);
+  }
+  return power;
+}
+
+/* CIE XYZ of the preview's pixel (u, v) in the unit disk (white D65 light at normal incidence):
+ * Σ over the n_rows spectrum rows (λ nm, D65·x̄, D65·ȳ, D65·z̄) of |P(u/λ, v/λ; κ)/M²|²·row·step_nm,
+ * w = 1 + √(1 − u² − v²), κ = 2πw/λ, bins at (u/λ·W·dx, v/λ·H·dx); 0 where w > w_max. Bands as
+ * table_xyz's. */
+FN void bins_preview_xyz(GLOBAL const float* terms, long term_stride, long bin_stride, int ku_min, int kv_min,
+                         int ku_count, int kv_count, int n_bands, GLOBAL const real* bands, int expansion, real s,
+                         int width, int height, real dx, real u, real v, real w_max, int n_rows,
+                         GLOBAL const real* rows, real step_nm, real* xyz) {
+  xyz[0] = R(0.0);
+  xyz[1] = R(0.0);
+  xyz[2] = R(0.0);
+  real r2 = u * u + v * v;
+  if (r2 >= R(1.0)) return;
+  real w = R(1.0) + sqrt(R(1.0) - r2);
+  if (w > w_max) return;
+  for (int k = 0; k < n_rows; ++k) {
+    real lambda_um = rows[4 * k] * R(1e-3);
+    real kappa = R(6.283185307179586476925287) * w / lambda_um;
+    GLOBAL const real* band = bands + DIFFRACTION_BAND_REALS * table_band(n_bands, bands, kappa);
+    real power = bins_power(terms, term_stride, bin_stride, ku_min, kv_min, ku_count, kv_count, (int)band[1],
+                            (int)band[2], expansion, kappa, band[3], band[4], s, u / lambda_um * (real)width * dx,
+                            v / lambda_um * (real)height * dx);
+    xyz[0] += power * rows[4 * k + 1] * step_nm;
+    xyz[1] += power * rows[4 * k + 2] * step_nm;
+    xyz[2] += power * rows[4 * k + 3] * step_nm;
   }
 }

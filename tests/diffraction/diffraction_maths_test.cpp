@@ -13,6 +13,7 @@
 
 #include "cl/device.hpp"
 #include "cl/fft.hpp"
+#include "kinds/diffraction/diffraction_job.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "kinds/diffraction/reference.hpp"
 #include "kinds/diffraction/terms.hpp"
@@ -374,6 +375,41 @@ TEST(DiffractionMaths, ReconstructionErrorOnTheDeviceMatchesTheHost) {
   on_host.transform(20.0);
   EXPECT_GT(std::fabs(moved.max_error(band_for(p.bands, 20.0)) - on_host.max_error(band_for(p.bands, 20.0))),
             1e3 * bound);
+}
+
+TEST(DiffractionMaths, BinsPreviewOnTheDeviceMatchesTheHost) {
+  // The non-table job's preview on a GPU (diffraction_bins_preview over the bundle's [T][kv][ku]
+  // terms) against the host's double evaluation of the same bins_preview_xyz over the terms
+  // regrouped per bin. With fp64 both run in double and differ by contraction only: per pixel a
+  // few ulps of Σ_λ Σ_bins w·|Σ_n coef_n·F_n|² with |T_n| ≤ 1 (Chebyshev), below 1e-12 of the
+  // picture's largest value; 1e-9 is asserted. Without fp64 the kernel runs in float: (T + 8)·2^-24
+  // relative per sum, 1e-4 of the largest. Terms read as if their bins started one column later
+  // must draw differently (the bin mapping shows).
+  const Field f = centre_field(asymmetric_field(37, 29), Centre::mid_range);
+  Plan p;
+  p.kappa_hi = 33.0;
+  p.bands = make_bands(Expansion::chebyshev, 0.0, 33.0, f.s, 2, 12, kU);
+  p.total_terms = 24;
+  p.bins = Bins{-7, 11, -9, 5};
+  const Terms t = device_terms(device(), f, p, kQuiet);
+  double y_norm = 0;
+  const auto spectrum = spectrum_rows(RangeNm{380.0, 780.0}, y_norm);
+  const auto host = preview_xyz(nullptr, f, p, t, spectrum, 2.0), dev = preview_xyz(&device(), f, p, t, spectrum, 2.0);
+  ASSERT_EQ(host.size(), 3u * kPreviewSize * kPreviewSize);
+  ASSERT_EQ(dev.size(), host.size());
+  double largest = 0, worst = 0;
+  for (std::size_t i = 0; i < host.size(); ++i) {
+    largest = std::max(largest, std::fabs(host[i]));
+    worst = std::max(worst, std::fabs(host[i] - dev[i]));
+  }
+  EXPECT_GT(largest, 0.0);
+  EXPECT_LE(worst, (device().info().fp64 ? 1e-9 : 1e-4) * largest);
+  Terms shifted = t;
+  shifted.bins = Bins{-6, 12, -9, 5};
+  const auto moved = preview_xyz(&device(), f, p, shifted, spectrum, 2.0);
+  double diff = 0;
+  for (std::size_t i = 0; i < host.size(); ++i) diff = std::max(diff, std::fabs(host[i] - moved[i]));
+  EXPECT_GT(diff, 1e-3 * largest);
 }
 
 TEST(DiffractionMaths, SharedFftPlansAreReusedAndGiveTheSameTerms) {

@@ -23,14 +23,6 @@ Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 
-// The bands as table.cl takes them: κ_hi, first term, term count, κ_0, Δ per band.
-std::vector<double> packed_bands(const std::vector<Band>& bands) {
-  std::vector<double> b;
-  for (const auto& band : bands)
-    b.insert(b.end(), {band.kappa_hi, static_cast<double>(band.first_term), static_cast<double>(band.terms), band.kappa0,
-                       band.delta});
-  return b;
-}
 // Wavelength rows as table.cl takes them: λ µm, then the X, Y, Z weights.
 std::vector<double> packed_rows(const Wavelengths& wl) {
   std::vector<double> r;

@@ -18,6 +18,7 @@
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
 #include "io/exr.hpp"
+#include "cl/buffers.hpp"
 #include "io/png.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "kinds/diffraction/reference.hpp"
@@ -30,7 +31,6 @@ using nlohmann::json;
 namespace {
 
 constexpr double kTwoPi = 6.283185307179586476925287;
-constexpr int kPreviewSize = 192;
 constexpr double kPreviewStepNm = 5.0;
 constexpr int kAutoRefinements = 3;
 
@@ -109,6 +109,75 @@ std::vector<double> measurement_kappas(const Plan& p) {
   return k;
 }
 
+std::vector<double> preview_xyz(cl_util::Device* dev, const Field& f, const Plan& p, const Terms& t,
+                                const std::vector<double>& spectrum, double w_max) {
+  const int n = kPreviewSize;
+  const int step = static_cast<int>(kPreviewStepNm);
+  std::vector<double> rows;  // every step-th spectrum row
+  for (std::size_t row = 0; row < spectrum.size(); row += 4 * static_cast<std::size_t>(step))
+    rows.insert(rows.end(), spectrum.begin() + row, spectrum.begin() + row + 4);
+  const int n_rows = static_cast<int>(rows.size() / 4);
+  const auto bands = packed_bands(p.bands);
+  const int expansion = p.bands.front().expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV;
+  const Bins& b = t.bins;
+  if (dev)
+    return cl_util::checked("preview", [&] {
+      const cl::Program program = dev->build(kProgram, dev->real_options());
+      cl::Kernel k(program, "diffraction_bins_preview");
+      const cl::Buffer terms(dev->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, t.values.size() * sizeof(float),
+                             const_cast<float*>(t.values.data()));
+      const cl::Buffer bands_dev = cl_util::upload_real(*dev, bands), rows_dev = cl_util::upload_real(*dev, rows),
+                       out = cl_util::device_real(*dev, 3 * static_cast<std::size_t>(n) * n);
+      int arg = 0;
+      k.setArg(arg++, terms);
+      k.setArg(arg++, b.ku_min);
+      k.setArg(arg++, b.kv_min);
+      k.setArg(arg++, b.ku_count());
+      k.setArg(arg++, b.kv_count());
+      k.setArg(arg++, static_cast<int>(p.bands.size()));
+      k.setArg(arg++, bands_dev);
+      k.setArg(arg++, expansion);
+      cl_util::set_real_arg(*dev, k, arg++, f.s);
+      k.setArg(arg++, f.width);
+      k.setArg(arg++, f.height);
+      cl_util::set_real_arg(*dev, k, arg++, f.dx_um);
+      cl_util::set_real_arg(*dev, k, arg++, w_max);
+      k.setArg(arg++, n_rows);
+      k.setArg(arg++, rows_dev);
+      cl_util::set_real_arg(*dev, k, arg++, static_cast<double>(step));
+      k.setArg(arg++, n);
+      k.setArg(arg++, out);
+      cl::Event ev;
+      dev->queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(n, n), cl::NullRange, nullptr, &ev);
+      dev->profiler().record(ev);
+      return cl_util::download_real(*dev, out, 3 * static_cast<std::size_t>(n) * n);
+    });
+  // The terms regrouped per bin ([kv][ku][n][re,im]) so that a bin's sum reads one run.
+  const std::size_t per = t.per_term(), stride = 2 * static_cast<std::size_t>(t.count);
+  std::vector<float> by_bin(t.values.size());
+  constexpr std::size_t kRun = 4096;  // bins per task
+  parallel_for(static_cast<long long>((per + kRun - 1) / kRun), [&](long long run) {
+    const std::size_t lo = static_cast<std::size_t>(run) * kRun, hi = std::min(per, lo + kRun);
+    for (int k = 0; k < t.count; ++k)
+      for (std::size_t i = lo; i < hi; ++i) {
+        by_bin[i * stride + 2 * k] = t.values[2 * (k * per + i)];
+        by_bin[i * stride + 2 * k + 1] = t.values[2 * (k * per + i) + 1];
+      }
+  });
+  std::vector<double> xyz(3 * static_cast<std::size_t>(n) * n);
+  parallel_for(n, [&](long long py) {
+    const double v = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / n;
+    for (int px = 0; px < n; ++px) {
+      const double u = -1.0 + (px + 0.5) * 2.0 / n;
+      ref::bins_preview_xyz(by_bin.data(), 2, static_cast<long>(stride), b.ku_min, b.kv_min, b.ku_count(), b.kv_count(),
+                            static_cast<int>(p.bands.size()), bands.data(), expansion, f.s, f.width, f.height, f.dx_um,
+                            u, v, w_max, n_rows, rows.data(), static_cast<double>(step),
+                            xyz.data() + 3 * (static_cast<std::size_t>(py) * n + px));
+    }
+  });
+  return xyz;
+}
+
 namespace {
 
 struct Measured {
@@ -185,74 +254,10 @@ Terms rounded_to_half(const Terms& t) {
   return h;
 }
 
-// Colour of the diffracted light over the (u, v) disk, white D65 light at normal incidence:
-// XYZ(u,v) = Σ_λ |P(u/λ, v/λ; κ)/M²|²·D65·x̄ȳz̄·Δλ with w = 1 + √(1 − u² − v²), κ = 2πw/λ,
-// |P|² bilinear between bins; no Fresnel or geometry factor. Returns linear sRGB. Rows of
-// pixels run on the hardware threads; each pixel's sum is the same whatever the split.
-std::vector<float> preview_rgb(const Field& f, const Plan& p, const Terms& t, const std::vector<double>& spectrum,
-                               double w_max, std::vector<double>& luminance) {
+// Linear sRGB of preview_xyz's picture, and each pixel's Y.
+std::vector<float> preview_rgb(const std::vector<double>& xyz, std::vector<double>& luminance) {
   const int n = kPreviewSize;
-  std::vector<double> xyz(3 * n * n, 0.0);
   luminance.assign(n * n, 0.0);
-  const int step = static_cast<int>(kPreviewStepNm);
-  const Bins& b = t.bins;
-  // The terms regrouped per bin ([kv][ku][n][re,im]) so that a bin's sum reads one run.
-  const std::size_t per = t.per_term(), stride = 2 * static_cast<std::size_t>(t.count);
-  std::vector<float> by_bin(t.values.size());
-  constexpr std::size_t kRun = 4096;  // bins per task
-  parallel_for(static_cast<long long>((per + kRun - 1) / kRun), [&](long long run) {
-    const std::size_t lo = static_cast<std::size_t>(run) * kRun, hi = std::min(per, lo + kRun);
-    for (int k = 0; k < t.count; ++k)
-      for (std::size_t i = lo; i < hi; ++i) {
-        by_bin[i * stride + 2 * k] = t.values[2 * (k * per + i)];
-        by_bin[i * stride + 2 * k + 1] = t.values[2 * (k * per + i) + 1];
-      }
-  });
-  const std::vector<float> zeros(stride, 0.0f);
-  parallel_for(n, [&](long long py) {
-    std::vector<double> coef;
-    const double v = 1.0 - (static_cast<double>(py) + 0.5) * 2.0 / n;
-    for (std::size_t row = 0; row < spectrum.size(); row += 4 * step) {
-      const double lambda_um = spectrum[row] * 1e-3;
-      for (int px = 0; px < n; ++px) {
-        const double u = -1.0 + (px + 0.5) * 2.0 / n;
-        const double r2 = u * u + v * v;
-        if (r2 >= 1.0) continue;
-        const double w = 1.0 + std::sqrt(1.0 - r2);
-        if (w > w_max) continue;
-        const double kappa = kTwoPi * w / lambda_um;
-        const Band& band = band_for(p.bands, kappa);
-        coef.resize(band.terms);
-        ref::expansion_coefficients(band.expansion == Expansion::taylor ? 0 : 1, kappa, band.kappa0, band.delta, f.s,
-                                    band.terms, coef.data());
-        const double fu = u / lambda_um * f.width * f.dx_um, fv = v / lambda_um * f.height * f.dx_um;
-        const int u0 = static_cast<int>(std::floor(fu)), v0 = static_cast<int>(std::floor(fv));
-        // The four neighbouring bins' sums in one pass over the terms (absent bins read zeros).
-        const float* q[4];
-        double wt[4];
-        for (int c = 0; c < 4; ++c) {
-          const int du = c & 1, dv = c >> 1, ku = u0 + du, kv = v0 + dv;
-          wt[c] = (du ? fu - u0 : 1.0 - (fu - u0)) * (dv ? fv - v0 : 1.0 - (fv - v0));
-          const bool inside = ku >= b.ku_min && ku <= b.ku_max && kv >= b.kv_min && kv <= b.kv_max;
-          q[c] = inside ? by_bin.data() +
-                              (static_cast<std::size_t>(kv - b.kv_min) * b.ku_count() + (ku - b.ku_min)) * stride +
-                              2 * static_cast<std::size_t>(band.first_term)
-                        : zeros.data();
-          if (!inside) wt[c] = 0.0;
-        }
-        double re[4] = {0, 0, 0, 0}, im[4] = {0, 0, 0, 0};
-        for (int k = 0; k < band.terms; ++k)
-          for (int c = 0; c < 4; ++c) {
-            re[c] += coef[k] * q[c][2 * k];
-            im[c] += coef[k] * q[c][2 * k + 1];
-          }
-        double power = 0.0;
-        for (int c = 0; c < 4; ++c) power += wt[c] * (re[c] * re[c] + im[c] * im[c]);
-        const std::size_t i = static_cast<std::size_t>(py) * n + px;
-        for (int c = 0; c < 3; ++c) xyz[3 * i + c] += power * spectrum[row + 1 + c] * step;
-      }
-    }
-  });
   const Mat3 M = xyz_to_srgb();
   std::vector<float> rgb(3 * n * n);
   for (int i = 0; i < n * n; ++i) {
@@ -466,7 +471,9 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
   ctx.progress("preview", 0.95);
   if (spec.w_max >= 1.0) {
     std::vector<double> lum;
-    const auto rgb = tm.time("preview", [&] { return preview_rgb(f, p, terms, spectrum, spec.w_max, lum); });
+    // On a GPU the device draws it; on a CPU device the host's threads (docs/diffraction.md).
+    cl_util::Device* on = dev.info().type == "cpu" ? nullptr : &dev;
+    const auto rgb = tm.time("preview", [&] { return preview_rgb(preview_xyz(on, f, p, terms, spectrum, spec.w_max), lum); });
     std::vector<double> lit;
     for (double y : lum)
       if (y > 0) lit.push_back(y);

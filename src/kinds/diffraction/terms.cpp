@@ -46,6 +46,14 @@ std::vector<cplx> twiddles(int k, int m) {
 }
 }  // namespace
 
+std::vector<double> packed_bands(const std::vector<Band>& bands) {
+  std::vector<double> b;
+  for (const auto& band : bands)
+    b.insert(b.end(), {band.kappa_hi, static_cast<double>(band.first_term), static_cast<double>(band.terms), band.kappa0,
+                       band.delta});
+  return b;
+}
+
 const Band& band_for(const std::vector<Band>& bands, double kappa) {
   for (const auto& b : bands)
     if (kappa <= b.kappa_hi) return b;

@@ -114,5 +114,8 @@ std::vector<cplx> reconstruct(const std::vector<cplx>& terms, const Bins& bins, 
 
 // The band whose range holds κ (the first one at a shared edge).
 const Band& band_for(const std::vector<Band>& bands, double kappa);
+// The bands as kernels/diffraction/table.cl takes them: κ_hi, first term, term count, κ_0, Δ per
+// band (DIFFRACTION_BAND_REALS each; table_band picks as band_for does).
+std::vector<double> packed_bands(const std::vector<Band>& bands);
 
 }  // namespace specbake::diffraction
