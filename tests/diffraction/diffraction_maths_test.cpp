@@ -337,6 +337,19 @@ TEST(DiffractionMaths, DeviceMatchesDoubleReferenceNonSquarePrimeSizes) {
   EXPECT_LE(worst, 1e3 * 1.1102230246251565e-16 * f.count());
 }
 
+namespace {
+// Two Chebyshev bands of 12 terms over κ ∈ [0, 33] and cropped, non-symmetric bins: ku and kv
+// both negative and positive, so they wrap around the unshifted transform.
+Plan cropped_two_band_plan(const Field& f) {
+  Plan p;
+  p.kappa_hi = 33.0;
+  p.bands = make_bands(Expansion::chebyshev, 0.0, 33.0, f.s, 2, 12, kU);
+  p.total_terms = 24;
+  p.bins = Bins{-7, 11, -9, 5};
+  return p;
+}
+}  // namespace
+
 TEST(DiffractionMaths, ReconstructionErrorOnTheDeviceMatchesTheHost) {
   // The error measurement's maximum over the bins (ExactDft::max_error): on the device the exact
   // transform stays there and each work item reduces its bins; on the host, reconstruct and a
@@ -347,11 +360,7 @@ TEST(DiffractionMaths, ReconstructionErrorOnTheDeviceMatchesTheHost) {
   // a prime width (Bluestein). A shifted crop must give a different maximum: the bin mapping shows.
   const Field f = centre_field(asymmetric_field(37, 29), Centre::mid_range);
   if (!device().info().fp64) GTEST_SKIP() << "no fp64: the exact transform and its error stay on the host";
-  Plan p;
-  p.kappa_hi = 33.0;
-  p.bands = make_bands(Expansion::chebyshev, 0.0, 33.0, f.s, 2, 12, kU);
-  p.total_terms = 24;
-  p.bins = Bins{-7, 11, -9, 5};
+  const Plan p = cropped_two_band_plan(f);
   const Terms t = device_terms(device(), f, p, kQuiet);
   ExactDft on_dev(&device(), f, p.bins), on_host(nullptr, f, p.bins);
   ASSERT_TRUE(on_dev.on_device());
@@ -386,11 +395,7 @@ TEST(DiffractionMaths, BinsPreviewOnTheDeviceMatchesTheHost) {
   // relative per sum, 1e-4 of the largest. Terms read as if their bins started one column later
   // must draw differently (the bin mapping shows).
   const Field f = centre_field(asymmetric_field(37, 29), Centre::mid_range);
-  Plan p;
-  p.kappa_hi = 33.0;
-  p.bands = make_bands(Expansion::chebyshev, 0.0, 33.0, f.s, 2, 12, kU);
-  p.total_terms = 24;
-  p.bins = Bins{-7, 11, -9, 5};
+  const Plan p = cropped_two_band_plan(f);
   const Terms t = device_terms(device(), f, p, kQuiet);
   double y_norm = 0;
   const auto spectrum = spectrum_rows(RangeNm{380.0, 780.0}, y_norm);

@@ -50,16 +50,18 @@ Kind kind() {
     const Shape sh = shape_of(j.as<DiffractionSpec>());
     const std::uint64_t w = sh.w, h = sh.h;
     if (j.as<DiffractionSpec>().table) {
-      // Host: the heightfield in double; the row-stage results of a group of terms (float pairs,
-      // at most 768 MiB); the batches of rows and columns being transformed (at most 128 MiB
-      // each); every candidate table of a phase in double (T·ΣN²·16 bytes, ΣN² ≤ 768²). Device:
-      // one batch of rows.
+      // Device: the heights (double on fp64 devices), the row-stage results of a group of terms
+      // (float pairs, at most 768 MiB), the batches of rows and of columns being transformed (at
+      // most 128 MiB each), every candidate table of a phase (float pairs, T·ΣN²·8 bytes, ΣN² ≤
+      // 768²), the exact sums' windowed rows (2 × 64 MiB). Host: the heightfield in double, the
+      // tables read back, the chosen table's files.
       const auto terms = static_cast<std::uint64_t>(sh.terms), mib = std::uint64_t{1} << 20;
       const std::uint64_t kept = static_cast<std::uint64_t>(sh.y.kept);
       const std::uint64_t rows = std::min<std::uint64_t>(768 * mib, terms * kept * 1024 * 8);
       const std::uint64_t batch = std::min<std::uint64_t>(128 * mib, terms * kept * static_cast<std::uint64_t>(sh.x.n) * 8);
-      const std::uint64_t tables = terms * 768 * 768 * 16;
-      return MemoryEstimate{batch, batch, w * h * 8 + rows + 2 * batch + tables};
+      const std::uint64_t tables = terms * 768 * 768 * 8, heights = w * h * 8;
+      return MemoryEstimate{heights + rows + 2 * batch + tables + 128 * mib, std::max({heights, rows, tables}),
+                            heights + 2 * tables};
     }
     // Complex float fields of the heightfield's size: the term input, the FFT buffer and the
     // cropped terms (at most the full field per term, counted as two fields), plus a complex
