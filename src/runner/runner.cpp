@@ -8,6 +8,7 @@
 #include <csignal>
 #include <ctime>
 #include <fstream>
+#include <future>
 #include <map>
 #include <memory>
 #include <numeric>
@@ -440,6 +441,68 @@ std::vector<JobReport> Runner::run() {
   Devices devices;
   Selections selections;
   bool stopped = false;
+  // How a job that did not finish is reported (the exception its bake or its writing threw).
+  const auto record_failure = [&](const std::exception& e, JobReport& r) {
+    if (const auto* interrupted = dynamic_cast<const Interrupted*>(&e)) {
+      r.status = "interrupted";
+      r.code = interrupted->exit_code();
+      r.reason = std::string(e.what()) + "; nothing of this job was published";
+      stopped = true;
+    } else if (const int sig = stop_requested()) {
+      // A stop came first: a failure after it is what the signal did (a system call it cut
+      // short inside a library's step), not the job's.
+      const Interrupted stop(sig);
+      r.status = "interrupted";
+      r.code = stop.exit_code();
+      r.reason = std::string(stop.what()) + " (the step it stopped: " + e.what() + "); nothing of this job was published";
+      stopped = true;
+    } else {
+      const auto* known = dynamic_cast<const Error*>(&e);
+      r.status = "failed";
+      r.code = known ? known->exit_code() : ExitCode::job_failed;
+      r.reason = e.what();
+      spdlog::error("{}: {}", r.name, e.what());
+    }
+  };
+  // The end of a job's report: a job left without a bundle leaves no empty folder; `done_` sees
+  // the reports in the jobs' order.
+  const auto close_report = [&](JobReport& r, const fs::path& job_dir, Clock::time_point t0, Clock::time_point end) {
+    if (r.status != "built" && r.status != "up-to-date") {
+      r.bundle.clear();
+      std::error_code ec;
+      fs::remove(job_dir, ec);  // only when empty: a job that never produced a bundle
+    }
+    r.timings["total_s"] = std::chrono::duration<double>(end - t0).count();
+    if (done_) done_(r);
+  };
+  // A built job's bundle is written and published on a thread of its own while the next job
+  // bakes (the job's lock held until it is in place); at most one is in flight, and its report
+  // is finished before the next job's report or publish, and at the end of the run.
+  struct Publishing {
+    std::size_t report = 0;  // its index in `reports`
+    std::unique_ptr<JobLock> lock;
+    std::future<std::pair<fs::path, Clock::time_point>> written;
+    Clock::time_point t0, start;
+    fs::path job_dir;
+  };
+  std::optional<Publishing> publishing;
+  const auto settle_publishing = [&] {
+    if (!publishing) return;
+    JobReport& r = reports[publishing->report];
+    Clock::time_point end = Clock::now();
+    try {
+      const auto [bundle, at] = publishing->written.get();
+      end = at;
+      r.bundle = bundle;
+      r.timings["write_s"] = std::chrono::duration<double>(at - publishing->start).count();
+      spdlog::info("{}: wrote {}", r.name, r.bundle.string());
+    } catch (const std::exception& e) {
+      record_failure(e, r);
+    }
+    publishing->lock.reset();
+    close_report(r, publishing->job_dir, publishing->t0, end);
+    publishing.reset();
+  };
   for (std::size_t index = 0; index < items.size(); ++index) {
     const Item& it = items[index];
     const std::string& name = it.job->name;
@@ -457,6 +520,7 @@ std::vector<JobReport> Runner::run() {
     BundleStore store(it.output);
     const auto t0 = Clock::now();
     json stage_s = json::object();
+    bool deferred = false;  // its bundle is being written (publishing)
     try {
       throw_if_stopped();
       const cl_util::DeviceInfo& info = selections.get(it.device);
@@ -466,7 +530,7 @@ std::vector<JobReport> Runner::run() {
                     kind.programs.size(), info.name);
       const std::string hash12 = r.hash.substr(0, 12);
       {
-        JobLock lock(store.job_dir(name), name);
+        auto lock = std::make_unique<JobLock>(store.job_dir(name), name);
         store.clean_stale(name);
         if (!options_.force && store.is_complete(name, hash12)) {
           store.set_latest(name, hash12);
@@ -524,47 +588,36 @@ std::vector<JobReport> Runner::run() {
           for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
           for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
           manifest["timings_s"] = {{"bake", bake_s}, {"model_2core_cpu_s", kind.cost_s(*it.job)}, {"steps", stage_s}};
-          const auto tw = Clock::now();
-          r.bundle = store.publish(name, hash12, manifest, result.files);
+          settle_publishing();
           r.status = "built";
           r.parameters = result.parameters;
           r.accuracy = accuracy_json(result.accuracy);
           r.warnings = result.warnings;
-          r.timings = {{"bake_s", bake_s}, {"write_s", seconds_since(tw)}, {"steps_s", stage_s}};
-          spdlog::info("{}: wrote {}", name, r.bundle.string());
+          r.timings = {{"bake_s", bake_s}, {"steps_s", stage_s}};
+          const auto start = Clock::now();
+          publishing = Publishing{reports.size(), std::move(lock),
+                                  std::async(std::launch::async,
+                                             [store, name, hash12, manifest = std::move(manifest),
+                                              files = std::move(result.files)] {
+                                               fs::path bundle = store.publish(name, hash12, manifest, files);
+                                               return std::make_pair(std::move(bundle), Clock::now());
+                                             }),
+                                  t0, start, store.job_dir(name)};
+          deferred = true;
         }
       }
-    } catch (const Interrupted& e) {
-      r.status = "interrupted";
-      r.code = e.exit_code();
-      r.reason = std::string(e.what()) + "; nothing of this job was published";
-      stopped = true;
     } catch (const std::exception& e) {
-      if (const int sig = stop_requested()) {
-        // A stop came first: a failure after it is what the signal did (a system call it cut
-        // short inside a library's step), not the job's.
-        const Interrupted stop(sig);
-        r.status = "interrupted";
-        r.code = stop.exit_code();
-        r.reason = std::string(stop.what()) + " (the step it stopped: " + e.what() + "); nothing of this job was published";
-        stopped = true;
-      } else {
-        const auto* known = dynamic_cast<const Error*>(&e);
-        r.status = "failed";
-        r.code = known ? known->exit_code() : ExitCode::job_failed;
-        r.reason = e.what();
-        spdlog::error("{}: {}", name, e.what());
-      }
+      record_failure(e, r);
     }
-    if (r.status != "built" && r.status != "up-to-date") {
-      r.bundle.clear();
-      std::error_code ec;
-      fs::remove(store.job_dir(name), ec);  // only when empty: a job that never produced a bundle
+    if (deferred) {
+      reports.push_back(std::move(r));
+      continue;
     }
-    r.timings["total_s"] = seconds_since(t0);
-    if (done_) done_(r);
+    settle_publishing();
+    close_report(r, store.job_dir(name), t0, Clock::now());
     reports.push_back(std::move(r));
   }
+  settle_publishing();
   return reports;
 }
 

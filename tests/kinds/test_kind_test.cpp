@@ -187,6 +187,46 @@ TEST_F(TestKind, AFailureAfterAStopIsTheInterruption) {
   }
 }
 
+// A built job's bundle is written while the next job bakes: every report is still finished in the
+// jobs' order (the `done` callback sees them so), a bundle is complete and `latest` once its report
+// is, and a later job's failure or stop leaves an earlier job's bundle published.
+TEST_F(TestKind, BundlesWrittenWhileTheNextJobBakesAreReportedInOrder) {
+  RunOptions opts;
+  opts.out = tmp_.path() / "out";
+  for (const char* last : {"    kind: squares\n    count: 30\n", "    kind: cut-short\n    stop: false\n",
+                           "    kind: cut-short\n    stop: true\n"}) {
+    fs::remove_all(opts.out.value());
+    const Config c = parse_config(std::string("specbake: 1\njobs:\n  - name: a\n    kind: squares\n    count: 10\n"
+                                              "  - name: b\n    kind: squares\n    count: 20\n  - name: c\n") +
+                                      last,
+                                  "three.yaml");
+    std::vector<std::string> seen;
+    Runner run({c}, opts, {}, [&](const JobReport& r) {
+      seen.push_back(r.name);
+      // when a report is finished its bundle is in place
+      if (r.status == "built") {
+        EXPECT_TRUE(fs::exists(r.bundle / "manifest.json")) << r.name;
+        EXPECT_TRUE(fs::exists(opts.out.value() / r.name / "latest")) << r.name;
+        EXPECT_TRUE(r.timings.contains("write_s")) << r.name;
+        EXPECT_GE(r.timings.at("total_s").get<double>(), r.timings.at("bake_s").get<double>()) << r.name;
+      }
+    });
+    const auto reports = run.run();
+    clear_stop_request();
+    ASSERT_EQ(reports.size(), 3u);
+    EXPECT_EQ(seen, (std::vector<std::string>{"a", "b", "c"})) << last;
+    for (int k : {0, 1}) {
+      EXPECT_EQ(reports[k].status, "built") << reports[k].reason;
+      EXPECT_EQ(inspect_bundle(opts.out.value() / reports[k].name).bad, 0) << reports[k].name;
+    }
+    const std::string want = std::string(last).find("squares") != std::string::npos ? "built"
+                             : std::string(last).find("true") != std::string::npos ? "interrupted"
+                                                                                 : "failed";
+    EXPECT_EQ(reports[2].status, want) << reports[2].reason;
+    EXPECT_EQ(fs::exists(opts.out.value() / "c" / "latest"), want == "built");
+  }
+}
+
 TEST_F(TestKind, NamesAreUnique) { EXPECT_THROW(register_kind(squares_kind()), std::invalid_argument); }
 
 }  // namespace
