@@ -329,6 +329,26 @@ TEST(DiffractionTable, CliBundleBudgetAndBadKeys) {
   }
 }
 
+TEST(DiffractionTable, AnAutoSizeThatFailsNamesWhatWouldHelp) {
+  // A blazed grating whose orders a 64² table cannot hold, with a bundle budget that leaves only
+  // 64²: the error names the budget as what stopped the ladder and does not suggest the mapping it
+  // already has (power by default); with mapping: linear it does.
+  tst::TempDir dir;
+  const std::string job = "specbake: 1\noutput: out\njobs:\n  - name: t\n    kind: diffraction\n"
+                          "    procedural: {type: blazed-grating, size: 256, dx_um: 0.05, period_um: 2.0, depth_um: 1.2}\n"
+                          "    expansion: chebyshev\n    tolerance: 1e-4\n    max_bundle_mb: 2\n";
+  for (const std::string mapping : {"", ", mapping: linear"}) {
+    tst::write_file(dir / "c.yaml", job + "    table: {size: auto" + mapping + "}\n");
+    const auto r = tst::run_cli({"-q", "run", (dir / "c.yaml").string()});
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    EXPECT_NE(r.err.find("no size of the ladder up to 64"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("the larger sizes exceed max_bundle_mb = 2"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("a larger max_bundle_mb"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("mapping: power") != std::string::npos, !mapping.empty()) << r.err;
+    EXPECT_FALSE(fs::exists(dir / "out/t/latest"));
+  }
+}
+
 TEST(DiffractionTable, BrdfOfAFlatMirrorIsFresnelTimesCosine) {
   // A flat field: P(f) is the window's transform, real and positive at the centred origin, and at
   // a specular pair (ω_o the mirror of ω_i) the lookup f = −(ω_i + ω_o)_xy/λ = 0 falls between the

@@ -252,11 +252,16 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
                  err.texel_max, spec.tolerance, p.total_terms);
     target *= 0.25;
   }
-  if (!spec.table->size && err.between_max > spec.table->tolerance)
+  if (!spec.table->size && err.between_max > spec.table->tolerance) {
+    const bool capped = g.size < std::end(kTableLadder)[-1];  // larger sizes exceed max_bundle_mb
     throw JobError("table: size: auto: no size of the ladder up to " + std::to_string(g.size) +
                    " meets table.tolerance " + format_g(spec.table->tolerance) + " between texels (largest: " +
                    format_g(err.between_max) + " x the window's sum at kappa = " + format_g(err.between_at_kappa) +
-                   "); use mapping: power, a shorter coherence length, or a looser table.tolerance");
+                   (capped ? "; the larger sizes exceed max_bundle_mb = " + format_g(spec.max_bundle_mb) : std::string()) +
+                   "); use " + (spec.table->power_mapping ? "" : "mapping: power, ") +
+                   "a shorter coherence length (coherence)" + (capped ? ", a larger max_bundle_mb" : "") +
+                   " or a looser table.tolerance");
+  }
   if (err.texel_max > spec.tolerance)
     r.warnings.push_back("THE TABLE'S TEXELS DO NOT MEET THE TOLERANCE: measured " + format_g(err.texel_max) +
                          " x the window's sum at kappa = " + format_g(err.texel_at_kappa) + " rad/um, tolerance " +
