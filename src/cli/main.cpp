@@ -554,8 +554,8 @@ int main(int argc, char** argv) {
   gc->add_flag("--dry-run", gc_dry_run, "list what would be removed; change nothing");
 
   auto* diff = app.add_subcommand("diff", "compare two bundles file by file; non-zero exit past the thresholds");
-  diff->add_option("old", diff_old, "old bundle folder")->required();
-  diff->add_option("new", diff_new, "new bundle folder")->required();
+  diff->add_option("old", diff_old, "old bundle, or a job folder (its latest)")->required();
+  diff->add_option("new", diff_new, "new bundle, or a job folder (its latest)")->required();
   diff->add_option("--fail-abs", fail_abs, "allowed absolute difference per float32 element (element fails if |a-b| > abs + rel*max(|a|,|b|))")->check(CLI::NonNegativeNumber);
   diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(CLI::NonNegativeNumber);
 

@@ -8,6 +8,7 @@
 
 #include "core/errors.hpp"
 #include "io/exr.hpp"
+#include "io/inspect.hpp"
 #include "io/ktx2.hpp"
 
 namespace specbake {
@@ -59,7 +60,8 @@ void flatten(const json& j, const std::string& prefix, std::map<std::string, jso
 
 }  // namespace
 
-BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double fail_abs, double fail_rel) {
+BundleDiff diff_bundles(const fs::path& old_path, const fs::path& new_path, double fail_abs, double fail_rel) {
+  const fs::path old_dir = resolve_bundle(old_path), new_dir = resolve_bundle(new_path);
   const json a = read_manifest(old_dir), b = read_manifest(new_dir);
   BundleDiff d;
   std::map<std::string, json> fa, fb;

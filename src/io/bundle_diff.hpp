@@ -32,7 +32,8 @@ struct BundleDiff {
 
 // Relative difference: |a − b| / max(|a|, |b|), 0 when both are 0. An element exceeds the
 // thresholds when |a − b| > fail_abs + fail_rel·max(|a|, |b|) (numpy.allclose's rule, symmetric).
-BundleDiff diff_bundles(const fs::path& old_dir, const fs::path& new_dir, double fail_abs, double fail_rel);
+// Each path a bundle folder or a job folder (its `latest`, as inspect_bundle takes it).
+BundleDiff diff_bundles(const fs::path& old_path, const fs::path& new_path, double fail_abs, double fail_rel);
 
 // True if no float32 or EXR element exceeds the thresholds and no file was added, removed or
 // reshaped. Other files (JSON/GLSL copies, PNG previews) render the numeric data and are

@@ -9,18 +9,20 @@ namespace specbake {
 
 using nlohmann::json;
 
-Inspection inspect_bundle(const fs::path& path) {
+fs::path resolve_bundle(const fs::path& path) {
   std::error_code ec;
-  Inspection in;
-  if (fs::exists(path / "manifest.json", ec)) {
-    in.bundle = path;
-  } else if (fs::exists(path / "latest" / "manifest.json", ec)) {
-    in.bundle = fs::canonical(path / "latest", ec);
-    if (ec) in.bundle = path / "latest";
-  } else {
-    throw InputError({path, 0, 0, ""}, "expected a bundle folder (with manifest.json) or a job folder (with a "
-                                       "`latest` bundle)");
+  if (fs::exists(path / "manifest.json", ec)) return path;
+  if (fs::exists(path / "latest" / "manifest.json", ec)) {
+    fs::path bundle = fs::canonical(path / "latest", ec);
+    return ec ? path / "latest" : bundle;
   }
+  throw InputError({path, 0, 0, ""}, "expected a bundle folder (with manifest.json) or a job folder (with a "
+                                     "`latest` bundle)");
+}
+
+Inspection inspect_bundle(const fs::path& path) {
+  Inspection in;
+  in.bundle = resolve_bundle(path);
   std::ifstream f(in.bundle / "manifest.json");
   if (!f) throw IoError("cannot read " + (in.bundle / "manifest.json").string());
   try {

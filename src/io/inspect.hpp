@@ -28,6 +28,10 @@ struct Inspection {
   nlohmann::json to_json() const;
 };
 
+// The bundle folder `path` names: itself when it holds manifest.json, else a job folder's `latest`
+// followed. InputError if it is neither.
+fs::path resolve_bundle(const fs::path& path);
+
 // `path` is a bundle folder (holding manifest.json) or a job folder (holding `latest`).
 // InputError if it is neither or the manifest is not JSON; IoError if it cannot be read.
 Inspection inspect_bundle(const fs::path& path);

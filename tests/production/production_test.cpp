@@ -317,6 +317,13 @@ TEST(Production, DiffReportsWhereAndFailsPastThresholds) {
   r = spawn({"diff", a.string(), (t / "out" / "prism-b" / "latest").string(), "--fail-rel", "1"});
   EXPECT_NE(r.out.find("config.samples"), std::string::npos) << r.out;
   EXPECT_EQ(r.exit_code, 1);  // shapes differ (8 vs 12 samples)
+  // Job folders are taken as inspect takes them (their latest bundle); anything else is named.
+  EXPECT_EQ(spawn({"diff", (t / "out" / "prism-a").string(), a.string()}).exit_code, 0);
+  r = spawn({"diff", (t / "out" / "prism-a").string(), (t / "out" / "prism-b").string(), "--fail-rel", "1"});
+  EXPECT_NE(r.out.find("config.samples"), std::string::npos) << r.out;
+  r = spawn({"diff", (t / "out").string(), a.string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;  // an invalid input
+  EXPECT_NE(r.err.find("expected a bundle folder (with manifest.json) or a job folder"), std::string::npos) << r.err;
 }
 
 TEST(Production, ByteIdenticalAcrossRunsAndDeviceSelectors) {
