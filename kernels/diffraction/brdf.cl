@@ -3,7 +3,9 @@
  * C++ (the host's double reference, src/kinds/diffraction/brdf.cpp, via reference.hpp) and GLSL
  * (the bundle's shader/diffraction_brdf.glsl pastes this text after a prelude that defines real,
  * FN, R(x), fabs and fmax; src/kinds/diffraction/shader.cpp). Scalars only, no `const` locals
- * (compile-time constants in GLSL), no pointers, vectors or overloads.
+ * (compile-time constants in GLSL), no pointers, vectors or overloads. The expansion's
+ * coefficient recurrence lives here too, so that the shader's table lookup, the kernels and the
+ * host's reference run one text (diffraction.cl includes this file).
  *
  * Table map (Stam 1999 as Dhillon et al. 2014 use it; texel centre s_i = 2(i + 0.5)/N − 1 per
  * axis at f = sign(s)·|s|^p·f_max cycles/µm): the continuous texel coordinate of f, i.e. i at
@@ -16,6 +18,26 @@
  * f = −(ω_i + ω_o)_xy/λ, κ = 2π(cos θ_i + cos θ_o)/λ.
  */
 #include "common/real.h"
+#ifndef SPECBAKE_DIFFRACTION_BRDF_CL
+#define SPECBAKE_DIFFRACTION_BRDF_CL
+
+#define DIFFRACTION_TAYLOR 0
+#define DIFFRACTION_CHEBYSHEV 1
+
+/* The variable of a band's expansion at κ (diffraction.cl's header): taylor y = (κ−κ_0)·s, chebyshev
+ * t = (κ−κ_m)/Δ (0 for a band of zero width). */
+FN real expansion_variable(int expansion, real kappa, real kappa0, real delta, real s) {
+  if (expansion == DIFFRACTION_TAYLOR) return (kappa - kappa0) * s;
+  return delta > R(0.0) ? (kappa - kappa0) / delta : R(0.0);
+}
+
+/* coef_n for n ≥ 1 from coef_{n−1} (c) and coef_{n−2} (previous; any value at n = 1), x the
+ * expansion's variable: taylor c_n = c_{n−1}·y/n; chebyshev T_1 = t, T_n = 2t·T_{n−1} − T_{n−2}.
+ * coef_0 = 1. */
+FN real expansion_next(int expansion, int n, real x, real c, real previous) {
+  if (expansion == DIFFRACTION_TAYLOR) return c * x / R(n);
+  return n == 1 ? x : R(2.0) * x * c - previous;
+}
 
 /* Continuous texel coordinate (texel i's centre at i) of frequency f (cycles/µm) on a table of
  * `size` texels per axis with mapping power p and reach f_max. */
@@ -52,3 +74,5 @@ FN real specular_peak(real d_sq, real lambda_um, real sigma_um) {
 
 /* The weight of b in the linear interpolation of x between a and b (a < b), clamped to [0, 1]. */
 FN real lerp_weight(real x, real a, real b) { return fmin(fmax((x - a) / (b - a), R(0.0)), R(1.0)); }
+
+#endif

@@ -15,9 +15,9 @@
  * |T_n| ≤ 1 and |J_n| ≤ 1, so Chebyshev sums do not cancel; Taylor sums do when (κ−κ_0)s is large.
  */
 #include "common/real.h"
+/* DIFFRACTION_TAYLOR, DIFFRACTION_CHEBYSHEV and the expansion recurrence, shared with the shader: */
+#include "diffraction/brdf.cl"
 
-#define DIFFRACTION_TAYLOR 0
-#define DIFFRACTION_CHEBYSHEV 1
 /* Most terms one kernel call produces per sample (a private array of this size). */
 #define DIFFRACTION_MAX_BATCH 32
 /* Grid points a table's Kaiser–Bessel spread visits per target frequency (kernel width 10 + 1;
@@ -147,19 +147,12 @@ FN void term_inputs(real h, real c, real inv_s, int expansion, real kappa0, real
   }
 }
 
-/* The band's coefficients coef_n(κ), n = 0 … n_count−1 (see the header): taylor by the
- * recurrence c_n = c_{n−1}·y/n with y = (κ−κ_0)·s; chebyshev by T_{n+1} = 2t·T_n − T_{n−1}. */
+/* The band's coefficients coef_n(κ), n = 0 … n_count−1, by expansion_next. */
 FN void expansion_coefficients(int expansion, real kappa, real kappa0, real delta, real s, int n_count, real* coef) {
   if (n_count <= 0) return;
+  const real x = expansion_variable(expansion, kappa, kappa0, delta, s);
   coef[0] = R(1.0);
-  if (expansion == DIFFRACTION_TAYLOR) {
-    const real y = (kappa - kappa0) * s;
-    for (int n = 1; n < n_count; ++n) coef[n] = coef[n - 1] * y / (real)n;
-  } else {
-    const real t = delta > R(0.0) ? (kappa - kappa0) / delta : R(0.0);
-    if (n_count > 1) coef[1] = t;
-    for (int n = 2; n < n_count; ++n) coef[n] = R(2.0) * t * coef[n - 1] - coef[n - 2];
-  }
+  for (int n = 1; n < n_count; ++n) coef[n] = expansion_next(expansion, n, x, coef[n - 1], n > 1 ? coef[n - 2] : R(0.0));
 }
 
 /* Procedural heightfields (µm), x = ix·dx, y = iy·dx, p = period/dx samples:

@@ -36,15 +36,14 @@ FN void table_bilinear_sum(GLOBAL const float* terms, int size, int first, int c
   long per = (long)size * size;
   long i00 = 2 * ((long)v0 * size + u0);
   long i01 = i00 + 2 * (long)size;
-  real y = (kappa - kappa0) * s;
-  real t = delta > R(0.0) ? (kappa - kappa0) / delta : R(0.0);
+  real x = expansion_variable(expansion, kappa, kappa0, delta, s);
   real c = R(1.0);
   real previous = R(0.0);
   real r00 = R(0.0), j00 = R(0.0), r10 = R(0.0), j10 = R(0.0), r01 = R(0.0), j01 = R(0.0), r11 = R(0.0),
        j11 = R(0.0);
   for (int n = 0; n < count; ++n) {
     if (n > 0) {
-      real next = expansion == DIFFRACTION_TAYLOR ? c * y / (real)n : (n == 1 ? t : R(2.0) * t * c - previous);
+      real next = expansion_next(expansion, n, x, c, previous);
       previous = c;
       c = next;
     }
@@ -169,38 +168,44 @@ FN void table_xyz_fast_specular(GLOBAL const float* terms, int size, real f_max,
  * [T][kv][ku] (term_stride = 2·bins, bin_stride = 2) or regrouped per bin (2, 2T). */
 
 /* |P/M²|² bilinear between the four bins around continuous bin coordinates (fu, fv) (bins outside
- * weigh 0), |P/M²| = |Σ_n coef_n(κ)·F_n| over the band's terms, the coefficients by
- * expansion_coefficients' recurrences. */
+ * weigh 0), |P/M²| = |Σ_n coef_n(κ)·F_n| over the band's terms: the four bins' sums in one pass
+ * over the terms, the coefficients by expansion_next as the pass runs. */
 FN real bins_power(GLOBAL const float* terms, long term_stride, long bin_stride, int ku_min, int kv_min, int ku_count,
                    int kv_count, int first, int count, int expansion, real kappa, real kappa0, real delta, real s,
                    real fu, real fv) {
   int u0 = (int)floor(fu);
   int v0 = (int)floor(fv);
-  real power = R(0.0);
-  for (int c = 0; c < 4; ++c) {
-    int du = c & 1;
-    int dv = c >> 1;
+  real wt[4];
+  long at[4];
+  for (int k = 0; k < 4; ++k) {
+    int du = k & 1;
+    int dv = k >> 1;
     int a = u0 + du - ku_min;
     int b = v0 + dv - kv_min;
-    if (a < 0 || a >= ku_count || b < 0 || b >= kv_count) continue;
-    real wt = (du ? fu - (real)u0 : R(1.0) - (fu - (real)u0)) * (dv ? fv - (real)v0 : R(1.0) - (fv - (real)v0));
-    GLOBAL const float* q = terms + ((long)b * ku_count + a) * bin_stride + (long)first * term_stride;
-    real y = (kappa - kappa0) * s;
-    real t = delta > R(0.0) ? (kappa - kappa0) / delta : R(0.0);
-    real coef = R(1.0);
-    real previous = R(0.0);
-    real re = R(0.0), im = R(0.0);
-    for (int n = 0; n < count; ++n) {
-      if (n > 0) {
-        real next = expansion == DIFFRACTION_TAYLOR ? coef * y / (real)n : (n == 1 ? t : R(2.0) * t * coef - previous);
-        previous = coef;
-        coef = next;
-      }
-      re += coef * q[n * term_stride];
-      im += coef * q[n * term_stride + 1];
-    }
-    power += wt * (re * re + im * im);
+    bool inside = a >= 0 && a < ku_count && b >= 0 && b < kv_count;
+    wt[k] = inside ? (du ? fu - (real)u0 : R(1.0) - (fu - (real)u0)) * (dv ? fv - (real)v0 : R(1.0) - (fv - (real)v0))
+                   : R(0.0);
+    at[k] = inside ? ((long)b * ku_count + a) * bin_stride + (long)first * term_stride : -1;
   }
+  real x = expansion_variable(expansion, kappa, kappa0, delta, s);
+  real c = R(1.0);
+  real previous = R(0.0);
+  real re[4] = {R(0.0), R(0.0), R(0.0), R(0.0)};
+  real im[4] = {R(0.0), R(0.0), R(0.0), R(0.0)};
+  for (int n = 0; n < count; ++n) {
+    if (n > 0) {
+      real next = expansion_next(expansion, n, x, c, previous);
+      previous = c;
+      c = next;
+    }
+    for (int k = 0; k < 4; ++k) {
+      if (at[k] < 0) continue;
+      re[k] += c * terms[at[k] + n * term_stride];
+      im[k] += c * terms[at[k] + n * term_stride + 1];
+    }
+  }
+  real power = R(0.0);
+  for (int k = 0; k < 4; ++k) power += wt[k] * (re[k] * re[k] + im[k] * im[k]);
   return power;
 }
 

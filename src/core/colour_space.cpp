@@ -4,6 +4,12 @@
 
 namespace specbake {
 
+std::array<double, 3> apply(const Mat3& m, const double* v) {
+  std::array<double, 3> out{};
+  for (int r = 0; r < 3; ++r) out[r] = m[3 * r] * v[0] + m[3 * r + 1] * v[1] + m[3 * r + 2] * v[2];
+  return out;
+}
+
 Mat3 multiply(const Mat3& a, const Mat3& b) {
   Mat3 c{};
   for (int r = 0; r < 3; ++r)
@@ -34,8 +40,7 @@ Mat3 srgb_to_xyz() {
   }
   const double W[3] = {wx / wy, 1.0, (1.0 - wx - wy) / wy};
   const Mat3 Pinv = inverse(P);
-  double s[3];
-  for (int r = 0; r < 3; ++r) s[r] = Pinv[3 * r] * W[0] + Pinv[3 * r + 1] * W[1] + Pinv[3 * r + 2] * W[2];
+  const std::array<double, 3> s = apply(Pinv, W);
   Mat3 M{};
   for (int r = 0; r < 3; ++r)
     for (int j = 0; j < 3; ++j) M[3 * r + j] = P[3 * r + j] * s[j];

@@ -12,5 +12,7 @@ Mat3 srgb_to_xyz();
 Mat3 xyz_to_srgb();
 Mat3 inverse(const Mat3& m);
 Mat3 multiply(const Mat3& a, const Mat3& b);
+// m·v for a 3-vector v (v[0], v[1], v[2]).
+std::array<double, 3> apply(const Mat3& m, const double* v);
 
 }  // namespace specbake

@@ -121,7 +121,7 @@ void check_against_refdata(const Heightfield& hf, const char* taylor_csv, const 
   for (const auto& r : read_csv(tst::refdata_dir() / "diffraction" / dft_csv))
     exact[{d(r, "kappa_rad_per_um"), std::stoi(r.at("ku")), std::stoi(r.at("kv"))}] = {d(r, "P_re"), d(r, "P_im")};
   const Plan p = plain_taylor(f, 41, 1.0);
-  const Terms t = device_terms(device(), f, p, kQuiet);
+  const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
   int checked = 0;
   double worst = 0.0;
   for (const auto& r : read_csv(tst::refdata_dir() / "diffraction" / taylor_csv)) {
@@ -222,7 +222,7 @@ TEST(DiffractionMaths, JacobiAngerOrdersOfSineGrating) {
     spec.crop = false;
     const Field f = make_field(spec);
     const Plan p = make_plan(spec, f, spec.tolerance);
-    const Terms t = device_terms(device(), f, p, kQuiet);
+    const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
     const double M2 = 128.0 * 128.0, a = 0.15;
     for (double kappa : {0.0, 5.0, 17.3, p.kappa_hi}) {
       const auto P = reconstruct(t, band_for(p.bands, kappa), f, kappa);
@@ -251,7 +251,7 @@ TEST(DiffractionMaths, ParsevalHoldsAndTruncationBreaksIt) {
   for (Expansion e : {Expansion::taylor, Expansion::chebyshev}) {
     spec.expansion = e;
     const Plan p = make_plan(spec, f, spec.tolerance);
-    const Terms t = device_terms(device(), f, p, kQuiet);
+    const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
     for (int i = 0; i <= 8; ++i) {
       const double kappa = p.kappa_hi * i / 8.0;
       const Band& b = band_for(p.bands, kappa);
@@ -267,7 +267,7 @@ TEST(DiffractionMaths, ParsevalHoldsAndTruncationBreaksIt) {
   }
   // A truncated plain Taylor sum at y = κ·s ≈ 10 with 4 terms loses energy badly.
   const Plan bad = plain_taylor(f, 4, 40.0);
-  const Terms t = device_terms(device(), f, bad, kQuiet);
+  const Terms t = device_terms(DeviceHeights(device(), f), f, bad, kQuiet);
   const auto P = reconstruct(t, bad.bands[0], f, 40.0);
   double sum = 0.0;
   for (const auto& v : P) sum += std::norm(v);
@@ -283,7 +283,7 @@ TEST(DiffractionMaths, SignConventionMirroredResultFails) {
   spec.center = Centre::none;
   const Field f = centre_field(random_field(), Centre::none);
   const Plan p = make_plan(spec, f, spec.tolerance);
-  const Terms t = device_terms(device(), f, p, kQuiet);
+  const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
   int compared = 0;
   double mirror_worst = 0.0, tol = 0.0;
   for (const auto& r : read_csv(tst::refdata_dir() / "diffraction/random_smooth_dft.csv")) {
@@ -315,7 +315,7 @@ TEST(DiffractionMaths, DeviceMatchesDoubleReferenceNonSquarePrimeSizes) {
     p.bands = make_bands(e, 0.0, 33.0, f.s, 2, 12, kU);
     p.total_terms = 24;
     p.bins = full_bins(f.width, f.height);
-    const Terms t = device_terms(device(), f, p, kQuiet);
+    const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
     const auto want = reference_terms(f, p.bands, p.bins);
     // Float32 FFT bound per value, over M²: 2u (input and output rounding) + 6u·log2(4N)
     // (Bluestein: three power-of-two transforms of ≥ 2N points), times max|q_n| ≤ 2.
@@ -327,7 +327,8 @@ TEST(DiffractionMaths, DeviceMatchesDoubleReferenceNonSquarePrimeSizes) {
     EXPECT_GT(worst, 0.0);  // float32 really differs from double: the comparison sees both paths
   }
   // The double-precision exact DFT (VkFFT double on the device) against the host DFT.
-  ExactDft on_dev(&device(), f, full_bins(f.width, f.height));
+  const DeviceHeights heights(device(), f);
+  ExactDft on_dev(&heights, f, full_bins(f.width, f.height));
   ExactDft on_host(nullptr, f, full_bins(f.width, f.height));
   ASSERT_TRUE(on_dev.on_device() || !device().info().fp64);
   const auto a = on_dev(21.0), b = on_host(21.0);
@@ -361,8 +362,9 @@ TEST(DiffractionMaths, ReconstructionErrorOnTheDeviceMatchesTheHost) {
   const Field f = centre_field(asymmetric_field(37, 29), Centre::mid_range);
   if (!device().info().fp64) GTEST_SKIP() << "no fp64: the exact transform and its error stay on the host";
   const Plan p = cropped_two_band_plan(f);
-  const Terms t = device_terms(device(), f, p, kQuiet);
-  ExactDft on_dev(&device(), f, p.bins), on_host(nullptr, f, p.bins);
+  const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
+  const DeviceHeights heights(device(), f);
+  ExactDft on_dev(&heights, f, p.bins), on_host(nullptr, f, p.bins);
   ASSERT_TRUE(on_dev.on_device());
   on_dev.prepare(t, true);
   on_host.prepare(t, false);
@@ -378,7 +380,7 @@ TEST(DiffractionMaths, ReconstructionErrorOnTheDeviceMatchesTheHost) {
   // The same terms read as if their bins started one column later: the maximum must move.
   Terms shifted = t;
   shifted.bins = Bins{-6, 12, -9, 5};
-  ExactDft moved(&device(), f, shifted.bins);
+  ExactDft moved(&heights, f, shifted.bins);
   moved.prepare(shifted, true);
   moved.transform(20.0);
   on_host.transform(20.0);
@@ -396,7 +398,7 @@ TEST(DiffractionMaths, BinsPreviewOnTheDeviceMatchesTheHost) {
   // must draw differently (the bin mapping shows).
   const Field f = centre_field(asymmetric_field(37, 29), Centre::mid_range);
   const Plan p = cropped_two_band_plan(f);
-  const Terms t = device_terms(device(), f, p, kQuiet);
+  const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
   double y_norm = 0;
   const auto spectrum = spectrum_rows(RangeNm{380.0, 780.0}, y_norm);
   const auto host = preview_xyz(nullptr, f, p, t, spectrum, 2.0), dev = preview_xyz(&device(), f, p, t, spectrum, 2.0);
@@ -426,7 +428,7 @@ TEST(DiffractionMaths, SharedFftPlansAreReusedAndGiveTheSameTerms) {
   // A second bake through the reused plan gives the same bits.
   const Field f = centre_field(random_field(), Centre::mid_range);
   const Plan p = plain_taylor(f, 6, 10.0);
-  const Terms t1 = device_terms(device(), f, p, kQuiet), t2 = device_terms(device(), f, p, kQuiet);
+  const Terms t1 = device_terms(DeviceHeights(device(), f), f, p, kQuiet), t2 = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
   EXPECT_EQ(t1.values, t2.values);
 }
 
@@ -442,12 +444,13 @@ TEST(DiffractionMaths, FloatOnlyDeviceMeetsTheBounds) {
   DiffractionSpec spec;
   spec.tolerance = 1e-4;
   spec.crop = false;
-  ExactDft exact(&float_only, f, full_bins(f.width, f.height));
+  const DeviceHeights heights(float_only, f);
+  ExactDft exact(&heights, f, full_bins(f.width, f.height));
   EXPECT_FALSE(exact.on_device());
   for (Expansion e : {Expansion::taylor, Expansion::chebyshev}) {
     spec.expansion = e;
     const Plan p = make_plan(spec, f, spec.tolerance);
-    const Terms t = device_terms(float_only, f, p, kQuiet);
+    const Terms t = device_terms(DeviceHeights(float_only, f), f, p, kQuiet);
     const auto want = reference_terms(f, p.bands, p.bins);
     const std::size_t per = t.per_term();
     double worst_ratio = 0.0;
@@ -476,7 +479,8 @@ TEST(DiffractionMaths, ExactDftAtKappaZeroIsTheDcBin) {
   // with DC inside, and bins without DC).
   const Field f = centre_field(random_field(), Centre::mid_range);
   for (const Bins& bins : {full_bins(f.width, f.height), Bins{-5, 7, -3, 2}, Bins{1, 9, -4, 4}}) {
-    ExactDft exact(&device(), f, bins);
+    const DeviceHeights heights(device(), f);
+    ExactDft exact(&heights, f, bins);
     const auto got = exact(0.0);
     auto want = host_dft(std::vector<cplx>(f.count(), 1.0), f.width, f.height, bins);
     ASSERT_EQ(got.size(), want.size());
@@ -504,13 +508,14 @@ TEST(DiffractionHardCases, TallFieldMeetsToleranceWithBandsOrChebyshev) {
   const double scale = 40.0 / (kappa_hi * f.s);
   for (auto& h : hf.h_um) h *= scale;
   f = centre_field(hf, Centre::mid_range);
-  ExactDft exact(&device(), f, full_bins(64, 64));
+  const DeviceHeights heights(device(), f);
+  ExactDft exact(&heights, f, full_bins(64, 64));
   for (Expansion e : {Expansion::taylor, Expansion::chebyshev}) {
     spec.expansion = e;
     const Plan p = make_plan(spec, f, spec.tolerance);
     EXPECT_NEAR(p.y_max, 40.0, 1e-9);
     if (e == Expansion::taylor) EXPECT_GT(p.bands.size(), 1u);  // one band would need e^20·u ≫ 1e-4
-    const Terms t = device_terms(device(), f, p, kQuiet);
+    const Terms t = device_terms(DeviceHeights(device(), f), f, p, kQuiet);
     double worst = 0.0;
     for (int i = 0; i <= 12; ++i) {
       const double kappa = p.kappa_hi * i / 12.0;

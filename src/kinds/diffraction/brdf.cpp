@@ -30,8 +30,31 @@ std::vector<double> packed_rows(const Wavelengths& wl) {
     r.insert(r.end(), {wl.lambda_um[k], wl.xyz[k][0], wl.xyz[k][1], wl.xyz[k][2]});
   return r;
 }
-int expansion_of(const BrdfTable& t) { return t.bands.front().expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV; }
-double p_scale_of(const BrdfTable& t) { return static_cast<double>(t.f.count()) / t.window_sum; }
+
+// The table as table.cl's functions take it, and their double evaluations on the host; `d` holds
+// ω_i then ω_o, wavelength rows as packed_rows.
+struct PackedTable {
+  const BrdfTable& t;
+  std::vector<double> bands = packed_bands(t.bands);
+  int expansion = expansion_id(t.bands.front().expansion);
+  double p_scale = static_cast<double>(t.f.count()) / t.window_sum;  // W·H/Σw
+  int n_bands() const { return static_cast<int>(t.bands.size()); }
+  double brdf(const double* d, double lambda_um) const {
+    return ref::table_brdf(t.terms.data(), t.g.size, t.g.f_max, t.g.power, n_bands(), bands.data(), expansion, t.f.s,
+                           p_scale, t.ior, d[0], d[1], d[2], d[3], d[4], d[5], lambda_um);
+  }
+  void xyz(const double* d, const std::vector<double>& rows, double* out) const {
+    ref::table_xyz(t.terms.data(), t.g.size, t.g.f_max, t.g.power, n_bands(), bands.data(), expansion, t.f.s, p_scale,
+                   t.ior, d[0], d[1], d[2], d[3], d[4], d[5], static_cast<int>(rows.size() / 4), rows.data(), out);
+  }
+  void xyz_fast_specular(const double* d, const std::vector<double>& few, const std::vector<double>& all,
+                         double* out) const {
+    ref::table_xyz_fast_specular(t.terms.data(), t.g.size, t.g.f_max, t.g.power, n_bands(), bands.data(), expansion,
+                                 t.f.s, p_scale, t.ior, t.sigma_um, d[0], d[1], d[2], d[3], d[4], d[5],
+                                 static_cast<int>(few.size() / 4), few.data(), static_cast<int>(all.size() / 4),
+                                 all.data(), out);
+  }
+};
 
 // The lit pixels of a picture: each one's directions (ω_i, ω_o: six reals) and its index.
 struct Pairs {
@@ -91,10 +114,10 @@ Pairs sphere_pairs(const Vec3& light, int size) {
 std::vector<float> to_picture(const Pairs& p, const std::vector<double>& xyz) {
   const Mat3 m = xyz_to_srgb();
   std::vector<float> rgb(3 * static_cast<std::size_t>(p.width) * p.height, 0.0f);
-  for (std::size_t i = 0; i < p.pixel.size(); ++i)
-    for (int r = 0; r < 3; ++r)
-      rgb[3 * p.pixel[i] + r] = static_cast<float>(m[3 * r] * xyz[3 * i] + m[3 * r + 1] * xyz[3 * i + 1] +
-                                                   m[3 * r + 2] * xyz[3 * i + 2]);
+  for (std::size_t i = 0; i < p.pixel.size(); ++i) {
+    const auto c = apply(m, xyz.data() + 3 * i);
+    for (int r = 0; r < 3; ++r) rgb[3 * p.pixel[i] + r] = static_cast<float>(c[r]);
+  }
   return rgb;
 }
 }  // namespace
@@ -105,8 +128,7 @@ struct BrdfPictures::OnDevice {
   cl::Buffer terms, bands;
 };
 
-BrdfPictures::BrdfPictures(const BrdfTable& t, cl_util::Device* dev)
-    : t_(t), bands_(packed_bands(t.bands)) {
+BrdfPictures::BrdfPictures(const BrdfTable& t, cl_util::Device* dev) : t_(t) {
   if (!dev) return;
   cl_util::checked("BRDF previews: device set-up", [&] {
     const cl::Program program = dev->build(kProgram, dev->real_options());
@@ -114,7 +136,7 @@ BrdfPictures::BrdfPictures(const BrdfTable& t, cl_util::Device* dev)
         *dev, cl::Kernel(program, "diffraction_brdf_xyz"),
         cl::Buffer(dev->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, t.terms.size() * sizeof(float),
                    const_cast<float*>(t.terms.data())),
-        cl_util::upload_real(*dev, bands_)});
+        cl_util::upload_real(*dev, packed_bands(t.bands))});
     return 0;
   });
 }
@@ -124,21 +146,15 @@ bool BrdfPictures::on_device() const { return device_ != nullptr; }
 std::vector<double> BrdfPictures::shade(const std::vector<double>& dirs, const Wavelengths& wl,
                                         const Wavelengths* few) const {
   const std::size_t n = dirs.size() / 6;
+  const PackedTable pt{t_};
   const auto rows = packed_rows(wl), few_rows = few ? packed_rows(*few) : std::vector<double>{};
-  const int n_wl = static_cast<int>(wl.lambda_um.size()), n_few = few ? static_cast<int>(few->lambda_um.size()) : 0;
   if (!device_) {
     std::vector<double> xyz(3 * n);
     parallel_for(static_cast<long long>(n), [&](long long i) {
-      const double* d = dirs.data() + 6 * i;
       if (few)
-        ref::table_xyz_fast_specular(t_.terms.data(), t_.g.size, t_.g.f_max, t_.g.power, static_cast<int>(t_.bands.size()),
-                                     bands_.data(), expansion_of(t_), t_.f.s, p_scale_of(t_), t_.ior, t_.sigma_um, d[0],
-                                     d[1], d[2], d[3], d[4], d[5], n_few, few_rows.data(), n_wl, rows.data(),
-                                     xyz.data() + 3 * i);
+        pt.xyz_fast_specular(dirs.data() + 6 * i, few_rows, rows, xyz.data() + 3 * i);
       else
-        ref::table_xyz(t_.terms.data(), t_.g.size, t_.g.f_max, t_.g.power, static_cast<int>(t_.bands.size()),
-                       bands_.data(), expansion_of(t_), t_.f.s, p_scale_of(t_), t_.ior, d[0], d[1], d[2], d[3], d[4],
-                       d[5], n_wl, rows.data(), xyz.data() + 3 * i);
+        pt.xyz(dirs.data() + 6 * i, rows, xyz.data() + 3 * i);
     });
     return xyz;
   }
@@ -152,19 +168,19 @@ std::vector<double> BrdfPictures::shade(const std::vector<double>& dirs, const W
     k.setArg(arg++, t_.g.size);
     cl_util::set_real_arg(dev, k, arg++, t_.g.f_max);
     cl_util::set_real_arg(dev, k, arg++, t_.g.power);
-    k.setArg(arg++, static_cast<int>(t_.bands.size()));
+    k.setArg(arg++, pt.n_bands());
     k.setArg(arg++, device_->bands);
-    k.setArg(arg++, expansion_of(t_));
+    k.setArg(arg++, pt.expansion);
     cl_util::set_real_arg(dev, k, arg++, t_.f.s);
-    cl_util::set_real_arg(dev, k, arg++, p_scale_of(t_));
+    cl_util::set_real_arg(dev, k, arg++, pt.p_scale);
     cl_util::set_real_arg(dev, k, arg++, t_.ior);
     cl_util::set_real_arg(dev, k, arg++, t_.sigma_um);
     k.setArg(arg++, few ? 1 : 0);
     k.setArg(arg++, static_cast<int>(n));
     k.setArg(arg++, pairs);
-    k.setArg(arg++, n_wl);
+    k.setArg(arg++, static_cast<int>(rows.size() / 4));
     k.setArg(arg++, wl_dev);
-    k.setArg(arg++, n_few);
+    k.setArg(arg++, static_cast<int>(few_rows.size() / 4));
     k.setArg(arg++, few_dev);
     k.setArg(arg++, out);
     cl_util::run_1d(dev, k, n);
@@ -190,20 +206,15 @@ std::vector<float> BrdfPictures::sphere(const Wavelengths& wl, const Vec3& light
 
 std::array<double, 3> xyz_fast_specular(const BrdfTable& t, const Vec3& wi, const Vec3& wo, const Wavelengths& few,
                                         const Wavelengths& all) {
-  const auto bands = packed_bands(t.bands), few_rows = packed_rows(few), all_rows = packed_rows(all);
+  const double d[6] = {wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]};
   std::array<double, 3> xyz{};
-  ref::table_xyz_fast_specular(t.terms.data(), t.g.size, t.g.f_max, t.g.power, static_cast<int>(t.bands.size()),
-                               bands.data(), expansion_of(t), t.f.s, p_scale_of(t), t.ior, t.sigma_um, wi[0], wi[1],
-                               wi[2], wo[0], wo[1], wo[2], static_cast<int>(few.lambda_um.size()), few_rows.data(),
-                               static_cast<int>(all.lambda_um.size()), all_rows.data(), xyz.data());
+  PackedTable{t}.xyz_fast_specular(d, packed_rows(few), packed_rows(all), xyz.data());
   return xyz;
 }
 
 double brdf(const BrdfTable& t, const Vec3& wi, const Vec3& wo, double lambda_um) {
-  const auto bands = packed_bands(t.bands);
-  return ref::table_brdf(t.terms.data(), t.g.size, t.g.f_max, t.g.power, static_cast<int>(t.bands.size()), bands.data(),
-                         expansion_of(t), t.f.s, p_scale_of(t), t.ior, wi[0], wi[1], wi[2], wo[0], wo[1], wo[2],
-                         lambda_um);
+  const double d[6] = {wi[0], wi[1], wi[2], wo[0], wo[1], wo[2]};
+  return PackedTable{t}.brdf(d, lambda_um);
 }
 
 Wavelengths every_nm(const std::vector<double>& spectrum, int step_nm) {

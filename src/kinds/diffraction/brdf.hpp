@@ -83,7 +83,6 @@ class BrdfPictures {
   std::vector<double> shade(const std::vector<double>& dirs, const Wavelengths& wl, const Wavelengths* few) const;
   struct OnDevice;
   const BrdfTable& t_;
-  std::vector<double> bands_;
   std::shared_ptr<OnDevice> device_;
 };
 

@@ -118,7 +118,7 @@ std::vector<double> preview_xyz(cl_util::Device* dev, const Field& f, const Plan
     rows.insert(rows.end(), spectrum.begin() + row, spectrum.begin() + row + 4);
   const int n_rows = static_cast<int>(rows.size() / 4);
   const auto bands = packed_bands(p.bands);
-  const int expansion = p.bands.front().expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV;
+  const int expansion = expansion_id(p.bands.front().expansion);
   const Bins& b = t.bins;
   if (dev)
     return cl_util::checked("preview", [&] {
@@ -262,9 +262,8 @@ std::vector<float> preview_rgb(const std::vector<double>& xyz, std::vector<doubl
   std::vector<float> rgb(3 * n * n);
   for (int i = 0; i < n * n; ++i) {
     luminance[i] = xyz[3 * i + 1];
-    for (int r = 0; r < 3; ++r)
-      rgb[3 * i + r] = static_cast<float>(M[3 * r] * xyz[3 * i] + M[3 * r + 1] * xyz[3 * i + 1] +
-                                          M[3 * r + 2] * xyz[3 * i + 2]);
+    const auto c = apply(M, xyz.data() + 3 * i);
+    for (int r = 0; r < 3; ++r) rgb[3 * i + r] = static_cast<float>(c[r]);
   }
   return rgb;
 }
@@ -311,6 +310,7 @@ namespace {
 struct Work {
   Timings tm;
   Field f;
+  std::unique_ptr<DeviceHeights> heights;  // uploaded once for the terms and the exact transforms
   std::unique_ptr<ExactDft> exact;
   Plan p;
   Terms terms;
@@ -325,7 +325,8 @@ void plan_step(const DiffractionSpec& spec, JobContext& ctx, Work& w) {
   w.f = w.tm.time("field", [&] { return make_field(spec); });
   check_bundle_budget(spec, w.f, make_plan(spec, w.f, spec.tolerance));
   w.exact = w.tm.time("exact DFT plan", [&] {
-    return std::make_unique<ExactDft>(&ctx.device, w.f, crop_bins(spec, w.f.width, w.f.height, w.f.dx_um));
+    w.heights = std::make_unique<DeviceHeights>(ctx.device, w.f);
+    return std::make_unique<ExactDft>(w.heights.get(), w.f, crop_bins(spec, w.f.width, w.f.height, w.f.dx_um));
   });
 }
 
@@ -345,7 +346,7 @@ void compute_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeRes
   for (int attempt = 0;; ++attempt) {
     p = tm.time("plan", [&] { return make_plan(spec, f, target); });
     ctx.progress("FFT terms", 0.1);
-    terms = device_terms(dev, f, p, ctx.progress, &tm);
+    terms = device_terms(*w.heights, f, p, ctx.progress, &tm);
     m = measure(p, f, exact, terms, dev, ctx.progress, tm);
     attempts.push_back({{"target", target}, {"terms", p.total_terms}, {"bands", p.bands.size()},
                         {"measured_max_over_M2", m.max_over_m2}});

@@ -5,6 +5,7 @@
 #include "core/colour_space.hpp"
 #include "core/glsl.hpp"
 #include "core/text.hpp"
+#include "kinds/diffraction/terms.hpp"
 
 namespace specbake::diffraction {
 
@@ -57,7 +58,7 @@ std::string diffraction_glsl(const Field& f, const std::vector<Band>& bands, con
     << "const float DIFFRACTION_WINDOW_SUM = " << glsl_float(window.sum) << ";\n"
     << "const float DIFFRACTION_SIGMA_UM = " << glsl_float(window.sigma_um) << ";  // the coherence window's sigma\n"
     << "const float DIFFRACTION_IOR = " << glsl_float(ior) << ";\n"
-    << "const int DIFFRACTION_EXPANSION = " << (bands.front().expansion == Expansion::taylor ? 0 : 1)
+    << "const int DIFFRACTION_EXPANSION = " << expansion_id(bands.front().expansion)
     << ";  // 0 taylor, 1 chebyshev\n"
     << "const int DIFFRACTION_BANDS = " << bands.size() << ";\n"
     << "const float DIFFRACTION_BAND_KAPPA_HI[" << bands.size() << "] = " << array("float", hi, real) << ";\n"
@@ -88,13 +89,13 @@ vec2 diffraction_p(sampler2DArray terms, vec2 f, float kappa) {
   vec2 uv = (vec2(diffraction_texel(f.x, DIFFRACTION_F_MAX, DIFFRACTION_POWER, DIFFRACTION_TABLE_SIZE),
                   diffraction_texel(f.y, DIFFRACTION_F_MAX, DIFFRACTION_POWER, DIFFRACTION_TABLE_SIZE)) + 0.5) /
             DIFFRACTION_TABLE_SIZE;
-  float y = (kappa - DIFFRACTION_BAND_KAPPA0[b]) * DIFFRACTION_SCALE_UM;
-  float t = DIFFRACTION_BAND_DELTA[b] > 0.0 ? (kappa - DIFFRACTION_BAND_KAPPA0[b]) / DIFFRACTION_BAND_DELTA[b] : 0.0;
+  float x = expansion_variable(DIFFRACTION_EXPANSION, kappa, DIFFRACTION_BAND_KAPPA0[b], DIFFRACTION_BAND_DELTA[b],
+                               DIFFRACTION_SCALE_UM);
   float coef = 1.0, previous = 1.0;
   vec2 sum = vec2(0.0);
   for (int n = 0; n < DIFFRACTION_BAND_TERMS[b]; ++n) {
     if (n > 0) {
-      float next = DIFFRACTION_EXPANSION == 0 ? coef * y / float(n) : (n == 1 ? t : 2.0 * t * coef - previous);
+      float next = expansion_next(DIFFRACTION_EXPANSION, n, x, coef, previous);
       previous = coef;
       coef = next;
     }

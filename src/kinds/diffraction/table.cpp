@@ -283,8 +283,6 @@ AxisExtent fft_extent(int m, double dx_um, double sigma_um) {
   return {a.count, a.n};
 }
 
-DeviceHeights::DeviceHeights(cl_util::Device& d, const Field& f) : dev(d), h(cl_util::upload_real(d, f.h_um)) {}
-
 std::vector<std::vector<float>> table_terms_fft(const DeviceHeights& on, const Field& f, const Window& w,
                                                 const std::vector<Band>& bands, const std::vector<TableGeometry>& tables,
                                                 const std::function<void(double)>& progress) {
@@ -356,7 +354,7 @@ std::vector<std::vector<float>> table_terms_fft(const DeviceHeights& on, const F
           row_inputs.setArg(arg++, c);
           cl_util::set_real_arg(dev, row_inputs, arg++, f.c);
           cl_util::set_real_arg(dev, row_inputs, arg++, inv_s);
-          row_inputs.setArg(arg++, band.expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV);
+          row_inputs.setArg(arg++, expansion_id(band.expansion));
           cl_util::set_real_arg(dev, row_inputs, arg++, band.kappa0);
           cl_util::set_real_arg(dev, row_inputs, arg++, band.delta);
           row_inputs.setArg(arg++, t0);
@@ -602,7 +600,7 @@ struct Evaluator {
   cplx scale;
   Evaluator(const std::vector<float>& t, const TableGeometry& geo, const Field& f, const Band& b, double k)
       : terms(t), g(geo), band(b), kappa(k), s(f.s), coef(b.terms) {
-    ref::expansion_coefficients(b.expansion == Expansion::taylor ? 0 : 1, k, b.kappa0, b.delta, f.s, b.terms,
+    ref::expansion_coefficients(expansion_id(b.expansion), k, b.kappa0, b.delta, f.s, b.terms,
                                 coef.data());
     scale = static_cast<double>(f.count()) * std::polar(1.0, k * f.c);
   }
@@ -621,7 +619,7 @@ struct Evaluator {
   cplx bilinear(double tu, double tv) const {
     double re, im;
     ref::table_bilinear_sum(terms.data(), g.size, band.first_term, band.terms,
-                            band.expansion == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV, kappa,
+                            expansion_id(band.expansion), kappa,
                             band.kappa0, band.delta, s, tu, tv, &re, &im);
     return scale * cplx(re, im);
   }

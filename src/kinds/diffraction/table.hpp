@@ -29,6 +29,7 @@
 
 #include "cl/device.hpp"
 #include "kinds/diffraction/planning.hpp"
+#include "kinds/diffraction/terms.hpp"
 
 namespace specbake::diffraction {
 
@@ -56,14 +57,6 @@ struct TableGeometry {
   double texel_of(double f) const;
 };
 TableGeometry table_geometry(const DiffractionSpec& spec, int size);
-
-// A field's heights on a device, as the device's `real`: uploaded once per bake and read by every
-// pass that needs them (the table's terms, the exact sums of its error measurement).
-struct DeviceHeights {
-  DeviceHeights(cl_util::Device& dev, const Field& f);
-  cl_util::Device& dev;
-  cl::Buffer h;
-};
 
 // The separable amplitude window over the samples (σ in µm; wx[ix]·wy[iy]).
 struct Window {

@@ -16,8 +16,6 @@ namespace {
 constexpr double kTwoPi = 6.283185307179586476925287;
 constexpr std::size_t kWorkspaceBytes = 64u << 20;  // FFT batch buffer cap
 
-int expansion_id(Expansion e) { return e == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV; }
-
 // Signed bins [lo, hi] (hi − lo < m) as runs contiguous in an unshifted array of length m:
 // bins first_offset … first_offset+count−1 (from lo) sit at indices first_index … .
 struct BinRun {
@@ -46,6 +44,8 @@ std::vector<cplx> twiddles(int k, int m) {
 }
 }  // namespace
 
+int expansion_id(Expansion e) { return e == Expansion::taylor ? DIFFRACTION_TAYLOR : DIFFRACTION_CHEBYSHEV; }
+
 std::vector<double> packed_bands(const std::vector<Band>& bands) {
   std::vector<double> b;
   for (const auto& band : bands)
@@ -53,6 +53,8 @@ std::vector<double> packed_bands(const std::vector<Band>& bands) {
                        band.delta});
   return b;
 }
+
+DeviceHeights::DeviceHeights(cl_util::Device& d, const Field& f) : dev(d), h(cl_util::upload_real(d, f.h_um)) {}
 
 const Band& band_for(const std::vector<Band>& bands, double kappa) {
   for (const auto& b : bands)
@@ -85,8 +87,9 @@ nlohmann::json Timings::json() {
   return j;
 }
 
-Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress,
+Terms device_terms(const DeviceHeights& on, const Field& f, const Plan& plan, const Progress& progress,
                    Timings* timings) {
+  cl_util::Device& dev = on.dev;
   Timings local;
   local.use(&dev.profiler());
   Timings& tm = timings ? *timings : local;
@@ -105,7 +108,7 @@ Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const
     return &cl_util::shared_fft(dev, f.width, f.height, 1, cl_util::FftPrecision::single);
   });
   return cl_util::checked("diffraction terms", [&] {
-    cl::Buffer h = cl_util::upload_real(dev, f.h_um);
+    const cl::Buffer& h = on.h;
     cl::Buffer work(dev.context(), CL_MEM_READ_WRITE, fft.bytes() * batch);
     t.values.resize(2 * t.per_term() * t.count);
     cl::Kernel inputs(program, "diffraction_term_inputs"), taylor(program, "diffraction_taylor_inputs");
@@ -304,16 +307,17 @@ struct ExactDft::Impl {
   }
 };
 
-ExactDft::ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins) : impl_(std::make_unique<Impl>()) {
+ExactDft::ExactDft(const DeviceHeights* on, const Field& f, const Bins& bins) : impl_(std::make_unique<Impl>()) {
   impl_->f = &f;
   impl_->bins = bins;
+  cl_util::Device* dev = on ? &on->dev : nullptr;
   if (dev && dev->info().fp64) {
     impl_->fft = &cl_util::shared_fft(*dev, f.width, f.height, 1, cl_util::FftPrecision::double_);
     cl_util::checked("exact DFT: device set-up", [&] {
       const cl::Program program = dev->build(kProgram, dev->real_options());
       impl_->phase = cl::Kernel(program, "diffraction_phase_field");
       impl_->error = cl::Kernel(program, "diffraction_reconstruction_error");
-      impl_->h = cl_util::upload_real(*dev, f.h_um);
+      impl_->h = on->h;
       impl_->p = cl::Buffer(dev->context(), CL_MEM_READ_WRITE, static_cast<std::size_t>(f.count()) * sizeof(cplx));
       return 0;
     });

@@ -21,6 +21,14 @@ inline constexpr const char* kProgram = "kernels/diffraction/kernels.cl";
 
 using cplx = std::complex<double>;
 
+// A field's heights on a device, as the device's `real`: uploaded once per bake and read by every
+// pass that needs them (the terms, the exact transforms or sums of the error measurement).
+struct DeviceHeights {
+  DeviceHeights(cl_util::Device& dev, const Field& f);
+  cl_util::Device& dev;
+  cl::Buffer h;
+};
+
 // Terms as the bundle stores them: float32 [T][kv][ku][re, im] over plan.bins.
 struct Terms {
   Bins bins;
@@ -65,7 +73,7 @@ class Timings {
 };
 
 // The device path: float32 FFTs with VkFFT. Adds its sub-stages ("terms: …") to `timings`.
-Terms device_terms(cl_util::Device& dev, const Field& f, const Plan& plan, const Progress& progress,
+Terms device_terms(const DeviceHeights& on, const Field& f, const Plan& plan, const Progress& progress,
                    Timings* timings = nullptr);
 
 // Host double-precision term inputs q_n of every sample for the band's terms [n_first, n_first+count).
@@ -80,12 +88,12 @@ std::vector<cplx> reference_terms_at(const Field& f, const std::vector<Band>& ba
                                      const std::vector<std::pair<int, int>>& bins);
 
 // Exact P(k;κ) = Σ e^{iκh}·e^{−2πi(...)} over the bins ([kv][ku], not divided by M²), in double
-// precision: VkFFT double on the device when it has fp64 (dev != nullptr; e^{iκh} formed there by
-// diffraction_phase_field from the heights, uploaded once), else the host DFT;
+// precision: VkFFT double on the heights' device when it has fp64 (e^{iκh} formed there by
+// diffraction_phase_field from the heights), else the host DFT;
 // κ = 0 needs no transform (M² at the DC bin, 0 elsewhere).
 class ExactDft {
  public:
-  ExactDft(cl_util::Device* dev, const Field& f, const Bins& bins);
+  ExactDft(const DeviceHeights* on, const Field& f, const Bins& bins);  // on may be null: the host
   ~ExactDft();
   std::vector<cplx> operator()(double kappa);
   bool on_device() const;
@@ -114,6 +122,8 @@ std::vector<cplx> reconstruct(const std::vector<cplx>& terms, const Bins& bins, 
 
 // The band whose range holds κ (the first one at a shared edge).
 const Band& band_for(const std::vector<Band>& bands, double kappa);
+// DIFFRACTION_TAYLOR or DIFFRACTION_CHEBYSHEV, as the .cl maths names an expansion.
+int expansion_id(Expansion e);
 // The bands as kernels/diffraction/table.cl takes them: κ_hi, first term, term count, κ_0, Δ per
 // band (DIFFRACTION_BAND_REALS each; table_band picks as band_for does).
 std::vector<double> packed_bands(const std::vector<Band>& bands);
