@@ -187,12 +187,12 @@ struct Measured {
 
 // Max |P_rec − P_exact|/M² over the bins at each κ, for every band holding κ, P_rec from `terms`.
 // On a GPU the device reduces; on a CPU device the host's threads are faster (ExactDft::prepare).
-Measured measure(const Plan& p, const Field& f, ExactDft& exact, const Terms& terms, const cl_util::Device& dev,
+Measured measure(const Plan& p, const Field& f, ExactDft& exact, const Terms& terms, cl_util::Device& dev,
                  const Progress& progress, Timings& tm) {
   Measured m;
   m.kappas = measurement_kappas(p);
   const double inv = 1.0 / static_cast<double>(f.count());
-  exact.prepare(terms, dev.info().type != "cpu");
+  exact.prepare(terms, unless_cpu(dev) != nullptr);
   for (std::size_t i = 0; i < m.kappas.size(); ++i) {
     const double kappa = m.kappas[i];
     tm.time("error: exact DFT", [&] { exact.transform(kappa); });
@@ -472,9 +472,9 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
   ctx.progress("preview", 0.95);
   if (spec.w_max >= 1.0) {
     std::vector<double> lum;
-    // On a GPU the device draws it; on a CPU device the host's threads (docs/diffraction.md).
-    cl_util::Device* on = dev.info().type == "cpu" ? nullptr : &dev;
-    const auto rgb = tm.time("preview", [&] { return preview_rgb(preview_xyz(on, f, p, terms, spectrum, spec.w_max), lum); });
+    const auto rgb = tm.time("preview", [&] {
+      return preview_rgb(preview_xyz(unless_cpu(dev), f, p, terms, spectrum, spec.w_max), lum);
+    });
     std::vector<double> lit;
     for (double y : lum)
       if (y > 0) lit.push_back(y);

@@ -660,7 +660,7 @@ int random_count(const Field& f, int fixed, int lo, int hi) {
 }  // namespace
 
 const DeviceHeights* TableMeasurement::exact_device(const DeviceHeights* on) {
-  return on && on->dev.info().fp64 && on->dev.info().type != "cpu" ? on : nullptr;
+  return on && on->dev.info().fp64 && unless_cpu(on->dev) ? on : nullptr;
 }
 
 TableMeasurement::TableMeasurement(const DeviceHeights* on, const Field& f, const Window& w, const TableGeometry& shape,
