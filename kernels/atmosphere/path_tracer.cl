@@ -64,6 +64,17 @@
 #endif
 
 #define TRUTH_SHELLS 256        /* majorant table: shells of thickness (rt − rb)/TRUTH_SHELLS */
+#define TRUTH_MAX_KINKS 32      /* kink altitudes of the profiles the medium table can hold */
+/* The medium table (host-built, one per channel group): [TRUTH_SHELLS][NCH] majorants, then
+ * the number of kink altitudes of the density profiles and up to TRUTH_MAX_KINKS of them
+ * (ascending, km): where a profile's layer changes or its clamp to [0, 1] sets in. */
+#define TRUTH_KINKS_AT (TRUTH_SHELLS * NCH)
+#define TRUTH_MEDIUM_SIZE (TRUTH_KINKS_AT + 1 + TRUTH_MAX_KINKS)
+/* Exact optical depths (truth_optical_depth): the ray is cut where it crosses an altitude
+ * level, TRUTH_DEPTH_LEVELS equal levels over the atmosphere's thickness and every kink, so
+ * that each piece changes altitude monotonically by at most (rt − rb)/TRUTH_DEPTH_LEVELS (Earth:
+ * 2.5 km, ~2 of the Mie scale height) and holds no kink; each piece by 6-point Gauss–Legendre. */
+#define TRUTH_DEPTH_LEVELS 24
 #define TRUTH_MAX_EVENTS 1000   /* all-orders walks stop here (counted as truncated) */
 #define TRUTH_RATIO_BOOST R(2.0)
 
@@ -176,6 +187,70 @@ FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real m
   return sum * half_len;
 }
 
+/* ---- exact optical depth --------------------------------------------------------------------- */
+/* ∫ σ_t ds over [0, s_end] of the ray (h, mu), by quadrature: the deterministic counterpart of
+ * ratio tracking, for the long grazing rays of twilight whose ratio-tracking variance,
+ * e^{τ/boost} − 1, is what limits the truth there. Along the ray x = s + r μ is the signed
+ * distance from its point closest to the planet's centre, where r² − r_b² = ρ_t² + x² with
+ * ρ_t² = ρ² − (r μ)² (altitude-based, as everywhere here). Altitude levels h_j cross the ray at
+ * x = ±√(ρ_j² − ρ_t²); between consecutive crossings (and x = 0) the altitude is monotone and
+ * changes by at most one level spacing, with no kink inside, so 6-point Gauss–Legendre in x is
+ * accurate: the integrand is a few exponentials whose exponent changes by ≲ 2 over a piece, a
+ * Gaussian in x at a tangent point (relative error ≤ 1e-8 against a fine Simpson rule,
+ * tests/atmosphere/truth_test.cpp; 4 points left 2e-5 on grazing rays). Levels:
+ * TRUTH_DEPTH_LEVELS equal ones and the medium table's kinks, merged in ascending order. */
+FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, real x0, real x1) {
+  const real x[3] = {R(0.2386191860831969), R(0.6612093864662645), R(0.9324695142031521)};
+  const real w[3] = {R(0.4679139345726910), R(0.3607615730481386), R(0.1713244923791704)};
+  const real mid = R(0.5) * (x0 + x1), half_len = R(0.5) * (x1 - x0);
+  real sum = R(0.0);
+  for (int i = 0; i < 3; ++i)
+    for (int side = 0; side < 2; ++side) {
+      const real xx = side == 0 ? mid - half_len * x[i] : mid + half_len * x[i];
+      sum += w[i] * truth_extinction(a, c, altitude_of_rho2(a, rho_t2 + xx * xx));
+    }
+  return sum * half_len;
+}
+/* Adds the pieces of |x| ∈ [lo, hi] cut at the level crossings √(ρ_j² − ρ_t²) (the integrand
+ * depends on x² only, so the descending side is integrated in |x| too). */
+FN real truth_monotone_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real rho_t2, real lo,
+                             real hi) {
+  if (!(hi > lo)) return R(0.0);
+  const real dh = thickness(a) / (real)TRUTH_DEPTH_LEVELS;
+  const int n_kinks = (int)medium[TRUTH_KINKS_AT];
+  int j = 1, k = 0;
+  real depth = R(0.0), prev = lo;
+  for (;;) {
+    /* the next level of the two ascending lists merged: j·dh (j ≤ TRUTH_DEPTH_LEVELS) or kink k */
+    real level;
+    if (k < n_kinks && (j > TRUTH_DEPTH_LEVELS || medium[TRUTH_KINKS_AT + 1 + k] < (real)j * dh))
+      level = medium[TRUTH_KINKS_AT + 1 + k++];
+    else if (j <= TRUTH_DEPTH_LEVELS)
+      level = (real)j++ * dh;
+    else
+      break;
+    const real x2 = horizon_distance2(a, level) - rho_t2;
+    if (!(x2 > R(0.0))) continue;
+    const real x = sqrt(x2);
+    if (x <= prev) continue;
+    if (x >= hi) break;
+    depth += truth_piece_depth(a, c, rho_t2, prev, x);
+    prev = x;
+  }
+  return depth + truth_piece_depth(a, c, rho_t2, prev, hi);
+}
+FN real truth_optical_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
+                            real s_end) {
+  const real r_mu = radius_of(a, h) * mu;
+  const real rho_t2 = horizon_distance2(a, h) - r_mu * r_mu;
+  const real x0 = r_mu, x1 = r_mu + s_end;
+  /* the descending part (x < 0), then the rising part (x > 0) */
+  real depth = R(0.0);
+  if (x0 < R(0.0)) depth += truth_monotone_depth(a, c, medium, rho_t2, fmax(-x1, R(0.0)), -x0);
+  if (x1 > R(0.0)) depth += truth_monotone_depth(a, c, medium, rho_t2, fmax(x0, R(0.0)), x1);
+  return depth;
+}
+
 /* ---- transmittance estimates: ratio tracking ----------------------------------------------- */
 /* Unbiased estimate of T over [0, s_end] of the ray (h, mu, ground): ratio tracking against
  * TRUTH_RATIO_BOOST × the majorant of the lowest altitude left on [s, s_end]. A ray that meets
@@ -207,12 +282,21 @@ FN real truth_ratio_track(const AtmosphereParameters* a, int c, GLOBAL const rea
   }
   return t;
 }
-/* Unbiased estimate of T_sun from altitude h with sun cosine mu_s (visible fraction not
- * included): along mu_s, or along the horizon when the disc centre is below it. */
+/* T over [0, s_end] of the ray (h, mu, ground): exact (truth_optical_depth) or by ratio
+ * tracking. Twilight walks take the exact one: their grazing rays have optical depths of
+ * several, where ratio tracking's relative variance e^{τ/boost} − 1 dominated the truth's
+ * noise; daylight rays are short and thin, and ratio tracking (one or two steps) costs less. */
+FN real truth_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu,
+                            int ground, real s_end, int exact, PhiloxStream* rng, int* violations) {
+  if (exact) return exp(-truth_optical_depth(a, c, majorant, h, mu, s_end));
+  return truth_ratio_track(a, c, majorant, h, mu, ground, s_end, rng, violations);
+}
+/* T_sun from altitude h with sun cosine mu_s (visible fraction not included): along mu_s, or
+ * along the horizon when the disc centre is below it. */
 FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu_s,
-                                PhiloxStream* rng, int* violations) {
+                                int exact, PhiloxStream* rng, int* violations) {
   const real mu = fmax(mu_s, -horizon_distance(a, h) / radius_of(a, h));
-  return truth_ratio_track(a, c, majorant, h, mu, 0, distance_to_top(a, h, mu), rng, violations);
+  return truth_transmittance(a, c, majorant, h, mu, 0, distance_to_top(a, h, mu), exact, rng, violations);
 }
 
 /* ---- free paths: delta tracking ------------------------------------------------------------ */
@@ -312,7 +396,7 @@ FN real truth_sun_depth_guess(const AtmosphereParameters* a, int c, real h, real
   return fmax(R(2.0) * truth_extinction(a, c, h_t) * sqrt(ATM_PI * r_t * H / R(2.0)) - up, R(0.0));
 }
 FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, const real* z,
-                            const real* w, const real* sun, PhiloxStream* rng, int* violations) {
+                            const real* w, const real* sun, int exact, PhiloxStream* rng, int* violations) {
   const real mu = clamp_cosine(dot3(w, z));
   const int ground = ray_hits_ground(a, h, mu);
   const real d = distance_to_nearest_boundary(a, h, mu, ground);
@@ -379,8 +463,8 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     real s_r, s_m, s_t;
     truth_coefficients(a, c, h_s, &s_r, &s_m, &s_t);
     if (visible > R(0.0) && s_r + s_m > R(0.0) && pdf > R(0.0)) {
-      const real t_view = truth_ratio_track(a, c, majorant, h, mu, ground, s, rng, violations);
-      const real t_sun = truth_sun_transmittance(a, c, majorant, h_s, mu_s, rng, violations);
+      const real t_view = truth_transmittance(a, c, majorant, h, mu, ground, s, exact, rng, violations);
+      const real t_sun = truth_sun_transmittance(a, c, majorant, h_s, mu_s, exact, rng, violations);
       value += t_view * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible / pdf;
     }
   }
@@ -390,12 +474,66 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     const real mu_s = clamp_cosine(dot3(sun, p) / sqrt(dot3(p, p)));
     const real cos_factor = sun_horizontal_cosine(a, mu_s);
     if (cos_factor > R(0.0)) {
-      const real t_view = truth_ratio_track(a, c, majorant, h, mu, 1, d, rng, violations);
-      const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, rng, violations);
+      const real t_view = truth_transmittance(a, c, majorant, h, mu, 1, d, exact, rng, violations);
+      const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, exact, rng, violations);
       value += t_view * a->ground_albedo[c] / ATM_PI * e_sun * t_sun * cos_factor;
     }
   }
   return value;
+}
+
+/* ---- guided directions (twilight walks) ------------------------------------------------------ */
+/* With the sun below the horizon, the light reaching shadowed air comes from sunlit air
+ * hundreds of km towards the sun, within a few degrees of the local horizontal; the phase
+ * function sends ~3 % of its directions there. Twilight walks draw their direction after a
+ * scattering event from the mixture (1 − β) phase + β guide (one-sample MIS, balance
+ * heuristic: weight f / mixture pdf, unbiased since the phase part is positive everywhere it
+ * is), the guide being a product, over the local frame (zenith z, azimuth 0 towards the sun),
+ * of a wrapped Cauchy azimuth (concentration TRUTH_GUIDE_RHO) and a Cauchy elevation about the
+ * horizontal (scale TRUTH_GUIDE_WIDTH) truncated to [−π/2, π/2]; pdf per sr p_φ p_e / cos e. */
+#define TRUTH_GUIDE_SHARE R(0.5)
+#define TRUTH_GUIDE_RHO R(0.5)
+#define TRUTH_GUIDE_WIDTH R(0.05)
+/* The horizontal unit vectors t1 (towards the sun's azimuth) and t2 = z × t1. */
+FN void truth_guide_frame(const real* z, const real* sun, real* t1, real* t2) {
+  const real sz = dot3(sun, z);
+  for (int k = 0; k < 3; ++k) t1[k] = sun[k] - sz * z[k];
+  real n = dot3(t1, t1);
+  if (!(n > R(1e-20))) { /* the sun at the zenith or nadir: any horizontal direction */
+    const real e[3] = {fabs(z[0]) < R(0.9) ? R(1.0) : R(0.0), fabs(z[0]) < R(0.9) ? R(0.0) : R(1.0), R(0.0)};
+    const real ez = dot3(e, z);
+    for (int k = 0; k < 3; ++k) t1[k] = e[k] - ez * z[k];
+    n = dot3(t1, t1);
+  }
+  n = sqrt(n);
+  for (int k = 0; k < 3; ++k) t1[k] /= n;
+  t2[0] = z[1] * t1[2] - z[2] * t1[1];
+  t2[1] = z[2] * t1[0] - z[0] * t1[2];
+  t2[2] = z[0] * t1[1] - z[1] * t1[0];
+}
+FN real truth_guide_elevation_norm(void) { return R(2.0) * atan(R(0.5) * ATM_PI / TRUTH_GUIDE_WIDTH); }
+FN void truth_guide_sample(const real* z, const real* sun, real u_e, real u_phi, real* out) {
+  real t1[3], t2[3];
+  truth_guide_frame(z, sun, t1, t2);
+  const real q = (R(1.0) - TRUTH_GUIDE_RHO) / (R(1.0) + TRUTH_GUIDE_RHO);
+  const real phi = R(2.0) * atan(q * tan(ATM_PI * (u_phi - R(0.5))));
+  const real e = TRUTH_GUIDE_WIDTH * tan(truth_guide_elevation_norm() * (u_e - R(0.5)));
+  const real ce = cos(e), se = sin(e), cp = cos(phi), sp = sin(phi);
+  for (int k = 0; k < 3; ++k) out[k] = ce * (cp * t1[k] + sp * t2[k]) + se * z[k];
+  v3_normalize(out);
+}
+FN real truth_guide_pdf(const real* z, const real* sun, const real* w) {
+  real t1[3], t2[3];
+  truth_guide_frame(z, sun, t1, t2);
+  const real se = clamp_cosine(dot3(w, z));
+  const real ce = sqrt(fmax(R(1.0) - se * se, R(0.0)));
+  if (!(ce > R(0.0))) return R(0.0); /* the pole: a null set, any finite value */
+  const real e = asin(se), phi = atan2(dot3(w, t2), dot3(w, t1));
+  const real rho = TRUTH_GUIDE_RHO;
+  const real p_phi = (R(1.0) - rho * rho) / (R(2.0) * ATM_PI * (R(1.0) + rho * rho - R(2.0) * rho * cos(phi)));
+  const real x = e / TRUTH_GUIDE_WIDTH;
+  const real p_e = R(1.0) / (truth_guide_elevation_norm() * TRUTH_GUIDE_WIDTH * (R(1.0) + x * x));
+  return p_phi * p_e / ce;
 }
 
 /* ---- one walk ---------------------------------------------------------------------------- */
@@ -455,7 +593,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real albedo = a->ground_albedo[c];
       const real cos_factor = sun_done ? R(0.0) : sun_horizontal_cosine(a, mu_s);
       if (cos_factor > R(0.0) && albedo > R(0.0)) {
-        const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, rng, violations);
+        const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, use_line, rng, violations);
         const real add = weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
         radiance += add;
         if (order <= split_order) *radiance_low += add;
@@ -474,7 +612,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real nu = clamp_cosine(dot3(w, sun));
       const real visible = sun_done ? R(0.0) : sun_visible_fraction(a, h, mu_s);
       if (visible > R(0.0) && s_r + s_m > R(0.0)) {
-        const real t_sun = truth_sun_transmittance(a, c, majorant, h, mu_s, rng, violations);
+        const real t_sun = truth_sun_transmittance(a, c, majorant, h, mu_s, use_line, rng, violations);
         const real add = weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
         radiance += add;
         if (order <= split_order) *radiance_low += add;
@@ -483,20 +621,31 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       if (!(s_r + s_m > R(0.0))) break;
       const real g = a->mie_g;
       const real u_type = philox_uniform(rng), u_cos = philox_uniform(rng), u_phi = philox_uniform(rng);
-      const real cos_t =
-          u_type * (s_r + s_m) < s_r ? sample_rayleigh_cosine(u_cos) : sample_henyey_greenstein_cosine(g, u_cos);
-      const real p_r = rayleigh_phase(cos_t);
-      const real ratio = (s_r * p_r + s_m * mie_phase(g, cos_t)) / (s_r * p_r + s_m * henyey_greenstein_phase(g, cos_t));
-      weight *= (s_r + s_m) * ratio;
-      rho *= ratio;
       real w1[3];
-      truth_rotate(w, cos_t, R(2.0) * ATM_PI * u_phi, w1);
+      if (use_line && philox_uniform(rng) < TRUTH_GUIDE_SHARE) {
+        truth_guide_sample(z, sun, u_cos, u_phi, w1);
+      } else {
+        const real cos_t =
+            u_type * (s_r + s_m) < s_r ? sample_rayleigh_cosine(u_cos) : sample_henyey_greenstein_cosine(g, u_cos);
+        truth_rotate(w, cos_t, R(2.0) * ATM_PI * u_phi, w1);
+      }
+      /* f / pdf of the direction drawn; Russian roulette keeps following the phase function's
+       * ratio alone (any survival probability keeps the estimate unbiased) */
+      const real cos_t = clamp_cosine(dot3(w, w1));
+      const real p_r = rayleigh_phase(cos_t);
+      const real f = s_r * p_r + s_m * mie_phase(g, cos_t);
+      const real pdf_phase = (s_r * p_r + s_m * henyey_greenstein_phase(g, cos_t)) / (s_r + s_m);
+      const real pdf = use_line ? (R(1.0) - TRUTH_GUIDE_SHARE) * pdf_phase + TRUTH_GUIDE_SHARE * truth_guide_pdf(z, sun, w1)
+                                : pdf_phase;
+      weight *= f / pdf;
+      rho *= f / ((s_r + s_m) * pdf_phase);
       for (int k = 0; k < 3; ++k) w[k] = w1[k];
     }
     /* the next vertex's sun term, in expectation over where the free path ends */
     sun_done = use_line;
     if (sun_done) {
-      const real add = weight * truth_next_sun_term(a, c, majorant, on_ground ? R(0.0) : h, z, w, sun, rng, violations);
+      const real add =
+          weight * truth_next_sun_term(a, c, majorant, on_ground ? R(0.0) : h, z, w, sun, use_line, rng, violations);
       radiance += add;
       if (order + 1 <= split_order) *radiance_low += add;
     }

@@ -32,7 +32,7 @@ constexpr int kStride = ref3::kTruthOutStride;
 // one; each segment's optical depth by kSubSegments × 8-point Gauss–Legendre.
 constexpr int kSegments = 256;
 constexpr int kSubSegments = 4;
-constexpr int kMaxKinkAltitudes = 32;
+constexpr int kMaxKinkAltitudes = TRUTH_MAX_KINKS;
 constexpr int kNodes = kSegments + 1 + 2 * kMaxKinkAltitudes;
 // Segment probabilities mix in this much of the uniform density, so that every segment has a
 // positive probability whatever the approximations of the table.
@@ -344,11 +344,17 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   return P;
 }
 
-// The majorant table of one channel group, [TRUTH_SHELLS][kGroup].
-std::vector<double> majorant_table(const Model& m, const Channels& group) {
+}  // namespace
+
+// The medium table of one channel group (path_tracer.cl): [TRUTH_SHELLS][kGroup] majorants,
+// then the kink altitudes' count and the kinks.
+std::vector<double> medium_table(const Model& m, const Channels& group) {
   const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
   const double t = m.top_radius_km - m.bottom_radius_km, width = t / TRUTH_SHELLS;
-  std::vector<double> out(TRUTH_SHELLS * kGroup, 0.0);
+  std::vector<double> out(ref3::kTruthMediumSize, 0.0);
+  const std::vector<double> kinks = kink_altitudes(a);
+  out[ref3::kTruthKinksAt] = static_cast<double>(kinks.size());
+  std::copy(kinks.begin(), kinks.end(), out.begin() + ref3::kTruthKinksAt + 1);
   for (int j = 0; j < TRUTH_SHELLS; ++j) {
     const double lo = std::max(0.0, (j - kShellOverlap) * width);
     const double hi = t * (1.0 + 1e-9);
@@ -362,6 +368,8 @@ std::vector<double> majorant_table(const Model& m, const Channels& group) {
   }
   return out;
 }
+
+namespace {
 
 // The [P][kGroup][kNodes] slice of a [P][C][kNodes] table for channels first..first+count.
 std::vector<double> group_slice(const std::vector<double>& v, std::size_t n_points, std::size_t n_channels,
@@ -414,7 +422,7 @@ std::vector<Group> groups_of(const Prepared& P) {
     g.a = ref3::make_parameters(P.model, g.channels);
     g.tau = group_slice(P.node_tau, P.n_points, P.n_channels, first, g.count);
     g.cdf = group_slice(P.node_cdf, P.n_points, P.n_channels, first, g.count);
-    g.majorant = majorant_table(P.model, g.channels);
+    g.majorant = medium_table(P.model, g.channels);
     out.push_back(std::move(g));
   }
   return out;

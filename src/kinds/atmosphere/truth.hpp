@@ -116,6 +116,12 @@ TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const 
 // Bytes a trace of `points` points and `channels` channels holds at once (the largest chunk's
 // view-ray tables and their per-group copies, one launch's output), on the host and on the
 // device; for memory estimates before anything is allocated.
+struct Model;
+struct Channels;
+// The tracer's medium table for one group of up to three channels (path_tracer.cl): the
+// majorants per altitude shell, then the profiles' kink altitudes (for its exact optical depths).
+std::vector<double> medium_table(const Model& m, const Channels& group);
+
 struct TruthMemory {
   std::uint64_t host = 0, device = 0, largest_buffer = 0;
 };

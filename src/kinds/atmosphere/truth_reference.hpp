@@ -13,5 +13,7 @@ using std::cbrt, std::fabs, std::log;
 #include "atmosphere/path_tracer.cl"
 inline constexpr int kTruthOutStride = TRUTH_OUT_STRIDE;
 inline constexpr int kTruthChannels = NCH;
+inline constexpr int kTruthKinksAt = TRUTH_KINKS_AT;
+inline constexpr int kTruthMediumSize = TRUTH_MEDIUM_SIZE;
 #undef NCH
 }  // namespace specbake::atmosphere::ref3
