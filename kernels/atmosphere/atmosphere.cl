@@ -23,7 +23,8 @@
  * Quadratures (part of the model: the reference textures depend on them):
  *   transmittance    500-interval trapezoid over the distance to the top boundary;
  *   single/multiple  50-interval trapezoid over the distance to the nearest boundary;
- *   density J_n      16 × 32 midpoint rule over the sphere (θ, φ);
+ *   density J_n      n_θ × 32 midpoint rule over the sphere (θ through density_theta_node: by
+ *                    default 16 nodes packed towards the horizon; the reference: 16 uniform);
  *   indirect E       16 × 64 midpoint rule over the upper hemisphere.
  * Transmittance inside every integral is read from the transmittance texture (bilinear),
  * never integrated again; the same for the scattering textures (trilinear + a lerp in ν).
@@ -61,7 +62,7 @@
  *   ray samples [R][MU][51][RAY_STRIDE]: for each texel's (h, μ) ray and sample i, what does
  *     not depend on μ_s and ν: altitude, r/r_i and d_i/r_i (μ_s,i = (r μ_s + d_i ν)/r_i),
  *     the (u_μ, u_r) of the sample, trapezoid weight × dx, densities, transmittance;
- *   density incidence [R][MU_S][16][inc_stride]: for each (h, μ_s) and incident θ, the NU
+ *   density incidence [R][MU_S][n_θ][inc_stride]: for each (h, μ_s) and incident θ, the NU
  *     ν-slices of the incoming radiance (and single Mie at order 2) and the ground geometry.
  *
  * Compile-time settings: NCH (channels), NU_MAX (largest NU the caller uses).
@@ -136,10 +137,12 @@ typedef struct {
   real sun_angular_radius;          /* rad */
   real mu_s_min;
   real mie_g;
-  real reserved;
+  real density_theta_power;         /* p of the density's θ rule (density_theta_node): 1 = uniform */
   int transmittance_w, transmittance_h;   /* mu, r */
   int irradiance_w, irradiance_h;         /* mu_s, r */
   int r_size, mu_size, mu_s_size, nu_size;
+  int density_theta;                      /* θ nodes of the density's sphere rule (even) */
+  int mu_s_geometric;                     /* 1: μ_s lookups blend geometrically (mu_s_blend) */
 } AtmosphereParameters;
 
 /* ---- small helpers (the scalar geometry is in lookup.cl) ----------------------------- */
@@ -518,10 +521,11 @@ FN_HOT ScatteringColumns scattering_columns(const AtmosphereParameters* a, real 
   return x;
 }
 /* One channel of the lookup from its columns' values (s0.i0, s0.i1, s1.i0, s1.i1) and weights
- * (s0.fx, s1.fx, f). */
-FN_HOT real scattering_blend(real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
-  const real v0 = (R(1.0) - fx0) * c00 + fx0 * c01;
-  const real v1 = (R(1.0) - fx1) * c10 + fx1 * c11;
+ * (s0.fx, s1.fx, f): along μ_s linear as the reference (a GPU's filter) or, `geometric`, by
+ * mu_s_blend (lookup.cl); along ν linear. */
+FN_HOT real scattering_blend(int geometric, real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
+  const real v0 = geometric ? mu_s_blend(c00, c01, fx0) : (R(1.0) - fx0) * c00 + fx0 * c01;
+  const real v1 = geometric ? mu_s_blend(c10, c11, fx1) : (R(1.0) - fx1) * c10 + fx1 * c11;
   return v0 * (R(1.0) - f) + v1 * f;
 }
 /* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
@@ -534,7 +538,7 @@ FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* 
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i1, c01);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
-  for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
+  for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(a->mu_s_geometric, x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -753,7 +757,7 @@ FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL c
   }
   for (int k = 0; k < LANES; ++k)
     for (int c = 0; c < NCH; ++c) {
-      const real j = scattering_blend(fx0[k], fx1[k], f[k], columns[i00[k] + c], columns[i01[k] + c],
+      const real j = scattering_blend(a->mu_s_geometric, fx0[k], fx1[k], f[k], columns[i00[k] + c], columns[i01[k] + c],
                                       columns[i10[k] + c], columns[i11[k] + c]);
       out[k * NCH + c] += j * s[RAY_T + c] * s[RAY_W];
     }
@@ -785,12 +789,30 @@ FN int incidence_stride(const AtmosphereParameters* a) { return 2 * a->nu_size *
 #define INC_SIN(a) (INC_GROUND(a) + 5)
 #define INC_MAX (2 * NU_MAX * NCH + NCH + INC_FIXED)
 
+/* Node l of the density's θ rule and its width dθ: the midpoint rule in y ∈ (−1, 1), n =
+ * a->density_theta equal steps, of θ(y) = π/2 (1 + sgn(y) |y|^p), dθ = (π/2) p |y|^(p−1) dy.
+ * p = 1 is the reference's uniform rule, θ_l = (l + ½) π/n. p > 1 packs the nodes towards the
+ * horizon (θ = π/2), where the incoming light changes fastest: the limb, the ground's horizon
+ * just below it, and in twilight the only light there is — single scattering from sunlit air
+ * hundreds of km away, arriving within a few degrees of the horizontal. n is even, so y = 0
+ * falls between nodes and each half is a smooth midpoint rule (second order in 1/n). */
+FN void density_theta_node(const AtmosphereParameters* a, int l, real* theta, real* d_theta) {
+  const real n = (real)a->density_theta;
+  const real y = ((real)(2 * l + 1) - n) / n;
+  const real p = a->density_theta_power;
+  const real ay = fabs(y);
+  const real stretch = pow(ay, p - R(1.0));
+  *theta = R(0.5) * ATM_PI * (R(1.0) + (y < R(0.0) ? -ay : ay) * stretch);
+  *d_theta = ATM_PI * p * stretch / n;
+}
+
 /* delta_rayleigh/delta_mie: single scattering (used when order == 2); delta_multiple:
  * radiance of order n − 1 (order > 2). */
 FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* delta_rayleigh,
                           GLOBAL const real* delta_mie, GLOBAL const real* delta_multiple, real h, real mu_s,
                           int order, int l, real* e) {
-  const real theta = ((real)l + R(0.5)) * (ATM_PI / (real)DENSITY_SPHERE_STEPS);
+  real theta, d_theta;
+  density_theta_node(a, l, &theta, &d_theta);
   const real cos_theta = cos(theta), sin_theta = sin(theta);
   const int ground = ray_hits_ground(a, h, cos_theta);
   real distance = R(0.0);
@@ -815,7 +837,7 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
   if (order == 2) scattering_slices(a, delta_mie, uvwz[1], uvwz[2], uvwz[3], e + INC_MIE(a));
 }
 
-/* J_n at (h, mu, mu_s) and `count` values nu[k] (a texel row of the ν axis) from the 16
+/* J_n at (h, mu, mu_s) and `count` values nu[k] (a texel row of the ν axis) from the n_θ
  * incidence entries of (h, mu_s) and the ground irradiance of order n − 2 (direct for order
  * 2); out[k·NCH + c], per km per sr.
  *
@@ -873,12 +895,14 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
   real a_r[NU_MAX * LANES], a_m[NU_MAX * LANES];
   real a_r_mie[NU_MAX * LANES], a_m_mie[NU_MAX * LANES];
   real ground_light[NCH * LANES];
-  for (int l = 0; l < DENSITY_SPHERE_STEPS; ++l) {
+  for (int l = 0; l < a->density_theta; ++l) {
     for (int k = 0; k < stride; ++k) e[k] = incidence[l * stride + k];
     const int ground = e[INC_GROUND(a)] != R(0.0);
     const real cos_theta = e[INC_COS(a)], sin_theta = e[INC_SIN(a)];
     const real distance = e[INC_DISTANCE(a)], n_z = e[INC_NZ(a)], inv_n = e[INC_INV_N(a)];
-    const real d_omega = d_angle * d_angle * sin_theta;
+    real theta_l, d_theta;
+    density_theta_node(a, l, &theta_l, &d_theta);
+    const real d_omega = d_theta * d_angle * sin_theta;
     /* the sun's cosine to the ground normal n = r·z + distance·ω_i is (distance·ν_i + (n_z −
      * distance·cos θ)·μ_s)/|n|, affine in ν_i */
     const real ground_slope = distance * inv_n, ground_offset = (n_z - distance * cos_theta) * mu_s * inv_n;

@@ -4,7 +4,7 @@
  * innermost:
  *   transmittance [h][w][NCH], irradiance [h][w][NCH], scattering [R][MU][NU·MU_S][NCH],
  *   ray samples [R][MU][SCATTERING_STEPS + 1][RAY_STRIDE],
- *   density incidence [R][MU_S][DENSITY_SPHERE_STEPS][incidence_stride].
+ *   density incidence [R][MU_S][density_theta][incidence_stride].
  * Built with -DNCH=<channels> -DNU_MAX=<NU> (real = float unless SPECBAKE_REAL_DOUBLE). */
 #include "atmosphere/atmosphere.cl"
 
@@ -16,7 +16,7 @@ __kernel void atmosphere_layout(AtmosphereParameters a, __global real* reals, __
   reals[2] = a.absorption_density.constant_term[1];
   reals[3] = a.bottom_radius;
   reals[4] = a.mie_g;
-  reals[5] = a.reserved;
+  reals[5] = a.density_theta_power;
   ints[0] = a.transmittance_w;
   ints[1] = a.nu_size;
   ints[2] = (int)sizeof(AtmosphereParameters);
@@ -103,9 +103,9 @@ __kernel void density_incidence_table(AtmosphereParameters a, __global const rea
                                       __global const real* delta_R, __global const real* delta_M,
                                       __global const real* delta_S, int order, __global real* incidence) {
   const int id = get_global_id(0);
-  if (id >= a.r_size * a.mu_s_size * DENSITY_SPHERE_STEPS) return;
-  const int l = id % DENSITY_SPHERE_STEPS, xs = (id / DENSITY_SPHERE_STEPS) % a.mu_s_size,
-            z = id / (DENSITY_SPHERE_STEPS * a.mu_s_size);
+  if (id >= a.r_size * a.mu_s_size * a.density_theta) return;
+  const int l = id % a.density_theta, xs = (id / a.density_theta) % a.mu_s_size,
+            z = id / (a.density_theta * a.mu_s_size);
   real h, mu, mu_s, nu, e[INC_MAX];
   int ground;
   scattering_params_from_texel(&a, xs, 0, z, &h, &mu, &mu_s, &nu, &ground);
@@ -124,7 +124,7 @@ __kernel void scattering_density_texture(AtmosphereParameters a, __global const 
   int ground;
   for (int k = 0; k < a.nu_size; ++k)
     scattering_params_from_texel(&a, k * a.mu_s_size + xs, y, z, &h, &mu, &mu_s, &nu[k], &ground);
-  __global const real* block = incidence + (z * a.mu_s_size + xs) * DENSITY_SPHERE_STEPS * incidence_stride(&a);
+  __global const real* block = incidence + (z * a.mu_s_size + xs) * a.density_theta * incidence_stride(&a);
   scattering_density(&a, block, delta_E, h, mu, mu_s, nu, a.nu_size, order, j);
   const int row = (z * a.mu_size + y) * a.nu_size * a.mu_s_size;
   for (int k = 0; k < a.nu_size; ++k)

@@ -48,6 +48,15 @@ FN real smooth_step(real e0, real e1, real x) {
 /* num/den capped at 1, 0 where den is 0 (a transmittance ratio through an opaque segment). */
 FN real ratio_or_zero(real num, real den) { return den > R(0.0) ? fmin(num / den, R(1.0)) : R(0.0); }
 FN real coord_of_unit(real x, real n) { return R(0.5) / n + x * (R(1.0) - R(1.0) / n); }
+/* The blend between two μ_s texels a and b at weight g of b: geometric, a (b/a)^g, where both
+ * are positive and within a factor 1000 of each other, else linear. In twilight the sky falls
+ * by about e per degree of sun elevation, and a linear blend of such values overstates them
+ * (the chord of a convex function): by up to 2× between the default texture's μ_s texels,
+ * which lie 1.5° apart there; the geometric blend is exact for an exponential. Zeros (texels
+ * whose rays see no sunlit air) keep the linear blend. */
+FN real mu_s_blend(real a, real b, real g) {
+  return (a > R(0.0) && b > R(0.0) && fmin(a, b) > R(1e-3) * fmax(a, b)) ? a * pow(b / a, g) : a + (b - a) * g;
+}
 
 /* ---- geometry in the altitude h ------------------------------------------------------ */
 /* H = √(rt² − rb²): the distance to the top boundary along the horizon at the ground. */

@@ -72,6 +72,7 @@ struct SpecbakeAtmosphere {
   real mu_size;
   real mu_s_size;
   real nu_size;
+  real mu_s_geometric;      /* 1: blend the two μ_s texels geometrically (mu_s_blend), 0: linearly */
 };
 
 /* ---- texture lookups ------------------------------------------------------------------- */
@@ -117,52 +118,91 @@ vec4 SpecbakeScatteringUvwz(SpecbakeAtmosphere atm, real h, real mu, real mu_s, 
               scattering_u_mu_at(atm.bottom_radius, atm.top_radius, h, mu, meets_ground, atm.mu_size),
               scattering_u_r_at(atm.bottom_radius, atm.top_radius, h, atm.r_size));
 }
+/* The μ_s texel columns around u_mu_s (texel centres, clamped) and the weight g of the second:
+ * with mu_s_geometric a lookup fetches both at their centres (the filter then blends μ and r
+ * only) and joins them by mu_s_blend; else one fetch at u_mu_s lets the filter blend μ_s too. */
+vec3 SpecbakeMuSColumns(SpecbakeAtmosphere atm, real u_mu_s) {
+  real xs = u_mu_s * atm.mu_s_size - R(0.5);
+  real i0 = floor(xs);
+  return vec3((clamp_real(i0, R(0.0), atm.mu_s_size - R(1.0)) + R(0.5)) / atm.mu_s_size,
+              (clamp_real(i0 + R(1.0), R(0.0), atm.mu_s_size - R(1.0)) + R(0.5)) / atm.mu_s_size, xs - i0);
+}
+SpecbakeRadiance SpecbakeMuSBlend(SpecbakeRadiance a, SpecbakeRadiance b, real g) {
+  SpecbakeRadiance v = a;
+  for (int c = 0; c < SPECBAKE_CHANNELS; ++c) v[c] = mu_s_blend(a[c], b[c], g);
+  return v;
+}
 #ifndef SPECBAKE_SPECTRAL
-/* The 3D layout: two trilinear lookups around nu (corner-sampled, divisor NU − 1); u_mu_s keeps
- * half a texel from each slice's edges, so the filter never mixes two nu slices. */
+/* The 3D layout: a lookup in each of the two nu slices around nu (corner-sampled, divisor NU −
+ * 1), lerped; u_mu_s keeps half a texel from each slice's edges, so the filter never mixes two
+ * nu slices. */
+vec3 SpecbakeScattering3DSlice(SpecbakeAtmosphere atm, sampler3D scattering_texture, real slice, real u_mu_s, real u_mu,
+                               real u_r) {
+  if (atm.mu_s_geometric == R(0.0))
+    return TEXTURE_RGB(scattering_texture, vec3((slice + u_mu_s) / atm.nu_size, u_mu, u_r));
+  vec3 m = SpecbakeMuSColumns(atm, u_mu_s);
+  return SpecbakeMuSBlend(TEXTURE_RGB(scattering_texture, vec3((slice + m.x) / atm.nu_size, u_mu, u_r)),
+                          TEXTURE_RGB(scattering_texture, vec3((slice + m.y) / atm.nu_size, u_mu, u_r)), m.z);
+}
 vec3 GetScattering3D(SpecbakeAtmosphere atm, sampler3D scattering_texture, real h, real mu, real mu_s, real nu,
                      int meets_ground) {
   vec4 uvwz = SpecbakeScatteringUvwz(atm, h, mu, mu_s, nu, meets_ground);
-  real u_mu_s = uvwz.y;
-  real u_mu = uvwz.z;
-  real u_r = uvwz.w;
-  real x = uvwz.x;
-  real x0 = floor(x);
-  real f = x - x0;
-  vec3 v0 = TEXTURE_RGB(scattering_texture, vec3((x0 + u_mu_s) / atm.nu_size, u_mu, u_r));
-  vec3 v1 = TEXTURE_RGB(scattering_texture, vec3((x0 + R(1.0) + u_mu_s) / atm.nu_size, u_mu, u_r));
+  real x0 = floor(uvwz.x);
+  real f = uvwz.x - x0;
+  vec3 v0 = SpecbakeScattering3DSlice(atm, scattering_texture, x0, uvwz.y, uvwz.z, uvwz.w);
+  vec3 v1 = SpecbakeScattering3DSlice(atm, scattering_texture, x0 + R(1.0), uvwz.y, uvwz.z, uvwz.w);
   return v0 * (R(1.0) - f) + v1 * f;
 }
 #endif
 /* The tiled 2D layout (column = r_index·NU·MU_S + nu_slice·MU_S + mu_s_index): bilinear
- * filtering covers mu_s and mu; r and nu are interpolated here, from 4 fetches. */
+ * filtering covers mu and (without mu_s_geometric) mu_s; r and nu are interpolated here: per nu
+ * slice, the two r tiles' fetches lerped (at the μ_s coordinate, or at each of the two μ_s
+ * texel centres, then blended as the 3D layout does), then the two slices lerped. 4 fetches,
+ * 8 with mu_s_geometric. */
+SpecbakeRadiance SpecbakeScatteringTiledColumn(SpecbakeAtmosphere atm, SpecbakeSampler2D scattering_texture, real slice,
+                                               real u_column, real u_mu, real k0, real k1, real g) {
+  real tiles = atm.r_size * atm.nu_size;
+  SpecbakeRadiance a = SPECBAKE_FETCH(scattering_texture, vec2((k0 * atm.nu_size + slice + u_column) / tiles, u_mu));
+  SpecbakeRadiance b = SPECBAKE_FETCH(scattering_texture, vec2((k1 * atm.nu_size + slice + u_column) / tiles, u_mu));
+  return a * (R(1.0) - g) + b * g;
+}
+SpecbakeRadiance SpecbakeScatteringTiledSlice(SpecbakeAtmosphere atm, SpecbakeSampler2D scattering_texture, real slice,
+                                              real u_mu_s, real u_mu, real k0, real k1, real g) {
+  if (atm.mu_s_geometric == R(0.0))
+    return SpecbakeScatteringTiledColumn(atm, scattering_texture, slice, u_mu_s, u_mu, k0, k1, g);
+  vec3 m = SpecbakeMuSColumns(atm, u_mu_s);
+  return SpecbakeMuSBlend(SpecbakeScatteringTiledColumn(atm, scattering_texture, slice, m.x, u_mu, k0, k1, g),
+                          SpecbakeScatteringTiledColumn(atm, scattering_texture, slice, m.y, u_mu, k0, k1, g), m.z);
+}
 SpecbakeRadiance GetScatteringTiled2D(SpecbakeAtmosphere atm, SpecbakeSampler2D scattering_texture, real h, real mu,
                                       real mu_s, real nu, int meets_ground) {
   vec4 uvwz = SpecbakeScatteringUvwz(atm, h, mu, mu_s, nu, meets_ground);
-  real u_mu_s = uvwz.y;
-  real u_mu = uvwz.z;
-  real u_r = uvwz.w;
-  real x = uvwz.x;
-  real s0 = floor(x);
-  real f = x - s0;
+  real s0 = floor(uvwz.x);
+  real f = uvwz.x - s0;
   real s1 = fmin(s0 + R(1.0), atm.nu_size - R(1.0));
-  real z = u_r * atm.r_size - R(0.5);
+  real z = uvwz.w * atm.r_size - R(0.5);
   real k0f = floor(z);
   real g = z - k0f;
   real k0 = clamp_real(k0f, R(0.0), atm.r_size - R(1.0));
   real k1 = clamp_real(k0f + R(1.0), R(0.0), atm.r_size - R(1.0));
-  real tiles = atm.r_size * atm.nu_size;
-  SpecbakeRadiance a00 = SPECBAKE_FETCH(scattering_texture, vec2((k0 * atm.nu_size + s0 + u_mu_s) / tiles, u_mu));
-  SpecbakeRadiance a01 = SPECBAKE_FETCH(scattering_texture, vec2((k0 * atm.nu_size + s1 + u_mu_s) / tiles, u_mu));
-  SpecbakeRadiance a10 = SPECBAKE_FETCH(scattering_texture, vec2((k1 * atm.nu_size + s0 + u_mu_s) / tiles, u_mu));
-  SpecbakeRadiance a11 = SPECBAKE_FETCH(scattering_texture, vec2((k1 * atm.nu_size + s1 + u_mu_s) / tiles, u_mu));
-  return (a00 * (R(1.0) - f) + a01 * f) * (R(1.0) - g) + (a10 * (R(1.0) - f) + a11 * f) * g;
+  SpecbakeRadiance v0 = SpecbakeScatteringTiledSlice(atm, scattering_texture, s0, uvwz.y, uvwz.z, k0, k1, g);
+  SpecbakeRadiance v1 = SpecbakeScatteringTiledSlice(atm, scattering_texture, s1, uvwz.y, uvwz.z, k0, k1, g);
+  return v0 * (R(1.0) - f) + v1 * f;
 }
 
 #ifndef SPECBAKE_SPECTRAL
 /* The 3D layout of `ktx2: {scattering: rgba-combined}` (scattering.ktx2): RGB the scattering
  * texture, alpha single Mie's red channel; returns the scattering and rebuilds single Mie in
  * `single_mie` (extrapolated_single_mie, lookup.cl). Two RGBA lookups around nu, as GetScattering3D. */
+vec4 SpecbakeCombined3DSlice(SpecbakeAtmosphere atm, sampler3D combined_texture, real slice, real u_mu_s, real u_mu,
+                             real u_r) {
+  if (atm.mu_s_geometric == R(0.0))
+    return TEXTURE_RGBA(combined_texture, vec3((slice + u_mu_s) / atm.nu_size, u_mu, u_r));
+  vec3 m = SpecbakeMuSColumns(atm, u_mu_s);
+  vec4 a = TEXTURE_RGBA(combined_texture, vec3((slice + m.x) / atm.nu_size, u_mu, u_r));
+  vec4 b = TEXTURE_RGBA(combined_texture, vec3((slice + m.y) / atm.nu_size, u_mu, u_r));
+  return vec4(mu_s_blend(a.x, b.x, m.z), mu_s_blend(a.y, b.y, m.z), mu_s_blend(a.z, b.z, m.z), mu_s_blend(a.w, b.w, m.z));
+}
 vec3 GetCombinedScattering3D(SpecbakeAtmosphere atm, sampler3D combined_texture, real h, real mu, real mu_s, real nu,
                              int meets_ground, OUT(vec3) single_mie) {
   vec4 uvwz = SpecbakeScatteringUvwz(atm, h, mu, mu_s, nu, meets_ground);
@@ -172,8 +212,8 @@ vec3 GetCombinedScattering3D(SpecbakeAtmosphere atm, sampler3D combined_texture,
   real x = uvwz.x;
   real x0 = floor(x);
   real f = x - x0;
-  vec4 v0 = TEXTURE_RGBA(combined_texture, vec3((x0 + u_mu_s) / atm.nu_size, u_mu, u_r));
-  vec4 v1 = TEXTURE_RGBA(combined_texture, vec3((x0 + R(1.0) + u_mu_s) / atm.nu_size, u_mu, u_r));
+  vec4 v0 = SpecbakeCombined3DSlice(atm, combined_texture, x0, u_mu_s, u_mu, u_r);
+  vec4 v1 = SpecbakeCombined3DSlice(atm, combined_texture, x0 + R(1.0), u_mu_s, u_mu, u_r);
   vec4 c = v0 * (R(1.0) - f) + v1 * f;
   vec3 b_r = atm.rayleigh_scattering;
   vec3 b_m = atm.mie_scattering;

@@ -97,15 +97,21 @@ TEST(SceneCheck, DisplayedDeltaEMatchesTheClosedForm) {
   EXPECT_EQ(displayed_de2000({0.2, 0.3, 0.4}, {0.2, 0.3, 0.4}), 0.0);
   EXPECT_GT(displayed_de2000({0.2, 0.3, 0.45}, {0.2, 0.3, 0.4}), 0.5);  // a hue shift shows
   EXPECT_TRUE(std::isnan(displayed_de2000({1, 1, 1}, {0, 0, 0})));
-  // with a floor, a glow where the reference is black is an error: the exposure of Y = floor
-  // shows the test colour at 0.18 · Y_test / floor; here Y_test = floor: L* = 49.5 against 0,
-  // neutral, so ΔE = ΔL*/S_L with L̄ = 24.75
-  const double floor = 0.01, L = 116 * std::cbrt(0.18) - 16, Lm = 0.5 * L;
+  // a fixed exposure shows a glow where the reference is black: the exposure of Y = y shows the
+  // test colour at 0.18 · Y_test / y; here Y_test = y: L* = 49.5 against 0, neutral, so
+  // ΔE = ΔL*/S_L with L̄ = 24.75
+  const double y = 0.01, L = 116 * std::cbrt(0.18) - 16, Lm = 0.5 * L;
   const double SL = 1 + 0.015 * (Lm - 50) * (Lm - 50) / std::sqrt(20 + (Lm - 50) * (Lm - 50));
-  EXPECT_NEAR(displayed_de2000({floor, floor, floor}, {0, 0, 0}, floor), L / SL, 1e-9);
-  EXPECT_EQ(displayed_de2000({0, 0, 0}, {0, 0, 0}, floor), 0.0);
-  // a floor below the reference's luminance changes nothing
-  EXPECT_EQ(displayed_de2000({0.3, 0.2, 0.1}, {0.2, 0.2, 0.2}, 1e-3), displayed_de2000({0.3, 0.2, 0.1}, {0.2, 0.2, 0.2}));
+  EXPECT_NEAR(displayed_de2000({y, y, y}, {0, 0, 0}, y), L / SL, 1e-9);
+  EXPECT_EQ(displayed_de2000({0, 0, 0}, {0, 0, 0}, y), 0.0);
+  // a fixed exposure at the reference's own luminance is the per-view one; another is not
+  EXPECT_NEAR(displayed_de2000({0.3, 0.2, 0.1}, {0.2, 0.2, 0.2}, 0.2),
+              displayed_de2000({0.3, 0.2, 0.1}, {0.2, 0.2, 0.2}), 1e-12);
+  EXPECT_GT(std::fabs(displayed_de2000({0.3, 0.2, 0.1}, {0.2, 0.2, 0.2}, 2.0) -
+                      displayed_de2000({0.3, 0.2, 0.1}, {0.2, 0.2, 0.2})), 0.5);
+  // EV100 0 brings 0.125 cd/m² to mid grey, each EV doubles it
+  EXPECT_DOUBLE_EQ(exposure_luminance(0.0), 0.125);
+  EXPECT_DOUBLE_EQ(exposure_luminance(3.0), 1.0);
 }
 
 TEST(SceneCheck, SummariesUseTheNearestRankPercentile) {
@@ -469,14 +475,33 @@ TEST_P(HardCases, TheTruthMatchesAnIndependentQuadrature) {
 // here without check_scene's comparison code. Two samples of the same distribution: the means
 // agree within 4 √(s₁²/n₁ + s₂²/n₂) (low-discrepancy sets estimate means at least as well as
 // i.i.d. ones, so the i.i.d. bound is conservative); the same walk rules give both sets the
-// same Monte Carlo noise. ΔE here uses the check's exposure floor (1e-3 of the brightest view).
+// same Monte Carlo noise. Both over the lit points (reference luminance at least
+// kDarkLuminance; the dark ones are reported apart), ΔE at the check's per-view exposure.
 TEST_P(HardCases, TheReportedErrorIsWhatFreshPointsMeasure) {
   const HardCase hc = hard_cases()[GetParam()];
   SCOPED_TRACE(hc.name);
   const AtmosphereSpec s = spec_of(hc.job);
   const Baked b = bake_luts(s, t::shared_device(), [](std::string_view, double) {}, 0);
   const SceneCheck check = check_scene(s, b.luts, b.orders_used, t::shared_device(), [](std::string_view, double) {});
-  const std::vector<double> de_a = csv_column(check.points_csv.bytes, "de2000");
+  const auto k = spectrum_of(s).sky_radiance_to_luminance;
+  const Mat3 M = srgb_to_xyz();
+  auto luminance = [&](const Vec3& v) { return M[3] * v[0] + M[4] * v[1] + M[5] * v[2]; };
+  // the check's points that are lit: the reference it shows (the spectral truth where it traced one)
+  std::vector<char> lit_a;
+  {
+    const bool spectral_ref = check.points_csv.bytes.find("spectral_R") != std::string::npos;
+    const auto ref = csv_rgb(check.points_csv.bytes, spectral_ref ? "spectral_" : "L_");
+    for (const Vec3& v : ref)
+      lit_a.push_back(luminance(spectral_ref ? Vec3{683 * v[0], 683 * v[1], 683 * v[2]}
+                                             : Vec3{k[0] * v[0], k[1] * v[1], k[2] * v[2]}) >= kDarkLuminance);
+  }
+  auto lit_only = [&](const std::vector<double>& v) {
+    std::vector<double> out;
+    for (std::size_t p = 0; p < v.size(); ++p)
+      if (lit_a[p]) out.push_back(v[p]);
+    return out;
+  };
+  const std::vector<double> de_a = lit_only(csv_column(check.points_csv.bytes, "de2000"));
 
   // fresh points, traced with the check's walks (so their noise is alike) and other seeds
   const std::vector<TruthPoint> fresh = scene_points_of(s, s.scene.points);
@@ -485,28 +510,24 @@ TEST_P(HardCases, TheReportedErrorIsWhatFreshPointsMeasure) {
   const TruthResult spectral = trace_truth(ss, t::shared_device(), fresh, scene_truth_options(ss, 778));
   const TruthBundleValues sv = to_bundle_units(ss, spectral);
   const auto lut = lut_sky_radiance(b.luts, fresh);
-  const auto k = spectrum_of(s).sky_radiance_to_luminance;
   std::vector<double> de_b, rel_b;
-  double top = 0.0, top_y = 0.0;
-  const Mat3 M = srgb_to_xyz();
-  for (std::size_t p = 0; p < fresh.size(); ++p) {
-    top = std::max(top, tr.L(p, 1));
-    top_y = std::max(top_y, 683 * (M[3] * sv.radiance[3 * p] + M[4] * sv.radiance[3 * p + 1] + M[5] * sv.radiance[3 * p + 2]));
-  }
+  double top = 0.0;
+  for (std::size_t p = 0; p < fresh.size(); ++p) top = std::max(top, tr.L(p, 1));
   for (std::size_t p = 0; p < fresh.size(); ++p) {
     const Vec3 shown_lut{lut[p][0] * k[0], lut[p][1] * k[1], lut[p][2] * k[2]};
     const Vec3 shown_ref{sv.radiance[3 * p] * 683, sv.radiance[3 * p + 1] * 683, sv.radiance[3 * p + 2] * 683};
-    de_b.push_back(displayed_de2000(shown_lut, shown_ref, 1e-3 * top_y));
+    if (!(luminance(shown_ref) >= kDarkLuminance)) continue;
+    de_b.push_back(displayed_de2000(shown_lut, shown_ref));
     rel_b.push_back(std::fabs(lut[p][1] - tr.L(p, 1)) / std::max(tr.L(p, 1), 1e-3 * top));
   }
   const std::vector<double> rel_a =
-      relative_errors(csv_rgb(check.points_csv.bytes, "lut_"), csv_rgb(check.points_csv.bytes, "L_"), 1);
+      lit_only(relative_errors(csv_rgb(check.points_csv.bytes, "lut_"), csv_rgb(check.points_csv.bytes, "L_"), 1));
   const auto& total = check.record.details["parts"]["total"];
-  const double n = static_cast<double>(de_a.size());
+  const double n = static_cast<double>(de_a.size()), n_b = static_cast<double>(de_b.size());
   EXPECT_NEAR(mean_of(de_a), total["de2000"]["mean"].get<double>(), 1e-6 * mean_of(de_a) + 1e-12);
   EXPECT_NEAR(mean_of(rel_a), total["relative"]["G"]["mean"].get<double>(), 1e-6 * mean_of(rel_a) + 1e-12);
-  const double bound_de = 4 * std::sqrt(variance_of(de_a) / n + variance_of(de_b) / n);
-  const double bound_rel = 4 * std::sqrt(variance_of(rel_a) / n + variance_of(rel_b) / n);
+  const double bound_de = 4 * std::sqrt(variance_of(de_a) / n + variance_of(de_b) / n_b);
+  const double bound_rel = 4 * std::sqrt(variance_of(rel_a) / n + variance_of(rel_b) / n_b);
   std::printf("%s: mean CIEDE2000 reported %.3f, fresh points %.3f (bound %.3f); mean relative error G reported "
               "%.4f, fresh %.4f (bound %.4f); p99 CIEDE2000 %.3f, max %.3f; truth se (de) mean %.3f\n",
               hc.name, mean_of(de_a), mean_of(de_b), bound_de, mean_of(rel_a), mean_of(rel_b), bound_rel,

@@ -333,7 +333,11 @@ json parameters_json(const AtmosphereSpec& spec) {
   p["length_unit"] = "km (texture values do not depend on it)";
   p["quadrature"] = {{"transmittance", "trapezoid, 500 intervals"},
                      {"single_and_multiple_scattering", "trapezoid, 50 intervals to the nearest boundary"},
-                     {"scattering_density", "midpoint 16 x 32 over the sphere"},
+                     {"scattering_density", "midpoint " + std::to_string(m.density_theta) + " x 32 over the sphere, theta " +
+                                                (m.density_theta_power == 1.0 ? "uniform" : "packed towards the horizon")},
+                     {"density_theta", m.density_theta},
+                     {"density_rule", m.density_theta_power == 1.0 ? "uniform" : "horizon"},
+                     {"mu_s_blend", m.mu_s_geometric ? "geometric" : "linear"},
                      {"indirect_irradiance", "midpoint 16 x 64 over the upper hemisphere"}};
   return p;
 }
@@ -563,6 +567,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   r.accuracy.insert(r.accuracy.begin(), sc.record);  // the headline: the error the user sees
   r.files.push_back(std::move(sc.points_csv));
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
+  for (std::string& w : sc.warnings) r.warnings.push_back(std::move(w));
   if (!sc.failure.empty()) {
     if (ctx.judge) throw JobError(sc.failure);
     r.warnings.push_back(sc.failure);

@@ -96,6 +96,31 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
   if (at.has("scale")) scale_sizes_at(at.child("scale"), percent_at(at.child("scale")), s);  // given or default, scaled
 }
 
+// `quadrature: reference | {density_theta, density_rule, mu_s_blend}` — the scattering
+// density's sphere rule and the scattering textures' blend along μ_s; `reference` is the
+// reference implementation's (16 uniform θ, linear).
+void parse_quadrature(const At& at, AtmosphereSpec& s) {
+  if (at.node.IsScalar()) {
+    at.choice<int>({{"reference", 0}});
+    s.density_theta = 16;
+    s.density_horizon = s.mu_s_geometric = false;
+    return;
+  }
+  at.expect_map("quadrature settings: reference, or {density_theta, density_rule, mu_s_blend}");
+  at.allow_keys({"density_theta", "density_rule", "mu_s_blend"});
+  if (at.has("mu_s_blend"))
+    s.mu_s_geometric = at.child("mu_s_blend").choice<int>({{"geometric", 1}, {"linear", 0}}) == 1;
+  if (at.has("density_theta")) {
+    const At n = at.child("density_theta");
+    const long long v = n.integer();
+    if (v < 4 || v > DENSITY_THETA_MAX || v % 2)
+      n.fail("expected an even number of θ nodes in [4, " + std::to_string(DENSITY_THETA_MAX) + "], got " + n.shown());
+    s.density_theta = static_cast<int>(v);
+  }
+  if (at.has("density_rule"))
+    s.density_horizon = at.child("density_rule").choice<int>({{"horizon", 1}, {"uniform", 0}}) == 1;
+}
+
 std::string shown_number(double v) {
   char b[32];
   std::snprintf(b, sizeof b, "%g", v);
@@ -114,7 +139,7 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
   at.expect_map("a scene {camera_altitude_km, sun_elevation_deg, views, view_elevation_deg, points, relative_se, "
                 "view_sun_azimuth_deg, seed, tolerance_de2000 | tolerance_relative} or none");
   at.allow_keys({"camera_altitude_km", "sun_elevation_deg", "views", "view_elevation_deg", "view_sun_azimuth_deg",
-                 "points", "relative_se", "seed", "tolerance_de2000", "tolerance_relative"});
+                 "points", "relative_se", "seed", "tolerance_de2000", "tolerance_relative", "exposure"});
   auto range = [](const At& r, double lo, double hi, const char* text, double& a, double& b) {
     if (r.node.IsScalar()) {
       a = b = r.number_in(lo, hi, text);
@@ -161,6 +186,17 @@ void parse_scene(const At& at, AtmosphereSpec& s) {
     if (v < 0) n.fail("expected an integer >= 0, got " + n.shown());
     sc.seed = static_cast<std::uint64_t>(v);
   }
+  if (at.has("exposure")) {  // per-view | {ev100: X}
+    const At e = at.child("exposure");
+    if (e.node.IsScalar()) {
+      e.choice<int>({{"per-view", 0}});
+    } else {
+      e.expect_map("an exposure: per-view, or {ev100: X}");
+      e.allow_keys({"ev100"});
+      if (!e.has("ev100")) e.fail("expected {ev100: X} (a fixed exposure), or per-view");
+      sc.exposure_ev100 = e.child("ev100").number_in(-30.0, 30.0, "in [-30, 30] (EV100)");
+    }
+  }
   if (at.has("tolerance_de2000") && at.has("tolerance_relative"))
     at.child("tolerance_relative").fail("expected one of tolerance_de2000 and tolerance_relative, not both");
   if (at.has("tolerance_de2000"))
@@ -201,7 +237,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   job.allow_keys({"name", "kind", "preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
                   "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
                   "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
-                  "ktx2", "scene", "previews"});
+                  "ktx2", "scene", "previews", "quadrature"});
   AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
   if (job.has("preset")) job.child("preset").choice<int>({{"earth", 0}});
   set_earth_profiles(s);
@@ -263,6 +299,7 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   }
   if (job.has("tolerance")) s.tolerance = job.child("tolerance").number_in(1e-8, 0.5, "in [1e-8, 0.5]");
   if (job.has("sizes")) parse_sizes(job.child("sizes"), s);
+  if (job.has("quadrature")) parse_quadrature(job.child("quadrature"), s);
   if (job.has("layout")) {
     s.layout_3d = s.layout_tiled2d = false;
     job.child("layout").each_item("layouts (3d, tiled2d)", [&](const At& it) {
@@ -344,6 +381,9 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
                      {"irradiance", {s.irradiance_mu_s, s.irradiance_r}},
                      {"scattering", {{"r", s.scattering_r}, {"mu", s.scattering_mu}, {"mu_s", s.scattering_mu_s},
                                      {"nu", s.scattering_nu}}}}},
+          {"quadrature", {{"density_theta", s.density_theta},
+                          {"density_rule", s.density_horizon ? "horizon" : "uniform"},
+                          {"mu_s_blend", s.mu_s_geometric ? "geometric" : "linear"}}},
           {"layout", layouts},
           {"outputs", outputs},
           {"precision", s.double_precision ? "double" : "float"}};

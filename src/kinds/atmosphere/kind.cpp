@@ -17,7 +17,7 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
   // single-scattering deltas, the multiple-scattering delta, the density, the pass's scattering
   // sum and an order's addition to it), a ray-sample table per (r, mu) texel row
   // (SCATTERING_STEPS + 1 samples of RAY_FIXED + w values) and a density incidence table per
-  // (r, mu_s) (DENSITY_SPHERE_STEPS directions of (2·nu + 1)·w + INC_FIXED values), plus the
+  // (r, mu_s) (density_theta directions of (2·nu + 1)·w + INC_FIXED values), plus the
   // small 2D textures; the sums over passes (pass.hpp's Sums) add the bundle's two R,G,B 4D
   // textures, 1/P_R per texel and each order's R,G,B addition while later passes add to it (all
   // orders' with several passes: the order count, or for `orders: auto` its cap; one at a time
@@ -27,7 +27,7 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
   const std::uint64_t texels = std::uint64_t(s.scattering_r) * s.scattering_mu * s.scattering_mu_s * s.scattering_nu;
   const std::uint64_t texture = texels * w * real;
   const std::uint64_t rays = std::uint64_t(s.scattering_r) * s.scattering_mu * (SCATTERING_STEPS + 1) * (RAY_FIXED + w) * real;
-  const std::uint64_t incidence = std::uint64_t(s.scattering_r) * s.scattering_mu_s * DENSITY_SPHERE_STEPS *
+  const std::uint64_t incidence = std::uint64_t(s.scattering_r) * s.scattering_mu_s * s.density_theta *
                                   ((2 * s.scattering_nu + 1) * w + INC_FIXED) * real;
   const std::uint64_t channels = s.spectral ? s.count : 3, passes = (channels + w - 1) / w;
   const std::uint64_t orders_kept = passes > 1 ? std::uint64_t(s.orders.value_or(kMaxAutoOrders)) : 1;

@@ -94,14 +94,14 @@ constexpr int kNuMaxAtLeast = 8;
 std::size_t lanes(const cl_util::DeviceInfo& info) { return info.type == "cpu" ? 8 : 1; }
 
 // Table shapes, from atmosphere.cl's macros (visible here through reference.hpp): ray samples
-// [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][DENSITY_SPHERE_STEPS][(2 NU + 1) NCH + INC_FIXED].
-constexpr int kScatteringSteps = SCATTERING_STEPS, kDensitySphereSteps = DENSITY_SPHERE_STEPS, kRayFixed = RAY_T,
+// [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][density_theta][(2 NU + 1) NCH + INC_FIXED].
+constexpr int kScatteringSteps = SCATTERING_STEPS, kRayFixed = RAY_T,
               kIncidenceFixed = INC_FIXED;
 
 // Parameter block, and the values the layout kernel must echo back.
 struct Block {
   std::vector<unsigned char> bytes;
-  std::vector<double> echo_reals;  // solar[0], albedo[NCH-1], absorption constant[1], rb, g, reserved
+  std::vector<double> echo_reals;  // solar[0], albedo[NCH-1], absorption constant[1], rb, g, density_theta_power
   std::vector<int> echo_ints;      // transmittance_w, nu_size, sizeof
 };
 
@@ -112,7 +112,7 @@ Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
     Block b;
     b.bytes = W::block(a, dbl);
     b.echo_reals = {a.solar_irradiance[0], a.ground_albedo[W::channels - 1], a.absorption_density.constant_term[1],
-                    a.bottom_radius, a.mie_g, a.reserved};
+                    a.bottom_radius, a.mie_g, a.density_theta_power};
     b.echo_ints = {a.transmittance_w, a.nu_size, static_cast<int>(b.bytes.size())};
     return b;
   });
@@ -154,7 +154,7 @@ class DeviceBackend final : public PassBackend, private Sums {
     n_e_ = 1LL * sizes_.irradiance_w * sizes_.irradiance_h;
     n_s_ = sizes_.scattering_texels();
     n_ray_ = 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1) * (kRayFixed + width);
-    n_inc_ = 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps * (2 * sizes_.nu * width + width + kIncidenceFixed);
+    n_inc_ = 1LL * sizes_.r * sizes_.mu_s * model_.density_theta * (2 * sizes_.nu * width + width + kIncidenceFixed);
     cl_util::checked("allocating atmosphere textures", [&] {
       rays_ = alloc_reals(n_ray_);
       incidence_ = alloc_reals(n_inc_);
@@ -184,7 +184,7 @@ class DeviceBackend final : public PassBackend, private Sums {
     launch("single_scattering_texture", row_chunks(), {&T_, &rays_, &dR_, &dM_});
   }
   void scattering_density(int order) override {
-    launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * kDensitySphereSteps,
+    launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * model_.density_theta,
            {&T_, &dR_, &dM_, &dS_, order, &incidence_});
     launch("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s, {&incidence_, &dE_, order, &J_});
   }

@@ -213,7 +213,8 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
     << f(rgb.mie_scattering[2]) << "),  // mie_scattering (km^-1)\n"
     << "    " << f(s.transmittance_w) << ", " << f(s.transmittance_h) << ", " << f(s.irradiance_w) << ", "
     << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
-    << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ");  // R, MU, MU_S, NU\n"
+    << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ",  // R, MU, MU_S, NU\n"
+    << "    " << f(m.mu_s_geometric ? 1.0 : 0.0) << ");  // mu_s_geometric: mu_s texels blended geometrically\n"
     << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef TEXTURE_RGBA\n#undef OUT\n#undef INOUT\n"
     << "#endif\n";
   return o.str();
@@ -264,7 +265,8 @@ std::string sampling_spectral_glsl(const Model& m, const SpectralLuts& l, const 
   o << "),  // solar_irradiance per set\n"
     << "    " << f(s.transmittance_w) << ", " << f(s.transmittance_h) << ", " << f(s.irradiance_w) << ", "
     << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
-    << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ");  // R, MU, MU_S, NU\n"
+    << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ",  // R, MU, MU_S, NU\n"
+    << "    " << f(m.mu_s_geometric ? 1.0 : 0.0) << ");  // mu_s_geometric: mu_s texels blended geometrically\n"
     << glsl_subset_epilogue() << "#undef TEXTURE_LAYER\n#undef OUT\n#undef INOUT\n"
     << "#endif\n";
   return o.str();

@@ -41,6 +41,9 @@ constexpr std::uint64_t kSpectralSeedOffset = 0x9e3779b97f4a7c15ULL;
 constexpr std::uint64_t kHeldOutSeedStride = 0xbf58476d1ce4e5b9ULL;  // seed + first * stride
 constexpr double kMidGrey = 0.18;
 constexpr double kRelativeFloor = 1e-3;
+// A truth whose p99 standard error (CIEDE2000) is more than this share of the reported p99
+// error cannot resolve it: the record and the run say so.
+constexpr double kNoisyTruthShare = 0.5;
 
 Vec3 times(const Vec3& v, const std::array<double, 3>& k) { return {v[0] * k[0], v[1] * k[1], v[2] * k[2]}; }
 
@@ -70,10 +73,10 @@ namespace {
 // Channel c's relative errors and the displayed-colour ΔE of one part.
 struct Part {
   std::string name;
-  std::array<ErrorSummary, 3> relative{};
+  std::array<ErrorSummary, 3> relative{}, dark_relative{};  // over the lit points, the dark ones
   bool has_relative = true;
-  std::vector<double> de;
-  ErrorSummary de_summary;
+  std::vector<double> de;                // every point
+  ErrorSummary de_summary, dark_summary;  // over the lit points, the dark ones
 };
 
 // The worst channel's p99 relative error of a part (0 without per-channel errors).
@@ -83,29 +86,42 @@ double worst_relative_p99(const Part& part) {
   return w;
 }
 
+// The points a part's figures cover: the lit ones (the reference's luminance at least
+// kDarkLuminance) or the dark ones, reported apart.
+std::vector<double> select_points(const std::vector<double>& v, const std::vector<char>& dark, bool want_dark) {
+  std::vector<double> out;
+  for (std::size_t p = 0; p < v.size(); ++p)
+    if ((dark[p] != 0) == want_dark) out.push_back(v[p]);
+  return out;
+}
+
+// A part's errors at every point (the exposure rule of the scene: per view, or fixed at
+// exposure_y), summarised over the lit points; the dark points' own figures in dark_summary.
 Part make_part(std::string name, const std::vector<Vec3>* test, const std::vector<Vec3>* ref,
-               const std::vector<Vec3>& shown_test, const std::vector<Vec3>& shown_ref) {
+               const std::vector<Vec3>& shown_test, const std::vector<Vec3>& shown_ref, double exposure_y,
+               const std::vector<char>& dark) {
   Part part;
   part.name = std::move(name);
   part.has_relative = test && ref;
   if (part.has_relative)
-    for (int c = 0; c < 3; ++c) part.relative[c] = summarize_errors(relative_errors(*test, *ref, c));
-  // the exposure of views darker than 1e-3 of the scene's brightest is that of 1e-3 of it
-  double top = 0.0;
-  for (const Vec3& v : shown_ref) top = std::max(top, luminance_y(v));
+    for (int c = 0; c < 3; ++c) {
+      const std::vector<double> e = relative_errors(*test, *ref, c);
+      part.relative[c] = summarize_errors(select_points(e, dark, false));
+      part.dark_relative[c] = summarize_errors(select_points(e, dark, true));
+    }
   part.de.resize(shown_test.size());
-  for (std::size_t p = 0; p < shown_test.size(); ++p)
-    part.de[p] = displayed_de2000(shown_test[p], shown_ref[p], kRelativeFloor * top);
-  part.de_summary = summarize_errors(part.de);
+  for (std::size_t p = 0; p < shown_test.size(); ++p) part.de[p] = displayed_de2000(shown_test[p], shown_ref[p], exposure_y);
+  part.de_summary = summarize_errors(select_points(part.de, dark, false));
+  part.dark_summary = summarize_errors(select_points(part.de, dark, true));
   return part;
 }
 
-json part_json(const Part& part) {
-  json j = {{"de2000", summary_json(part.de_summary)}};
+json part_json(const Part& part, bool dark) {
+  json j = {{"de2000", summary_json(dark ? part.dark_summary : part.de_summary)}};
   if (part.has_relative) {
     const char* names[3] = {"R", "G", "B"};
     json rel = json::object();
-    for (int c = 0; c < 3; ++c) rel[names[c]] = summary_json(part.relative[c]);
+    for (int c = 0; c < 3; ++c) rel[names[c]] = summary_json(dark ? part.dark_relative[c] : part.relative[c]);
     j["relative"] = rel;
   }
   return j;
@@ -138,10 +154,13 @@ json scene_json(const AtmosphereScene& sc) {
             {"seed", sc.seed}};
   if (sc.tolerance_de2000) j["tolerance_de2000"] = *sc.tolerance_de2000;
   if (sc.tolerance_relative) j["tolerance_relative"] = *sc.tolerance_relative;
+  j["exposure"] = sc.exposure_ev100 ? json{{"ev100", *sc.exposure_ev100}} : json("per-view");
   return j;
 }
 
-double displayed_de2000(const Vec3& test, const Vec3& ref, double y_floor) {
+double exposure_luminance(double ev100) { return 0.125 * std::exp2(ev100); }
+
+double displayed_de2000(const Vec3& test, const Vec3& ref, double exposure_y) {
   const Mat3& M = to_xyz();
   auto xyz = [&](const Vec3& rgb) {
     return std::array<double, 3>{M[0] * rgb[0] + M[1] * rgb[1] + M[2] * rgb[2],
@@ -150,7 +169,7 @@ double displayed_de2000(const Vec3& test, const Vec3& ref, double y_floor) {
   };
   static const std::array<double, 3> white = xyz({1.0, 1.0, 1.0});
   const auto x_ref = xyz(ref), x_test = xyz(test);
-  const double y = std::max(x_ref[1], y_floor);
+  const double y = exposure_y > 0.0 ? exposure_y : x_ref[1];
   if (!(y > 0.0) || !std::isfinite(y)) return std::numeric_limits<double>::quiet_NaN();
   const double k = kMidGrey / y;
   const std::array<double, 3> a{k * x_test[0], k * x_test[1], k * x_test[2]}, b{k * x_ref[0], k * x_ref[1], k * x_ref[2]};
@@ -325,11 +344,18 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     shown_all[p] = times(t_all[p], k);
     shown_ref[p] = reference ? times(s_all[p], k683) : shown_all[p];
   }
+  // One exposure rule for every part and for the truth's se: per view, or the config's fixed one.
+  // Views whose reference is darker than kDarkLuminance are reported apart, with their own figures.
+  const double exposure_y = sc.exposure_ev100 ? exposure_luminance(*sc.exposure_ev100) : 0.0;
+  std::vector<char> dark(n);
+  for (std::size_t p = 0; p < n; ++p) dark[p] = !(luminance_y(shown_ref[p]) >= kDarkLuminance);
+  const long long n_dark = std::count(dark.begin(), dark.end(), 1);
   std::vector<Part> parts;
-  parts.push_back(make_part("total", &lut, &t_all, shown_lut, shown_ref));
-  parts.push_back(make_part("lut_discretisation", &lut, &t_low, shown_lut, shown_low));
-  parts.push_back(make_part("order_truncation", &t_low, &t_all, shown_low, shown_all));
-  if (reference) parts.push_back(make_part("spectral_sampling", nullptr, nullptr, shown_all, shown_ref));
+  parts.push_back(make_part("total", &lut, &t_all, shown_lut, shown_ref, exposure_y, dark));
+  parts.push_back(make_part("lut_discretisation", &lut, &t_low, shown_lut, shown_low, exposure_y, dark));
+  parts.push_back(make_part("order_truncation", &t_low, &t_all, shown_low, shown_all, exposure_y, dark));
+  if (reference)
+    parts.push_back(make_part("spectral_sampling", nullptr, nullptr, shown_all, shown_ref, exposure_y, dark));
 
   // the truth's own standard error: relative per channel, and in ΔE as the colour moved by one
   // se in each channel in turn, combined in quadrature
@@ -342,7 +368,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       if (t_all[p][c] > 0.0) se_rel.push_back(se_all[p][c] / t_all[p][c]);
       Vec3 moved = shown_ref[p];
       moved[c] += ref_se[p][c] * k_ref[c];
-      const double d = displayed_de2000(moved, shown_ref[p]);
+      const double d = displayed_de2000(moved, shown_ref[p], exposure_y);
       if (std::isfinite(d)) q += d * d;
     }
     de_se[p] = std::sqrt(q);
@@ -351,11 +377,12 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   for (std::size_t p = 0; p < n; ++p)
     if (t.paths[p] >= o.max_paths || (reference && s.paths[p] >= so.max_paths)) ++below_target;
 
+  const ErrorSummary se_de = summarize_errors(select_points(de_se, dark, false)), se_rel_summary = summarize_errors(se_rel);
   const Part& total = parts[0];
   const bool by_radiance = sc.tolerance_relative.has_value();
   // no lit point: nothing to judge the LUTs by (NaN fails the record)
-  const bool dark = total.de_summary.count == 0;
-  const double value = dark ? std::numeric_limits<double>::quiet_NaN()
+  const bool dark_scene = total.de_summary.count == 0;
+  const double value = dark_scene ? std::numeric_limits<double>::quiet_NaN()
                             : by_radiance ? worst_relative_p99(total) : total.de_summary.p99;
   const std::optional<double> tolerance = by_radiance ? sc.tolerance_relative : sc.tolerance_de2000;
 
@@ -370,17 +397,32 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                       "missing orders as lut_discretisation)"},
       {"points_without_light", std::count_if(shown_ref.begin(), shown_ref.end(),
                                              [](const Vec3& v) { return !(luminance_y(v) > 0.0); })},
-      {"exposure", "per view: the reference's luminance Y brought to 0.18, both colours scaled alike; CIE L*a*b* "
-                   "against D65 (Y = 1), no gamut clipping, no tone curve"},
+      {"exposure", sc.exposure_ev100
+                       ? "fixed, EV100 " + format_g(*sc.exposure_ev100) + ": luminance " +
+                             format_g(exposure_y) + " cd/m^2 brought to 0.18 in every view, both colours scaled alike, "
+                             "for every part and the truth's se; CIE L*a*b* against D65 (Y = 1), no gamut clipping, "
+                             "no tone curve"
+                       : "per view: the reference's luminance Y brought to 0.18 (a renderer's auto exposure), both "
+                         "colours scaled alike, for every part and the truth's se; CIE L*a*b* against D65 (Y = 1), no "
+                         "gamut clipping, no tone curve"},
+      {"dark_points", {{"threshold_cd_m2", kDarkLuminance},
+                       {"count", n_dark},
+                       {"note", "views whose reference luminance is below the threshold: not in parts or "
+                                "standard_error, their own figures here"},
+                       {"parts", json::object()},
+                       {"standard_error_de2000", summary_json(summarize_errors(select_points(de_se, dark, true)))}}},
       {"relative_error", "|test - reference| / max(|reference|, 1e-3 x the channel's maximum over the points), "
                          "per channel in the bundle's units"},
       {"parts", json::object()},
       {"standard_error", {{"relative", summary_json(summarize_errors(se_rel))},
-                          {"de2000", summary_json(summarize_errors(de_se))},
+                          {"de2000", summary_json(se_de)},
                           {"target_relative", sc.relative_se},
                           {"points_at_max_paths", below_target}}},  // reached the cap, met or not
       {"truth", t.summary()}};
-  for (const Part& part : parts) details["parts"][part.name] = part_json(part);
+  for (const Part& part : parts) {
+    details["parts"][part.name] = part_json(part, false);
+    if (n_dark > 0) details["dark_points"]["parts"][part.name] = part_json(part, true);
+  }
   details["parts"]["total"]["note"] = reference ? "the LUT against the all-orders truth at the bake's wavelengths; "
                                                   "de2000 against the 48-wavelength spectral truth (what the sky "
                                                   "looks like)"
@@ -424,8 +466,23 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                     "the scene check per point: the truth (all orders, its se, the bake's orders), the LUT's "
                     "GetSkyRadiance, and the CIEDE2000 of each part (docs/atmosphere.md, \"The scene check\")"};
 
-  const ErrorSummary se_de = summarize_errors(de_se), se_rel_summary = summarize_errors(se_rel);
-  if (dark) {
+  // what the truth cannot resolve, said in the record and the run summary
+  if (!dark_scene && se_de.p99 > kNoisyTruthShare * total.de_summary.p99)
+    out.warnings.push_back("scene check: the truth's own p99 standard error (" + format_g(se_de.p99) +
+                           " CIEDE2000) is more than half the reported p99 error (" + format_g(total.de_summary.p99) +
+                           "): the figure is mostly the truth's noise; lower scene.relative_se (now " +
+                           format_g(sc.relative_se) + ")");
+  if (below_target > 0)
+    out.warnings.push_back("scene check: " + std::to_string(below_target) + " of the " + std::to_string(n) +
+                           " points stopped at the truth's walk cap (" + std::to_string(o.max_paths) +
+                           " walks), their standard error above the target relative_se " + format_g(sc.relative_se) +
+                           " (standard_error in the record says how far)");
+  if (n_dark > 0)
+    out.warnings.push_back("scene check: " + std::to_string(n_dark) + " of the " + std::to_string(n) +
+                           " points are darker than " + format_g(kDarkLuminance) +
+                           " cd/m^2 and are reported apart (dark_points in the record)");
+  out.record.details["warnings"] = out.warnings;
+  if (dark_scene) {
     out.failure = "scene check: none of the scene's " + std::to_string(n) +
                   " points has light in the path-traced truth (cameras " + format_g(sc.camera_altitude_min_km) + "-" +
                   format_g(sc.camera_altitude_max_km) + " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " +

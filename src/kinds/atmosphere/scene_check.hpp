@@ -30,10 +30,16 @@ namespace specbake::atmosphere {
 // bundle's values times the radiance-to-luminance factors), taken to CIE XYZ, scaled by one
 // exposure that brings the reference's luminance Y to 0.18 (mid grey, the per-view auto
 // exposure of a renderer), then CIE L*a*b* against D65 (Y = 1) and CIEDE2000. No clipping to
-// the sRGB gamut and no tone curve: the difference is the sky's, not a display's. The exposure
-// is that of max(Y, y_floor) (the check uses 1e-3 of the scene's brightest view, so that a LUT
-// that glows where the truth is dark counts); NaN when that is not > 0.
-double displayed_de2000(const Vec3& test_luminance_rgb, const Vec3& reference_luminance_rgb, double y_floor = 0.0);
+// the sRGB gamut and no tone curve: the difference is the sky's, not a display's. With
+// exposure_y > 0 the exposure brings that luminance to 0.18 instead (a fixed exposure, the same
+// for every view: scene_exposure_y); NaN when the luminance brought to 0.18 is not > 0.
+double displayed_de2000(const Vec3& test_luminance_rgb, const Vec3& reference_luminance_rgb, double exposure_y = 0.0);
+// The luminance (cd m⁻²) a fixed exposure of `ev100` brings to mid grey: 0.125 · 2^EV100, the
+// reflected-light meter's calibration (K = 12.5 cd m⁻² s, ISO 100).
+double exposure_luminance(double ev100);
+// Views darker than this (cd m⁻², the reference's luminance) are reported apart by the scene
+// check, with their own figures: below the darkest night sky a display shows.
+inline constexpr double kDarkLuminance = 1e-4;
 
 // max, median and 99th percentile (nearest rank) and mean of the finite values; count of them.
 struct ErrorSummary {
@@ -52,6 +58,7 @@ struct SceneCheck {
   Accuracy record;           // "vs_path_traced", judged against the scene's tolerance when it has one
   OutputFile points_csv;     // scene_check.csv: per point the truth, the LUT and every error
   std::string failure;       // non-empty when the tolerance is missed: what dominates, what to raise
+  std::vector<std::string> warnings;  // what the truth cannot resolve (also in the record's details)
   double seconds = 0.0;
 };
 

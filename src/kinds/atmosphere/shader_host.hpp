@@ -145,6 +145,7 @@ Atmosphere shared_atmosphere_of(const Model& m) {
   a.mu_size = s.mu;
   a.mu_s_size = s.mu_s;
   a.nu_size = s.nu;
+  a.mu_s_geometric = m.mu_s_geometric ? 1.0 : 0.0;
   return a;
 }
 

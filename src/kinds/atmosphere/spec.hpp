@@ -24,6 +24,8 @@ struct AtmosphereScene {
   std::uint64_t seed = 1;
   std::optional<double> tolerance_de2000;    // judged on the p99 CIEDE2000 of the displayed colour
   std::optional<double> tolerance_relative;  // judged on the p99 relative radiance error (worst channel)
+  // the colour error's exposure: nullopt per view (a renderer's auto exposure), else fixed at EV100
+  std::optional<double> exposure_ev100;
 };
 
 // Geometry, sun, ground, the media (AtmosphereMedia) and what to bake.
@@ -43,6 +45,11 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   double tolerance = 1e-3;
   int transmittance_mu = 256, transmittance_r = 64, irradiance_mu_s = 64, irradiance_r = 16;
   int scattering_r = 32, scattering_mu = 128, scattering_mu_s = 32, scattering_nu = 8;
+  // `quadrature:` the scattering density's sphere rule: θ nodes (even), and whether they are
+  // packed towards the horizon (default) or uniform as in the reference (docs/atmosphere.md).
+  int density_theta = 16;
+  bool density_horizon = true;
+  bool mu_s_geometric = true;  // the scattering textures' μ_s lookups: geometric (default) or linear
   bool layout_3d = true, layout_tiled2d = false;
   bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
   // File formats of the textures: .bin and .exr always; KTX2 (2D/3D RGBA textures engines load) on request.

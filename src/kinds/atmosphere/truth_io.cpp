@@ -330,6 +330,9 @@ Luts load_bundle_luts(const fs::path& dir) {
     s.mu = sz.at("scattering").at("mu").get<int>();
     s.mu_s = sz.at("scattering").at("mu_s").get<int>();
     s.nu = sz.at("scattering").at("nu").get<int>();
+    // bundles from before `quadrature` blended μ_s linearly (their shader did)
+    const auto q = m.at("parameters").find("quadrature");
+    luts.model.mu_s_geometric = q != m.at("parameters").end() && q->value("mu_s_blend", "linear") == "geometric";
   } catch (const nlohmann::json::exception& e) {
     throw InputError(at, std::string("an atmosphere bundle manifest (") + e.what() + ")");
   }
