@@ -3,5 +3,5 @@
 # Extra arguments go to `specbake run` (e.g. --force, --only NAME, --device cpu).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
-"$root/scripts/setup.sh"
+"$root/scripts/setup.sh" specbake
 exec "$root/build/specbake" run "$root/configs" "$@"

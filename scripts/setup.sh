@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what specbake needs from Debian 12 packages (only what is missing),
 # then configures and builds into build/ (Release).
-#   scripts/setup.sh            install + build
+#   scripts/setup.sh            install + build everything (tests, benchmarks, the test venv)
+#   scripts/setup.sh specbake   install + build only the binary (what baking needs)
 #   SPECBAKE_NO_INSTALL=1 ...   skip the apt step (already provisioned machines)
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -33,6 +34,10 @@ fi
 
 build_type=${SPECBAKE_BUILD_TYPE:-Release}
 cmake -S "$root" -B "$root/build" -DCMAKE_BUILD_TYPE="$build_type" ${SPECBAKE_CMAKE_ARGS:-}
+if [ $# -gt 0 ]; then
+  cmake --build "$root/build" -j "$(nproc)" --target "$@"
+  exit 0
+fi
 cmake --build "$root/build" -j "$(nproc)"
 
 # Test-side Python: a venv at build/pyenv with pyktx2 (an independent KTX2 reader; the version

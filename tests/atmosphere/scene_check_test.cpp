@@ -235,6 +235,59 @@ TEST(SceneCheck, BakeRecordsTheErrorItsPartsAndThePoints) {
   EXPECT_FALSE(std::filesystem::exists(dir / "out2" / "sky" / "latest" / "scene_check.csv"));
 }
 
+// One exposure rule for every figure, and the dark views apart: a twilight scene reaching far
+// below the horizon (max_sun_zenith 120°, sun −20° to −4°) has views darker than
+// kDarkLuminance; the record counts them (as the per-point file's reference luminances say),
+// leaves them out of `parts` (which then count only the lit ones) and gives their own
+// figures, and warns. With `exposure: {ev100: X}` every point's ΔE is the one at that fixed
+// exposure (recomputed here from the file's radiance columns).
+TEST(SceneCheck, OneExposureRuleAndTheDarkViewsApart) {
+  t::TempDir dir;
+  const std::string scene = "    max_sun_zenith_deg: 120\n    scene: {camera_altitude_km: [0, 1], sun_elevation_deg: [-20, -4], "
+                            "points: 24, relative_se: 0.05";
+  t::write_file(dir / "a.yaml", kSmallSky + scene + "}\n");
+  t::write_file(dir / "b.yaml", kSmallSky + scene + ", exposure: {ev100: -6}}\n");
+  const Spectrum sp = spectrum_of(spec_of("    preset: earth\n"));
+  const Mat3 M = srgb_to_xyz();
+  for (const char* name : {"a", "b"}) {
+    SCOPED_TRACE(name);
+    const auto r = t::run_cli({"run", (dir / (std::string(name) + ".yaml")).string(), "--out",
+                               (dir / (std::string("out_") + name)).string()});
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    const auto b = dir / (std::string("out_") + name) / "sky" / "latest";
+    const auto m = t::read_json(b / "manifest.json");
+    const nlohmann::json* rec = find_accuracy(m["accuracy"], "vs_path_traced");
+    ASSERT_NE(rec, nullptr);
+    const auto& d = rec->at("details");
+    const std::string csv = t::read_file(b / "scene_check.csv");
+    std::vector<std::vector<double>> col;
+    for (const char* c : {"spectral_R", "spectral_G", "spectral_B", "lut_R", "lut_G", "lut_B", "de2000"})
+      col.push_back(csv_column(csv, c));
+    long long dark = 0;
+    for (std::size_t p = 0; p < col[0].size(); ++p) {
+      const Vec3 ref{683 * col[0][p], 683 * col[1][p], 683 * col[2][p]};
+      const double y = M[3] * ref[0] + M[4] * ref[1] + M[5] * ref[2];
+      dark += !(y >= kDarkLuminance);
+      if (std::string(name) == "b") {
+        const auto k = sp.sky_radiance_to_luminance;
+        const Vec3 lut{col[3][p] * k[0], col[4][p] * k[1], col[5][p] * k[2]};
+        EXPECT_NEAR(displayed_de2000(lut, ref, exposure_luminance(-6.0)), col[6][p], 1e-5) << p;
+      }
+    }
+    ASSERT_GT(dark, 0);
+    ASSERT_LT(dark, 24);
+    EXPECT_EQ(d["dark_points"]["count"].get<long long>(), dark);
+    EXPECT_EQ(d["parts"]["total"]["de2000"]["count"].get<long long>() + dark, 24);
+    EXPECT_EQ(d["dark_points"]["parts"]["total"]["de2000"]["count"].get<long long>(), dark);
+    EXPECT_NE(d["exposure"].get<std::string>().find(std::string(name) == "a" ? "per view" : "fixed, EV100 -6"),
+              std::string::npos);
+    bool warned = false;
+    for (const auto& w : d["warnings"]) warned |= w.get<std::string>().find("reported apart") != std::string::npos;
+    EXPECT_TRUE(warned);
+    EXPECT_NE(r.out.find("reported apart"), std::string::npos) << r.out;
+  }
+}
+
 // A scene tolerance the bake misses fails the job (exit 1) before anything is published: the
 // message gives the p99 by cause, names the largest and what to raise; the bundle published
 // before under the same job name stays `latest`, byte for byte.

@@ -320,6 +320,9 @@ json parameters_json(const AtmosphereSpec& spec) {
   p["sizes"] = {{"transmittance", {{"mu", s.transmittance_w}, {"r", s.transmittance_h}}},
                 {"irradiance", {{"mu_s", s.irradiance_w}, {"r", s.irradiance_h}}},
                 {"scattering", {{"r", s.r}, {"mu", s.mu}, {"mu_s", s.mu_s}, {"nu", s.nu}}}};
+  // what an engine holds: transmittance, irradiance, scattering and single Mie as float32 R,G,B
+  p["texture_memory_bytes"] = 12LL * (1LL * s.transmittance_w * s.transmittance_h + 1LL * s.irradiance_w * s.irradiance_h +
+                                      2LL * s.scattering_texels());
   json layouts = json::array();
   if (spec.layout_3d) layouts.push_back("3d");
   if (spec.layout_tiled2d) layouts.push_back("tiled2d");

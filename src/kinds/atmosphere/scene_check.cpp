@@ -484,7 +484,8 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   out.record.details["warnings"] = out.warnings;
   if (dark_scene) {
     out.failure = "scene check: none of the scene's " + std::to_string(n) +
-                  " points has light in the path-traced truth (cameras " + format_g(sc.camera_altitude_min_km) + "-" +
+                  " points is brighter than " + format_g(kDarkLuminance) +
+                  " cd/m^2 in the path-traced truth (cameras " + format_g(sc.camera_altitude_min_km) + "-" +
                   format_g(sc.camera_altitude_max_km) + " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " +
                   format_g(sc.sun_elevation_max_deg) + " deg, " + views_name(sc.views) +
                   " views), so the LUTs cannot be judged there; give the scene a sun and views that see sunlit "
