@@ -2,11 +2,11 @@
 # Checks that docker/Dockerfile's build stage copies everything the build reads, without building
 # the image: the stage's COPY lines are replayed into a temporary folder (WORKDIR and absolute
 # destinations honoured), the project is configured there with the stage's SPECBAKE_CMAKE_ARGS,
-# and `make -n all` (a dry run: nothing is compiled) must find every input of every target the
-# stage builds — sources, embedded kernels/data/scripts, CMake scripts. A file the stage misses
-# makes CMake's configure or make fail ("No rule to make target ..."), and this script exit 1.
-# Headers are not listed to make (the compiler finds them); they live in the copied src/ and
-# kernels/ folders.
+# and `make -n -k all` (a dry run: nothing is compiled) must find every input of every target the
+# stage builds ("No rule to make target ..." names a missing one) and run exactly the commands a
+# dry run of the whole repository runs (which catches a globbed folder — kernels/, data/ — that
+# is missing: a glob finds nothing rather than failing). Exits 1 naming what is missing.
+# Headers are not listed to make (the compiler finds them); they come with src/ and kernels/.
 #
 #   tests/docker/build_inputs_test.sh REPO_ROOT [--drop SRC]
 # --drop SRC replays the stage without its COPY of SRC: the check's own test (it must fail).
