@@ -20,6 +20,7 @@
 #include "io/inspect.hpp"
 #include "kinds/atmosphere/truth.hpp"
 #include "runner/runner.hpp"
+#include "runner/night_report.hpp"
 #include "runner/sweep.hpp"
 
 using namespace specbake;
@@ -499,6 +500,13 @@ std::vector<std::string> split_names(const std::vector<std::string>& in, const c
   return out;
 }
 
+// `report`: one summary of a sharded night's --report files (src/runner/night_report.hpp).
+int cmd_report(const std::vector<std::string>& inputs, bool as_json) {
+  const NightReport night = merge_night(std::vector<fs::path>(inputs.begin(), inputs.end()));
+  std::cout << (as_json ? night_json(night).dump(2) + "\n" : night_text(night));
+  return static_cast<int>(night.failed() ? ExitCode::job_failed : ExitCode::ok);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -594,6 +602,13 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->default_str("the job's");
 
+  std::vector<std::string> night_inputs;
+  bool night_as_json = false;
+  auto* night = app.add_subcommand(
+      "report", "merge the --report files of a sharded night into one table; exit 1 if a shard or job failed");
+  night->add_option("reports", night_inputs, "shard --report JSON files, or folders of them")->required();
+  night->add_flag("--json", night_as_json, "print the merged night as JSON");
+
   auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
   inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")
       ->required();
@@ -625,6 +640,7 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("devices")) return cmd_devices();
     if (app.got_subcommand("inspect")) return cmd_inspect(inspect_dir, inspect_json);
+    if (app.got_subcommand("report")) return cmd_report(night_inputs, night_as_json);
     if (app.got_subcommand("gc")) {
       const GcResult g = BundleStore(gc_dir).gc(keep, gc_dry_run);
       const char* verb = gc_dry_run ? "would remove" : "removed";

@@ -248,6 +248,70 @@ TEST(Production, ShardAutoReadsTheSchedulersEnvironment) {
   refused({"--shard", "auto/x"}, none, "--shard auto/N expects a count");
 }
 
+// `specbake report` over the shard reports of real runs: one table, exit 0 for a complete night,
+// 1 when a shard's job failed (with its reason), 3 for a file that is not a report, 5 for a path
+// that does not exist; --json gives the same merge.
+TEST(Production, ReportMergesTheShardsOfANight) {
+  TempDir t;
+  write_file(t / "c.yaml", R"(specbake: 1
+jobs:
+  - {name: prism-bad, kind: dispersion, samples: auto, tolerance_de2000: 1e-9, material: {n_d: 1.5, v_d: 60}}
+  - {name: prism-a, kind: dispersion, samples: 4, material: {n_d: 1.5, v_d: 60}}
+  - {name: prism-b, kind: dispersion, samples: 8, material: {glass: N-BK7}}
+)");
+  std::set<std::string> failed_shard_jobs;
+  for (int i = 0; i < 2; ++i) {
+    const auto rep = t / "reports" / ("shard-" + std::to_string(i) + ".json");
+    fs::create_directories(rep.parent_path());
+    const auto r = spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--shard",
+                          std::to_string(i) + "/2", "--report", rep.string()});
+    EXPECT_TRUE(r.exit_code == 0 || r.exit_code == 1) << r.err;
+    const auto shard_report = read_json(rep);
+    for (const auto& j : shard_report["jobs"])
+      if (r.exit_code != 0) failed_shard_jobs.insert(j["name"].get<std::string>());
+  }
+  ASSERT_TRUE(failed_shard_jobs.count("prism-bad"));
+  auto r = spawn({"report", (t / "reports").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  for (const char* phrase : {"prism-bad", "failed", "1 failed", "the night FAILED", "shard-0.json", "shard-1.json"})
+    EXPECT_NE(r.out.find(phrase), std::string::npos) << phrase << "\n" << r.out;
+  r = spawn({"report", (t / "reports").string(), "--json"});
+  EXPECT_EQ(r.exit_code, 1);
+  const auto night = nlohmann::json::parse(r.out);
+  EXPECT_EQ(night["summary"]["jobs"], 3);
+  EXPECT_EQ(night["summary"]["statuses"]["built"], 2);
+  EXPECT_EQ(night["summary"]["statuses"]["failed"], 1);
+  EXPECT_EQ(night["failed"], true);
+
+  // Without the failing job, the next night is complete: every job up to date, exit 0.
+  write_file(t / "c.yaml", R"(specbake: 1
+jobs:
+  - {name: prism-a, kind: dispersion, samples: 4, material: {n_d: 1.5, v_d: 60}}
+  - {name: prism-b, kind: dispersion, samples: 8, material: {glass: N-BK7}}
+)");
+  for (int i = 0; i < 2; ++i)
+    ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--shard",
+                     std::to_string(i) + "/2", "--report", (t / "night2" / ("s" + std::to_string(i) + ".json")).string()})
+                  .exit_code,
+              5);  // no folder night2 yet: the report path is checked first (exit 5)
+  fs::create_directories(t / "night2");
+  for (int i = 0; i < 2; ++i)
+    ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--shard",
+                     std::to_string(i) + "/2", "--report", (t / "night2" / ("s" + std::to_string(i) + ".json")).string()})
+                  .exit_code,
+              0);
+  r = spawn({"report", (t / "night2" / "s0.json").string(), (t / "night2" / "s1.json").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("2 jobs from 2 shard reports: 0 built, 2 up to date"), std::string::npos) << r.out;
+
+  write_file(t / "not-a-report.json", "{\"jobs\": 3}");
+  r = spawn({"report", (t / "not-a-report.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("not-a-report.json"), std::string::npos) << r.err;
+  EXPECT_EQ(spawn({"report", (t / "nowhere.json").string()}).exit_code, 5);
+  EXPECT_EQ(spawn({"report"}).exit_code, 2);
+}
+
 TEST(Production, ConcurrentRunsOnOneOutputDoNotCorruptIt) {
   TempDir t;
   write_file(t / "c.yaml", kConfig);
