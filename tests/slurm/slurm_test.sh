@@ -13,6 +13,9 @@
 #             date and builds nothing.
 #   night 3   two arrays (3 and 2 tasks) at once over a fresh output: the per-job lock lets each
 #             bundle be built once (reports and bundle folders), and all verify.
+#   night 4   only with SPECBAKE_SLURM_TEST_IMAGE (an image built from docker/Dockerfile) and
+#             SPECBAKE_SLURM_TEST_ENGINE (podman or docker; apptainer takes docker:// or .sif):
+#             one array of 2 tasks running specbake from the image; every job built once, all verify.
 # Installs slurm-wlm and munge when missing (as root, or through passwordless sudo). Exits 77
 # (skipped) with the reason only when they cannot be installed or the daemons cannot start.
 #
@@ -136,7 +139,7 @@ say "cluster up: $(sinfo -h -o '%P %D node(s) %t, %c CPUs') ($(slurmctld -V))"
 submit() {
   mkdir -p "$tmp/reports/$1"
   SPECBAKE_OUT=$2 SPECBAKE_REPORTS=$tmp/reports/$1 SPECBAKE_CONFIGS=$configs SPECBAKE_BIN=$exe \
-    sbatch --parsable --array="$3" --cpus-per-task=1 --job-name="$1" --chdir="$tmp" \
+    SPECBAKE_IMAGE=${image:-} SPECBAKE_ENGINE=${engine:-} sbatch --parsable --array="$3" --cpus-per-task=1 --job-name="$1" --chdir="$tmp" \
     --output="$tmp/log/$1-%A_%a.out" "$batch"
 }
 # wait_done JOB...: until no task of the arrays is pending or running (bounded).
@@ -268,4 +271,21 @@ assert n["summary"]["built_twice"] == 0 and not n["failed"], n' "$tmp/night.json
   fail "two arrays over one output: $(cat "$tmp/night.json")"
 "$exe" report "$tmp/reports/night3a" "$tmp/reports/night3b" || fail "specbake report says night 3 failed"
 say "night 3: arrays $d and $e over one fresh output built each bundle once (the other shard found it up to date)"
+# --- Night 4 (by request): specbake from the container image --------------------------------------
+image=${SPECBAKE_SLURM_TEST_IMAGE:-}
+engine=${SPECBAKE_SLURM_TEST_ENGINE:-}
+if [ -n "$image" ]; then
+  f=$(submit night4 "$tmp/out4" 0-1)
+  wait_done "$f"
+  check_completed "$f"
+  check_bundles "$tmp/out4"
+  merged night4
+  py 'import json, sys
+n = json.load(open(sys.argv[1]))
+assert sorted(j["name"] for j in n["jobs"]) == sorted(sys.argv[2:]), [j["name"] for j in n["jobs"]]
+for j in n["jobs"]:
+    assert j["status"] == "built" and j["builds"] == 1, (j["name"], j["status"], j["builds"])
+assert not n["failed"], n["problems"]' "$tmp/night.json" "${jobs[@]}" || fail "night 4 (image $image): $(cat "$tmp/night.json")"
+  say "night 4: array $f ran specbake from $image through ${engine:-apptainer}: every job built once, all verify"
+fi
 say "PASS"
