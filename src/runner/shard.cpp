@@ -12,7 +12,9 @@ namespace {
 
 // A non-negative decimal integer (the whole text), else nullopt.
 std::optional<long> whole_number(const std::string& text) {
-  if (text.empty() || text.size() > 9 || !std::all_of(text.begin(), text.end(), ::isdigit)) return std::nullopt;
+  if (text.empty() || text.size() > 9 ||
+      !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; }))
+    return std::nullopt;
   return std::stol(text);
 }
 
