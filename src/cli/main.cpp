@@ -19,8 +19,8 @@
 #include "io/bundle_diff.hpp"
 #include "io/inspect.hpp"
 #include "kinds/atmosphere/truth.hpp"
-#include "runner/runner.hpp"
 #include "runner/night_report.hpp"
+#include "runner/runner.hpp"
 #include "runner/sweep.hpp"
 
 using namespace specbake;

@@ -53,7 +53,7 @@ struct JobReport {
 // before or between jobs (config, usage, output folder, signal), if any. `shard`: the run's
 // shard (null in the report when unknown: the run stopped before --shard was read).
 nlohmann::json report_json(const std::vector<JobReport>& reports, const std::string& error = "",
-                           const std::optional<Shard>& shard = Shard{});
+                           const std::optional<Shard>& shard = std::nullopt);
 
 // Live progress of a run: the job (1-based index of `count`), its step and what it is doing,
 // the fraction of the job done, and the estimated seconds left of this job (< 0: unknown).
