@@ -19,6 +19,7 @@
 #include "io/bundle_diff.hpp"
 #include "io/inspect.hpp"
 #include "kinds/atmosphere/truth.hpp"
+#include "runner/night_report.hpp"
 #include "runner/runner.hpp"
 #include "runner/sweep.hpp"
 
@@ -317,12 +318,13 @@ class ReportFile {
     if (::access(parent.c_str(), W_OK) != 0 || (fs::exists(path_, ec) && ::access(path_.c_str(), W_OK) != 0))
       throw IoError("cannot write report " + path_ + ": permission denied");
   }
-  void write(const std::vector<JobReport>& reports, const std::string& error = "") const {
+  void write(const std::vector<JobReport>& reports, const std::string& error = "",
+             const std::optional<Shard>& shard = std::nullopt) const {
     if (path_.empty()) return;
     const fs::path tmp = path_ + ".tmp";
     {
       std::ofstream o(tmp);
-      o << report_json(reports, error).dump(2) << "\n";
+      o << report_json(reports, error, shard).dump(2) << "\n";
       if (!o.flush()) {
         std::error_code ec;
         fs::remove(tmp, ec);
@@ -498,6 +500,13 @@ std::vector<std::string> split_names(const std::vector<std::string>& in, const c
   return out;
 }
 
+// `report`: one summary of a sharded night's --report files (src/runner/night_report.hpp).
+int cmd_report(const std::vector<std::string>& inputs, bool as_json) {
+  const NightReport night = merge_night(std::vector<fs::path>(inputs.begin(), inputs.end()));
+  std::cout << (as_json ? night_json(night).dump(2) + "\n" : night_text(night));
+  return static_cast<int>(night.failed() ? ExitCode::job_failed : ExitCode::ok);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -534,7 +543,9 @@ int main(int argc, char** argv) {
         ->allow_extra_args(false);
     sub->add_option("--only", only, "only these jobs (comma-separated names; repeatable)")->allow_extra_args(false);
     sub->add_flag("--force", force, "rebuild bundles that are up to date");
-    sub->add_option("--shard", shard, "only shard I of N (I/N, 0-based): a deterministic, balanced split of the jobs")
+    sub->add_option("--shard", shard,
+                    "only shard I of N (I/N, 0-based): a deterministic, balanced split of the jobs; auto or auto/N: "
+                    "I and N from a Slurm array, a Kubernetes Indexed Job or SPECBAKE_SHARD_INDEX/COUNT")
         ->allow_extra_args(false);
     sub->add_flag("--keep-going", keep_going,
                   "report invalid configs and jobs, run every valid job, exit 3 if any was invalid");
@@ -591,6 +602,13 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->default_str("the job's");
 
+  std::vector<std::string> night_inputs;
+  bool night_as_json = false;
+  auto* night = app.add_subcommand(
+      "report", "merge the --report files of a sharded night into one table; exit 1 if a shard or job failed");
+  night->add_option("reports", night_inputs, "shard --report JSON files, or folders of them")->required();
+  night->add_flag("--json", night_as_json, "print the merged night as JSON");
+
   auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
   inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")
       ->required();
@@ -618,9 +636,11 @@ int main(int argc, char** argv) {
 
   std::unique_ptr<ReportFile> report_file;
   std::vector<JobReport> reports;
+  std::optional<Shard> run_shard;  // known once --shard is read
   try {
     if (app.got_subcommand("devices")) return cmd_devices();
     if (app.got_subcommand("inspect")) return cmd_inspect(inspect_dir, inspect_json);
+    if (app.got_subcommand("report")) return cmd_report(night_inputs, night_as_json);
     if (app.got_subcommand("gc")) {
       const GcResult g = BundleStore(gc_dir).gc(keep, gc_dry_run);
       const char* verb = gc_dry_run ? "would remove" : "removed";
@@ -652,7 +672,8 @@ int main(int argc, char** argv) {
     if (!device.empty()) opts.device = device;
     opts.only = split_names(only, "--only");
     opts.force = force;
-    if (!shard.empty()) std::tie(opts.shard_index, opts.shard_count) = parse_shard(shard);
+    if (!shard.empty()) opts.shard = parse_shard(shard);
+    run_shard = opts.shard;
     std::vector<fs::path> paths(configs.begin(), configs.end());
     std::vector<JobReport> invalid;
     auto loaded = load_configs(paths, keep_going ? &invalid : nullptr);
@@ -679,7 +700,7 @@ int main(int argc, char** argv) {
       spdlog::error("{}: the run ended at a safe point; finished jobs are published, nothing half-written",
                     stopped);
     }
-    report_file->write(reports, stopped);
+    report_file->write(reports, stopped, run_shard);
     // An interrupted run says so (130/143); else invalid configs (--keep-going) come first.
     if (!stop_requested() && !invalid.empty()) return static_cast<int>(ExitCode::invalid_input);
     return static_cast<int>(exit_code(reports));
@@ -688,7 +709,7 @@ int main(int argc, char** argv) {
     spdlog::error("{}", e.what());
     if (report_file) {
       try {
-        report_file->write(reports, e.what());
+        report_file->write(reports, e.what(), run_shard);
       } catch (const Error& w) {
         spdlog::error("{}", w.what());
       }

@@ -11,7 +11,6 @@
 #include <future>
 #include <map>
 #include <memory>
-#include <numeric>
 #include <optional>
 #include <set>
 
@@ -127,37 +126,7 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
   return configs;
 }
 
-std::pair<int, int> parse_shard(const std::string& text) {
-  const auto slash = text.find('/');
-  try {
-    if (slash == std::string::npos) throw std::invalid_argument("no slash");
-    std::size_t a = 0, b = 0;
-    const int i = std::stoi(text.substr(0, slash), &a), n = std::stoi(text.substr(slash + 1), &b);
-    if (a != slash || b != text.size() - slash - 1 || n < 1 || i < 0 || i >= n) throw std::invalid_argument("range");
-    return {i, n};
-  } catch (const std::exception&) {
-    throw UsageError("--shard expects I/N with 0 <= I < N (e.g. 0/4), got '" + text + "'");
-  }
-}
-
-std::vector<int> assign_shards(const std::vector<std::pair<std::string, double>>& name_cost, int count) {
-  std::vector<std::size_t> order(name_cost.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    if (name_cost[a].second != name_cost[b].second) return name_cost[a].second > name_cost[b].second;
-    return name_cost[a].first < name_cost[b].first;
-  });
-  std::vector<double> load(count, 0.0);
-  std::vector<int> shard(name_cost.size(), 0);
-  for (std::size_t idx : order) {
-    const int s = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
-    shard[idx] = s;
-    load[s] += name_cost[idx].second;
-  }
-  return shard;
-}
-
-json report_json(const std::vector<JobReport>& reports, const std::string& error) {
+json report_json(const std::vector<JobReport>& reports, const std::string& error, const std::optional<Shard>& shard) {
   json jobs = json::array();
   std::map<std::string, int> counts;
   int warnings = 0;
@@ -178,6 +147,8 @@ json report_json(const std::vector<JobReport>& reports, const std::string& error
   json out = {{"schema", "specbake.report/1"},
               {"tool", {{"name", "specbake"}, {"version", kVersion}}},
               {"created_utc", utc_now()},
+              {"shard", shard ? json{{"index", shard->index}, {"count", shard->count}, {"source", shard->source}}
+                              : json(nullptr)},
               {"summary",
                {{"built", counts["built"]},
                 {"up_to_date", counts["up-to-date"]},
@@ -321,15 +292,16 @@ std::vector<Runner::Item> Runner::select() const {
         throw UsageError("--out " + options_.out->string() + " would put job '" + it.job->name + "' of " +
                          first->second->where.str() + " and of " + it.job->where.str() + " into one bundle folder");
   }
-  if (options_.shard_count > 1) {
+  if (options_.shard.count > 1) {
     std::vector<std::pair<std::string, double>> name_cost;
     for (const auto& it : items)
       name_cost.emplace_back(it.config->file.string() + "\n" + it.job->name, kind_named(it.job->kind).cost_s(*it.job));
-    const auto shard = assign_shards(name_cost, options_.shard_count);
+    const auto shard = assign_shards(name_cost, options_.shard.count);
     std::vector<Item> mine;
     for (std::size_t i = 0; i < items.size(); ++i)
-      if (shard[i] == options_.shard_index) mine.push_back(items[i]);
-    spdlog::info("shard {}/{}: {} of {} jobs", options_.shard_index, options_.shard_count, mine.size(), items.size());
+      if (shard[i] == options_.shard.index) mine.push_back(items[i]);
+    spdlog::info("shard {}/{} ({}): {} of {} jobs", options_.shard.index, options_.shard.count, options_.shard.source,
+                 mine.size(), items.size());
     items = std::move(mine);
   }
   return items;

@@ -21,6 +21,7 @@
 #include "core/errors.hpp"
 #include "job/kind.hpp"
 #include "registry/registry.hpp"
+#include "runner/shard.hpp"
 
 namespace specbake {
 
@@ -29,16 +30,8 @@ struct RunOptions {
   std::optional<std::string> device;    // overrides every config's device
   std::vector<std::string> only;        // job names; empty = all
   bool force = false;                   // rebuild bundles that are up to date
-  int shard_index = 0, shard_count = 1; // --shard I/N: run only shard I (0-based) of N
+  Shard shard;                          // --shard: run only shard I (0-based) of N
 };
-
-// Parses "I/N" (0 <= I < N); throws UsageError.
-std::pair<int, int> parse_shard(const std::string& text);
-
-// Deterministic, balanced split of jobs into `count` shards: jobs sorted by estimated cost
-// (descending, ties by name) go one by one to the shard with the least total so far.
-// Returns the shard of each job, in the order given.
-std::vector<int> assign_shards(const std::vector<std::pair<std::string, double>>& name_cost, int count);
 
 struct JobReport {
   std::string config;
@@ -57,8 +50,10 @@ struct JobReport {
 };
 
 // JSON summary of a run (what --report writes). `error`: a problem that stopped the whole run
-// before or between jobs (config, usage, output folder, signal), if any.
-nlohmann::json report_json(const std::vector<JobReport>& reports, const std::string& error = "");
+// before or between jobs (config, usage, output folder, signal), if any. `shard`: the run's
+// shard (null in the report when unknown: the run stopped before --shard was read).
+nlohmann::json report_json(const std::vector<JobReport>& reports, const std::string& error = "",
+                           const std::optional<Shard>& shard = std::nullopt);
 
 // Live progress of a run: the job (1-based index of `count`), its step and what it is doing,
 // the fraction of the job done, and the estimated seconds left of this job (< 0: unknown).

@@ -157,8 +157,6 @@ TEST(Production, ShardsPartitionJobsDeterministicallyAndBalanced) {
     // Greedy largest-first: no shard exceeds the mean by more than one job's cost.
     for (double l : load) EXPECT_LE(l, total / n + biggest);
   }
-  EXPECT_EQ(parse_shard("2/5"), std::make_pair(2, 5));
-  for (const char* bad : {"5/5", "-1/3", "1", "a/b", "1/0", "1/2x"}) EXPECT_THROW(parse_shard(bad), UsageError) << bad;
 }
 
 TEST(Production, ShardedRunsTogetherBuildEveryJobOnce) {
@@ -175,6 +173,143 @@ TEST(Production, ShardedRunsTogetherBuildEveryJobOnce) {
   }
   EXPECT_EQ(built, (std::set<std::string>{"prism-a", "prism-b"}));
   EXPECT_EQ(spawn({"run", (t / "c.yaml").string(), "--shard", "3/3"}).exit_code, 2);
+}
+
+// --shard auto: a Slurm array task, a Kubernetes index or SPECBAKE_SHARD_* pick the same jobs as
+// the explicit I/N, and the report records the shard and where it came from; a missing or
+// contradictory environment is a usage error (exit 2) that names the variables, with the
+// report written (shard null) and nothing baked.
+TEST(Production, ShardAutoReadsTheSchedulersEnvironment) {
+  TempDir t;
+  write_file(t / "c.yaml", kConfig);
+  // No inherited shard variables: each run sets exactly the ones it names (empty = unset).
+  const std::map<std::string, std::string> none = {
+      {"SLURM_JOB_ID", ""},         {"SLURM_ARRAY_TASK_ID", ""},  {"SLURM_ARRAY_TASK_MIN", ""},
+      {"SLURM_ARRAY_TASK_MAX", ""}, {"SLURM_ARRAY_TASK_COUNT", ""}, {"JOB_COMPLETION_INDEX", ""},
+      {"SPECBAKE_SHARD_INDEX", ""}, {"SPECBAKE_SHARD_COUNT", ""}};
+  const auto with = [&](std::map<std::string, std::string> vars) {
+    vars.insert(none.begin(), none.end());  // insert keeps the given values
+    return vars;
+  };
+  const auto jobs_of = [&](const std::vector<std::string>& shard_args, const std::map<std::string, std::string>& env) {
+    const auto rep = t / "plan.json";
+    std::vector<std::string> args = {"plan", (t / "c.yaml").string(), "--out", (t / "out").string(), "--report",
+                                     rep.string()};
+    args.insert(args.end(), shard_args.begin(), shard_args.end());
+    const auto r = spawn(args, env);
+    EXPECT_EQ(r.exit_code, 0) << r.err;
+    std::set<std::string> names;
+    const auto j = read_json(rep);
+    for (const auto& job : j["jobs"]) names.insert(job["name"].get<std::string>());
+    return std::make_pair(names, j["shard"]);
+  };
+  for (int i = 0; i < 2; ++i) {
+    const auto [expected, explicit_shard] = jobs_of({"--shard", std::to_string(i) + "/2"}, none);
+    EXPECT_EQ(explicit_shard["index"], i);
+    EXPECT_EQ(explicit_shard["count"], 2);
+    ASSERT_EQ(expected.size(), 1u);  // two jobs, two shards
+    // sbatch --array=1-2: task ID i+1 is shard i.
+    const auto [slurm, slurm_shard] = jobs_of(
+        {"--shard", "auto"},
+        with({{"SLURM_ARRAY_TASK_ID", std::to_string(i + 1)}, {"SLURM_ARRAY_TASK_MIN", "1"},
+              {"SLURM_ARRAY_TASK_MAX", "2"}, {"SLURM_ARRAY_TASK_COUNT", "2"}}));
+    EXPECT_EQ(slurm, expected);
+    EXPECT_EQ(slurm_shard["index"], i);
+    EXPECT_NE(slurm_shard["source"].get<std::string>().find("SLURM_ARRAY_TASK_ID=" + std::to_string(i + 1)),
+              std::string::npos);
+    EXPECT_EQ(jobs_of({"--shard", "auto/2"}, with({{"JOB_COMPLETION_INDEX", std::to_string(i)}})).first, expected);
+    EXPECT_EQ(jobs_of({"--shard", "auto"},
+                      with({{"SPECBAKE_SHARD_INDEX", std::to_string(i)}, {"SPECBAKE_SHARD_COUNT", "2"}})).first,
+              expected);
+  }
+  const auto refused = [&](const std::vector<std::string>& shard_args, const std::map<std::string, std::string>& env,
+                           const std::string& phrase) {
+    const auto rep = t / "refused.json";
+    std::vector<std::string> args = {"run", (t / "c.yaml").string(), "--out", (t / "refused-out").string(),
+                                     "--report", rep.string()};
+    args.insert(args.end(), shard_args.begin(), shard_args.end());
+    const auto r = spawn(args, env);
+    EXPECT_EQ(r.exit_code, 2) << r.err;
+    EXPECT_NE(r.err.find(phrase), std::string::npos) << r.err;
+    const auto j = read_json(rep);
+    EXPECT_TRUE(j["shard"].is_null());
+    EXPECT_NE(j["error"].get<std::string>().find(phrase), std::string::npos);
+    EXPECT_FALSE(fs::exists(t / "refused-out"));
+  };
+  refused({"--shard", "auto"}, none, "no shard in the environment");
+  refused({"--shard", "auto"}, with({{"SLURM_JOB_ID", "12"}}), "not an array task");
+  refused({"--shard", "auto"}, with({{"JOB_COMPLETION_INDEX", "1"}}), "expected --shard auto/N");
+  refused({"--shard", "auto"},
+          with({{"SLURM_ARRAY_TASK_ID", "0"}, {"SLURM_ARRAY_TASK_COUNT", "2"}, {"SPECBAKE_SHARD_INDEX", "1"},
+                {"SPECBAKE_SHARD_COUNT", "2"}}),
+          "the environment disagrees");
+  refused({"--shard", "auto/3"}, with({{"SLURM_ARRAY_TASK_ID", "0"}, {"SLURM_ARRAY_TASK_COUNT", "2"}}),
+          "2 shards, not 3");
+  refused({"--shard", "auto/x"}, none, "--shard auto/N expects a count");
+}
+
+// `specbake report` over the shard reports of real runs: one table, exit 0 for a complete night,
+// 1 when a shard's job failed (with its reason), 3 for a file that is not a report, 5 for a path
+// that does not exist; --json gives the same merge.
+TEST(Production, ReportMergesTheShardsOfANight) {
+  TempDir t;
+  write_file(t / "c.yaml", R"(specbake: 1
+jobs:
+  - {name: prism-bad, kind: dispersion, samples: auto, tolerance_de2000: 1e-9, material: {n_d: 1.5, v_d: 60}}
+  - {name: prism-a, kind: dispersion, samples: 4, material: {n_d: 1.5, v_d: 60}}
+  - {name: prism-b, kind: dispersion, samples: 8, material: {glass: N-BK7}}
+)");
+  std::set<std::string> failed_shard_jobs;
+  for (int i = 0; i < 2; ++i) {
+    const auto rep = t / "reports" / ("shard-" + std::to_string(i) + ".json");
+    fs::create_directories(rep.parent_path());
+    const auto r = spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--shard",
+                          std::to_string(i) + "/2", "--report", rep.string()});
+    EXPECT_TRUE(r.exit_code == 0 || r.exit_code == 1) << r.err;
+    const auto shard_report = read_json(rep);
+    for (const auto& j : shard_report["jobs"])
+      if (r.exit_code != 0) failed_shard_jobs.insert(j["name"].get<std::string>());
+  }
+  ASSERT_TRUE(failed_shard_jobs.count("prism-bad"));
+  auto r = spawn({"report", (t / "reports").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  for (const char* phrase : {"prism-bad", "failed", "1 failed", "the night FAILED", "shard-0.json", "shard-1.json"})
+    EXPECT_NE(r.out.find(phrase), std::string::npos) << phrase << "\n" << r.out;
+  r = spawn({"report", (t / "reports").string(), "--json"});
+  EXPECT_EQ(r.exit_code, 1);
+  const auto night = nlohmann::json::parse(r.out);
+  EXPECT_EQ(night["summary"]["jobs"], 3);
+  EXPECT_EQ(night["summary"]["statuses"]["built"], 2);
+  EXPECT_EQ(night["summary"]["statuses"]["failed"], 1);
+  EXPECT_EQ(night["failed"], true);
+
+  // Without the failing job, the next night is complete: every job up to date, exit 0.
+  write_file(t / "c.yaml", R"(specbake: 1
+jobs:
+  - {name: prism-a, kind: dispersion, samples: 4, material: {n_d: 1.5, v_d: 60}}
+  - {name: prism-b, kind: dispersion, samples: 8, material: {glass: N-BK7}}
+)");
+  for (int i = 0; i < 2; ++i)
+    ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--shard",
+                     std::to_string(i) + "/2", "--report", (t / "night2" / ("s" + std::to_string(i) + ".json")).string()})
+                  .exit_code,
+              5);  // no folder night2 yet: the report path is checked first (exit 5)
+  fs::create_directories(t / "night2");
+  for (int i = 0; i < 2; ++i)
+    ASSERT_EQ(spawn({"run", (t / "c.yaml").string(), "--out", (t / "out").string(), "--shard",
+                     std::to_string(i) + "/2", "--report", (t / "night2" / ("s" + std::to_string(i) + ".json")).string()})
+                  .exit_code,
+              0);
+  r = spawn({"report", (t / "night2" / "s0.json").string(), (t / "night2" / "s1.json").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("2 jobs from 2 shard reports: 0 built, 2 up to date"), std::string::npos) << r.out;
+
+  write_file(t / "not-a-report.json", "{\"jobs\": 3}");
+  r = spawn({"report", (t / "not-a-report.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("not-a-report.json"), std::string::npos) << r.err;
+  EXPECT_EQ(spawn({"report", (t / "nowhere.json").string()}).exit_code, 5);
+  EXPECT_EQ(spawn({"report"}).exit_code, 2);
 }
 
 TEST(Production, ConcurrentRunsOnOneOutputDoNotCorruptIt) {
