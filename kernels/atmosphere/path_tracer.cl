@@ -73,8 +73,8 @@
 /* Exact optical depths (truth_optical_depth): the ray is cut where it crosses an altitude
  * level, TRUTH_DEPTH_LEVELS equal levels over the atmosphere's thickness and every kink, so
  * that each piece changes altitude monotonically by at most (rt − rb)/TRUTH_DEPTH_LEVELS (Earth:
- * 2.5 km, ~2 of the Mie scale height) and holds no kink; each piece by 6-point Gauss–Legendre. */
-#define TRUTH_DEPTH_LEVELS 24
+ * 5 km, ~4 Mie scale heights) and holds no kink; each piece by 6-point Gauss–Legendre. */
+#define TRUTH_DEPTH_LEVELS 12
 #define TRUTH_MAX_EVENTS 1000   /* all-orders walks stop here (counted as truncated) */
 #define TRUTH_RATIO_BOOST R(2.0)
 
@@ -195,9 +195,9 @@ FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real m
  * ρ_t² = ρ² − (r μ)² (altitude-based, as everywhere here). Altitude levels h_j cross the ray at
  * x = ±√(ρ_j² − ρ_t²); between consecutive crossings (and x = 0) the altitude is monotone and
  * changes by at most one level spacing, with no kink inside, so 6-point Gauss–Legendre in x is
- * accurate: the integrand is a few exponentials whose exponent changes by ≲ 2 over a piece, a
- * Gaussian in x at a tangent point (relative error ≤ 1e-8 against a fine Simpson rule,
- * tests/atmosphere/truth_test.cpp; 4 points left 2e-5 on grazing rays). Levels:
+ * accurate: the integrand is a few exponentials whose exponent changes by ≲ 4 over a piece, a
+ * Gaussian in x at a tangent point (relative error ≤ 3e-8 against a fine Simpson rule,
+ * tests/atmosphere/truth_test.cpp; 24 levels gave ≤ 1e-8 for twice the cost, 4 points 2e-5). Levels:
  * TRUTH_DEPTH_LEVELS equal ones and the medium table's kinks, merged in ascending order. */
 FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, real x0, real x1) {
   const real x[3] = {R(0.2386191860831969), R(0.6612093864662645), R(0.9324695142031521)};
