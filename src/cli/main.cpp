@@ -18,7 +18,9 @@
 #include "io/bundle.hpp"
 #include "io/bundle_diff.hpp"
 #include "io/inspect.hpp"
+#include "io/output_folder.hpp"
 #include "kinds/atmosphere/truth.hpp"
+#include "runner/html_report.hpp"
 #include "runner/runner.hpp"
 #include "runner/sweep.hpp"
 
@@ -124,17 +126,7 @@ std::string fmt_number(double v) {
   return b;
 }
 
-// "self_check 5.6e-06 <= 0.002" from the first accuracy record.
-std::string headline(const json& accuracy) {
-  if (!accuracy.is_array() || accuracy.empty()) return "-";
-  const json& a = accuracy[0];
-  std::string s = a.value("name", "?") + " ";
-  s += a["value"].is_number() ? fmt_number(a["value"].get<double>()) : a["value"].dump();
-  if (a.contains("unit") && a["unit"].is_string()) s += " " + a["unit"].get<std::string>();
-  if (a.contains("tolerance") && a["tolerance"].is_number())
-    s += (a.value("passed", false) ? " <= " : " > ") + fmt_number(a["tolerance"].get<double>());
-  return s;
-}
+std::string headline(const json& accuracy) { return accuracy_headline(accuracy); }
 
 std::string describe(const JobReport& r) {
   if (r.parameters.is_null() || r.parameters.empty()) return "";
@@ -266,7 +258,31 @@ int cmd_devices() {
   return 0;
 }
 
+// inspect OUT: one line per job folder (its latest bundle).
+int cmd_inspect_output(const fs::path& dir, bool as_json) {
+  const auto jobs = scan_output_folder(dir);
+  if (as_json) {
+    json j = json::array();
+    for (const auto& o : jobs) j.push_back(o.to_json());
+    std::cout << json{{"output", fs::weakly_canonical(dir).string()}, {"jobs", j}}.dump(2) << "\n";
+    return 0;
+  }
+  std::vector<std::vector<std::string>> rows{{"job", "kind", "bundle", "size", "age", "accuracy (headline)"}};
+  for (const auto& o : jobs) {
+    const json j = o.to_json();
+    rows.push_back({o.name, j["kind"], j["hash"].get<std::string>().substr(0, 12), human_bytes(o.bytes),
+                    human_age(o.age_s), j["headline"]});
+  }
+  print_table(rows);
+  std::cout << jobs.size() << " job(s) in " << fs::weakly_canonical(dir).string()
+            << "; `specbake inspect " << (dir / "JOB").string() << "` checks one bundle's files\n";
+  return 0;
+}
+
 int cmd_inspect(const fs::path& path, bool as_json) {
+  std::error_code ec;
+  if (!fs::exists(path / "manifest.json", ec) && !fs::exists(path / "latest", ec) && is_output_folder(path))
+    return cmd_inspect_output(path, as_json);
   const Inspection in = inspect_bundle(path);
   const int rc = in.bad ? static_cast<int>(ExitCode::job_failed) : 0;
   if (as_json) {
@@ -481,6 +497,18 @@ int cmd_sweep(const SweepArgs& a, ProgressLine& progress_line, bool quiet) {
   return failed ? static_cast<int>(ExitCode::job_failed) : 0;
 }
 
+// specbake report DIR...: the HTML page over output folders.
+int cmd_report(const std::vector<std::string>& dirs, const std::string& out, bool quiet) {
+  const fs::path file = report_html_path(out);
+  check_report_html_path(file, "--out");
+  ReportPage page = report_page_from_output(std::vector<fs::path>(dirs.begin(), dirs.end()));
+  write_report_html(page, file);
+  if (!quiet)
+    std::cout << "wrote " << file.string() << " (" << page.jobs.size() << " job(s), " << page.sweeps.size()
+              << " sweep(s))\n";
+  return 0;
+}
+
 // "a,b" and repeated options → names; an empty name is a usage error.
 std::vector<std::string> split_names(const std::vector<std::string>& in, const char* option) {
   std::vector<std::string> out;
@@ -544,6 +572,19 @@ int main(int argc, char** argv) {
   };
   auto* run = app.add_subcommand("run", "bake every job of the configs into versioned bundles");
   add_selection(run);
+  std::string report_html_file;
+  run->add_option("--report-html", report_html_file, "write the run's HTML page (as `specbake report` makes) to FILE")
+      ->allow_extra_args(false);
+
+  std::vector<std::string> report_dirs;
+  std::string report_out;
+  auto* report_cmd = app.add_subcommand("report", "an HTML page over output folders: status, accuracy, previews, "
+                                                  "what changed since the earlier bundle (opens from disk)");
+  report_cmd->add_option("dirs", report_dirs, "output folders (holding <job>/latest bundles) or sweep folders")
+      ->required();
+  report_cmd->add_option("--out", report_out, "the page's file, or a folder to write report.html into "
+                                              "(default ./report.html)")
+      ->allow_extra_args(false);
   add_selection(app.add_subcommand("plan", "show what `run` would do, resolved settings and estimates; writes no bundle"));
 
   app.add_subcommand("devices", "list OpenCL platforms and devices, and which one `auto` picks");
@@ -635,6 +676,7 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("diff")) return cmd_diff(diff_old, diff_new, fail_abs, fail_rel);
     if (app.got_subcommand("truth")) return cmd_truth(truth_args);
     if (app.got_subcommand("sweep")) return cmd_sweep(sweep_args, progress_line, quiet);
+    if (app.got_subcommand("report")) return cmd_report(report_dirs, report_out, quiet);
 
     const bool is_plan = app.got_subcommand("plan");
     const CLI::App* sub = app.get_subcommands().front();
@@ -646,6 +688,8 @@ int main(int argc, char** argv) {
     given_empty("--shard", shard);
     given_empty("--report", report);
     report_file = std::make_unique<ReportFile>(report);
+    if (!is_plan) given_empty("--report-html", report_html_file);
+    if (!report_html_file.empty()) check_report_html_path(report_html_file, "--report-html");
 
     RunOptions opts;
     if (!out.empty()) opts.out = fs::path(out);
@@ -680,6 +724,13 @@ int main(int argc, char** argv) {
                     stopped);
     }
     report_file->write(reports, stopped);
+    if (!report_html_file.empty()) {
+      ReportPage page;
+      page.sources = configs;
+      for (const auto& r : reports) page.jobs.push_back(page_job(r));
+      write_report_html(page, report_html_file);
+      if (!quiet) std::cout << "wrote " << report_html_file << "\n";
+    }
     // An interrupted run says so (130/143); else invalid configs (--keep-going) come first.
     if (!stop_requested() && !invalid.empty()) return static_cast<int>(ExitCode::invalid_input);
     return static_cast<int>(exit_code(reports));
