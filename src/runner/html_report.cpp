@@ -137,11 +137,6 @@ std::string details_html(const json& details) {
   Flattened f;
   flatten(details, "", f);
   std::ostringstream o;
-  if (!f.leaves.empty()) {
-    o << "<table class=\"kv\">";
-    for (const auto& [k, v] : f.leaves) o << "<tr><th>" << esc(k) << "</th><td>" << esc(v) << "</td></tr>";
-    o << "</table>";
-  }
   for (const auto& [cols, rows] : f.tables) {
     o << "<table class=\"stats\"><tr><th></th>";
     for (const auto& c : cols) o << "<th>" << esc(c) << "</th>";
@@ -152,6 +147,12 @@ std::string details_html(const json& details) {
       o << "</tr>";
     }
     o << "</table>";
+  }
+  // the notes and settings of the record, folded
+  if (!f.leaves.empty()) {
+    o << "<details><summary>" << f.leaves.size() << " more field(s)</summary><table class=\"kv\">";
+    for (const auto& [k, v] : f.leaves) o << "<tr><th>" << esc(k) << "</th><td>" << esc(v) << "</td></tr>";
+    o << "</table></details>";
   }
   return o.str();
 }
@@ -216,6 +217,58 @@ std::string previews_html(const PageJob& j, const json& manifest) {
   }
   if (n) o << "</div>";
   return n ? "<h4>Previews</h4>" + o.str() : "";
+}
+
+// The live sky (src/runner/report/sky.js): an atmosphere bundle's own sampling.glsl in WebGL2 on
+// its float32 textures, embedded as base64 in a JSON block. Only RGB bundles with the 3D layout
+// and a separate single-Mie texture (the layout sky.js binds); at most kLiveSkyBytes of texture
+// data per bundle, so that a page of large bakes stays openable. Otherwise a note says why not.
+constexpr std::uint64_t kLiveSkyBytes = 48ull << 20;
+
+std::string live_sky_html(const PageJob& j, const json& manifest, std::size_t index) {
+  if (j.kind != "atmosphere") return "";
+  const auto note = [](const std::string& why) {
+    return "<h4>Live view</h4><p class=\"note\">no live view of this bundle: " + esc(why) + "</p>";
+  };
+  std::map<std::string, json> files;
+  for (const auto& f : manifest.value("files", json::array())) files[f.value("path", "")] = f;
+  json data = {{"job", j.name}, {"textures", json::object()}};
+  std::string glsl;
+  if (!files.count("sampling.glsl") || !read_bytes(j.bundle / "sampling.glsl", glsl))
+    return note("it has no sampling.glsl (a spectral-only or KTX2-only bundle)");
+  if (glsl.find("this bundle has no 3D layout") != std::string::npos)
+    return note("the live view binds the 3D scattering layout; this bundle has the tiled 2D one only");
+  data["glsl"] = glsl;
+  std::uint64_t total = 0;
+  for (const char* name : {"transmittance", "scattering", "single_mie_scattering"}) {
+    const std::string path = std::string(name) + ".bin";
+    if (!files.count(path)) return note("it has no " + path + " (the live view needs it)");
+    total += files[path].value("bytes", std::uint64_t{0});
+    if (total > kLiveSkyBytes)
+      return note("its textures exceed the " + human_bytes(kLiveSkyBytes) + " a page embeds");
+    std::string bytes;
+    if (!read_bytes(j.bundle / path, bytes)) return note("cannot read " + (j.bundle / path).string());
+    data["textures"][name] = {{"shape", files[path].value("shape", json::array())}, {"base64", base64(bytes)}};
+  }
+  std::string text = data.dump();
+  for (std::size_t at = 0; (at = text.find("</", at)) != std::string::npos; at += 3) text.replace(at, 2, "<\\/");
+  std::ostringstream o;
+  o << "<h4>Live view</h4><div class=\"live-sky\" id=\"live-sky-" << index << "\" data-job=\"" << esc(j.name)
+    << "\"><canvas width=\"320\" height=\"320\"></canvas><div class=\"controls\">"
+    << "<label>sun elevation <input type=\"range\" name=\"sun_elevation_deg\" min=\"-10\" max=\"90\" step=\"0.5\" "
+       "value=\"20\"><output></output> deg</label>"
+    << "<label>sun azimuth <input type=\"range\" name=\"sun_azimuth_deg\" min=\"-180\" max=\"180\" step=\"1\" "
+       "value=\"0\"><output></output> deg</label>"
+    << "<label>altitude <input type=\"range\" name=\"altitude_km\" min=\"0\" max=\"50\" step=\"0.1\" "
+       "value=\"0\"><output></output> km</label>"
+    << "<label>exposure <input type=\"range\" name=\"exposure\" min=\"-4\" max=\"10\" step=\"0.25\" "
+       "value=\"3\"><output></output> stops</label>"
+    << "<p class=\"live-note\">The bundle's own sampling.glsl (GetSkyRadiance, as shipped) in WebGL2 on its float32 "
+       "textures: equidistant fisheye, zenith at the centre, sun azimuth 0 at the right; the sky's radiance "
+       "(R, G, B at the bundle's wavelengths, no sun disc) times 2^exposure, then 1 − exp(−x) and the sRGB "
+       "curve.</p><p class=\"live-status\"></p></div>"
+    << "<script type=\"application/json\" class=\"sky-data\">" << text << "</script></div>\n";
+  return o.str();
 }
 
 std::string changes_html(const PageJob& j, const json& manifest) {
@@ -455,11 +508,12 @@ std::string report_html(const ReportPage& page) {
       for (const auto& w : j.warnings) o << "<li>" << esc(w) << "</li>";
       o << "</ul></div>\n";
     }
+    if (manifest.is_object()) o << previews_html(j, manifest) << live_sky_html(j, manifest, i);
     if (!j.accuracy.empty()) {
       o << "<h4>Accuracy</h4>";
       for (const auto& a : j.accuracy) o << record_html(a) << "\n";
     }
-    if (manifest.is_object()) o << previews_html(j, manifest) << changes_html(j, manifest);
+    if (manifest.is_object()) o << changes_html(j, manifest);
     else if (!j.bundle.empty()) o << "<p class=\"note\">cannot read " << esc((j.bundle / "manifest.json").string()) << "</p>";
     if (j.parameters.is_object() && !j.parameters.empty())
       o << "<details><summary>Parameters</summary>" << details_html(j.parameters) << "</details>\n";
@@ -467,7 +521,8 @@ std::string report_html(const ReportPage& page) {
   }
   o << sweeps_html(page.sweeps);
   o << "<footer>made by specbake; opens from disk: no server, no network.</footer>\n<script>\n"
-    << resource("src/runner/report/page.js") << "</script>\n</body></html>\n";
+    << resource("src/runner/report/page.js") << "</script>\n<script>\n" << resource("src/runner/report/sky.js")
+    << "</script>\n</body></html>\n";
   return o.str();
 }
 

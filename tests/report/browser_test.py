@@ -2,14 +2,19 @@
 """The report page in a real browser: headless Chromium (Debian's `chromium`) driven over the
 DevTools protocol on a pipe (--remote-debugging-pipe; Python's standard library only).
 
-  browser_test.py SPECBAKE_EXE REFERENCE_PNG WORK_DIR [--update]
+  browser_test.py SPECBAKE_EXE REFERENCE_PNG WORK_DIR SKY_HOST_EXE [--update]
 
 Bakes a small output folder (a prism twice, a grating, a small sky), writes `specbake report`'s
 page, opens it from disk and
   * fails on any console error, uncaught exception, failed load or error the page's own script
     counted (<body data-js-errors>);
   * compares a screenshot of the top of the page (1280 x 2400 CSS px) loosely with REFERENCE_PNG:
-    the mean luminance of 16 x 16 px blocks, correlated (layout present), not pixel-exact.
+    the mean luminance of 16 x 16 px blocks, correlated (layout present), not pixel-exact;
+  * renders the sky bundle's live view (its own sampling.glsl in WebGL2) at a few views into a
+    float framebuffer, reads the pixels back and compares each with SKY_HOST_EXE's double
+    evaluation of the same source from the same float32 texels and inputs, within the llvmpipe
+    GL test's per-pixel bound (texel-coordinate rounding to 8 fractional bits, float32 geometry
+    and arithmetic: tests/atmosphere/gl_pixel_bound.hpp).
 --update writes the screenshot as the new reference. Exit 77 (skip) only when Chromium is
 missing and cannot be installed, or cannot start; the reason is printed.
 """
@@ -234,9 +239,48 @@ def errors_in(events):
     return out
 
 
+# The live sky's views checked: sun high, low and below the horizon, from the ground and above.
+SKY_VIEWS = [{"sun_elevation_deg": 20, "sun_azimuth_deg": 0, "altitude_km": 0.001},
+             {"sun_elevation_deg": 4, "sun_azimuth_deg": 70, "altitude_km": 2.0},
+             {"sun_elevation_deg": -3, "sun_azimuth_deg": -120, "altitude_km": 12.0}]
+SKY_N = 40
+
+
+def check_sky(sky_host, bundle, view, gl):
+    r = subprocess.run([sky_host, bundle, str(gl["n"])] + ["%.9g" % v for v in gl["sun"]] + ["%.9g" % gl["altitude_km"]],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        print("FAIL: sky_host: " + r.stderr)
+        return False
+    host = json.loads(r.stdout)
+    worst, at, lit, over, rel_bounds = 0.0, None, 0, 0, []
+    for i, kind in enumerate(host["kind"]):
+        px = gl["rgba"][4 * i:4 * i + 4]
+        if kind < 0:
+            if any(px):
+                over += 1
+            continue
+        lit += 1
+        for c in range(3):
+            v, b = host["value"][3 * i + c], host["bound"][3 * i + c]
+            d = abs(px[c] - v)
+            rel_bounds.append(b / abs(v) if v else float("inf"))
+            ratio = d / b if b > 0 else (0.0 if d == 0 else float("inf"))
+            if ratio > worst:
+                worst, at = ratio, (i % gl["n"], i // gl["n"], "RGB"[c], px[c], v, b)
+            over += d > b
+    rel_bounds.sort()
+    print("live sky %s: %d sky pixels on %s; worst |GL - host| / bound %.3g at %s; median bound / value %.2g"
+          % (view, lit, gl.get("renderer", "?"), worst, at, rel_bounds[len(rel_bounds) // 2]))
+    if lit < SKY_N * SKY_N // 2 or over:
+        print("FAIL: %d channel(s) beyond the bound (or outside the circle not 0)" % over)
+        return False
+    return True
+
+
 def main():
-    exe, reference, work = sys.argv[1], sys.argv[2], sys.argv[3]
-    update = "--update" in sys.argv[4:]
+    exe, reference, work, sky_host = sys.argv[1:5]
+    update = "--update" in sys.argv[5:]
     chromium = find_chromium()
     shutil.rmtree(work, ignore_errors=True)
     os.makedirs(work)
@@ -278,6 +322,13 @@ def main():
                            " images: Array.from(document.images).filter(i => !(i.complete && i.naturalWidth > 0)).length})")
         state = json.loads(state)
         shot = base64.b64decode(b.send("Page.captureScreenshot", {"format": "png"})["data"])
+        unavailable = b.evaluate("(document.querySelector('.live-sky') || {getAttribute: () => 'no live view on the page'})"
+                                 ".getAttribute('data-unavailable')")
+        renders = []
+        if unavailable is None:
+            for view in SKY_VIEWS:
+                renders.append(json.loads(b.evaluate("JSON.stringify(specbakeSky.sky.radiance(%s, %d))"
+                                                     % (json.dumps(view), SKY_N))))
         time.sleep(0.5)  # late console messages
         b.send("Runtime.evaluate", {"expression": "1"})
         errors = errors_in(b.events)
@@ -287,6 +338,11 @@ def main():
     with open(os.path.join(work, "screenshot.png"), "wb") as f:
         f.write(shot)
     failed = False
+    if unavailable is not None:
+        print("FAIL: the live sky did not run in this Chromium (SwiftShader WebGL2): %s" % unavailable)
+        failed = True
+    for view, gl in zip(SKY_VIEWS, renders):
+        failed |= not check_sky(sky_host, os.path.join(work, "out", "sky", "latest"), view, gl)
     if errors or state["errors"] != "0":
         print("FAIL: errors in the browser:\n  " + "\n  ".join(errors + [state["box"]]))
         failed = True
