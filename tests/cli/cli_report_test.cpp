@@ -6,6 +6,7 @@
 #include <string>
 
 #include "io/output_folder.hpp"
+#include "runner/html_report.hpp"
 #include "support/testing.hpp"
 
 namespace {
@@ -32,8 +33,12 @@ class Report : public ::testing::Test {
     t::write_file(*dir_ / "b.yaml", "specbake: 1\noutput: out\njobs:\n" + prism(4));
     const auto a = t::run_cli({"run", (*dir_ / "a.yaml").string()});
     ASSERT_EQ(a.exit_code, 0) << a.err;
-    const auto b = t::run_cli({"run", (*dir_ / "b.yaml").string(), "--report-html", (*dir_ / "run.html").string()});
+    const auto b = t::run_cli({"run", (*dir_ / "b.yaml").string(), "--report-html", (*dir_ / "run.html").string(),
+                               "--report", (*dir_ / "run.json").string()});
     ASSERT_EQ(b.exit_code, 0) << b.err;
+    const auto s = t::run_cli({"sweep", (*dir_ / "b.yaml").string(), "--job", "prism", "--vary", "samples=2,3",
+                               "--out", (*dir_ / "sweeps" / "prism").string()});
+    ASSERT_EQ(s.exit_code, 0) << s.err;
   }
   static void TearDownTestSuite() { delete dir_; }
   static fs::path out() { return *dir_ / "out"; }
@@ -143,6 +148,38 @@ TEST_F(Report, InspectAnOutputFolder) {
   const auto one = t::run_cli({"inspect", (out() / "prism").string()});
   EXPECT_EQ(one.exit_code, 0) << one.err;
   EXPECT_NE(one.out.find("match their sha256"), std::string::npos);
+}
+
+// A folder of sweeps beside the output folder: each sweep's plot, titled by its job and keys.
+TEST_F(Report, Sweeps) {
+  const auto r = t::run_cli({"report", out().string(), (*dir_ / "sweeps").string(), "--out", (*dir_ / "s.html").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("1 sweep(s)"), std::string::npos) << r.out;
+  const std::string html = t::read_file(*dir_ / "s.html");
+  EXPECT_NE(html.find("prism (dispersion): 2 points over samples"), std::string::npos);
+  if (fs::exists(*dir_ / "sweeps" / "prism" / "sweep.png"))
+    EXPECT_NE(html.find("speed against error (sweep.png)"), std::string::npos);
+}
+
+// Rows from a --report file's entries (what a night's shard reports hold): the same fields as
+// from the bundle, and the earlier bundle found beside it.
+TEST_F(Report, RowsFromAReportFile) {
+  const json report = t::read_json(*dir_ / "run.json");
+  ASSERT_EQ(report["jobs"].size(), 1u);
+  const specbake::PageJob j = specbake::page_job_from_report_entry(report["jobs"][0]);
+  EXPECT_EQ(j.name, "prism");
+  EXPECT_EQ(j.kind, "dispersion");
+  EXPECT_EQ(j.status, "built");
+  EXPECT_EQ(fs::canonical(j.bundle), fs::canonical(out() / "prism" / "latest"));
+  EXPECT_FALSE(j.previous.empty());
+  EXPECT_EQ(j.accuracy, report["jobs"][0]["accuracy"]);
+  EXPECT_GT(j.seconds, 0.0);
+  specbake::ReportPage page;
+  page.jobs = {j, specbake::page_job_from_report_entry(json{{"name", "broken"}, {"status", "invalid"},
+                                                            {"reason", "c.yaml:3:5: <expected> a number"}})};
+  const std::string html = specbake::report_html(page);
+  EXPECT_NE(html.find("Changes since the earlier bundle"), std::string::npos);
+  EXPECT_NE(html.find("c.yaml:3:5: &lt;expected&gt; a number"), std::string::npos) << "escaped";
 }
 
 TEST(OutputFolder, Formats) {
