@@ -281,8 +281,11 @@ int cmd_inspect_output(const fs::path& dir, bool as_json) {
 
 int cmd_inspect(const fs::path& path, bool as_json) {
   std::error_code ec;
-  if (!fs::exists(path / "manifest.json", ec) && !fs::exists(path / "latest", ec) && is_output_folder(path))
-    return cmd_inspect_output(path, as_json);
+  if (!fs::exists(path / "manifest.json", ec) && !fs::exists(path / "latest", ec)) {
+    if (is_output_folder(path)) return cmd_inspect_output(path, as_json);
+    throw InputError({path, 0, 0, ""}, "expected a bundle folder (with manifest.json), a job folder (with a `latest` "
+                                       "bundle) or an output folder (job folders with `latest` bundles)");
+  }
   const Inspection in = inspect_bundle(path);
   const int rc = in.bad ? static_cast<int>(ExitCode::job_failed) : 0;
   if (as_json) {
@@ -632,8 +635,10 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->default_str("the job's");
 
-  auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
-  inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")
+  auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256, or list an output "
+                                                "folder's jobs");
+  inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest), job folder (its latest) "
+                                             "or output folder (its jobs: latest bundle, size, age, headline)")
       ->required();
   inspect->add_flag("--json", inspect_json, "print the summary and per-file checks as JSON");
 
