@@ -271,11 +271,40 @@ std::string live_sky_html(const PageJob& j, const json& manifest, std::size_t in
   return o.str();
 }
 
+// The live prism (src/runner/report/prism.js): a dispersion bundle's own dispersion.glsl in WebGL2
+// summing a white beam's per-sample renders (specbake_dispersion_combine), with a spread control.
+std::string live_prism_html(const PageJob& j, const json& manifest, std::size_t index) {
+  if (j.kind != "dispersion") return "";
+  std::string glsl;
+  bool listed = false;
+  for (const auto& f : manifest.value("files", json::array())) listed |= f.value("path", "") == "dispersion.glsl";
+  if (!listed || !read_bytes(j.bundle / "dispersion.glsl", glsl)) return "";
+  double spread = 4.0;  // the prism check's spread (beam widths between the range's ends), where recorded
+  for (const auto& a : j.accuracy)
+    if (a.is_object() && a.contains("details") && a["details"].is_object() && a["details"].contains("spread") &&
+        a["details"]["spread"].is_number())
+      spread = a["details"]["spread"].get<double>();
+  std::string text = json{{"job", j.name}, {"glsl", glsl}, {"spread", spread}}.dump();
+  for (std::size_t at = 0; (at = text.find("</", at)) != std::string::npos; at += 3) text.replace(at, 2, "<\\/");
+  std::ostringstream o;
+  o << "<h4>Live view</h4><div class=\"live-prism\" id=\"live-prism-" << index << "\" data-job=\"" << esc(j.name)
+    << "\"><canvas width=\"640\" height=\"64\"></canvas><div class=\"controls\">"
+    << "<label>spread <input type=\"range\" name=\"spread\" min=\"0\" max=\"16\" step=\"0.25\" value=\""
+    << num(spread) << "\"><output></output> beam widths</label>"
+    << "<p class=\"live-note\">The bundle's own dispersion.glsl (specbake_dispersion_combine, as shipped) in WebGL2: "
+       "a white beam one unit wide through a thin prism, sample n landing at spread · SPECBAKE_IOR_OFFSET[n] (the "
+       "spread: beam widths between the range's ends), the per-sample renders summed with K_n; linear sRGB clamped "
+       "to [0, 1], then the sRGB curve. The static preview above compares the same sum with the dense spectrum."
+       "</p><p class=\"live-status\"></p></div>"
+    << "<script type=\"application/json\" class=\"prism-data\">" << text << "</script></div>\n";
+  return o.str();
+}
+
 std::string changes_html(const PageJob& j, const json& manifest) {
   if (j.previous.empty() || j.bundle.empty()) return "";
   std::ostringstream o;
   const json old = read_manifest_or_null(j.previous);
-  o << "<h4>Changes since the earlier bundle " << esc(j.previous.filename().string());
+  o << "<h4>Changes since the earlier bundle <code>" << esc(j.previous.filename().string()) << "</code>";
   if (old.is_object()) o << " (" << esc(old.value("created_utc", "?")) << ")";
   o << "</h4>";
   // Accuracy: each record's value, earlier and now, by name.
@@ -293,7 +322,7 @@ std::string changes_html(const PageJob& j, const json& manifest) {
     if (now.is_number() && was.is_number()) {
       const double d = now.get<double>() - was.get<double>();
       change = d == 0 ? "same" : (d > 0 ? "+" : "") + num(d);
-      if (was.get<double>() != 0) change += " (" + num(100.0 * d / std::abs(was.get<double>())) + " %)";
+      if (d != 0 && was.get<double>() != 0) change += " (" + num(100.0 * d / std::abs(was.get<double>())) + " %)";
     } else if (!before.count(name)) {
       change = "new";
     }
@@ -508,7 +537,8 @@ std::string report_html(const ReportPage& page) {
       for (const auto& w : j.warnings) o << "<li>" << esc(w) << "</li>";
       o << "</ul></div>\n";
     }
-    if (manifest.is_object()) o << previews_html(j, manifest) << live_sky_html(j, manifest, i);
+    if (manifest.is_object())
+      o << previews_html(j, manifest) << live_sky_html(j, manifest, i) << live_prism_html(j, manifest, i);
     if (!j.accuracy.empty()) {
       o << "<h4>Accuracy</h4>";
       for (const auto& a : j.accuracy) o << record_html(a) << "\n";
@@ -522,7 +552,7 @@ std::string report_html(const ReportPage& page) {
   o << sweeps_html(page.sweeps);
   o << "<footer>made by specbake; opens from disk: no server, no network.</footer>\n<script>\n"
     << resource("src/runner/report/page.js") << "</script>\n<script>\n" << resource("src/runner/report/sky.js")
-    << "</script>\n</body></html>\n";
+    << "</script>\n<script>\n" << resource("src/runner/report/prism.js") << "</script>\n</body></html>\n";
   return o.str();
 }
 

@@ -324,6 +324,11 @@ def main():
         shot = base64.b64decode(b.send("Page.captureScreenshot", {"format": "png"})["data"])
         unavailable = b.evaluate("(document.querySelector('.live-sky') || {getAttribute: () => 'no live view on the page'})"
                                  ".getAttribute('data-unavailable')")
+        # the live prism: drawn. Its beams, one unit wide each, on a strip 16 * (max - min IOR offset) + 1
+        # units wide (about 31 for N-BK7 at 3-4 samples) light 10-13 % of it; 4 % is about one beam.
+        prism = b.evaluate("(() => { const p = specbakePrism.prism; if (!p) return -1; const px = p.pixels();"
+                           " let lit = 0; for (let i = 0; i < px.length; i += 4) lit += px[i] + px[i + 1] + px[i + 2] > 60;"
+                           " return lit / (px.length / 4); })()")
         renders = []
         if unavailable is None:
             for view in SKY_VIEWS:
@@ -338,6 +343,9 @@ def main():
     with open(os.path.join(work, "screenshot.png"), "wb") as f:
         f.write(shot)
     failed = False
+    if prism < 0.04:
+        print("FAIL: the live prism is missing or dark (lit fraction %s)" % prism)
+        failed = True
     if unavailable is not None:
         print("FAIL: the live sky did not run in this Chromium (SwiftShader WebGL2): %s" % unavailable)
         failed = True
@@ -360,7 +368,7 @@ def main():
         if r < MIN_CORRELATION or mad > MAX_MEAN_ABS:
             print("FAIL: the page's layout differs from the reference")
             failed = True
-    print("console: %d error(s); page: %s" % (len(errors), state))
+    print("console: %d error(s); page: %s; live prism lit fraction %.3f" % (len(errors), state, prism))
     sys.exit(1 if failed else 0)
 
 
