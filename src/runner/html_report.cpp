@@ -219,85 +219,122 @@ std::string previews_html(const PageJob& j, const json& manifest) {
   return n ? "<h4>Previews</h4>" + o.str() : "";
 }
 
-// The live sky (src/runner/report/sky.js): an atmosphere bundle's own sampling.glsl in WebGL2 on
-// its float32 textures, embedded as base64 in a JSON block. Only RGB bundles with the 3D layout
-// and a separate single-Mie texture (the layout sky.js binds); at most kLiveSkyBytes of texture
-// data per bundle, so that a page of large bakes stays openable. Otherwise a note says why not.
-constexpr std::uint64_t kLiveSkyBytes = 48ull << 20;
+// ---- live views (src/runner/report/live.js and one script per view) ---------------------------
+// A bundle's own shipped GLSL in WebGL2, on its data embedded in the page as base64 float32 in a
+// JSON block; at most kLiveBytes of data per bundle, so that a page of large bakes stays openable.
+// Where a bundle lacks what a view needs, a note says why.
+constexpr std::uint64_t kLiveBytes = 48ull << 20;
 
-std::string live_sky_html(const PageJob& j, const json& manifest, std::size_t index) {
-  if (j.kind != "atmosphere") return "";
-  const auto note = [](const std::string& why) {
-    return "<h4>Live view</h4><p class=\"note\">no live view of this bundle: " + esc(why) + "</p>";
-  };
-  std::map<std::string, json> files;
-  for (const auto& f : manifest.value("files", json::array())) files[f.value("path", "")] = f;
-  json data = {{"job", j.name}, {"textures", json::object()}};
-  std::string glsl;
-  if (!files.count("sampling.glsl") || !read_bytes(j.bundle / "sampling.glsl", glsl))
-    return note("it has no sampling.glsl (a spectral-only or KTX2-only bundle)");
-  if (glsl.find("this bundle has no 3D layout") != std::string::npos)
-    return note("the live view binds the 3D scattering layout; this bundle has the tiled 2D one only");
-  data["glsl"] = glsl;
-  std::uint64_t total = 0;
-  for (const char* name : {"transmittance", "scattering", "single_mie_scattering"}) {
-    const std::string path = std::string(name) + ".bin";
-    if (!files.count(path)) return note("it has no " + path + " (the live view needs it)");
-    total += files[path].value("bytes", std::uint64_t{0});
-    if (total > kLiveSkyBytes)
-      return note("its textures exceed the " + human_bytes(kLiveSkyBytes) + " a page embeds");
-    std::string bytes;
-    if (!read_bytes(j.bundle / path, bytes)) return note("cannot read " + (j.bundle / path).string());
-    data["textures"][name] = {{"shape", files[path].value("shape", json::array())}, {"base64", base64(bytes)}};
-  }
+struct Slider {
+  const char* name;
+  const char* label;
+  double min, max, step, value;
+  const char* unit;
+};
+
+std::string live_view_html(const char* cls, std::size_t index, int width, int height, const std::vector<Slider>& sliders,
+                           const std::string& note, const json& data) {
   std::string text = data.dump();
   for (std::size_t at = 0; (at = text.find("</", at)) != std::string::npos; at += 3) text.replace(at, 2, "<\\/");
   std::ostringstream o;
-  o << "<h4>Live view</h4><div class=\"live-sky\" id=\"live-sky-" << index << "\" data-job=\"" << esc(j.name)
-    << "\"><canvas width=\"320\" height=\"320\"></canvas><div class=\"controls\">"
-    << "<label>sun elevation <input type=\"range\" name=\"sun_elevation_deg\" min=\"-10\" max=\"90\" step=\"0.5\" "
-       "value=\"20\"><output></output> deg</label>"
-    << "<label>sun azimuth <input type=\"range\" name=\"sun_azimuth_deg\" min=\"-180\" max=\"180\" step=\"1\" "
-       "value=\"0\"><output></output> deg</label>"
-    << "<label>altitude <input type=\"range\" name=\"altitude_km\" min=\"0\" max=\"50\" step=\"0.1\" "
-       "value=\"0\"><output></output> km</label>"
-    << "<label>exposure <input type=\"range\" name=\"exposure\" min=\"-4\" max=\"10\" step=\"0.25\" "
-       "value=\"3\"><output></output> stops</label>"
-    << "<p class=\"live-note\">The bundle's own sampling.glsl (GetSkyRadiance, as shipped) in WebGL2 on its float32 "
-       "textures: equidistant fisheye, zenith at the centre, sun azimuth 0 at the right; the sky's radiance "
-       "(R, G, B at the bundle's wavelengths, no sun disc) times 2^exposure, then 1 − exp(−x) and the sRGB "
-       "curve.</p><p class=\"live-status\"></p></div>"
-    << "<script type=\"application/json\" class=\"sky-data\">" << text << "</script></div>\n";
+  o << "<h4>Live view</h4><div class=\"live " << cls << "\" id=\"" << cls << "-" << index << "\"><canvas width=\""
+    << width << "\" height=\"" << height << "\"></canvas><div class=\"controls\">";
+  for (const Slider& c : sliders)
+    o << "<label>" << c.label << " <input type=\"range\" name=\"" << c.name << "\" min=\"" << num(c.min)
+      << "\" max=\"" << num(c.max) << "\" step=\"" << num(c.step) << "\" value=\"" << num(c.value)
+      << "\"><output></output> " << c.unit << "</label>";
+  o << "<p class=\"live-note\">" << esc(note) << "</p><p class=\"live-status\"></p></div>"
+    << "<script type=\"application/json\" class=\"live-data\">" << text << "</script></div>\n";
   return o.str();
 }
 
-// The live prism (src/runner/report/prism.js): a dispersion bundle's own dispersion.glsl in WebGL2
-// summing a white beam's per-sample renders (specbake_dispersion_combine), with a spread control.
-std::string live_prism_html(const PageJob& j, const json& manifest, std::size_t index) {
-  if (j.kind != "dispersion") return "";
+std::string no_live_view(const std::string& why) {
+  return "<h4>Live view</h4><p class=\"note\">no live view of this bundle: " + esc(why) + "</p>";
+}
+
+// The shipped text at `glsl_path` and the float32 files (name → path) into `data`; "" or the reason not.
+std::string live_data(const PageJob& j, const json& manifest, const std::string& glsl_path,
+                      const std::vector<std::pair<std::string, std::string>>& bins, json& data) {
+  std::map<std::string, json> files;
+  for (const auto& f : manifest.value("files", json::array())) files[f.value("path", "")] = f;
   std::string glsl;
-  bool listed = false;
-  for (const auto& f : manifest.value("files", json::array())) listed |= f.value("path", "") == "dispersion.glsl";
-  if (!listed || !read_bytes(j.bundle / "dispersion.glsl", glsl)) return "";
+  if (!files.count(glsl_path) || !read_bytes(j.bundle / glsl_path, glsl)) return "it has no " + glsl_path;
+  data = {{"job", j.name}, {"glsl", glsl}, {"textures", json::object()}};
+  std::uint64_t total = 0;
+  for (const auto& [name, path] : bins) {
+    if (!files.count(path)) return "it has no " + path + " (the live view reads it)";
+    total += files[path].value("bytes", std::uint64_t{0});
+    if (total > kLiveBytes) return "its data exceed the " + human_bytes(kLiveBytes) + " a page embeds per bundle";
+    std::string bytes;
+    if (!read_bytes(j.bundle / path, bytes)) return "cannot read " + (j.bundle / path).string();
+    data["textures"][name] = {{"shape", files[path].value("shape", json::array())}, {"base64", base64(bytes)}};
+  }
+  return "";
+}
+
+// Atmosphere (sky.js): sampling.glsl's GetSkyRadiance over a fisheye; RGB bundles with the 3D
+// layout and a separate single-Mie texture (what sky.js binds).
+std::string live_sky_html(const PageJob& j, const json& manifest, std::size_t index) {
+  json data;
+  const std::string why = live_data(j, manifest, "sampling.glsl",
+                                    {{"transmittance", "transmittance.bin"}, {"scattering", "scattering.bin"},
+                                     {"single_mie_scattering", "single_mie_scattering.bin"}},
+                                    data);
+  if (!why.empty()) return no_live_view(why);
+  if (data["glsl"].get<std::string>().find("this bundle has no 3D layout") != std::string::npos)
+    return no_live_view("the live view binds the 3D scattering layout; this bundle has the tiled 2D one only");
+  return live_view_html(
+      "live-sky", index, 320, 320,
+      {{"sun_elevation_deg", "sun elevation", -10, 90, 0.5, 20, "deg"},
+       {"sun_azimuth_deg", "sun azimuth", -180, 180, 1, 0, "deg"},
+       {"altitude_km", "altitude", 0, 50, 0.1, 0, "km"},
+       {"exposure", "exposure", -4, 10, 0.25, 3, "stops"}},
+      "The bundle's own sampling.glsl (GetSkyRadiance, as shipped) in WebGL2 on its float32 textures: equidistant "
+      "fisheye, zenith at the centre, sun azimuth 0 at the right; the sky's radiance (R, G, B at the bundle's "
+      "wavelengths, no sun disc) times 2^exposure, then 1 − exp(−x) and the sRGB curve.",
+      data);
+}
+
+// Dispersion (prism.js): dispersion.glsl's specbake_dispersion_combine over a white beam.
+std::string live_prism_html(const PageJob& j, const json& manifest, std::size_t index) {
+  json data;
+  const std::string why = live_data(j, manifest, "dispersion.glsl", {}, data);
+  if (!why.empty()) return no_live_view(why);
   double spread = 4.0;  // the prism check's spread (beam widths between the range's ends), where recorded
   for (const auto& a : j.accuracy)
     if (a.is_object() && a.contains("details") && a["details"].is_object() && a["details"].contains("spread") &&
         a["details"]["spread"].is_number())
       spread = a["details"]["spread"].get<double>();
-  std::string text = json{{"job", j.name}, {"glsl", glsl}, {"spread", spread}}.dump();
-  for (std::size_t at = 0; (at = text.find("</", at)) != std::string::npos; at += 3) text.replace(at, 2, "<\\/");
-  std::ostringstream o;
-  o << "<h4>Live view</h4><div class=\"live-prism\" id=\"live-prism-" << index << "\" data-job=\"" << esc(j.name)
-    << "\"><canvas width=\"640\" height=\"64\"></canvas><div class=\"controls\">"
-    << "<label>spread <input type=\"range\" name=\"spread\" min=\"0\" max=\"16\" step=\"0.25\" value=\""
-    << num(spread) << "\"><output></output> beam widths</label>"
-    << "<p class=\"live-note\">The bundle's own dispersion.glsl (specbake_dispersion_combine, as shipped) in WebGL2: "
-       "a white beam one unit wide through a thin prism, sample n landing at spread · SPECBAKE_IOR_OFFSET[n] (the "
-       "spread: beam widths between the range's ends), the per-sample renders summed with K_n; linear sRGB clamped "
-       "to [0, 1], then the sRGB curve. The static preview above compares the same sum with the dense spectrum."
-       "</p><p class=\"live-status\"></p></div>"
-    << "<script type=\"application/json\" class=\"prism-data\">" << text << "</script></div>\n";
-  return o.str();
+  return live_view_html(
+      "live-prism", index, 640, 64, {{"spread", "spread", 0, 16, 0.25, spread, "beam widths"}},
+      "The bundle's own dispersion.glsl (specbake_dispersion_combine, as shipped) in WebGL2: a white beam one unit "
+      "wide through a thin prism, sample n landing at spread · SPECBAKE_IOR_OFFSET[n] (the spread: beam widths "
+      "between the range's ends), the per-sample renders summed with K_n; linear sRGB clamped to [0, 1], then the "
+      "sRGB curve. The static preview above compares the same sum with the dense spectrum.",
+      data);
+}
+
+// Diffraction table bundles (lobes.js): diffraction_srgb_fast over the outgoing hemisphere.
+std::string live_lobes_html(const PageJob& j, const json& manifest, std::size_t index) {
+  json data;
+  const std::string why =
+      live_data(j, manifest, "shader/diffraction_brdf.glsl", {{"table_terms", "table_terms.bin"}}, data);
+  if (!why.empty()) return no_live_view(why);
+  return live_view_html(
+      "live-lobes", index, 320, 320,
+      {{"light_angle_deg", "light angle", 0, 85, 1, 30, "deg"}, {"exposure", "exposure", -4, 12, 0.25, 4, "stops"}},
+      "The bundle's own shader/diffraction_brdf.glsl (diffraction_srgb_fast, as shipped) in WebGL2 on its table "
+      "(table_terms.bin): the outgoing hemisphere seen from above (orthographic, the normal at the centre), lit by "
+      "D65 at the light angle from the normal on the left (its mirror direction on the right); the relative BRDF "
+      "in linear sRGB times 2^exposure, clamped to [0, 1], then the sRGB curve.",
+      data);
+}
+
+std::string live_html(const PageJob& j, const json& manifest, std::size_t index) {
+  if (j.kind == "atmosphere") return live_sky_html(j, manifest, index);
+  if (j.kind == "dispersion") return live_prism_html(j, manifest, index);
+  if (j.kind == "diffraction") return live_lobes_html(j, manifest, index);
+  return "";
 }
 
 std::string changes_html(const PageJob& j, const json& manifest) {
@@ -538,7 +575,7 @@ std::string report_html(const ReportPage& page) {
       o << "</ul></div>\n";
     }
     if (manifest.is_object())
-      o << previews_html(j, manifest) << live_sky_html(j, manifest, i) << live_prism_html(j, manifest, i);
+      o << previews_html(j, manifest) << live_html(j, manifest, i);
     if (!j.accuracy.empty()) {
       o << "<h4>Accuracy</h4>";
       for (const auto& a : j.accuracy) o << record_html(a) << "\n";
@@ -551,8 +588,10 @@ std::string report_html(const ReportPage& page) {
   }
   o << sweeps_html(page.sweeps);
   o << "<footer>made by specbake; opens from disk: no server, no network.</footer>\n<script>\n"
-    << resource("src/runner/report/page.js") << "</script>\n<script>\n" << resource("src/runner/report/sky.js")
-    << "</script>\n<script>\n" << resource("src/runner/report/prism.js") << "</script>\n</body></html>\n";
+    << resource("src/runner/report/page.js") << "</script>\n";
+  for (const char* js : {"live.js", "sky.js", "prism.js", "lobes.js"})
+    o << "<script>\n" << resource(std::string("src/runner/report/") + js) << "</script>\n";
+  o << "</body></html>\n";
   return o.str();
 }
 

@@ -10,6 +10,7 @@ page, opens it from disk and
     counted (<body data-js-errors>);
   * compares a screenshot of the top of the page (1280 x 2400 CSS px) loosely with REFERENCE_PNG:
     the mean luminance of 16 x 16 px blocks, correlated (layout present), not pixel-exact;
+  * checks that the live prism and BRDF lobes draw (their lit fractions);
   * renders the sky bundle's live view (its own sampling.glsl in WebGL2) at a few views into a
     float framebuffer, reads the pixels back and compares each with SKY_HOST_EXE's double
     evaluation of the same source from the same float32 texels and inputs, within the llvmpipe
@@ -324,11 +325,15 @@ def main():
         shot = base64.b64decode(b.send("Page.captureScreenshot", {"format": "png"})["data"])
         unavailable = b.evaluate("(document.querySelector('.live-sky') || {getAttribute: () => 'no live view on the page'})"
                                  ".getAttribute('data-unavailable')")
-        # the live prism: drawn. Its beams, one unit wide each, on a strip 16 * (max - min IOR offset) + 1
-        # units wide (about 31 for N-BK7 at 3-4 samples) light 10-13 % of it; 4 % is about one beam.
-        prism = b.evaluate("(() => { const p = specbakePrism.prism; if (!p) return -1; const px = p.pixels();"
-                           " let lit = 0; for (let i = 0; i < px.length; i += 4) lit += px[i] + px[i + 1] + px[i + 2] > 60;"
-                           " return lit / (px.length / 4); })()")
+        # the live prism and BRDF lobes: drawn. The prism's beams, one unit wide each, on a strip
+        # 16 * (max - min IOR offset) + 1 units wide (about 31 for N-BK7 at 3-4 samples) light 10-13 %
+        # of it; the grating's lobes at the default light angle and exposure light ~14 % of the disc's
+        # square; 4 % is about one beam, or the specular peak and one order.
+        lit = b.evaluate("JSON.stringify(['specbakePrism', 'specbakeLobes'].map(r => { const v = Object.values(window[r])[0];"
+                         " if (!v) return -1; const px = v.pixels(); let n = 0;"
+                         " for (let i = 0; i < px.length; i += 4) n += px[i] + px[i + 1] + px[i + 2] > 60;"
+                         " return n / (px.length / 4); }))")
+        lit = json.loads(lit)
         renders = []
         if unavailable is None:
             for view in SKY_VIEWS:
@@ -343,9 +348,10 @@ def main():
     with open(os.path.join(work, "screenshot.png"), "wb") as f:
         f.write(shot)
     failed = False
-    if prism < 0.04:
-        print("FAIL: the live prism is missing or dark (lit fraction %s)" % prism)
-        failed = True
+    for view, fraction in zip(("prism", "BRDF lobes"), lit):
+        if fraction < 0.04:
+            print("FAIL: the live %s is missing or dark (lit fraction %s)" % (view, fraction))
+            failed = True
     if unavailable is not None:
         print("FAIL: the live sky did not run in this Chromium (SwiftShader WebGL2): %s" % unavailable)
         failed = True
@@ -368,7 +374,7 @@ def main():
         if r < MIN_CORRELATION or mad > MAX_MEAN_ABS:
             print("FAIL: the page's layout differs from the reference")
             failed = True
-    print("console: %d error(s); page: %s; live prism lit fraction %.3f" % (len(errors), state, prism))
+    print("console: %d error(s); page: %s; live prism, lobes lit fractions %s" % (len(errors), state, lit))
     sys.exit(1 if failed else 0)
 
 

@@ -5,16 +5,13 @@
 // window.specbakePrism[job].pixels() returns the canvas' RGBA bytes (row 0 at the bottom).
 (function () {
   'use strict';
+  var L = window.specbakeLive;
   window.specbakePrism = {};
 
-  function Unavailable(message) { this.message = message; }
-
-  var VERTEX = '#version 300 es\nvoid main() { vec2 p = vec2(float((gl_VertexID & 1) << 2) - 1.0, ' +
-      'float((gl_VertexID & 2) << 1) - 1.0); gl_Position = vec4(p, 0.0, 1.0); }\n';
   var MAIN = [
     'uniform highp sampler2DArray renders;',
     'out vec4 color;',
-    'vec3 srgb(vec3 c) { return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c)); }',
+    L.SRGB,
     'void main() {',
     '  vec3 c = specbake_dispersion_combine(renders, ivec2(int(gl_FragCoord.x), 0));',
     '  color = vec4(srgb(clamp(c, 0.0, 1.0)), 1.0);',
@@ -29,22 +26,8 @@
 
   function Prism(root, data) {
     var canvas = root.querySelector('canvas');
-    var gl = canvas.getContext('webgl2', {preserveDrawingBuffer: true});
-    if (!gl) throw new Unavailable('no WebGL2 in this browser: the static preview above shows the prism');
-    function compile(type, text) {
-      var s = gl.createShader(type);
-      gl.shaderSource(s, text);
-      gl.compileShader(s);
-      if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error('dispersion.glsl as GLSL ES 3.00: ' + gl.getShaderInfoLog(s));
-      return s;
-    }
-    var program = gl.createProgram();
-    gl.attachShader(program, compile(gl.VERTEX_SHADER, VERTEX));
-    gl.attachShader(program, compile(gl.FRAGMENT_SHADER, '#version 300 es\nprecision highp float;\nprecision highp int;\n' +
-        'precision highp sampler2DArray;\n' + data.glsl + '\n' + MAIN));
-    gl.linkProgram(program);
-    if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error('link: ' + gl.getProgramInfoLog(program));
-    gl.useProgram(program);
+    var gl = L.context(canvas, 'the prism');
+    var program = L.program(gl, 'dispersion.glsl', data.glsl, ['sampler2DArray'], MAIN);
     var off = offsets(data.glsl), n = off.length, w = canvas.width;
     var lo = Math.min.apply(null, off), hi = Math.max.apply(null, off);
     var tex = gl.createTexture();
@@ -56,8 +39,7 @@
     var input = root.querySelector('input');
 
     function draw() {
-      var spread = parseFloat(input.value);
-      input.parentNode.querySelector('output').textContent = input.value;
+      var spread = L.values(root).spread;
       // the strip spans the landing points of the widest spread the control offers, so that a
       // larger spread spreads the colours wider on the page
       var smax = parseFloat(input.max), x0 = smax * lo - 0.5, dx = (smax * (hi - lo) + 1) / w;
@@ -84,15 +66,5 @@
     };
   }
 
-  Array.prototype.forEach.call(document.querySelectorAll('.live-prism'), function (root) {
-    var data = JSON.parse(root.querySelector('script.prism-data').textContent);
-    try {
-      window.specbakePrism[data.job] = new Prism(root, data);
-    } catch (e) {
-      root.querySelector('canvas').hidden = true;
-      root.querySelector('.live-status').textContent = e.message;
-      if (e instanceof Unavailable) root.setAttribute('data-unavailable', e.message);
-      else console.error('live prism of ' + data.job + ': ' + e.message);
-    }
-  });
+  L.mount('live-prism', Prism, window.specbakePrism);
 })();

@@ -8,13 +8,8 @@
 // compares them with the host's double evaluation).
 (function () {
   'use strict';
+  var L = window.specbakeLive;
   window.specbakeSky = {};
-
-  function floats(b64) {
-    var s = atob(b64), a = new Uint8Array(s.length);
-    for (var i = 0; i < s.length; ++i) a[i] = s.charCodeAt(i);
-    return new Float32Array(a.buffer);
-  }
 
   // Equidistant fisheye (render.cpp's fisheye_direction): pixel centre (x, y) in (-1, 1), row 0 at
   // the bottom; w = 1 inside the circle, 0 outside.
@@ -39,8 +34,6 @@
     return new Float32Array([Math.cos(e) * Math.cos(a), Math.cos(e) * Math.sin(a), Math.sin(e)]);
   }
 
-  var VERTEX = '#version 300 es\nvoid main() { vec2 p = vec2(float((gl_VertexID & 1) << 2) - 1.0, ' +
-      'float((gl_VertexID & 2) << 1) - 1.0); gl_Position = vec4(p, 0.0, 1.0); }\n';
   var MAIN = [
     'uniform highp sampler2D transmittance_texture;',
     'uniform highp sampler3D scattering_texture;',
@@ -51,7 +44,7 @@
     'uniform float scale;',
     'uniform int linear_out;',
     'out vec4 color;',
-    'vec3 srgb(vec3 c) { return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c)); }',
+    L.SRGB,
     'void main() {',
     '  vec4 d = texelFetch(directions, ivec2(gl_FragCoord.xy), 0);',
     '  if (d.w == 0.0) { color = vec4(0.0); return; }',
@@ -61,37 +54,20 @@
     '  color = linear_out == 1 ? vec4(l, 1.0) : vec4(srgb(1.0 - exp(-max(l, 0.0) * scale)), 1.0);',
     '}'].join('\n');
 
-  // What this browser lacks (not an error of the page).
-  function Unavailable(message) { this.message = message; }
-
   function Sky(root, data) {
     var canvas = root.querySelector('canvas'), status = root.querySelector('.live-status');
-    var gl = canvas.getContext('webgl2', {preserveDrawingBuffer: true});
-    if (!gl) throw new Unavailable('no WebGL2 in this browser: the static previews above show the sky');
+    var gl = L.context(canvas, 'the sky');
     if (!gl.getExtension('OES_texture_float_linear'))
-      throw new Unavailable('this WebGL2 cannot filter float32 textures (OES_texture_float_linear): the static previews show the sky');
+      throw new L.Unavailable('this WebGL2 cannot filter float32 textures (OES_texture_float_linear): the static previews show the sky');
     var floatTarget = gl.getExtension('EXT_color_buffer_float');
 
-    function compile(type, text) {
-      var s = gl.createShader(type);
-      gl.shaderSource(s, text);
-      gl.compileShader(s);
-      if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error('sampling.glsl as GLSL ES 3.00: ' + gl.getShaderInfoLog(s));
-      return s;
-    }
-    var program = gl.createProgram();
-    gl.attachShader(program, compile(gl.VERTEX_SHADER, VERTEX));
-    gl.attachShader(program, compile(gl.FRAGMENT_SHADER, '#version 300 es\nprecision highp float;\nprecision highp int;\n' +
-        'precision highp sampler2D;\nprecision highp sampler3D;\n' + data.glsl + '\n' + MAIN));
-    gl.linkProgram(program);
-    if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error('link: ' + gl.getProgramInfoLog(program));
-    gl.useProgram(program);
+    var program = L.program(gl, 'sampling.glsl', data.glsl, ['sampler2D', 'sampler3D'], MAIN);
 
     function texture(unit, target, tex) {
       gl.activeTexture(gl.TEXTURE0 + unit);
       var t = gl.createTexture();
       gl.bindTexture(target, t);
-      var s = tex.shape, values = floats(tex.base64);
+      var s = tex.shape, values = L.floats(tex.base64);
       gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
       if (target === gl.TEXTURE_2D) gl.texImage2D(target, 0, gl.RGB32F, s[1], s[0], 0, gl.RGB, gl.FLOAT, values);
       else gl.texImage3D(target, 0, gl.RGB32F, s[2], s[1], s[0], 0, gl.RGB, gl.FLOAT, values);
@@ -130,20 +106,11 @@
       return {sun: Array.from(sun), altitude_km: Math.fround(p.altitude_km)};
     }
 
-    var inputs = root.querySelectorAll('input');
-    function params() {
-      var p = {};
-      Array.prototype.forEach.call(inputs, function (i) {
-        p[i.name] = parseFloat(i.value);
-        i.parentNode.querySelector('output').textContent = i.value;
-      });
-      return p;
-    }
     function redraw() {
       gl.bindFramebuffer(gl.FRAMEBUFFER, null);
-      draw(params(), canvas.width, false);
+      draw(L.values(root), canvas.width, false);
     }
-    Array.prototype.forEach.call(inputs, function (i) { i.addEventListener('input', redraw); });
+    Array.prototype.forEach.call(root.querySelectorAll('input'), function (i) { i.addEventListener('input', redraw); });
     redraw();
     status.textContent = 'WebGL2: ' + (gl.getParameter(gl.VERSION) || '') + '; rendering live';
 
@@ -168,17 +135,5 @@
     };
   }
 
-  Array.prototype.forEach.call(document.querySelectorAll('.live-sky'), function (root) {
-    var data = JSON.parse(root.querySelector('script.sky-data').textContent);
-    try {
-      window.specbakeSky[data.job] = new Sky(root, data);
-    } catch (e) {
-      // The previews stay. A browser without what the live view needs is no error of the page;
-      // a shader that does not compile is.
-      root.querySelector('canvas').hidden = true;
-      root.querySelector('.live-status').textContent = e.message;
-      if (e instanceof Unavailable) root.setAttribute('data-unavailable', e.message);
-      else console.error('live sky of ' + data.job + ': ' + e.message);
-    }
-  });
+  L.mount('live-sky', Sky, window.specbakeSky);
 })();
