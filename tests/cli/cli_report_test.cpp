@@ -182,6 +182,27 @@ TEST_F(Report, RowsFromAReportFile) {
   EXPECT_NE(html.find("c.yaml:3:5: &lt;expected&gt; a number"), std::string::npos) << "escaped";
 }
 
+// A bundle without what a live view needs gets a note saying which file is missing, not a broken view.
+TEST(ReportPage, LiveViewNotes) {
+  t::TempDir d;
+  for (const char* kind : {"atmosphere", "dispersion", "diffraction"}) {
+    const fs::path b = d / "out" / kind / "0123456789ab";
+    fs::create_directories(b);
+    t::write_file(b / "manifest.json", json{{"job", {{"name", kind}, {"kind", kind}}},
+                                            {"created_utc", "2026-01-01T00:00:00Z"},
+                                            {"files", json::array()},
+                                            {"accuracy", json::array()}}
+                                           .dump());
+    fs::create_directory_symlink("0123456789ab", d / "out" / kind / "latest");
+  }
+  const auto page = specbake::report_page_from_output({d / "out"});
+  ASSERT_EQ(page.jobs.size(), 3u);
+  const std::string html = specbake::report_html(page);
+  for (const char* file : {"sampling.glsl", "dispersion.glsl", "shader/diffraction_brdf.glsl"})
+    EXPECT_NE(html.find(std::string("no live view of this bundle: it has no ") + file), std::string::npos) << file;
+  EXPECT_EQ(html.find("class=\"live-data\""), std::string::npos);
+}
+
 TEST(OutputFolder, Formats) {
   EXPECT_EQ(specbake::human_bytes(512), "512 B");
   EXPECT_EQ(specbake::human_bytes(3 * 1024 * 1024 + 200 * 1024), "3.2 MiB");
