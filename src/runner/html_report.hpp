@@ -1,9 +1,11 @@
 #pragma once
 // The morning page (`specbake report DIR...`, `run --report-html FILE`): one static HTML file
-// that opens from disk with no server and no network. CSS and JS are inline (the embedded
-// src/runner/report/page.css and page.js); the previews and sweep plots are inline data: URIs.
+// that opens from disk with no server and no network. CSS and scripts are inline (the embedded
+// src/runner/report/*.css, *.js); the previews and sweep plots are inline data: URIs.
 // Per job: status, time, bundle size, headline accuracy and the whole accuracy record, the
-// warnings, the previews, and what changed since the job's earlier bundle (io/bundle_diff).
+// warnings, the previews, a live WebGL2 view run by the bundle's own shipped GLSL on its data
+// (atmosphere: the sky; dispersion: the prism; diffraction tables: the BRDF lobes), and what
+// changed since the job's earlier bundle (io/bundle_diff).
 //
 // The page is built from PageJob rows, which come from an output folder's bundles
 // (page_job(OutputJob)), from a run's reports (page_job(JobReport)) or from the `jobs` entries
