@@ -18,7 +18,9 @@
 #include "io/bundle.hpp"
 #include "io/bundle_diff.hpp"
 #include "io/inspect.hpp"
+#include "io/output_folder.hpp"
 #include "kinds/atmosphere/truth.hpp"
+#include "runner/html_report.hpp"
 #include "runner/night_report.hpp"
 #include "runner/runner.hpp"
 #include "runner/sweep.hpp"
@@ -125,17 +127,7 @@ std::string fmt_number(double v) {
   return b;
 }
 
-// "self_check 5.6e-06 <= 0.002" from the first accuracy record.
-std::string headline(const json& accuracy) {
-  if (!accuracy.is_array() || accuracy.empty()) return "-";
-  const json& a = accuracy[0];
-  std::string s = a.value("name", "?") + " ";
-  s += a["value"].is_number() ? fmt_number(a["value"].get<double>()) : a["value"].dump();
-  if (a.contains("unit") && a["unit"].is_string()) s += " " + a["unit"].get<std::string>();
-  if (a.contains("tolerance") && a["tolerance"].is_number())
-    s += (a.value("passed", false) ? " <= " : " > ") + fmt_number(a["tolerance"].get<double>());
-  return s;
-}
+std::string headline(const json& accuracy) { return accuracy_headline(accuracy); }
 
 std::string describe(const JobReport& r) {
   if (r.parameters.is_null() || r.parameters.empty()) return "";
@@ -267,7 +259,34 @@ int cmd_devices() {
   return 0;
 }
 
+// inspect OUT: one line per job folder (its latest bundle).
+int cmd_inspect_output(const fs::path& dir, bool as_json) {
+  const auto jobs = scan_output_folder(dir);
+  if (as_json) {
+    json j = json::array();
+    for (const auto& o : jobs) j.push_back(o.to_json());
+    std::cout << json{{"output", fs::weakly_canonical(dir).string()}, {"jobs", j}}.dump(2) << "\n";
+    return 0;
+  }
+  std::vector<std::vector<std::string>> rows{{"job", "kind", "bundle", "size", "age", "accuracy (headline)"}};
+  for (const auto& o : jobs) {
+    const json j = o.to_json();
+    rows.push_back({o.name, j["kind"], j["hash"].get<std::string>().substr(0, 12), human_bytes(o.bytes),
+                    human_age(o.age_s), j["headline"]});
+  }
+  print_table(rows);
+  std::cout << jobs.size() << " job(s) in " << fs::weakly_canonical(dir).string()
+            << "; `specbake inspect " << (dir / "JOB").string() << "` checks one bundle's files\n";
+  return 0;
+}
+
 int cmd_inspect(const fs::path& path, bool as_json) {
+  std::error_code ec;
+  if (!fs::exists(path / "manifest.json", ec) && !fs::exists(path / "latest", ec)) {
+    if (is_output_folder(path)) return cmd_inspect_output(path, as_json);
+    throw InputError({path, 0, 0, ""}, "expected a bundle folder (with manifest.json), a job folder (with a `latest` "
+                                       "bundle) or an output folder (job folders with `latest` bundles)");
+  }
   const Inspection in = inspect_bundle(path);
   const int rc = in.bad ? static_cast<int>(ExitCode::job_failed) : 0;
   if (as_json) {
@@ -500,11 +519,41 @@ std::vector<std::string> split_names(const std::vector<std::string>& in, const c
   return out;
 }
 
-// `report`: one summary of a sharded night's --report files (src/runner/night_report.hpp).
-int cmd_report(const std::vector<std::string>& inputs, bool as_json) {
-  const NightReport night = merge_night(std::vector<fs::path>(inputs.begin(), inputs.end()));
-  std::cout << (as_json ? night_json(night).dump(2) + "\n" : night_text(night));
-  return static_cast<int>(night.failed() ? ExitCode::job_failed : ExitCode::ok);
+// `report INPUT...`: a sharded night's --report files (files, or folders of them) merged into one
+// table (src/runner/night_report.hpp; exit 1 when the night failed), and/or the HTML page
+// (src/runner/html_report.hpp) over output and sweep folders and the night's jobs: written with
+// --out, and by default when an output or sweep folder is given.
+int cmd_report(const std::vector<std::string>& inputs, const std::string& out, bool as_json, bool quiet) {
+  std::vector<fs::path> reports, folders;
+  for (const auto& in : inputs) {
+    const fs::path p(in);
+    std::error_code ec;
+    bool holds_reports = false;  // a folder of --report files holds *.json and no job folders
+    if (fs::is_directory(p, ec) && !is_output_folder(p) && find_sweeps(p).empty())
+      for (fs::directory_iterator it(p, ec), end; !ec && it != end && !holds_reports; it.increment(ec))
+        holds_reports = it->path().extension() == ".json";
+    if (fs::is_directory(p, ec) && !holds_reports) folders.push_back(p);  // the page says what it expected
+    else reports.push_back(p);
+  }
+  std::optional<NightReport> night;
+  if (!reports.empty()) {
+    night = merge_night(reports);
+    std::cout << (as_json ? night_json(*night).dump(2) + "\n" : night_text(*night));
+  }
+  if (!folders.empty() || !out.empty()) {
+    const fs::path file = report_html_path(out);
+    check_report_html_path(file, "--out");
+    ReportPage page = folders.empty() ? ReportPage{} : report_page_from_output(folders);
+    if (night) {
+      for (const auto& shard : night->shards) page.sources.push_back(fs::absolute(shard.file).lexically_normal().string());
+      for (const auto& job : night->jobs) page.jobs.push_back(page_job_from_report_entry(job.decision().job));
+    }
+    write_report_html(page, file);
+    if (!quiet && !as_json)
+      std::cout << "wrote " << file.string() << " (" << page.jobs.size() << " job(s), " << page.sweeps.size()
+                << " sweep(s))\n";
+  }
+  return static_cast<int>(night && night->failed() ? ExitCode::job_failed : ExitCode::ok);
 }
 
 }  // namespace
@@ -555,6 +604,10 @@ int main(int argc, char** argv) {
   };
   auto* run = app.add_subcommand("run", "bake every job of the configs into versioned bundles");
   add_selection(run);
+  std::string report_html_file;
+  run->add_option("--report-html", report_html_file, "write the run's HTML page (as `specbake report` makes) to FILE")
+      ->allow_extra_args(false);
+
   add_selection(app.add_subcommand("plan", "show what `run` would do, resolved settings and estimates; writes no bundle"));
 
   app.add_subcommand("devices", "list OpenCL platforms and devices, and which one `auto` picks");
@@ -602,15 +655,25 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->default_str("the job's");
 
-  std::vector<std::string> night_inputs;
-  bool night_as_json = false;
-  auto* night = app.add_subcommand(
-      "report", "merge the --report files of a sharded night into one table; exit 1 if a shard or job failed");
-  night->add_option("reports", night_inputs, "shard --report JSON files, or folders of them")->required();
-  night->add_flag("--json", night_as_json, "print the merged night as JSON");
+  std::vector<std::string> report_inputs;
+  std::string report_out;
+  bool report_json = false;
+  auto* report_cmd = app.add_subcommand(
+      "report", "one summary of a sharded night's --report files (exit 1 if a shard or job failed), and an HTML page "
+                "over output folders and the night: status, accuracy, previews, what changed (opens from disk)");
+  report_cmd->add_option("inputs", report_inputs,
+                         "--report JSON files or folders of them (merged into one table), output folders (holding "
+                         "<job>/latest bundles) or sweep folders (on the page)")
+      ->required();
+  report_cmd->add_option("--out", report_out, "the page's file, or a folder to write report.html into (default "
+                                              "./report.html; written when a folder is given or with --out)")
+      ->allow_extra_args(false);
+  report_cmd->add_flag("--json", report_json, "print the merged night as JSON");
 
-  auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256");
-  inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest) or job folder (its latest)")
+  auto* inspect = app.add_subcommand("inspect", "summarise a bundle and check its files' sha256, or list an output "
+                                                "folder's jobs");
+  inspect->add_option("bundle", inspect_dir, "bundle folder (e.g. assets/bk7-prism/latest), job folder (its latest) "
+                                             "or output folder (its jobs: latest bundle, size, age, headline)")
       ->required();
   inspect->add_flag("--json", inspect_json, "print the summary and per-file checks as JSON");
 
@@ -640,7 +703,7 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("devices")) return cmd_devices();
     if (app.got_subcommand("inspect")) return cmd_inspect(inspect_dir, inspect_json);
-    if (app.got_subcommand("report")) return cmd_report(night_inputs, night_as_json);
+    if (app.got_subcommand("report")) return cmd_report(report_inputs, report_out, report_json, quiet);
     if (app.got_subcommand("gc")) {
       const GcResult g = BundleStore(gc_dir).gc(keep, gc_dry_run);
       const char* verb = gc_dry_run ? "would remove" : "removed";
@@ -666,6 +729,8 @@ int main(int argc, char** argv) {
     given_empty("--shard", shard);
     given_empty("--report", report);
     report_file = std::make_unique<ReportFile>(report);
+    if (!is_plan) given_empty("--report-html", report_html_file);
+    if (!report_html_file.empty()) check_report_html_path(report_html_file, "--report-html");
 
     RunOptions opts;
     if (!out.empty()) opts.out = fs::path(out);
@@ -701,6 +766,13 @@ int main(int argc, char** argv) {
                     stopped);
     }
     report_file->write(reports, stopped, run_shard);
+    if (!report_html_file.empty()) {
+      ReportPage page;
+      page.sources = configs;
+      for (const auto& r : reports) page.jobs.push_back(page_job(r));
+      write_report_html(page, report_html_file);
+      if (!quiet) std::cout << "wrote " << report_html_file << "\n";
+    }
     // An interrupted run says so (130/143); else invalid configs (--keep-going) come first.
     if (!stop_requested() && !invalid.empty()) return static_cast<int>(ExitCode::invalid_input);
     return static_cast<int>(exit_code(reports));

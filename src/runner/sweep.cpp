@@ -225,7 +225,7 @@ json SweepResult::json() const {
                         {"status", p.status}, {"bake_s", p.bake_s},
                         {"wall_s", p.wall_s}, {"device_s", p.device_s},
                         {"host_s", p.host_s}, {"runs", p.runs},
-                        {"pareto", p.pareto}};
+                        {"bundle_bytes", p.bundle_bytes}, {"pareto", p.pareto}};
     if (p.status == "measured") {
       j["error"] = p.error;
       j["record"] = p.record;
@@ -365,6 +365,7 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
         ++p.runs;
       };
       measure(b);
+      for (const auto& f : b.result.files) p.bundle_bytes += f.bytes.size();
       for (double spent = b.bake_s; b.bake_s < kShortBake_s && spent < kRepeatBudget_s && p.runs < kMaxRuns;) {
         const TimedBake again = bake_timed(kind, job, dev, ev, progress, /*judge=*/false, &memo);
         spent += again.bake_s;

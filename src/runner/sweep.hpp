@@ -6,6 +6,7 @@
 // spectrum, diffraction's exact transform, the atmosphere's path-traced scene). The results go to
 // sweep.json, sweep.csv and sweep.png (error against time, log axes, Pareto front, tolerance),
 // drawn by scripts/sweep_plot.py with matplotlib. Contract: docs/sweep.md.
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -45,6 +46,7 @@ struct SweepPoint {
   double bake_s = 0.0;              // wall without the check step (the time the x axis shows)
   double device_s = 0.0, host_s = 0.0;  // without the check step, as bake_s
   int runs = 0;                     // bakes timed (short ones are repeated; the fastest is kept)
+  std::uint64_t bundle_bytes = 0;   // the bundle's files as the bake made them (manifest aside)
   double error = 0.0;
   std::string record, unit, metric;
   std::optional<double> tolerance;

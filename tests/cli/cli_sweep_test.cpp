@@ -125,7 +125,8 @@ int pixels_near(const t::Image& im, int r, int g, int b, int tol = 24) {
 }
 
 // The picture of a sweep with `points` measured points: 1200 x 825 (scripts/sweep_plot.py), not
-// blank, one marker per point (front: #d62728 red, dominated: #1f77b4 blue), the tolerance line.
+// blank, one marker per point in each of the two panels (error against time, against bundle size;
+// front: #d62728 red, dominated: #1f77b4 blue), the tolerance line.
 void expect_picture(const fs::path& png, int points, bool tolerance_line) {
   const t::Image im = t::read_png(png);
   ASSERT_EQ(im.width, 1200) << png << " (is python3-matplotlib installed? scripts/setup.sh installs it)";
@@ -135,7 +136,7 @@ void expect_picture(const fs::path& png, int points, bool tolerance_line) {
     not_white += im.rgba[i] < 250 || im.rgba[i + 1] < 250 || im.rgba[i + 2] < 250;
   EXPECT_GT(not_white, 5000) << "blank picture";
   // the legend shows one swatch of each colour: two more blobs
-  EXPECT_EQ(blobs(im, 0xd6, 0x27, 0x28) + blobs(im, 0x1f, 0x77, 0xb4), points + 2) << "markers in " << png;
+  EXPECT_EQ(blobs(im, 0xd6, 0x27, 0x28) + blobs(im, 0x1f, 0x77, 0xb4), 2 * points + 2) << "markers in " << png;
   // the dashed tolerance line crosses the axes (~930 px wide, about half of it ink)
   if (tolerance_line) EXPECT_GT(pixels_near(im, 0x2c, 0xa0, 0x2c), 300);
   else EXPECT_LT(pixels_near(im, 0x2c, 0xa0, 0x2c), 50);
@@ -194,6 +195,11 @@ TEST_F(Sweep, DispersionMeasuresWhatRunRecords) {
                            "c24.yaml");
   ASSERT_EQ(run({"run", c24.string()}).exit_code, 0);
   const json m = t::read_json(tmp_ / "out" / "prism" / "latest" / "manifest.json");
+  // the bundle size the sweep plots is what `run` publishes: the manifest's files
+  std::uint64_t bytes = 0;
+  for (const auto& f : m["files"]) bytes += f["bytes"].get<std::uint64_t>();
+  EXPECT_EQ(s["points"][2]["bundle_bytes"].get<std::uint64_t>(), bytes);
+  EXPECT_LT(s["points"][0]["bundle_bytes"].get<std::uint64_t>(), bytes) << "2 samples: smaller tables";
   const json* rec = nullptr;
   for (const auto& a : m["accuracy"])
     if (a["name"] == "prism_de2000") rec = &a;

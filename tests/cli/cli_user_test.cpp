@@ -356,7 +356,12 @@ TEST_F(CliUser, InspectEveryKind) {
     EXPECT_GT(j["files"].size(), 3u);
     EXPECT_TRUE(j["accuracy"].is_array());
   }
+  // the output folder: its jobs listed (tests/cli/cli_report_test.cpp); a folder of none of these is exit 3
   auto r = run({"inspect", (tmp_ / "out").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("3 job(s)"), std::string::npos) << r.out;
+  fs::create_directories(tmp_ / "empty");
+  r = run({"inspect", (tmp_ / "empty").string()});
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("expected a bundle folder"), std::string::npos) << r.err;
 }

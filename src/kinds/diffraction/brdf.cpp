@@ -89,7 +89,10 @@ Pairs lobe_pairs(const std::vector<double>& light_deg, int panel) {
 }
 
 // The sphere picture: a unit sphere seen along −z (orthographic), the tangent x along the latitude
-// circle about the view axis (any direction at the pole), lit by a point light at `light`.
+// circle about the vertical (y) axis, lit by a point light at `light`. A tangent field on a sphere
+// has a pole somewhere (hairy ball); about y its two poles sit at the top and bottom of the
+// outline, seen edge-on, instead of pinching the picture at its centre as circles about the view
+// axis would.
 Pairs sphere_pairs(const Vec3& light, int size) {
   Pairs p;
   p.width = p.height = size;
@@ -100,7 +103,8 @@ Pairs sphere_pairs(const Vec3& light, int size) {
       const double x = -1.0 + (px + 0.5) * 2.0 / size, r2 = x * x + y * y;
       if (r2 >= 1.0) continue;
       const Vec3 n = {x, y, std::sqrt(1.0 - r2)};
-      const Vec3 tx = r2 > 1e-12 ? normalize({-y, x, 0.0}) : Vec3{1.0, 0.0, 0.0};
+      const double rho2 = n[0] * n[0] + n[2] * n[2];  // 0 only at the poles (0, ±1, 0), outside the disc's pixels
+      const Vec3 tx = rho2 > 1e-12 ? normalize({n[2], 0.0, -n[0]}) : Vec3{1.0, 0.0, 0.0};
       const Vec3 ty = cross(n, tx);
       const Vec3 l = normalize({light[0] - n[0], light[1] - n[1], light[2] - n[2]});
       p.add(static_cast<std::size_t>(py) * size + px, {dot(l, tx), dot(l, ty), dot(l, n)},

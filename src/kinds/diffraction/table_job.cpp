@@ -84,7 +84,7 @@ void add_brdf_previews(const BrdfPictures& pictures, const BrdfTable& t, const W
   const float es = percentile_exposure(sphere);
   r.files.push_back({"preview/sphere.png", png_from_linear(kSpherePixels, kSpherePixels, sphere, es), "",
                      {kSpherePixels, kSpherePixels, 3}, "", "",
-                     "a unit sphere covered by the surface (tangent x along circles about the view axis), seen along "
+                     "a unit sphere covered by the surface (tangent x along circles about the vertical axis), seen along "
                      "-z, lit by a D65 point light at (2, 1.5, 3) radii; exposure " + format_g(es) +
                          " (99.5th percentile of the lit pixels)"});
   double peak = 0;

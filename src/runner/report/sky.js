@@ -1,0 +1,139 @@
+// specbake report page: the live sky of an atmosphere bundle. Its own sampling.glsl (GLSL 4.50 /
+// ES 3.20 text without #version) compiled as GLSL ES 3.00 in WebGL2, on its float32 textures
+// (transmittance 2D, scattering and single Mie 3D; LINEAR, CLAMP_TO_EDGE, as sampling.glsl's
+// header asks), GetSkyRadiance per pixel of an equidistant fisheye. Where WebGL2 or linear
+// filtering of float textures is missing, the page says so and keeps the static previews.
+// window.specbakeSky[job].radiance({sun_elevation_deg, sun_azimuth_deg, altitude_km}, n) renders
+// n x n pixels of linear radiance into a float framebuffer and returns them (the browser test
+// compares them with the host's double evaluation).
+(function () {
+  'use strict';
+  var L = window.specbakeLive;
+  window.specbakeSky = {};
+
+  // Equidistant fisheye (render.cpp's fisheye_direction): pixel centre (x, y) in (-1, 1), row 0 at
+  // the bottom; w = 1 inside the circle, 0 outside.
+  function directions(n) {
+    var d = new Float32Array(4 * n * n);
+    for (var y = 0; y < n; ++y) {
+      for (var x = 0; x < n; ++x) {
+        var dx = (2 * x + 1) / n - 1, dy = (2 * y + 1) / n - 1, rho = Math.sqrt(dx * dx + dy * dy), i = 4 * (y * n + x);
+        if (rho > 1) continue;
+        var theta = rho * Math.PI / 2, phi = Math.atan2(dy, dx);
+        d[i] = Math.sin(theta) * Math.cos(phi);
+        d[i + 1] = Math.sin(theta) * Math.sin(phi);
+        d[i + 2] = Math.cos(theta);
+        d[i + 3] = 1;
+      }
+    }
+    return d;
+  }
+
+  function sunDirection(p) {
+    var e = p.sun_elevation_deg * Math.PI / 180, a = p.sun_azimuth_deg * Math.PI / 180;
+    return new Float32Array([Math.cos(e) * Math.cos(a), Math.cos(e) * Math.sin(a), Math.sin(e)]);
+  }
+
+  var MAIN = [
+    'uniform highp sampler2D transmittance_texture;',
+    'uniform highp sampler3D scattering_texture;',
+    'uniform highp sampler3D single_mie_scattering_texture;',
+    'uniform highp sampler2D directions;',
+    'uniform vec3 sun;',
+    'uniform float altitude_km;',
+    'uniform float scale;',
+    'uniform int linear_out;',
+    'out vec4 color;',
+    L.SRGB,
+    'void main() {',
+    '  vec4 d = texelFetch(directions, ivec2(gl_FragCoord.xy), 0);',
+    '  if (d.w == 0.0) { color = vec4(0.0); return; }',
+    '  vec3 t;',
+    '  vec3 l = GetSkyRadiance(SPECBAKE_ATMOSPHERE, transmittance_texture, scattering_texture,',
+    '                          single_mie_scattering_texture, vec3(0.0, 0.0, 1.0), altitude_km, d.xyz, 0.0, sun, t);',
+    '  color = linear_out == 1 ? vec4(l, 1.0) : vec4(srgb(1.0 - exp(-max(l, 0.0) * scale)), 1.0);',
+    '}'].join('\n');
+
+  function Sky(root, data) {
+    var canvas = root.querySelector('canvas'), status = root.querySelector('.live-status');
+    var gl = L.context(canvas, 'the sky');
+    if (!gl.getExtension('OES_texture_float_linear'))
+      throw new L.Unavailable('this WebGL2 cannot filter float32 textures (OES_texture_float_linear): the static previews show the sky');
+    var floatTarget = gl.getExtension('EXT_color_buffer_float');
+
+    var program = L.program(gl, 'sampling.glsl', data.glsl, ['sampler2D', 'sampler3D'], MAIN);
+
+    function texture(unit, target, tex) {
+      gl.activeTexture(gl.TEXTURE0 + unit);
+      var t = gl.createTexture();
+      gl.bindTexture(target, t);
+      var s = tex.shape, values = L.floats(tex.base64);
+      gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+      if (target === gl.TEXTURE_2D) gl.texImage2D(target, 0, gl.RGB32F, s[1], s[0], 0, gl.RGB, gl.FLOAT, values);
+      else gl.texImage3D(target, 0, gl.RGB32F, s[2], s[1], s[0], 0, gl.RGB, gl.FLOAT, values);
+      gl.texParameteri(target, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+      gl.texParameteri(target, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+      gl.texParameteri(target, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+      gl.texParameteri(target, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+      if (target === gl.TEXTURE_3D) gl.texParameteri(target, gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE);
+    }
+    texture(0, gl.TEXTURE_2D, data.textures.transmittance);
+    texture(1, gl.TEXTURE_3D, data.textures.scattering);
+    texture(2, gl.TEXTURE_3D, data.textures.single_mie_scattering);
+    gl.uniform1i(gl.getUniformLocation(program, 'transmittance_texture'), 0);
+    gl.uniform1i(gl.getUniformLocation(program, 'scattering_texture'), 1);
+    gl.uniform1i(gl.getUniformLocation(program, 'single_mie_scattering_texture'), 2);
+    gl.uniform1i(gl.getUniformLocation(program, 'directions'), 3);
+    var dirTex = gl.createTexture(), dirSize = 0;
+    function useDirections(n) {
+      if (n === dirSize) return;
+      gl.activeTexture(gl.TEXTURE3);
+      gl.bindTexture(gl.TEXTURE_2D, dirTex);
+      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, n, n, 0, gl.RGBA, gl.FLOAT, directions(n));
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+      dirSize = n;
+    }
+    function draw(p, n, linear) {
+      var sun = sunDirection(p);
+      useDirections(n);
+      gl.uniform3fv(gl.getUniformLocation(program, 'sun'), sun);
+      gl.uniform1f(gl.getUniformLocation(program, 'altitude_km'), p.altitude_km);
+      gl.uniform1f(gl.getUniformLocation(program, 'scale'), Math.pow(2, p.exposure || 0));
+      gl.uniform1i(gl.getUniformLocation(program, 'linear_out'), linear ? 1 : 0);
+      gl.viewport(0, 0, n, n);
+      gl.drawArrays(gl.TRIANGLES, 0, 3);
+      return {sun: Array.from(sun), altitude_km: Math.fround(p.altitude_km)};
+    }
+
+    function redraw() {
+      gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+      draw(L.values(root), canvas.width, false);
+    }
+    Array.prototype.forEach.call(root.querySelectorAll('input'), function (i) { i.addEventListener('input', redraw); });
+    redraw();
+    status.textContent = 'WebGL2: ' + (gl.getParameter(gl.VERSION) || '') + '; rendering live';
+
+    // Linear radiance of an n x n view, row 0 at the bottom, RGBA per pixel.
+    this.radiance = function (p, n) {
+      if (!floatTarget) throw new Error('no EXT_color_buffer_float: cannot read radiance back');
+      var fb = gl.createFramebuffer(), rb = gl.createRenderbuffer();
+      gl.bindRenderbuffer(gl.RENDERBUFFER, rb);
+      gl.renderbufferStorage(gl.RENDERBUFFER, gl.RGBA32F, n, n);
+      gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+      gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.RENDERBUFFER, rb);
+      var inputsUsed = draw(p, n, true), px = new Float32Array(4 * n * n);
+      gl.readPixels(0, 0, n, n, gl.RGBA, gl.FLOAT, px);
+      gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+      gl.deleteFramebuffer(fb);
+      gl.deleteRenderbuffer(rb);
+      redraw();
+      inputsUsed.n = n;
+      inputsUsed.rgba = Array.from(px);
+      inputsUsed.renderer = gl.getParameter(gl.RENDERER);
+      return inputsUsed;
+    };
+  }
+
+  L.mount('live-sky', Sky, window.specbakeSky);
+})();
