@@ -142,7 +142,7 @@ typedef struct {
   int irradiance_w, irradiance_h;         /* mu_s, r */
   int r_size, mu_size, mu_s_size, nu_size;
   int density_theta;                      /* θ nodes of the density's sphere rule (even) */
-  int mu_s_geometric;                     /* 1: μ_s lookups blend geometrically (mu_s_blend) */
+  int int_padding;                        /* keeps the int count even (no padding in double builds) */
 } AtmosphereParameters;
 
 /* ---- small helpers (the scalar geometry is in lookup.cl) ----------------------------- */
@@ -521,11 +521,12 @@ FN_HOT ScatteringColumns scattering_columns(const AtmosphereParameters* a, real 
   return x;
 }
 /* One channel of the lookup from its columns' values (s0.i0, s0.i1, s1.i0, s1.i1) and weights
- * (s0.fx, s1.fx, f): along μ_s linear as the reference (a GPU's filter) or, `geometric`, by
- * mu_s_blend (lookup.cl); along ν linear. */
-FN_HOT real scattering_blend(int geometric, real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
-  const real v0 = geometric ? mu_s_blend(c00, c01, fx0) : (R(1.0) - fx0) * c00 + fx0 * c01;
-  const real v1 = geometric ? mu_s_blend(c10, c11, fx1) : (R(1.0) - fx1) * c10 + fx1 * c11;
+ * (s0.fx, s1.fx, f), trilinear as the reference. (The shipped lookups can blend μ_s
+ * geometrically, render.glsl; here a pow per blend in the multiple scattering's inner loop
+ * made a bake ~5× slower on a CPU, docs/atmosphere.md "Twilight".) */
+FN_HOT real scattering_blend(real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
+  const real v0 = (R(1.0) - fx0) * c00 + fx0 * c01;
+  const real v1 = (R(1.0) - fx1) * c10 + fx1 * c11;
   return v0 * (R(1.0) - f) + v1 * f;
 }
 /* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
@@ -538,7 +539,7 @@ FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* 
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i1, c01);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
-  for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(a->mu_s_geometric, x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
+  for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -757,7 +758,7 @@ FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL c
   }
   for (int k = 0; k < LANES; ++k)
     for (int c = 0; c < NCH; ++c) {
-      const real j = scattering_blend(a->mu_s_geometric, fx0[k], fx1[k], f[k], columns[i00[k] + c], columns[i01[k] + c],
+      const real j = scattering_blend(fx0[k], fx1[k], f[k], columns[i00[k] + c], columns[i01[k] + c],
                                       columns[i10[k] + c], columns[i11[k] + c]);
       out[k * NCH + c] += j * s[RAY_T + c] * s[RAY_W];
     }
