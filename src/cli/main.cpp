@@ -203,9 +203,10 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
       }
       rows.push_back({r.name, r.kind, r.status == "planned" ? r.reason : r.status, est, dmem, hmem, describe(r)});
     } else {
-      const double t = r.timings.is_object() ? r.timings.value("total_s", 0.0) : 0.0;
+      // a job that ran (built, failed, interrupted, up to date) took its time; invalid, not run: "-"
+      const bool timed = r.timings.is_object() && r.timings.contains("total_s");
       rows.push_back({r.name, r.kind.empty() ? "-" : r.kind, r.status,
-                      r.status == "built" ? ProgressLine::duration(t) : "-", headline(r.accuracy),
+                      timed ? ProgressLine::duration(r.timings["total_s"].get<double>()) : "-", headline(r.accuracy),
                       std::to_string(r.warnings.size()), describe(r)});
     }
   }

@@ -45,6 +45,12 @@ std::string closest_word(const std::string& word, const std::vector<std::string>
 
 using yaml::At;
 
+void allow_job_keys(const At& job, std::initializer_list<const char*> own) {
+  std::vector<std::string> keys = {"name", "kind", "tolerance_advisory"};
+  keys.insert(keys.end(), own.begin(), own.end());
+  job.allow_keys(keys);
+}
+
 namespace {
 constexpr std::size_t kMaxConfigBytes = 1 << 20;  // a config is a few kB; refuse huge documents
 constexpr std::size_t kMaxExpandedNodes = 100000;  // nodes counted with every alias expanded
@@ -252,6 +258,9 @@ Config parse_config(const YAML::Node& root, const fs::path& file, const std::vec
                    (near.empty() ? "" : " (did you mean '" + near + "'?)"));
     }
     js.spec = kind->parse(job, js.normalised, js.inputs);
+    if (job.has("tolerance_advisory")) js.tolerance_advisory = job.child("tolerance_advisory").choice<bool>({{"true", true}, {"false", false}});
+    // in the hash only when set: a job made advisory, or strict again, is baked (and judged) again
+    if (js.tolerance_advisory) js.normalised["tolerance_advisory"] = true;
     cfg.jobs.push_back(std::move(js));
   } catch (const InputError& e) {
     if (!job_errors) throw;

@@ -36,6 +36,9 @@ struct JobSpec {
   std::shared_ptr<const KindSpec> spec;
   nlohmann::json normalised;  // canonical form of everything that defines the result
   Inputs inputs;
+  // `tolerance_advisory: true` (any kind): an accuracy record that misses its tolerance is a
+  // warning and the bundle is published; by default such a job fails (exit 1).
+  bool tolerance_advisory = false;
 
   // The kind's spec; std::bad_cast if the job is of another kind (a programming error).
   template <class S>
@@ -53,8 +56,8 @@ struct Config {
   std::vector<JobSpec> jobs;
 };
 
-// How one kind reads its keys of a job entry: `job` is the whole entry (name and kind included;
-// the parser rejects keys it does not know); fills `norm` with the canonical form of everything
+// How one kind reads its keys of a job entry: `job` is the whole entry (name, kind and
+// tolerance_advisory included; allow_job_keys rejects keys it does not know); fills `norm` with the canonical form of everything
 // that defines the result and `inputs` with the data files it read.
 struct KindSyntax {
   std::string name;
@@ -62,6 +65,9 @@ struct KindSyntax {
 };
 
 inline constexpr int kSchemaVersion = 1;
+// Rejects a job entry's unknown and duplicate keys: those every job has, whatever its kind
+// (name, kind, tolerance_advisory), and the kind's `own`.
+void allow_job_keys(const yaml::At& job, std::initializer_list<const char*> own);
 
 // Parses and validates; throws InputError (file:line:col + key path) or IoError. With
 // `job_errors` set, an invalid job entry is recorded there and left out instead (errors in the

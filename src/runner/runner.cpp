@@ -16,6 +16,7 @@
 #include <set>
 
 #include "core/hash.hpp"
+#include "core/text.hpp"
 #include "core/version.hpp"
 #include "io/bundle.hpp"
 
@@ -202,6 +203,15 @@ ExitCode exit_code(const std::vector<JobReport>& reports) {
 
 namespace {
 
+// A failed job's report keeps what it resolved and measured before it failed (BakeFailed).
+void take_what_it_got(const std::exception& e, JobReport& r) {
+  const auto* failed = dynamic_cast<const BakeFailed*>(&e);
+  if (!failed) return;
+  if (!failed->parameters.is_null()) r.parameters = failed->parameters;
+  if (!failed->accuracy.empty()) r.accuracy = failed->accuracy;
+  r.warnings = failed->warnings;
+}
+
 json device_json(const cl_util::DeviceInfo& d) {
   return {{"name", d.name}, {"platform", d.platform}, {"version", d.version}, {"type", d.type}, {"fp64", d.fp64}};
 }
@@ -364,6 +374,7 @@ std::vector<JobReport> Runner::plan() {
       memo.store = &results;
       JobContext ctx{devices.get(info)};
       ctx.memo = &memo;
+      ctx.judge = !it.job->tolerance_advisory;  // as `run` judges: a search `run` would fail with fails here
       r.parameters = kind.plan(*it.job, ctx);
       const MemoryEstimate need = kind.memory(*it.job);
       check_device_memory(*it.job, need, info);
@@ -372,6 +383,7 @@ std::vector<JobReport> Runner::plan() {
       r.status = "failed";
       r.code = e.exit_code();
       r.reason = e.what();
+      take_what_it_got(e, r);
     }
     if (done_) done_(r);
     reports.push_back(std::move(r));
@@ -394,7 +406,7 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   if (estimate_s < 0.0) estimate_s = kind.cost_s(job);
   const auto tb = Clock::now();
   JobContext ctx{dev};
-  ctx.judge = judge;
+  ctx.judge = judge && !job.tolerance_advisory;
   ctx.memo = memo;
   ctx.bundle_hash = bundle_hash;
   // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
@@ -427,7 +439,28 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   for (const auto& [step_name, sec] : out.steps)
     spdlog::debug("{}: step {}: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", ev.job, step_name, sec.device_s,
                   sec.host_s(), sec.wall_s);
+  if (judge) judge_tolerances(job, out.result);
   return out;
+}
+
+void judge_tolerances(const JobSpec& job, BakeResult& result) {
+  std::string missed;
+  bool self_check = false;
+  for (const Accuracy& a : result.accuracy) {
+    if (!a.tolerance || a.passed) continue;
+    missed += (missed.empty() ? "" : "; ") + a.name + " " + format_g(a.value) + (a.unit.empty() ? "" : " " + a.unit) +
+              " > tolerance " + format_g(*a.tolerance) + " (" + a.metric + ")";
+    self_check = self_check || a.name == "self_check";
+  }
+  if (missed.empty()) return;
+  if (job.tolerance_advisory && !self_check) {
+    result.warnings.push_back("tolerance_advisory: published although it misses its tolerance: " + missed);
+    return;
+  }
+  throw BakeFailed("missed its tolerance: " + missed + "; nothing published" +
+                       (self_check ? " (a self-check is never advisory)"
+                                   : " (tolerance_advisory: true in the job publishes it with a warning)"),
+                   result.parameters, accuracy_json(result.accuracy), result.warnings);
 }
 
 std::vector<JobReport> Runner::run() {
@@ -461,6 +494,7 @@ std::vector<JobReport> Runner::run() {
       r.status = "failed";
       r.code = known ? known->exit_code() : ExitCode::job_failed;
       r.reason = e.what();
+      take_what_it_got(e, r);
       spdlog::error("{}: {}", r.name, e.what());
     }
   };

@@ -195,6 +195,57 @@ TEST_F(CliUser, QuietVerboseAndWarnings) {
   EXPECT_EQ(v.err.find("[trace]"), std::string::npos) << v.err;
 }
 
+// A job that misses a tolerance it has fails (exit 1, nothing published), and its report keeps
+// what it resolved and measured; `tolerance_advisory: true` publishes it with a warning. A
+// dispersion job's colour error is judged when the config gives tolerance_de2000.
+TEST_F(CliUser, AMissedToleranceFailsUnlessAdvisory) {
+  const std::string grating =
+      "  - name: grating\n    kind: diffraction\n"
+      "    procedural: {type: sine-grating, size: 64, dx_um: 0.25, period_um: 2.0, amplitude_um: 0.15}\n"
+      "    terms: 2\n";  // 2 Taylor terms at y_max = 5: an error of order 1 against the default 1e-4
+  const std::string prism = "  - name: prism\n    kind: dispersion\n    samples: 3\n    material: {glass: N-BK7}\n";
+  const fs::path strict = cfg(config(grating + prism + "    tolerance_de2000: 0.5\n"));
+  auto r = run({"run", strict.string(), "--report", (tmp_ / "r.json").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_NE(r.out.find("0 built, 0 up to date, 2 failed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("grating: failed: missed its tolerance: vs_exact_transform"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("prism: failed: missed its tolerance: prism_de2000"), std::string::npos) << r.out;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("\ngrating +diffraction +failed +[0-9.]+ s "))) << r.out;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "grating"));
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism"));
+  const json rep = t::read_json(tmp_ / "r.json");
+  for (const auto& j : rep["jobs"]) {
+    EXPECT_EQ(j["status"], "failed");
+    EXPECT_EQ(j["exit_code"], 1);
+    EXPECT_TRUE(j["parameters"].is_object() && !j["parameters"].empty()) << j.dump();
+    ASSERT_TRUE(j["accuracy"].is_array() && !j["accuracy"].empty()) << j.dump();
+    EXPECT_FALSE(j["accuracy"][0]["passed"].get<bool>()) << j.dump();
+  }
+  EXPECT_EQ(rep["summary"]["failed"], 2);
+
+  // advisory: both published, each with a warning naming what it missed
+  const fs::path advisory =
+      cfg(config(grating + "    tolerance_advisory: true\n" + prism + "    tolerance_de2000: 0.5\n    tolerance_advisory: true\n"),
+          "advisory.yaml");
+  r = run({"run", advisory.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("2 built"), std::string::npos) << r.out;
+  EXPECT_EQ(count(r.out, "tolerance_advisory: published although it misses its tolerance"), 2) << r.out;
+  const json m = t::read_json(tmp_ / "out" / "prism" / "latest" / "manifest.json");
+  EXPECT_EQ(m["config"]["tolerance_advisory"], true);
+
+  // no tolerance_de2000 given with fixed samples: the colour error is reported, not judged
+  r = run({"run", cfg(config(prism), "reported.yaml").string(), "--out", (tmp_ / "o2").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  const json m2 = t::read_json(tmp_ / "o2" / "prism" / "latest" / "manifest.json");
+  EXPECT_TRUE(m2["accuracy"][0]["tolerance"].is_null()) << m2["accuracy"][0].dump();
+  EXPECT_FALSE(m2["config"].contains("tolerance_advisory"));
+
+  r = run({"run", cfg(config(prism + "    tolerance_advisory: yes\n"), "bad.yaml").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("tolerance_advisory"), std::string::npos) << r.err;
+}
+
 // Options given an empty value, and an option followed by a config path.
 TEST_F(CliUser, EmptyValuesAndOptionArity) {
   const fs::path c = cfg(config(kPrism));

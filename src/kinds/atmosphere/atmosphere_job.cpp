@@ -404,7 +404,10 @@ json plan(const AtmosphereSpec& spec, JobContext& ctx) {
   AutoSearch found = search_settings(spec, ctx.device, ctx.progress, ctx.memo ? *ctx.memo : local);
   json p = parameters_json(found.resolved);
   p["auto"] = found.record;
-  if (!found.met) p["auto"]["failure"] = found.failure;
+  if (!found.met) {
+    if (ctx.judge) throw BakeFailed(found.failure, p);  // as `run` would fail: its best try reported
+    p["auto"]["failure"] = found.failure;
+  }
   return p;
 }
 
@@ -454,7 +457,7 @@ AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResu
   r.parameters["auto"] = auto_record;
   record_orders(use, b, r);
   if (!found.met) {
-    if (ctx.judge) throw JobError(found.failure);
+    if (ctx.judge) throw BakeFailed(found.failure, r.parameters, accuracy_json({checked->record}), r.warnings);
     r.warnings.push_back(found.failure);
   }
   return use;
@@ -564,7 +567,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   r.files.push_back(std::move(sc.points_csv));
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
   if (!sc.failure.empty()) {
-    if (ctx.judge) throw JobError(sc.failure);
+    if (ctx.judge) throw BakeFailed(sc.failure, r.parameters, accuracy_json(r.accuracy), r.warnings);
     r.warnings.push_back(sc.failure);
   }
 }
