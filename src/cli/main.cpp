@@ -172,7 +172,7 @@ std::string summary_line(const std::vector<JobReport>& reports, bool plan) {
   }
   std::string s;
   if (plan) {
-    s = std::to_string(reports.size() - n["failed"]) + " planned, " + std::to_string(n["failed"]) + " failed";
+    s = std::to_string(n["planned"]) + " planned, " + std::to_string(n["failed"]) + " failed";
   } else {
     s = std::to_string(n["built"]) + " built, " + std::to_string(n["up-to-date"]) + " up to date, " +
         std::to_string(n["failed"]) + " failed";
@@ -220,9 +220,18 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
                 << (std::all_of(reports.begin(), reports.end(), calibrated) ? "" : "; others: the 2-core CPU model")
                 << "\n";
   }
+  // Why jobs failed, each reason once (a missing device fails every job alike), naming its jobs.
+  std::vector<std::pair<std::string, std::string>> why;  // (status: reason, jobs)
+  for (const auto& r : reports) {
+    if (r.code == ExitCode::ok) continue;
+    const std::string text = r.status + ": " + r.reason;
+    auto it = std::find_if(why.begin(), why.end(), [&](const auto& w) { return w.first == text; });
+    if (it == why.end()) why.emplace_back(text, r.name);
+    else it->second += ", " + r.name;
+  }
+  for (const auto& [text, jobs] : why) std::cout << jobs << ": " << text << "\n";
   for (const auto& r : reports) {
     const bool bad = r.code != ExitCode::ok;
-    if (bad) std::cout << r.name << (r.name.empty() ? "" : ": ") << r.status << ": " << r.reason << "\n";
     for (const auto& w : r.warnings) std::cout << "warning: " << r.name << ": " << w << "\n";
     if (verbose > 0) {
       std::cout << r.name << " (" << r.kind << ", " << r.config << ")\n";
@@ -656,8 +665,12 @@ int main(int argc, char** argv) {
     if (!shard.empty()) std::tie(opts.shard_index, opts.shard_count) = parse_shard(shard);
     std::vector<fs::path> paths(configs.begin(), configs.end());
     std::vector<JobReport> invalid;
-    auto loaded = load_configs(paths, keep_going ? &invalid : nullptr);
-    for (const auto& r : invalid) spdlog::error("{}", r.reason);
+    auto loaded = load_configs(paths, &invalid);
+    if (!keep_going && !invalid.empty()) {  // nothing runs; each invalid config or job said once
+      for (const auto& r : invalid) spdlog::error("{}", r.reason);
+      report_file->write(invalid, invalid.front().reason);
+      return static_cast<int>(invalid.front().code);
+    }
 
     std::signal(SIGINT, on_stop_signal);
     std::signal(SIGTERM, on_stop_signal);

@@ -64,6 +64,12 @@ struct KindSyntax {
   std::function<std::shared_ptr<const KindSpec>(const yaml::At& job, nlohmann::json& norm, Inputs& inputs)> parse;
 };
 
+// A job entry that failed validation, with its name and kind where they could be read ("" else).
+struct InvalidJob {
+  InputError error;
+  std::string name, kind;
+};
+
 inline constexpr int kSchemaVersion = 1;
 // Rejects a job entry's unknown and duplicate keys: those every job has, whatever its kind
 // (name, kind, tolerance_advisory), and the kind's `own`.
@@ -73,9 +79,9 @@ void allow_job_keys(const yaml::At& job, std::initializer_list<const char*> own)
 // `job_errors` set, an invalid job entry is recorded there and left out instead (errors in the
 // file's top level still throw).
 Config parse_config(const std::string& text, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds,
-                    std::vector<InputError>* job_errors = nullptr);
+                    std::vector<InvalidJob>* job_errors = nullptr);
 Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds,
-                   std::vector<InputError>* job_errors = nullptr);
+                   std::vector<InvalidJob>* job_errors = nullptr);
 // The two halves of parse_config: the text read into a YAML tree (size, alias and syntax checks;
 // InputError with file:line:col), and a tree validated into a Config. A tree edited after
 // reading (`specbake sweep` sets keys) is validated like a file; keys it added carry no
@@ -84,6 +90,6 @@ YAML::Node parse_yaml(const std::string& text, const fs::path& file_for_messages
 // A config file read and parsed into a tree (IoError when it cannot be read).
 YAML::Node load_yaml(const fs::path& file);
 Config parse_config(const YAML::Node& root, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds,
-                    std::vector<InputError>* job_errors = nullptr);
+                    std::vector<InvalidJob>* job_errors = nullptr);
 
 }  // namespace specbake

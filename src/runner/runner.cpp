@@ -87,10 +87,18 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
       add_file(p);
     }
   }
-  auto invalid_report = [](const fs::path& file, const std::string& name, const Error& e) {
+  // Named by the job's name where it could be read, else by where it is: file:jobs[i] (the
+  // file alone when the whole file is invalid).
+  auto invalid_report = [](const fs::path& file, const std::string& name, const Error& e, const std::string& kind = "") {
     JobReport r;
     r.config = file.string();
     r.name = name;
+    r.kind = kind;
+    if (r.name.empty()) {
+      const auto* input = dynamic_cast<const InputError*>(&e);
+      const std::string key = input ? input->where().key : "";
+      r.name = file.string() + (key.rfind("jobs[", 0) == 0 ? ":" + key.substr(0, key.find(']') + 1) : "");
+    }
     r.status = "invalid";
     r.code = e.exit_code();
     r.reason = e.what();
@@ -100,7 +108,7 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
   std::map<std::pair<std::string, std::string>, Location> seen;  // (output, name)
   for (const auto& f : files) {
     Config c;
-    std::vector<InputError> job_errors;
+    std::vector<InvalidJob> job_errors;
     try {
       c = load_config(f, invalid ? &job_errors : nullptr);
     } catch (const Error& e) {
@@ -108,7 +116,7 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
       invalid->push_back(invalid_report(f, "", e));
       continue;
     }
-    for (const auto& e : job_errors) invalid->push_back(invalid_report(f, e.where().key, e));
+    for (const auto& e : job_errors) invalid->push_back(invalid_report(f, e.name, e.error, e.kind));
     std::vector<JobSpec> kept;
     for (auto& j : c.jobs) {
       const auto key = std::make_pair(fs::weakly_canonical(c.output).string(), j.name);
@@ -116,7 +124,7 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
         const InputError e(j.where, "job name '" + j.name + "' is also used by " + it->second.str() +
                                         " with the same output folder; expected names unique per output folder");
         if (!invalid) throw e;
-        invalid->push_back(invalid_report(f, j.name, e));
+        invalid->push_back(invalid_report(f, j.name, e, j.kind));
         continue;
       }
       seen.emplace(key, j.where);
@@ -380,8 +388,8 @@ std::vector<JobReport> Runner::plan() {
       check_device_memory(*it.job, need, info);
       check_host_memory(*it.job, need);
     } catch (const Error& e) {
-      r.status = "failed";
       r.code = e.exit_code();
+      r.status = r.code == ExitCode::invalid_input ? "invalid" : "failed";
       r.reason = e.what();
       take_what_it_got(e, r);
     }
@@ -491,11 +499,12 @@ std::vector<JobReport> Runner::run() {
       stopped = true;
     } else {
       const auto* known = dynamic_cast<const Error*>(&e);
-      r.status = "failed";
       r.code = known ? known->exit_code() : ExitCode::job_failed;
+      // a job the config or its input makes impossible (too large, an unreadable input) is invalid
+      r.status = r.code == ExitCode::invalid_input ? "invalid" : "failed";
       r.reason = e.what();
       take_what_it_got(e, r);
-      spdlog::error("{}: {}", r.name, e.what());
+      spdlog::debug("{}: {}: {}", r.name, r.status, e.what());  // the summary (-q: stderr) says it once
     }
   };
   // The end of a job's report: a job left without a bundle leaves no empty folder; `done_` sees

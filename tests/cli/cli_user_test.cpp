@@ -131,6 +131,40 @@ TEST_F(CliUser, KeepGoingRunsEveryValidJob) {
   EXPECT_TRUE(found) << rep.dump(1);
 }
 
+// Invalid jobs are named by their name and kind where the config gives them (else file:jobs[i]),
+// counted as invalid, said once; plan counts only what it planned; a config error without
+// --keep-going is in the report as an invalid job too.
+TEST_F(CliUser, InvalidJobsAreNamedAndCounted) {
+  const fs::path a = cfg(config("  - name: bad-a\n    kind: dispersion\n    sampels: 3\n    material: {glass: N-BK7}\n" +
+                                kPrism),
+                         "a.yaml");
+  const fs::path b = cfg(config("  - kind: diffraction\n    heightfield: {file: missing.png, dx_um: 0.1, height_um: 0.2}\n"),
+                         "b.yaml");
+  auto r = run({"plan", a.string(), b.string(), "--keep-going", "--report", (tmp_ / "p.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.out << r.err;
+  EXPECT_NE(r.out.find("1 planned, 0 failed, 2 invalid"), std::string::npos) << r.out;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("\nbad-a +dispersion +invalid"))) << r.out;
+  EXPECT_NE(r.out.find(b.string() + ":jobs[0]: invalid: "), std::string::npos) << r.out;
+  EXPECT_EQ(count(r.out + r.err, "unknown key 'sampels'"), 1) << r.out << r.err;
+  json rep = t::read_json(tmp_ / "p.json");
+  EXPECT_EQ(rep["summary"]["planned"], 1);
+  EXPECT_EQ(rep["summary"]["invalid"], 2);
+  EXPECT_EQ(rep["jobs"][1]["name"], "bad-a");
+  EXPECT_EQ(rep["jobs"][1]["kind"], "dispersion");
+  EXPECT_EQ(rep["jobs"][1]["status"], "invalid");
+  EXPECT_EQ(rep["jobs"][2]["name"], b.string() + ":jobs[0]");
+
+  r = run({"run", a.string(), "--report", (tmp_ / "r.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism"));
+  rep = t::read_json(tmp_ / "r.json");
+  EXPECT_EQ(rep["summary"]["invalid"], 1);
+  ASSERT_EQ(rep["jobs"].size(), 1u) << rep.dump();
+  EXPECT_EQ(rep["jobs"][0]["name"], "bad-a");
+  EXPECT_EQ(rep["jobs"][0]["exit_code"], 3);
+  EXPECT_NE(rep.value("error", "").find("sampels"), std::string::npos);
+}
+
 // Ctrl-C (or SIGTERM) ends the run at a safe point: no temporary folder, no lock, the report
 // and the summary say what finished, exit 130 (143 for SIGTERM).
 TEST_F(CliUser, InterruptStopsAtASafePoint) {
