@@ -11,6 +11,7 @@
 #include <fstream>
 #include <iostream>
 #include <mutex>
+#include <optional>
 
 #include "cl/device.hpp"
 #include "core/hash.hpp"
@@ -314,18 +315,23 @@ int cmd_inspect(const fs::path& path, bool as_json) {
   return 0;
 }
 
+// A file a command will write (`option` names it), checked before any work: a folder is a usage
+// error, a place that cannot be written an I/O error.
+void check_output_file(const std::string& path, const std::string& option) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw UsageError(option + " " + path + " is a folder; expected a file path");
+  const fs::path parent = fs::absolute(path).parent_path();
+  if (!fs::is_directory(parent, ec)) throw IoError("cannot write " + option + " " + path + ": no folder " + parent.string());
+  if (::access(parent.c_str(), W_OK) != 0 || (fs::exists(path, ec) && ::access(path.c_str(), W_OK) != 0))
+    throw IoError("cannot write " + option + " " + path + ": permission denied");
+}
+
 // --report: checked when the run starts (a folder, or a path that cannot be written, stops the
 // run before any work), written atomically at the end — also when the run stops early.
 class ReportFile {
  public:
   explicit ReportFile(std::string path) : path_(std::move(path)) {
-    if (path_.empty()) return;
-    std::error_code ec;
-    if (fs::is_directory(path_, ec)) throw UsageError("--report " + path_ + " is a folder; expected a file path");
-    const fs::path parent = fs::absolute(path_).parent_path();
-    if (!fs::is_directory(parent, ec)) throw IoError("cannot write report " + path_ + ": no folder " + parent.string());
-    if (::access(parent.c_str(), W_OK) != 0 || (fs::exists(path_, ec) && ::access(path_.c_str(), W_OK) != 0))
-      throw IoError("cannot write report " + path_ + ": permission denied");
+    if (!path_.empty()) check_output_file(path_, "--report");
   }
   void write(const std::vector<JobReport>& reports, const std::string& error = "") const {
     if (path_.empty()) return;
@@ -422,14 +428,19 @@ int cmd_truth(const TruthArgs& a) {
     }
   }
   if (a.paths < 1) throw UsageError("--paths expects a positive integer");
+  // everything that can be wrong is found before the trace: the output, the points, the bundle
+  check_output_file(a.out, "--out");
   const auto points = atmosphere::read_truth_points(a.points);
+  const fs::path bundle = a.bundle.empty() ? fs::path() : resolve_bundle(a.bundle);  // a job folder: its latest
+  std::optional<atmosphere::Luts> luts;
+  if (!bundle.empty()) luts = atmosphere::load_bundle_luts(bundle);
   cl_util::Device dev(cl_util::select_device(a.device.empty() ? cfg.device : a.device));
   spdlog::info("truth: {} points, {} paths each, orders {}, seed {} on {}", points.size(), o.paths, a.orders, o.seed,
                dev.info().name);
   const auto result = atmosphere::trace_truth(spec, dev, points, o);
   std::vector<atmosphere::Vec3> lut;
-  if (!a.bundle.empty()) lut = atmosphere::lut_sky_radiance(atmosphere::load_bundle_luts(a.bundle), points);
-  atmosphere::write_text_file(a.out, atmosphere::truth_result_csv(spec, points, result, a.bundle.empty() ? nullptr : &lut));
+  if (luts) lut = atmosphere::lut_sky_radiance(*luts, points);
+  atmosphere::write_text_file(a.out, atmosphere::truth_result_csv(spec, points, result, luts ? &lut : nullptr));
   spdlog::info("truth: wrote {} ({:.1f} s)", a.out, result.seconds);
   return 0;
 }
@@ -579,7 +590,7 @@ int main(int argc, char** argv) {
   truth->add_option("--paths", truth_args.paths, "random walks per point and channel");
   truth->add_option("--orders", truth_args.orders, "scattering orders traced: N (1..N) or all");
   truth->add_option("--seed", truth_args.seed, "seed of the counter-based random streams (same seed: same bytes)");
-  truth->add_option("--bundle", truth_args.bundle, "also lut_<c>: that bundle's GetSkyRadiance at the points");
+  truth->add_option("--bundle", truth_args.bundle, "also lut_<c>: that bundle's (or job folder's latest) GetSkyRadiance at the points");
   truth->add_option("--device", truth_args.device, "OpenCL device (default: the config's, else auto)");
 
   SweepArgs sweep_args;

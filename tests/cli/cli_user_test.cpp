@@ -457,6 +457,15 @@ TEST_F(CliUser, GcDryRunAndLeftovers) {
   fs::create_directories(tmp_ / "out" / "prism" / ".tmp-0123456789ab-999999");
   t::write_file(tmp_ / "out" / "prism" / ".lock", "999999\n");  // no process holds it
   const auto before = t::snapshot(tmp_ / "out");
+  // A job or bundle folder given for the output folder is refused, naming the folder to give.
+  for (const fs::path& wrong : {tmp_ / "out" / "prism", tmp_ / "out" / "prism" / "latest"}) {
+    const auto w = run({"gc", wrong.string(), "--keep", "1"});
+    EXPECT_EQ(w.exit_code, 2) << w.out << w.err;
+    EXPECT_NE(w.err.find("gc takes the output folder that holds the job folders: " + (tmp_ / "out").string()),
+              std::string::npos)
+        << w.err;
+  }
+  EXPECT_TRUE(t::snapshot(tmp_ / "out") == before);
   // Three bundles created within a second: keep 1 keeps latest and one newest (2 when they
   // differ by name order); the dry run and the real run agree on the list.
   auto r = run({"gc", (tmp_ / "out").string(), "--keep", "1", "--dry-run"});
