@@ -642,24 +642,25 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
     const std::vector<double>* data;
     std::uint32_t width, height, depth;
     const char* layout;
+    const std::string& units;
   };
   const std::uint32_t wd = static_cast<std::uint32_t>(s.scattering_width());
+  const std::string unitless = "1";  // transmittance is a ratio, as in its .bin and .exr
   const Texture textures[] = {
       {spec.out_transmittance, "transmittance", &L.transmittance, std::uint32_t(s.transmittance_w),
-       std::uint32_t(s.transmittance_h), 0, "2D: x = mu coordinate, y = r coordinate"},
+       std::uint32_t(s.transmittance_h), 0, "2D: x = mu coordinate, y = r coordinate", unitless},
       {spec.out_irradiance, "irradiance", &L.irradiance, std::uint32_t(s.irradiance_w), std::uint32_t(s.irradiance_h), 0,
-       "2D: x = mu_s coordinate, y = r coordinate"},
+       "2D: x = mu_s coordinate, y = r coordinate", units},
       {spec.out_scattering && !spec.ktx2_combined, "scattering", &L.scattering, wd, std::uint32_t(s.mu),
-       std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"},
+       std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r", units},
       {spec.out_single_mie && !spec.ktx2_combined, "single_mie_scattering", &L.single_mie, wd, std::uint32_t(s.mu),
-       std::uint32_t(s.r),
-       "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"}};
+       std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r", units}};
   const std::string sizes = sizes_key(s);
   for (const Texture& t : textures) {
     if (!t.wanted) continue;
     const std::vector<float> f(t.data->begin(), t.data->end());
     add_ktx2_file(spec.ktx2,
-                  {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, units,
+                  {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, t.units,
                    std::string(t.name) + " (KTX2 copy)",
                    {{"specbake.parameterisation", param}, {"specbake.sizes", sizes}}},
                   ctx, r);
@@ -782,11 +783,11 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     r.files.push_back(std::move(f));
     encode.push_back([&r, at, bytes = std::move(bytes)] { r.files[at].bytes = bytes(); });
   };
-  auto attrs = [&](const std::string& layout, const std::string& content) {
+  auto attrs = [&](const std::string& layout, const std::string& content, const std::string& of = "") {
     return std::map<std::string, std::string>{{"specbake.layout", layout},
                                               {"specbake.content", content},
                                               {"specbake.parameterisation", param},
-                                              {"specbake.units", units}};
+                                              {"specbake.units", of.empty() ? units : of}};
   };
   if (spec.out_transmittance) {
     const std::string lay = "[r=" + std::to_string(s.transmittance_h) + "][mu=" + std::to_string(s.transmittance_w) +
@@ -796,7 +797,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
           [&] { return float32_le(L.transmittance, "transmittance"); });
     later({"transmittance.exr", "", "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32, row j = r index",
            "1", "transmittance (EXR copy)"},
-          [&, a = attrs(lay, "transmittance to the top boundary")] {
+          [&, a = attrs(lay, "transmittance to the top boundary", "1")] {
             return exr_of(s.transmittance_w, s.transmittance_h, L.transmittance, a);
           });
   }
