@@ -41,8 +41,10 @@ class ProgressLine {
     char eta[32] = "";
     if (e.eta_s >= 0.0) std::snprintf(eta, sizeof eta, ", ETA %s", duration(e.eta_s).c_str());
     char buf[256];
-    std::snprintf(buf, sizeof buf, "[%d/%d] %s: %s, %s %3.0f %%%s", e.index, e.count, e.job.c_str(), to_string(e.stage),
-                  e.what.c_str(), 100.0 * e.fraction, eta);
+    // "files" while in the files step is said once
+    const std::string what = e.what == to_string(e.stage) ? "" : ", " + e.what;
+    std::snprintf(buf, sizeof buf, "[%d/%d] %s: %s%s %3.0f %%%s", e.index, e.count, e.job.c_str(), to_string(e.stage),
+                  what.c_str(), 100.0 * e.fraction, eta);
     if (tty_) {
       line_ = buf;
       draw();
@@ -91,7 +93,7 @@ class ProgressLine {
 };
 
 // spdlog sink writing "[level] message" to stderr without tearing the progress line.
-class StderrSink : public spdlog::sinks::base_sink<spdlog::details::null_mutex> {
+class StderrSink : public spdlog::sinks::base_sink<std::mutex> {  // a bundle's writer thread logs too
  public:
   explicit StderrSink(ProgressLine& p) : progress_(p) {}
 
@@ -441,7 +443,7 @@ int cmd_truth(const TruthArgs& a) {
   std::vector<atmosphere::Vec3> lut;
   if (luts) lut = atmosphere::lut_sky_radiance(*luts, points);
   atmosphere::write_text_file(a.out, atmosphere::truth_result_csv(spec, points, result, luts ? &lut : nullptr));
-  spdlog::info("truth: wrote {} ({:.1f} s)", a.out, result.seconds);
+  std::cout << "wrote " << a.out << " (" << points.size() << " points, " << ProgressLine::duration(result.seconds) << ")\n";
   return 0;
 }
 
@@ -632,10 +634,9 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : static_cast<int>(ExitCode::usage);
   }
-  spdlog::set_level(quiet ? spdlog::level::warn
-                    : verbose >= 2 ? spdlog::level::trace
-                    : verbose == 1 ? spdlog::level::debug
-                                   : spdlog::level::info);
+  // Logs: warnings and errors by default (the progress line and the summary say the rest);
+  // -v adds info and debug lines, -vv trace.
+  spdlog::set_level(verbose >= 2 ? spdlog::level::trace : verbose == 1 ? spdlog::level::debug : spdlog::level::warn);
 
   std::unique_ptr<ReportFile> report_file;
   std::vector<JobReport> reports;
@@ -692,11 +693,10 @@ int main(int argc, char** argv) {
     progress_line.done();
     reports.insert(reports.end(), invalid.begin(), invalid.end());
     if (!quiet) print_reports(reports, is_plan, verbose);
-    for (const auto& r : reports) {
+    for (const auto& r : reports) {  // -q: no summary; its failures and warnings on stderr, once
       if (!quiet) break;
       if (r.code != ExitCode::ok) std::cerr << r.name << ": " << r.status << ": " << r.reason << "\n";
-      if (r.status == "up-to-date")  // a fresh bake logged its warnings as it went
-        for (const auto& w : r.warnings) std::cerr << "[warning] " << r.name << ": " << w << "\n";
+      for (const auto& w : r.warnings) std::cerr << "[warning] " << r.name << ": " << w << "\n";
     }
     std::string stopped;
     if (const int sig = stop_requested()) {

@@ -430,7 +430,7 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   ctx.progress = [&](std::string_view what, double f) {
     throw_if_stopped();
     ev.what = std::string(what);
-    ev.fraction = std::clamp(f, 0.0, 1.0);
+    ev.fraction = std::max(ev.fraction, std::clamp(f, 0.0, 1.0));  // the job's share done never goes back
     const double elapsed = seconds_since(tb);
     // ETA: from the measured rate once a few percent are done, else from the estimate (`run`: the
     // cost model scaled by the job's last bake on this device, as `plan` shows it).
@@ -538,7 +538,6 @@ std::vector<JobReport> Runner::run() {
       end = at;
       r.bundle = bundle;
       r.timings["write_s"] = std::chrono::duration<double>(at - publishing->start).count();
-      spdlog::info("{}: wrote {}", r.name, r.bundle.string());
     } catch (const std::exception& e) {
       record_failure(e, r);
     }
@@ -603,7 +602,8 @@ std::vector<JobReport> Runner::run() {
           BakeResult& result = baked.result;
           const double bake_s = baked.bake_s;
           for (const auto& [step_name, sec] : baked.steps) stage_s[step_name] = cl_util::seconds_json(sec);
-          for (const auto& w : result.warnings) spdlog::warn("{}: {}", name, w);
+          // the job's warnings are said once, by the summary (-q: on stderr)
+          for (const auto& w : result.warnings) spdlog::debug("{}: warning: {}", name, w);
           throw_if_stopped();
 
           json manifest = {
@@ -643,6 +643,7 @@ std::vector<JobReport> Runner::run() {
                                              [store, name, hash12, manifest = std::move(manifest),
                                               files = std::move(result.files)] {
                                                fs::path bundle = store.publish(name, hash12, manifest, files);
+                                               spdlog::info("{}: wrote {}", name, bundle.string());  // as it happens
                                                return std::make_pair(std::move(bundle), Clock::now());
                                              }),
                                   t0, start, store.job_dir(name)};

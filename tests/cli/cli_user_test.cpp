@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <set>
 #include <string>
@@ -561,11 +562,27 @@ namespace {
 // the step, what is running, the percentage and an ETA. `script` gives the run a terminal.
 TEST_F(CliUser, LiveProgressOnATerminal) {
   if (std::system("command -v script > /dev/null 2>&1") != 0) GTEST_SKIP() << "no `script` to provide a terminal";
-  const fs::path c = cfg(config(kSky));
+  const fs::path c = cfg(config(kSky + "  - name: flint\n    kind: dispersion\n    samples: 8\n    range_nm: [390, 780]\n"
+                                       "    material: {glass: N-SF11}\n"));
   const std::string text = run_on_terminal("run " + c.string() + " --out " + (tmp_ / "out").string());
-  EXPECT_NE(text.find("\r\033[K[1/1] sky: compute, order 2: scattering density"), std::string::npos) << text;
+  EXPECT_NE(text.find("\r\033[K[1/2] sky: compute, order 2: scattering density"), std::string::npos) << text;
   EXPECT_TRUE(std::regex_search(text, std::regex("[0-9]+ %, ETA [0-9.]+ s"))) << text;
-  EXPECT_NE(text.find("1 built"), std::string::npos) << text;
+  EXPECT_NE(text.find("2 built"), std::string::npos) << text;
+  // read as someone new: no log lines but warnings at the default verbosity, each warning once,
+  // the files step named once, and each job's percentage never going back
+  EXPECT_EQ(text.find("[info]"), std::string::npos) << text;
+  EXPECT_EQ(count(text, "the Cauchy/Abbe model"), 1) << text;
+  EXPECT_EQ(text.find("files, files"), std::string::npos) << text;
+  EXPECT_NE(text.find("flint: files "), std::string::npos) << text;
+  std::map<std::string, int> last;
+  const std::regex line("\\[[0-9]+/2\\] ([a-z]+): [^\r\n]*? +([0-9]+) %");
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), line); it != std::sregex_iterator(); ++it) {
+    const std::string job = (*it)[1];
+    const int percent = std::stoi((*it)[2]);
+    EXPECT_GE(percent, last[job]) << job << " went back to " << percent << " %";
+    last[job] = percent;
+  }
+  EXPECT_EQ(last.size(), 2u) << text;
 }
 
 // Before 5 % of a job is done the ETA comes from the estimate `plan` shows: the cost model
