@@ -12,6 +12,7 @@
 #include <iostream>
 #include <mutex>
 #include <optional>
+#include <sstream>
 
 #include "cl/device.hpp"
 #include "core/hash.hpp"
@@ -531,6 +532,7 @@ int main(int argc, char** argv) {
   spdlog::set_pattern("[%l] %v");
 
   CLI::App app{"specbake — bakes lookup tables for real-time spectral rendering (OpenCL)"};
+  app.name("specbake");  // parse() gets the arguments without argv[0]
   app.set_version_flag("--version", std::string("specbake ") + kVersion);
   app.require_subcommand(1);
   app.fallthrough();  // -v/-q also after the sub-command
@@ -619,12 +621,37 @@ int main(int argc, char** argv) {
       ->required();
   inspect->add_flag("--json", inspect_json, "print the summary and per-file checks as JSON");
 
+  // `specbake help [COMMAND]` is `specbake [COMMAND] --help`
+  std::vector<std::string> args(argv + 1, argv + argc);
+  if (!args.empty() && args.front() == "help") {
+    args.erase(args.begin());
+    args.push_back("--help");
+  }
+  std::reverse(args.begin(), args.end());  // CLI11 takes them last first
   try {
-    app.parse(argc, argv);
+    app.parse(args);
+  } catch (const CLI::ExtrasError& e) {
+    // An unknown option: suggest the nearest of the command's own.
+    const CLI::App* sub = app.get_subcommands().empty() ? &app : app.get_subcommands().front();
+    std::vector<std::string> names;
+    for (const CLI::Option* o : sub->get_options())
+      for (const auto& l : o->get_lnames()) names.push_back("--" + l);
+    for (const CLI::Option* o : app.get_options())
+      for (const auto& l : o->get_lnames()) names.push_back("--" + l);
+    std::string unknown;  // the first unexpected --option CLI11 names ("...not expected: --frce")
+    std::istringstream words(std::string(e.what()).substr(std::string(e.what()).find(':') + 1));
+    for (std::string w; words >> w && unknown.empty();)
+      if (w.rfind("--", 0) == 0) unknown = w.substr(0, w.find('='));
+    const std::string near = unknown.empty() ? "" : closest_word(unknown, names);
+    std::cerr << "specbake" << (sub == &app ? "" : " " + sub->get_name()) << ": "
+              << (unknown.empty() ? std::string(e.what()) : "unknown option '" + unknown + "'")
+              << (near.empty() ? "" : " (did you mean '" + near + "'?)") << "; run specbake "
+              << (sub == &app ? "" : sub->get_name() + " ") << "--help\n";
+    return static_cast<int>(ExitCode::usage);
   } catch (const CLI::ParseError& e) {
     // An unknown sub-command: suggest the nearest one.
-    if (argc > 1 && app.get_subcommands().empty() && argv[1][0] != '-') {
-      std::vector<std::string> names;
+    if (argc > 1 && app.get_subcommands().empty() && argv[1][0] != '-' && !dynamic_cast<const CLI::CallForHelp*>(&e)) {
+      std::vector<std::string> names = {"help"};
       for (const auto* s : app.get_subcommands([](const CLI::App*) { return true; })) names.push_back(s->get_name());
       const std::string near = closest_word(argv[1], names);
       std::cerr << "specbake: unknown command '" << argv[1] << "'"
@@ -688,11 +715,21 @@ int main(int argc, char** argv) {
     std::signal(SIGTERM, on_stop_signal);
     RunProgress on_progress;
     if (!quiet) on_progress = [&](const ProgressEvent& e) { progress_line.show(e); };
+    // configs without `output:` (and no --out) put their bundles in ./assets of the working folder
+    std::vector<std::string> default_output;
+    for (const auto& c : loaded)
+      if (!c.output_given && !opts.out && !c.jobs.empty()) default_output.push_back(c.file.string());
     Runner runner(std::move(loaded), opts, on_progress, [&](const JobReport&) { progress_line.done(); });
     reports = is_plan ? runner.plan() : runner.run();
     progress_line.done();
     reports.insert(reports.end(), invalid.begin(), invalid.end());
     if (!quiet) print_reports(reports, is_plan, verbose);
+    if (!quiet && !default_output.empty()) {
+      std::string files;
+      for (const auto& f : default_output) files += (files.empty() ? "" : ", ") + f;
+      std::cout << "bundles " << (is_plan ? "would go" : "went") << " to " << fs::absolute("assets").string()
+                << " (the working folder's ./assets: " << files << " has no `output:`; set it, or --out)\n";
+    }
     for (const auto& r : reports) {  // -q: no summary; its failures and warnings on stderr, once
       if (!quiet) break;
       if (r.code != ExitCode::ok) std::cerr << r.name << ": " << r.status << ": " << r.reason << "\n";

@@ -307,6 +307,30 @@ TEST_F(CliUser, SuggestionsForTypos) {
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("did you mean 'samples'"), std::string::npos) << r.err;
   r = run({"plan", c.string(), "--only", "prizm"});
+  // options, and `help` as a command
+  r = run({"run", "--frce", c.string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("unknown option '--frce' (did you mean '--force'?)"), std::string::npos) << r.err;
+  r = run({"help"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("Usage: specbake"), std::string::npos) << r.out;
+  r = run({"help", "run"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("--keep-going"), std::string::npos) << r.out;
+  r = run({"hlep"});
+  EXPECT_NE(r.err.find("did you mean 'help'"), std::string::npos) << r.err;
+}
+
+// A config without `output:` writes into ./assets of the working folder; the summary says so.
+TEST_F(CliUser, DefaultOutputIsSaid) {
+  const fs::path c = cfg("specbake: 1\njobs:\n" + kPrism, "no-output.yaml");
+  const auto r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("bundles would go to " + (tmp_ / "assets").string() + " (the working folder's ./assets: " +
+                       c.string() + " has no `output:`"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(run({"plan", cfg(config(kPrism)).string()}).out.find("working folder's"), std::string::npos);
 }
 
 // YAML mistakes are reported where they begin.
