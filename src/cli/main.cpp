@@ -366,6 +366,27 @@ std::string index_text(const std::vector<std::int64_t>& idx) {
   return s + "]";
 }
 
+// "old -> new" of a manifest value, short: a long array says how many of its entries differ and
+// the first, other long values are cut (the manifests hold the whole).
+std::string change_text(const json& a, const json& b) {
+  constexpr std::size_t kLong = 120;
+  const std::string da = a.dump(), db = b.dump();
+  if (da.size() + db.size() <= kLong) return da + " -> " + db;
+  if (a.is_array() && b.is_array() && a.size() == b.size()) {
+    std::size_t first = a.size(), n = 0;
+    for (std::size_t i = 0; i < a.size(); ++i)
+      if (a[i] != b[i]) {
+        if (first == a.size()) first = i;
+        ++n;
+      }
+    const std::string ea = a[first].dump(), eb = b[first].dump();
+    return "list of " + std::to_string(a.size()) + ", " + std::to_string(n) + " entries differ; first [" +
+           std::to_string(first) + "]: " + (ea.size() + eb.size() <= kLong ? ea + " -> " + eb : "(long; see the manifests)");
+  }
+  const auto cut = [](const std::string& s) { return s.size() <= 50 ? s : s.substr(0, 47) + "..."; };
+  return cut(da) + " -> " + cut(db) + " (cut; see the manifests)";
+}
+
 int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_rel) {
   const BundleDiff d = diff_bundles(a, b, fail_abs, fail_rel);
   for (const auto& f : d.files) {
@@ -383,10 +404,22 @@ int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_
     }
     std::cout << "\n";
   }
+  if (!d.accuracy.empty()) {
+    std::cout << "accuracy changes:\n";
+    const auto shown = [](const json& r) {
+      if (r.is_null()) return std::string("(none)");
+      std::string s = r["value"].is_number() ? fmt_number(r["value"].get<double>()) : r["value"].dump();
+      if (r["tolerance"].is_number())
+        s += std::string(r.value("passed", false) ? " <= " : " > ") + fmt_number(r["tolerance"].get<double>());
+      return s;
+    };
+    for (auto it = d.accuracy.begin(); it != d.accuracy.end(); ++it)
+      std::cout << "  " << it.key() << ": " << shown(it.value()["old"]) << " -> " << shown(it.value()["new"]) << "\n";
+  }
   if (!d.changed.empty()) {
     std::cout << "manifest changes:\n";
     for (auto it = d.changed.begin(); it != d.changed.end(); ++it)
-      std::cout << "  " << it.key() << ": " << it.value()[0].dump() << " -> " << it.value()[1].dump() << "\n";
+      std::cout << "  " << it.key() << ": " << change_text(it.value()[0], it.value()[1]) << "\n";
   }
   const bool ok = diff_passes(d);
   std::cout << (ok ? "within thresholds" : "DIFFERS beyond thresholds") << " (fail-abs " << fail_abs << ", fail-rel "
@@ -581,8 +614,17 @@ int main(int argc, char** argv) {
   auto* diff = app.add_subcommand("diff", "compare two bundles file by file; non-zero exit past the thresholds");
   diff->add_option("old", diff_old, "old bundle, or a job folder (its latest)")->required();
   diff->add_option("new", diff_new, "new bundle, or a job folder (its latest)")->required();
-  diff->add_option("--fail-abs", fail_abs, "allowed absolute difference per float32 element (element fails if |a-b| > abs + rel*max(|a|,|b|))")->check(CLI::NonNegativeNumber);
-  diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(CLI::NonNegativeNumber);
+  const CLI::Validator non_negative(
+      [](std::string& v) {
+        try {
+          if (std::stod(v) >= 0.0) return std::string();
+        } catch (const std::exception&) {
+        }
+        return "expected a number >= 0, got '" + v + "'";
+      },
+      "NUMBER >= 0");
+  diff->add_option("--fail-abs", fail_abs, "allowed absolute difference per float32 element (element fails if |a-b| > abs + rel*max(|a|,|b|))")->check(non_negative);
+  diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(non_negative);
 
   TruthArgs truth_args;
   auto* truth = app.add_subcommand("truth", "path-traced sky radiance of an atmosphere job at given views (CSV in, CSV out)");

@@ -10,6 +10,7 @@
 #include <map>
 #include <regex>
 #include <set>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -319,6 +320,29 @@ TEST_F(CliUser, SuggestionsForTypos) {
   EXPECT_NE(r.out.find("--keep-going"), std::string::npos) << r.out;
   r = run({"hlep"});
   EXPECT_NE(r.err.find("did you mean 'help'"), std::string::npos) << r.err;
+}
+
+// diff: accuracy changes shown old -> new, every line short enough to read, a bad threshold
+// said in words.
+TEST_F(CliUser, DiffShowsAccuracyChangesInShortLines) {
+  const auto sky = [](int mu) {
+    return "  - name: sky\n    kind: atmosphere\n    orders: 3\n"
+           "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: " +
+           std::to_string(mu) + ", mu_s: 6, nu: 3}}\n    scene: {points: 16}\n";
+  };
+  ASSERT_EQ(run({"run", cfg(config(sky(8)), "a.yaml").string(), "--out", (tmp_ / "a").string()}).exit_code, 0);
+  ASSERT_EQ(run({"run", cfg(config(sky(10)), "b.yaml").string(), "--out", (tmp_ / "b").string()}).exit_code, 0);
+  auto r = run({"diff", (tmp_ / "a" / "sky").string(), (tmp_ / "b" / "sky").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("accuracy changes:\n(  .*\n)*  vs_path_traced: [0-9.e+-]+ -> [0-9.e+-]+\n")))
+      << r.out;
+  EXPECT_NE(r.out.find("parameters.orders.per_order: list of 3, "), std::string::npos) << r.out;
+  std::istringstream lines(r.out);
+  for (std::string line; std::getline(lines, line);) EXPECT_LT(line.size(), 300u) << line;
+  r = run({"diff", (tmp_ / "a" / "sky").string(), (tmp_ / "b" / "sky").string(), "--fail-rel", "-1"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("expected a number >= 0, got '-1'"), std::string::npos) << r.err;
+  EXPECT_LT(r.err.size(), 200u) << r.err;
 }
 
 // A config without `output:` writes into ./assets of the working folder; the summary says so.
