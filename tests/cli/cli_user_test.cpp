@@ -249,6 +249,8 @@ TEST_F(CliUser, AMissedToleranceFailsUnlessAdvisory) {
   EXPECT_TRUE(std::regex_search(r.out, std::regex("\ngrating +diffraction +failed +[0-9.]+ s "))) << r.out;
   EXPECT_FALSE(fs::exists(tmp_ / "out" / "grating"));
   EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism"));
+  // a full-bin diffraction bundle carries no shader, and the summary says so
+  EXPECT_NE(r.out.find("2 taylor terms, field 64x64, no GLSL (table: none)"), std::string::npos) << r.out;
   const json rep = t::read_json(tmp_ / "r.json");
   for (const auto& j : rep["jobs"]) {
     EXPECT_EQ(j["status"], "failed");
