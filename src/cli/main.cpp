@@ -11,6 +11,8 @@
 #include <fstream>
 #include <iostream>
 #include <mutex>
+#include <optional>
+#include <sstream>
 
 #include "cl/device.hpp"
 #include "core/hash.hpp"
@@ -43,8 +45,10 @@ class ProgressLine {
     char eta[32] = "";
     if (e.eta_s >= 0.0) std::snprintf(eta, sizeof eta, ", ETA %s", duration(e.eta_s).c_str());
     char buf[256];
-    std::snprintf(buf, sizeof buf, "[%d/%d] %s: %s, %s %3.0f %%%s", e.index, e.count, e.job.c_str(), to_string(e.stage),
-                  e.what.c_str(), 100.0 * e.fraction, eta);
+    // "files" while in the files step is said once
+    const std::string what = e.what == to_string(e.stage) ? "" : ", " + e.what;
+    std::snprintf(buf, sizeof buf, "[%d/%d] %s: %s%s %3.0f %%%s", e.index, e.count, e.job.c_str(), to_string(e.stage),
+                  what.c_str(), 100.0 * e.fraction, eta);
     if (tty_) {
       line_ = buf;
       draw();
@@ -93,7 +97,7 @@ class ProgressLine {
 };
 
 // spdlog sink writing "[level] message" to stderr without tearing the progress line.
-class StderrSink : public spdlog::sinks::base_sink<spdlog::details::null_mutex> {
+class StderrSink : public spdlog::sinks::base_sink<std::mutex> {  // a bundle's writer thread logs too
  public:
   explicit StderrSink(ProgressLine& p) : progress_(p) {}
 
@@ -165,7 +169,7 @@ std::string summary_line(const std::vector<JobReport>& reports, bool plan) {
   }
   std::string s;
   if (plan) {
-    s = std::to_string(reports.size() - n["failed"]) + " planned, " + std::to_string(n["failed"]) + " failed";
+    s = std::to_string(n["planned"]) + " planned, " + std::to_string(n["failed"]) + " failed";
   } else {
     s = std::to_string(n["built"]) + " built, " + std::to_string(n["up-to-date"]) + " up to date, " +
         std::to_string(n["failed"]) + " failed";
@@ -196,9 +200,10 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
       }
       rows.push_back({r.name, r.kind, r.status == "planned" ? r.reason : r.status, est, dmem, hmem, describe(r)});
     } else {
-      const double t = r.timings.is_object() ? r.timings.value("total_s", 0.0) : 0.0;
+      // a job that ran (built, failed, interrupted, up to date) took its time; invalid, not run: "-"
+      const bool timed = r.timings.is_object() && r.timings.contains("total_s");
       rows.push_back({r.name, r.kind.empty() ? "-" : r.kind, r.status,
-                      r.status == "built" ? ProgressLine::duration(t) : "-", headline(r.accuracy),
+                      timed ? ProgressLine::duration(r.timings["total_s"].get<double>()) : "-", headline(r.accuracy),
                       std::to_string(r.warnings.size()), describe(r)});
     }
   }
@@ -212,9 +217,18 @@ void print_reports(const std::vector<JobReport>& reports, bool plan, int verbose
                 << (std::all_of(reports.begin(), reports.end(), calibrated) ? "" : "; others: the 2-core CPU model")
                 << "\n";
   }
+  // Why jobs failed, each reason once (a missing device fails every job alike), naming its jobs.
+  std::vector<std::pair<std::string, std::string>> why;  // (status: reason, jobs)
+  for (const auto& r : reports) {
+    if (r.code == ExitCode::ok) continue;
+    const std::string text = r.status + ": " + r.reason;
+    auto it = std::find_if(why.begin(), why.end(), [&](const auto& w) { return w.first == text; });
+    if (it == why.end()) why.emplace_back(text, r.name);
+    else it->second += ", " + r.name;
+  }
+  for (const auto& [text, jobs] : why) std::cout << jobs << ": " << text << "\n";
   for (const auto& r : reports) {
     const bool bad = r.code != ExitCode::ok;
-    if (bad) std::cout << r.name << (r.name.empty() ? "" : ": ") << r.status << ": " << r.reason << "\n";
     for (const auto& w : r.warnings) std::cout << "warning: " << r.name << ": " << w << "\n";
     if (verbose > 0) {
       std::cout << r.name << " (" << r.kind << ", " << r.config << ")\n";
@@ -324,18 +338,23 @@ int cmd_inspect(const fs::path& path, bool as_json) {
   return 0;
 }
 
+// A file a command will write (`option` names it), checked before any work: a folder is a usage
+// error, a place that cannot be written an I/O error.
+void check_output_file(const std::string& path, const std::string& option) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw UsageError(option + " " + path + " is a folder; expected a file path");
+  const fs::path parent = fs::absolute(path).parent_path();
+  if (!fs::is_directory(parent, ec)) throw IoError("cannot write " + option + " " + path + ": no folder " + parent.string());
+  if (::access(parent.c_str(), W_OK) != 0 || (fs::exists(path, ec) && ::access(path.c_str(), W_OK) != 0))
+    throw IoError("cannot write " + option + " " + path + ": permission denied");
+}
+
 // --report: checked when the run starts (a folder, or a path that cannot be written, stops the
 // run before any work), written atomically at the end — also when the run stops early.
 class ReportFile {
  public:
   explicit ReportFile(std::string path) : path_(std::move(path)) {
-    if (path_.empty()) return;
-    std::error_code ec;
-    if (fs::is_directory(path_, ec)) throw UsageError("--report " + path_ + " is a folder; expected a file path");
-    const fs::path parent = fs::absolute(path_).parent_path();
-    if (!fs::is_directory(parent, ec)) throw IoError("cannot write report " + path_ + ": no folder " + parent.string());
-    if (::access(parent.c_str(), W_OK) != 0 || (fs::exists(path_, ec) && ::access(path_.c_str(), W_OK) != 0))
-      throw IoError("cannot write report " + path_ + ": permission denied");
+    if (!path_.empty()) check_output_file(path_, "--report");
   }
   void write(const std::vector<JobReport>& reports, const std::string& error = "",
              const std::optional<Shard>& shard = std::nullopt) const {
@@ -368,6 +387,27 @@ std::string index_text(const std::vector<std::int64_t>& idx) {
   return s + "]";
 }
 
+// "old -> new" of a manifest value, short: a long array says how many of its entries differ and
+// the first, other long values are cut (the manifests hold the whole).
+std::string change_text(const json& a, const json& b) {
+  constexpr std::size_t kLong = 120;
+  const std::string da = a.dump(), db = b.dump();
+  if (da.size() + db.size() <= kLong) return da + " -> " + db;
+  if (a.is_array() && b.is_array() && a.size() == b.size()) {
+    std::size_t first = a.size(), n = 0;
+    for (std::size_t i = 0; i < a.size(); ++i)
+      if (a[i] != b[i]) {
+        if (first == a.size()) first = i;
+        ++n;
+      }
+    const std::string ea = a[first].dump(), eb = b[first].dump();
+    return "list of " + std::to_string(a.size()) + ", " + std::to_string(n) + " entries differ; first [" +
+           std::to_string(first) + "]: " + (ea.size() + eb.size() <= kLong ? ea + " -> " + eb : "(long; see the manifests)");
+  }
+  const auto cut = [](const std::string& s) { return s.size() <= 50 ? s : s.substr(0, 47) + "..."; };
+  return cut(da) + " -> " + cut(db) + " (cut; see the manifests)";
+}
+
 int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_rel) {
   const BundleDiff d = diff_bundles(a, b, fail_abs, fail_rel);
   for (const auto& f : d.files) {
@@ -385,10 +425,22 @@ int cmd_diff(const fs::path& a, const fs::path& b, double fail_abs, double fail_
     }
     std::cout << "\n";
   }
+  if (!d.accuracy.empty()) {
+    std::cout << "accuracy changes:\n";
+    const auto shown = [](const json& r) {
+      if (r.is_null()) return std::string("(none)");
+      std::string s = r["value"].is_number() ? fmt_number(r["value"].get<double>()) : r["value"].dump();
+      if (r["tolerance"].is_number())
+        s += std::string(r.value("passed", false) ? " <= " : " > ") + fmt_number(r["tolerance"].get<double>());
+      return s;
+    };
+    for (auto it = d.accuracy.begin(); it != d.accuracy.end(); ++it)
+      std::cout << "  " << it.key() << ": " << shown(it.value()["old"]) << " -> " << shown(it.value()["new"]) << "\n";
+  }
   if (!d.changed.empty()) {
     std::cout << "manifest changes:\n";
     for (auto it = d.changed.begin(); it != d.changed.end(); ++it)
-      std::cout << "  " << it.key() << ": " << it.value()[0].dump() << " -> " << it.value()[1].dump() << "\n";
+      std::cout << "  " << it.key() << ": " << change_text(it.value()[0], it.value()[1]) << "\n";
   }
   const bool ok = diff_passes(d);
   std::cout << (ok ? "within thresholds" : "DIFFERS beyond thresholds") << " (fail-abs " << fail_abs << ", fail-rel "
@@ -433,15 +485,20 @@ int cmd_truth(const TruthArgs& a) {
     }
   }
   if (a.paths < 1) throw UsageError("--paths expects a positive integer");
+  // everything that can be wrong is found before the trace: the output, the points, the bundle
+  check_output_file(a.out, "--out");
   const auto points = atmosphere::read_truth_points(a.points);
+  const fs::path bundle = a.bundle.empty() ? fs::path() : resolve_bundle(a.bundle);  // a job folder: its latest
+  std::optional<atmosphere::Luts> luts;
+  if (!bundle.empty()) luts = atmosphere::load_bundle_luts(bundle);
   cl_util::Device dev(cl_util::select_device(a.device.empty() ? cfg.device : a.device));
   spdlog::info("truth: {} points, {} paths each, orders {}, seed {} on {}", points.size(), o.paths, a.orders, o.seed,
                dev.info().name);
   const auto result = atmosphere::trace_truth(spec, dev, points, o);
   std::vector<atmosphere::Vec3> lut;
-  if (!a.bundle.empty()) lut = atmosphere::lut_sky_radiance(atmosphere::load_bundle_luts(a.bundle), points);
-  atmosphere::write_text_file(a.out, atmosphere::truth_result_csv(spec, points, result, a.bundle.empty() ? nullptr : &lut));
-  spdlog::info("truth: wrote {} ({:.1f} s)", a.out, result.seconds);
+  if (luts) lut = atmosphere::lut_sky_radiance(*luts, points);
+  atmosphere::write_text_file(a.out, atmosphere::truth_result_csv(spec, points, result, luts ? &lut : nullptr));
+  std::cout << "wrote " << a.out << " (" << points.size() << " points, " << ProgressLine::duration(result.seconds) << ")\n";
   return 0;
 }
 
@@ -566,6 +623,7 @@ int main(int argc, char** argv) {
   spdlog::set_pattern("[%l] %v");
 
   CLI::App app{"specbake — bakes lookup tables for real-time spectral rendering (OpenCL)"};
+  app.name("specbake");  // parse() gets the arguments without argv[0]
   app.set_version_flag("--version", std::string("specbake ") + kVersion);
   app.require_subcommand(1);
   app.fallthrough();  // -v/-q also after the sub-command
@@ -620,8 +678,17 @@ int main(int argc, char** argv) {
   auto* diff = app.add_subcommand("diff", "compare two bundles file by file; non-zero exit past the thresholds");
   diff->add_option("old", diff_old, "old bundle, or a job folder (its latest)")->required();
   diff->add_option("new", diff_new, "new bundle, or a job folder (its latest)")->required();
-  diff->add_option("--fail-abs", fail_abs, "allowed absolute difference per float32 element (element fails if |a-b| > abs + rel*max(|a|,|b|))")->check(CLI::NonNegativeNumber);
-  diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(CLI::NonNegativeNumber);
+  const CLI::Validator non_negative(
+      [](std::string& v) {
+        try {
+          if (std::stod(v) >= 0.0) return std::string();
+        } catch (const std::exception&) {
+        }
+        return "expected a number >= 0, got '" + v + "'";
+      },
+      "NUMBER >= 0");
+  diff->add_option("--fail-abs", fail_abs, "allowed absolute difference per float32 element (element fails if |a-b| > abs + rel*max(|a|,|b|))")->check(non_negative);
+  diff->add_option("--fail-rel", fail_rel, "allowed relative difference per float32 element")->check(non_negative);
 
   TruthArgs truth_args;
   auto* truth = app.add_subcommand("truth", "path-traced sky radiance of an atmosphere job at given views (CSV in, CSV out)");
@@ -633,7 +700,7 @@ int main(int argc, char** argv) {
   truth->add_option("--paths", truth_args.paths, "random walks per point and channel");
   truth->add_option("--orders", truth_args.orders, "scattering orders traced: N (1..N) or all");
   truth->add_option("--seed", truth_args.seed, "seed of the counter-based random streams (same seed: same bytes)");
-  truth->add_option("--bundle", truth_args.bundle, "also lut_<c>: that bundle's GetSkyRadiance at the points");
+  truth->add_option("--bundle", truth_args.bundle, "also lut_<c>: that bundle's (or job folder's latest) GetSkyRadiance at the points");
   truth->add_option("--device", truth_args.device, "OpenCL device (default: the config's, else auto)");
 
   SweepArgs sweep_args;
@@ -677,12 +744,37 @@ int main(int argc, char** argv) {
       ->required();
   inspect->add_flag("--json", inspect_json, "print the summary and per-file checks as JSON");
 
+  // `specbake help [COMMAND]` is `specbake [COMMAND] --help`
+  std::vector<std::string> args(argv + 1, argv + argc);
+  if (!args.empty() && args.front() == "help") {
+    args.erase(args.begin());
+    args.push_back("--help");
+  }
+  std::reverse(args.begin(), args.end());  // CLI11 takes them last first
   try {
-    app.parse(argc, argv);
+    app.parse(args);
+  } catch (const CLI::ExtrasError& e) {
+    // An unknown option: suggest the nearest of the command's own.
+    const CLI::App* sub = app.get_subcommands().empty() ? &app : app.get_subcommands().front();
+    std::vector<std::string> names;
+    for (const CLI::Option* o : sub->get_options())
+      for (const auto& l : o->get_lnames()) names.push_back("--" + l);
+    for (const CLI::Option* o : app.get_options())
+      for (const auto& l : o->get_lnames()) names.push_back("--" + l);
+    std::string unknown;  // the first unexpected --option CLI11 names ("...not expected: --frce")
+    std::istringstream words(std::string(e.what()).substr(std::string(e.what()).find(':') + 1));
+    for (std::string w; words >> w && unknown.empty();)
+      if (w.rfind("--", 0) == 0) unknown = w.substr(0, w.find('='));
+    const std::string near = unknown.empty() ? "" : closest_word(unknown, names);
+    std::cerr << "specbake" << (sub == &app ? "" : " " + sub->get_name()) << ": "
+              << (unknown.empty() ? std::string(e.what()) : "unknown option '" + unknown + "'")
+              << (near.empty() ? "" : " (did you mean '" + near + "'?)") << "; run specbake "
+              << (sub == &app ? "" : sub->get_name() + " ") << "--help\n";
+    return static_cast<int>(ExitCode::usage);
   } catch (const CLI::ParseError& e) {
     // An unknown sub-command: suggest the nearest one.
-    if (argc > 1 && app.get_subcommands().empty() && argv[1][0] != '-') {
-      std::vector<std::string> names;
+    if (argc > 1 && app.get_subcommands().empty() && argv[1][0] != '-' && !dynamic_cast<const CLI::CallForHelp*>(&e)) {
+      std::vector<std::string> names = {"help"};
       for (const auto* s : app.get_subcommands([](const CLI::App*) { return true; })) names.push_back(s->get_name());
       const std::string near = closest_word(argv[1], names);
       std::cerr << "specbake: unknown command '" << argv[1] << "'"
@@ -692,10 +784,9 @@ int main(int argc, char** argv) {
     const int rc = app.exit(e);
     return rc == 0 ? 0 : static_cast<int>(ExitCode::usage);
   }
-  spdlog::set_level(quiet ? spdlog::level::warn
-                    : verbose >= 2 ? spdlog::level::trace
-                    : verbose == 1 ? spdlog::level::debug
-                                   : spdlog::level::info);
+  // Logs: warnings and errors by default (the progress line and the summary say the rest);
+  // -v adds info and debug lines, -vv trace.
+  spdlog::set_level(verbose >= 2 ? spdlog::level::trace : verbose == 1 ? spdlog::level::debug : spdlog::level::warn);
 
   std::unique_ptr<ReportFile> report_file;
   std::vector<JobReport> reports;
@@ -741,23 +832,36 @@ int main(int argc, char** argv) {
     run_shard = opts.shard;
     std::vector<fs::path> paths(configs.begin(), configs.end());
     std::vector<JobReport> invalid;
-    auto loaded = load_configs(paths, keep_going ? &invalid : nullptr);
-    for (const auto& r : invalid) spdlog::error("{}", r.reason);
+    auto loaded = load_configs(paths, &invalid);
+    if (!keep_going && !invalid.empty()) {  // nothing runs; each invalid config or job said once
+      for (const auto& r : invalid) spdlog::error("{}", r.reason);
+      report_file->write(invalid, invalid.front().reason);
+      return static_cast<int>(invalid.front().code);
+    }
 
     std::signal(SIGINT, on_stop_signal);
     std::signal(SIGTERM, on_stop_signal);
     RunProgress on_progress;
     if (!quiet) on_progress = [&](const ProgressEvent& e) { progress_line.show(e); };
+    // configs without `output:` (and no --out) put their bundles in ./assets of the working folder
+    std::vector<std::string> default_output;
+    for (const auto& c : loaded)
+      if (!c.output_given && !opts.out && !c.jobs.empty()) default_output.push_back(c.file.string());
     Runner runner(std::move(loaded), opts, on_progress, [&](const JobReport&) { progress_line.done(); });
     reports = is_plan ? runner.plan() : runner.run();
     progress_line.done();
     reports.insert(reports.end(), invalid.begin(), invalid.end());
     if (!quiet) print_reports(reports, is_plan, verbose);
-    for (const auto& r : reports) {
+    if (!quiet && !default_output.empty()) {
+      std::string files;
+      for (const auto& f : default_output) files += (files.empty() ? "" : ", ") + f;
+      std::cout << "bundles " << (is_plan ? "would go" : "went") << " to " << fs::absolute("assets").string()
+                << " (the working folder's ./assets: " << files << " has no `output:`; set it, or --out)\n";
+    }
+    for (const auto& r : reports) {  // -q: no summary; its failures and warnings on stderr, once
       if (!quiet) break;
       if (r.code != ExitCode::ok) std::cerr << r.name << ": " << r.status << ": " << r.reason << "\n";
-      if (r.status == "up-to-date")  // a fresh bake logged its warnings as it went
-        for (const auto& w : r.warnings) std::cerr << "[warning] " << r.name << ": " << w << "\n";
+      for (const auto& w : r.warnings) std::cerr << "[warning] " << r.name << ": " << w << "\n";
     }
     std::string stopped;
     if (const int sig = stop_requested()) {

@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
+#include <cstring>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -44,6 +46,12 @@ std::string closest_word(const std::string& word, const std::vector<std::string>
 }
 
 using yaml::At;
+
+void allow_job_keys(const At& job, std::initializer_list<const char*> own) {
+  std::vector<std::string> keys = {"name", "kind", "tolerance_advisory"};
+  keys.insert(keys.end(), own.begin(), own.end());
+  job.allow_keys(keys);
+}
 
 namespace {
 constexpr std::size_t kMaxConfigBytes = 1 << 20;  // a config is a few kB; refuse huge documents
@@ -181,12 +189,12 @@ YAML::Node parse_yaml(const std::string& text, const fs::path& file) {
 }
 
 Config parse_config(const std::string& text, const fs::path& file, const std::vector<KindSyntax>& kinds,
-                    std::vector<InputError>* job_errors) {
+                    std::vector<InvalidJob>* job_errors) {
   return parse_config(parse_yaml(text, file), file, kinds, job_errors);
 }
 
 Config parse_config(const YAML::Node& root, const fs::path& file, const std::vector<KindSyntax>& kinds,
-                    std::vector<InputError>* job_errors) {
+                    std::vector<InvalidJob>* job_errors) {
   const At top{root, "", &file};
   if (!root.IsMap()) top.fail("expected a mapping with keys specbake, output, device, jobs");
   top.allow_keys({"specbake", "output", "device", "jobs"});
@@ -207,7 +215,7 @@ Config parse_config(const YAML::Node& root, const fs::path& file, const std::vec
     } else if (out[0] == '~') {
       top.child("output").fail("expected a folder path; '~user' is not expanded, write the full path");
     }
-    cfg.output = file.parent_path() / out;
+    cfg.output = (file.parent_path() / out).lexically_normal();  // configs/../assets prints as assets
     cfg.output_given = true;
   } else {
     cfg.output = "assets";
@@ -228,51 +236,71 @@ Config parse_config(const YAML::Node& root, const fs::path& file, const std::vec
   }
   static const std::regex name_re("[a-z0-9][a-z0-9._-]*");
   std::map<std::string, Location> names;
-  for (std::size_t i = 0; i < jobs.node.size(); ++i) try {
+  for (std::size_t i = 0; i < jobs.node.size(); ++i) {
     const At job = jobs.item(i);
-    job.expect_map("a job");
-    if (!job.has("name")) job.fail("expected a 'name'");
-    if (!job.has("kind")) job.fail("expected a 'kind' (" + kind_list + ")");
-    const At name_at = job.child("name");
-    JobSpec js;
-    js.name = name_at.string();
-    if (!std::regex_match(js.name, name_re) || js.name.size() > 100)
-      name_at.fail("expected a job name matching [a-z0-9][a-z0-9._-]* (at most 100 characters), got " +
-                   name_at.shown());
-    if (auto it = names.find(js.name); it != names.end())
-      name_at.fail("duplicate job name '" + js.name + "' (first used at " + it->second.str() + ")");
-    names.emplace(js.name, name_at.loc());
-    js.where = job.loc();
-    const At kind_at = job.child("kind");
-    js.kind = kind_at.string();
-    const auto kind = std::find_if(kinds.begin(), kinds.end(), [&](const KindSyntax& k) { return k.name == js.kind; });
-    if (kind == kinds.end()) {
-      const std::string near = closest_word(js.kind, kind_names);
-      kind_at.fail("expected kind " + kind_list + ", got " + kind_at.shown() +
-                   (near.empty() ? "" : " (did you mean '" + near + "'?)"));
+    // what names the job in reports, read before anything about it is checked
+    auto scalar = [&](const char* k) {
+      return job.node.IsMap() && job.node[k] && job.node[k].IsScalar() ? job.node[k].Scalar() : std::string();
+    };
+    const std::string read_name = std::regex_match(scalar("name"), name_re) ? scalar("name") : "";
+    const std::string read_kind = scalar("kind");
+    try {
+      job.expect_map("a job");
+      if (!job.has("name")) job.fail("expected a 'name'");
+      if (!job.has("kind")) job.fail("expected a 'kind' (" + kind_list + ")");
+      const At name_at = job.child("name");
+      JobSpec js;
+      js.name = name_at.string();
+      if (!std::regex_match(js.name, name_re) || js.name.size() > 100)
+        name_at.fail("expected a job name matching [a-z0-9][a-z0-9._-]* (at most 100 characters), got " +
+                     name_at.shown());
+      if (auto it = names.find(js.name); it != names.end())
+        name_at.fail("duplicate job name '" + js.name + "' (first used at " + it->second.str() + ")");
+      names.emplace(js.name, name_at.loc());
+      js.where = job.loc();
+      const At kind_at = job.child("kind");
+      js.kind = kind_at.string();
+      const auto kind = std::find_if(kinds.begin(), kinds.end(), [&](const KindSyntax& k) { return k.name == js.kind; });
+      if (kind == kinds.end()) {
+        const std::string near = closest_word(js.kind, kind_names);
+        kind_at.fail("expected kind " + kind_list + ", got " + kind_at.shown() +
+                     (near.empty() ? "" : " (did you mean '" + near + "'?)"));
+      }
+      js.spec = kind->parse(job, js.normalised, js.inputs);
+      if (job.has("tolerance_advisory"))
+        js.tolerance_advisory = job.child("tolerance_advisory").choice<bool>({{"true", true}, {"false", false}});
+      // in the hash only when set: a job made advisory, or strict again, is baked (and judged) again
+      if (js.tolerance_advisory) js.normalised["tolerance_advisory"] = true;
+      cfg.jobs.push_back(std::move(js));
+    } catch (const InputError& e) {
+      if (!job_errors) throw;
+      const bool known_kind = std::find(kind_names.begin(), kind_names.end(), read_kind) != kind_names.end();
+      job_errors->push_back({e, read_name, known_kind ? read_kind : ""});
     }
-    js.spec = kind->parse(job, js.normalised, js.inputs);
-    cfg.jobs.push_back(std::move(js));
-  } catch (const InputError& e) {
-    if (!job_errors) throw;
-    job_errors->push_back(e);
   }
   return cfg;
 }
 
 YAML::Node load_yaml(const fs::path& file) {
   std::error_code ec;
-  if (!fs::is_regular_file(file, ec)) throw IoError("cannot read config " + file.string() + ": not a file");
+  const auto st = fs::status(file, ec);
+  if (!fs::is_regular_file(st)) {
+    const std::string what = !fs::exists(st) ? (ec ? ec.message() : "no such file")
+                             : fs::is_directory(st) ? "a folder" : "not a regular file";
+    throw IoError("cannot read config " + file.string() + ": " + what + "; expected a YAML file");
+  }
   if (fs::file_size(file, ec) > kMaxConfigBytes)
     throw InputError({file, 0, 0, ""}, "config larger than " + std::to_string(kMaxConfigBytes) + " bytes");
   std::ifstream in(file, std::ios::binary);
-  if (!in) throw IoError("cannot read config " + file.string());
+  if (!in)
+    throw IoError("cannot read config " + file.string() + ": " + std::strerror(errno) +
+                  " (expected a file this user can read)");
   std::stringstream ss;
   ss << in.rdbuf();
   return parse_yaml(ss.str(), file);
 }
 
-Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds, std::vector<InputError>* job_errors) {
+Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds, std::vector<InvalidJob>* job_errors) {
   return parse_config(load_yaml(file), file, kinds, job_errors);
 }
 

@@ -36,6 +36,9 @@ struct JobSpec {
   std::shared_ptr<const KindSpec> spec;
   nlohmann::json normalised;  // canonical form of everything that defines the result
   Inputs inputs;
+  // `tolerance_advisory: true` (any kind): an accuracy record that misses its tolerance is a
+  // warning and the bundle is published; by default such a job fails (exit 1).
+  bool tolerance_advisory = false;
 
   // The kind's spec; std::bad_cast if the job is of another kind (a programming error).
   template <class S>
@@ -53,23 +56,32 @@ struct Config {
   std::vector<JobSpec> jobs;
 };
 
-// How one kind reads its keys of a job entry: `job` is the whole entry (name and kind included;
-// the parser rejects keys it does not know); fills `norm` with the canonical form of everything
+// How one kind reads its keys of a job entry: `job` is the whole entry (name, kind and
+// tolerance_advisory included; allow_job_keys rejects keys it does not know); fills `norm` with the canonical form of everything
 // that defines the result and `inputs` with the data files it read.
 struct KindSyntax {
   std::string name;
   std::function<std::shared_ptr<const KindSpec>(const yaml::At& job, nlohmann::json& norm, Inputs& inputs)> parse;
 };
 
+// A job entry that failed validation, with its name and kind where they could be read ("" else).
+struct InvalidJob {
+  InputError error;
+  std::string name, kind;
+};
+
 inline constexpr int kSchemaVersion = 1;
+// Rejects a job entry's unknown and duplicate keys: those every job has, whatever its kind
+// (name, kind, tolerance_advisory), and the kind's `own`.
+void allow_job_keys(const yaml::At& job, std::initializer_list<const char*> own);
 
 // Parses and validates; throws InputError (file:line:col + key path) or IoError. With
 // `job_errors` set, an invalid job entry is recorded there and left out instead (errors in the
 // file's top level still throw).
 Config parse_config(const std::string& text, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds,
-                    std::vector<InputError>* job_errors = nullptr);
+                    std::vector<InvalidJob>* job_errors = nullptr);
 Config load_config(const fs::path& file, const std::vector<KindSyntax>& kinds,
-                   std::vector<InputError>* job_errors = nullptr);
+                   std::vector<InvalidJob>* job_errors = nullptr);
 // The two halves of parse_config: the text read into a YAML tree (size, alias and syntax checks;
 // InputError with file:line:col), and a tree validated into a Config. A tree edited after
 // reading (`specbake sweep` sets keys) is validated like a file; keys it added carry no
@@ -78,6 +90,6 @@ YAML::Node parse_yaml(const std::string& text, const fs::path& file_for_messages
 // A config file read and parsed into a tree (IoError when it cannot be read).
 YAML::Node load_yaml(const fs::path& file);
 Config parse_config(const YAML::Node& root, const fs::path& file_for_messages, const std::vector<KindSyntax>& kinds,
-                    std::vector<InputError>* job_errors = nullptr);
+                    std::vector<InvalidJob>* job_errors = nullptr);
 
 }  // namespace specbake

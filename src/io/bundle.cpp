@@ -197,6 +197,14 @@ GcResult BundleStore::gc(int keep, bool dry_run) const {
   const fs::file_time_type started = fs::file_time_type::clock::now();
   std::error_code ec;
   if (!fs::is_directory(root_, ec)) throw IoError("no output folder " + root_.string());
+  // a job or bundle folder given for the output folder above it would prune nothing: say so
+  const fs::path above = fs::absolute(root_).lexically_normal().parent_path();
+  if (fs::exists(root_ / "latest", ec) || fs::is_symlink(root_ / "latest", ec))
+    throw UsageError(root_.string() + " is a job folder (it holds `latest`); gc takes the output folder that holds "
+                     "the job folders: " + above.string());
+  if (fs::exists(root_ / "manifest.json", ec))
+    throw UsageError(root_.string() + " is a bundle folder; gc takes the output folder that holds the job folders: " +
+                     above.parent_path().string());
   std::vector<fs::path> jobs;
   for (const auto& job : fs::directory_iterator(root_, ec))
     if (job.is_directory() && !job.is_symlink() && job.path().filename().string().front() != '.') jobs.push_back(job.path());

@@ -77,6 +77,24 @@ BundleDiff diff_bundles(const fs::path& old_path, const fs::path& new_path, doub
   }
   for (const auto& [k, v] : fb)
     if (!fa.count(k)) d.changed[k] = {nullptr, v};
+  d.accuracy = json::object();
+  const auto records = [](const json& m) {
+    std::map<std::string, json> out;
+    for (const auto& r : m.value("accuracy", json::array()))
+      if (r.is_object() && r.contains("name"))
+        out[r["name"].get<std::string>()] = {{"value", r.value("value", json())},
+                                             {"tolerance", r.value("tolerance", json())},
+                                             {"passed", r.value("passed", json())}};
+    return out;
+  };
+  const auto ra = records(a), rb = records(b);
+  for (const auto& [name, v] : ra) {
+    auto it = rb.find(name);
+    if (it == rb.end()) d.accuracy[name] = {{"old", v}, {"new", nullptr}};
+    else if (it->second != v) d.accuracy[name] = {{"old", v}, {"new", it->second}};
+  }
+  for (const auto& [name, v] : rb)
+    if (!ra.count(name)) d.accuracy[name] = {{"old", nullptr}, {"new", v}};
 
   std::map<std::string, json> files_a, files_b;
   for (const auto& f : a.at("files")) files_a[f.at("path")] = f;

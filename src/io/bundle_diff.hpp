@@ -28,6 +28,9 @@ struct BundleDiff {
   // Flattened manifest keys (config, inputs, kernels, parameters, tool, device) whose values
   // differ: key → [old, new].
   nlohmann::json changed;
+  // Accuracy records (by name) whose value or verdict differs: name → {old, new}, each
+  // {value, tolerance, passed} or null where the bundle lacks the record.
+  nlohmann::json accuracy;
 };
 
 // Relative difference: |a − b| / max(|a|, |b|), 0 when both are 0. An element exceeds the

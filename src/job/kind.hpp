@@ -120,6 +120,18 @@ nlohmann::json accuracy_json(const std::vector<Accuracy>& records);
 // The record called `name` in a manifest's or report's accuracy list; nullptr if absent.
 const nlohmann::json* find_accuracy(const nlohmann::json& list, std::string_view name);
 
+// A job that failed after it had resolved its parameters or measured its accuracy (an auto search
+// that ends short of its tolerance, a record that misses it): what it got that far, for the
+// report and the summary.
+class BakeFailed : public JobError {
+ public:
+  BakeFailed(const std::string& what, nlohmann::json parameters, nlohmann::json accuracy = nlohmann::json::array(),
+             std::vector<std::string> warnings = {})
+      : JobError(what), parameters(std::move(parameters)), accuracy(std::move(accuracy)), warnings(std::move(warnings)) {}
+  nlohmann::json parameters, accuracy;
+  std::vector<std::string> warnings;
+};
+
 struct BakeResult {
   nlohmann::json parameters;  // resolved values (auto → number, ...)
   std::vector<Accuracy> accuracy;

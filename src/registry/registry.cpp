@@ -38,13 +38,13 @@ void register_kind(Kind kind) {
   table().push_back(std::move(kind));
 }
 
-Config load_config(const fs::path& file, std::vector<InputError>* job_errors) {
+Config load_config(const fs::path& file, std::vector<InvalidJob>* job_errors) {
   return load_config(file, syntax(), job_errors);
 }
-Config parse_config(const std::string& text, const fs::path& file, std::vector<InputError>* job_errors) {
+Config parse_config(const std::string& text, const fs::path& file, std::vector<InvalidJob>* job_errors) {
   return parse_config(text, file, syntax(), job_errors);
 }
-Config parse_config(const YAML::Node& root, const fs::path& file, std::vector<InputError>* job_errors) {
+Config parse_config(const YAML::Node& root, const fs::path& file, std::vector<InvalidJob>* job_errors) {
   return parse_config(root, file, syntax(), job_errors);
 }
 

@@ -19,11 +19,11 @@ const Kind& kind_named(const std::string& name);
 void register_kind(Kind kind);
 
 // Config loading with the kinds' parsers (core/config.hpp).
-Config load_config(const fs::path& file, std::vector<InputError>* job_errors = nullptr);
+Config load_config(const fs::path& file, std::vector<InvalidJob>* job_errors = nullptr);
 Config parse_config(const std::string& text, const fs::path& file_for_messages,
-                    std::vector<InputError>* job_errors = nullptr);
+                    std::vector<InvalidJob>* job_errors = nullptr);
 Config parse_config(const YAML::Node& root, const fs::path& file_for_messages,
-                    std::vector<InputError>* job_errors = nullptr);
+                    std::vector<InvalidJob>* job_errors = nullptr);
 
 // check_device_memory (job/kind.hpp) with the job kind's own estimate.
 void check_device_memory(const JobSpec& job, const cl_util::DeviceInfo& device);

@@ -15,6 +15,7 @@
 #include <set>
 
 #include "core/hash.hpp"
+#include "core/text.hpp"
 #include "core/version.hpp"
 #include "io/bundle.hpp"
 
@@ -85,10 +86,18 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
       add_file(p);
     }
   }
-  auto invalid_report = [](const fs::path& file, const std::string& name, const Error& e) {
+  // Named by the job's name where it could be read, else by where it is: file:jobs[i] (the
+  // file alone when the whole file is invalid).
+  auto invalid_report = [](const fs::path& file, const std::string& name, const Error& e, const std::string& kind = "") {
     JobReport r;
     r.config = file.string();
     r.name = name;
+    r.kind = kind;
+    if (r.name.empty()) {
+      const auto* input = dynamic_cast<const InputError*>(&e);
+      const std::string key = input ? input->where().key : "";
+      r.name = file.string() + (key.rfind("jobs[", 0) == 0 ? ":" + key.substr(0, key.find(']') + 1) : "");
+    }
     r.status = "invalid";
     r.code = e.exit_code();
     r.reason = e.what();
@@ -98,7 +107,7 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
   std::map<std::pair<std::string, std::string>, Location> seen;  // (output, name)
   for (const auto& f : files) {
     Config c;
-    std::vector<InputError> job_errors;
+    std::vector<InvalidJob> job_errors;
     try {
       c = load_config(f, invalid ? &job_errors : nullptr);
     } catch (const Error& e) {
@@ -106,7 +115,7 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
       invalid->push_back(invalid_report(f, "", e));
       continue;
     }
-    for (const auto& e : job_errors) invalid->push_back(invalid_report(f, e.where().key, e));
+    for (const auto& e : job_errors) invalid->push_back(invalid_report(f, e.name, e.error, e.kind));
     std::vector<JobSpec> kept;
     for (auto& j : c.jobs) {
       const auto key = std::make_pair(fs::weakly_canonical(c.output).string(), j.name);
@@ -114,7 +123,7 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
         const InputError e(j.where, "job name '" + j.name + "' is also used by " + it->second.str() +
                                         " with the same output folder; expected names unique per output folder");
         if (!invalid) throw e;
-        invalid->push_back(invalid_report(f, j.name, e));
+        invalid->push_back(invalid_report(f, j.name, e, j.kind));
         continue;
       }
       seen.emplace(key, j.where);
@@ -172,6 +181,15 @@ ExitCode exit_code(const std::vector<JobReport>& reports) {
 }
 
 namespace {
+
+// A failed job's report keeps what it resolved and measured before it failed (BakeFailed).
+void take_what_it_got(const std::exception& e, JobReport& r) {
+  const auto* failed = dynamic_cast<const BakeFailed*>(&e);
+  if (!failed) return;
+  if (!failed->parameters.is_null()) r.parameters = failed->parameters;
+  if (!failed->accuracy.empty()) r.accuracy = failed->accuracy;
+  r.warnings = failed->warnings;
+}
 
 json device_json(const cl_util::DeviceInfo& d) {
   return {{"name", d.name}, {"platform", d.platform}, {"version", d.version}, {"type", d.type}, {"fp64", d.fp64}};
@@ -336,14 +354,16 @@ std::vector<JobReport> Runner::plan() {
       memo.store = &results;
       JobContext ctx{devices.get(info)};
       ctx.memo = &memo;
+      ctx.judge = !it.job->tolerance_advisory;  // as `run` judges: a search `run` would fail with fails here
       r.parameters = kind.plan(*it.job, ctx);
       const MemoryEstimate need = kind.memory(*it.job);
       check_device_memory(*it.job, need, info);
       check_host_memory(*it.job, need);
     } catch (const Error& e) {
-      r.status = "failed";
       r.code = e.exit_code();
+      r.status = r.code == ExitCode::invalid_input ? "invalid" : "failed";
       r.reason = e.what();
+      take_what_it_got(e, r);
     }
     if (done_) done_(r);
     reports.push_back(std::move(r));
@@ -366,7 +386,7 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   if (estimate_s < 0.0) estimate_s = kind.cost_s(job);
   const auto tb = Clock::now();
   JobContext ctx{dev};
-  ctx.judge = judge;
+  ctx.judge = judge && !job.tolerance_advisory;
   ctx.memo = memo;
   ctx.bundle_hash = bundle_hash;
   // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
@@ -382,7 +402,7 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   ctx.progress = [&](std::string_view what, double f) {
     throw_if_stopped();
     ev.what = std::string(what);
-    ev.fraction = std::clamp(f, 0.0, 1.0);
+    ev.fraction = std::max(ev.fraction, std::clamp(f, 0.0, 1.0));  // the job's share done never goes back
     const double elapsed = seconds_since(tb);
     // ETA: from the measured rate once a few percent are done, else from the estimate (`run`: the
     // cost model scaled by the job's last bake on this device, as `plan` shows it).
@@ -399,7 +419,28 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   for (const auto& [step_name, sec] : out.steps)
     spdlog::debug("{}: step {}: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", ev.job, step_name, sec.device_s,
                   sec.host_s(), sec.wall_s);
+  if (judge) judge_tolerances(job, out.result);
   return out;
+}
+
+void judge_tolerances(const JobSpec& job, BakeResult& result) {
+  std::string missed;
+  bool self_check = false;
+  for (const Accuracy& a : result.accuracy) {
+    if (!a.tolerance || a.passed) continue;
+    missed += (missed.empty() ? "" : "; ") + a.name + " " + format_g(a.value) + (a.unit.empty() ? "" : " " + a.unit) +
+              " > tolerance " + format_g(*a.tolerance) + " (" + a.metric + ")";
+    self_check = self_check || a.name == "self_check";
+  }
+  if (missed.empty()) return;
+  if (job.tolerance_advisory && !self_check) {
+    result.warnings.push_back("tolerance_advisory: published although it misses its tolerance: " + missed);
+    return;
+  }
+  throw BakeFailed("missed its tolerance: " + missed + "; nothing published" +
+                       (self_check ? " (a self-check is never advisory)"
+                                   : " (tolerance_advisory: true in the job publishes it with a warning)"),
+                   result.parameters, accuracy_json(result.accuracy), result.warnings);
 }
 
 std::vector<JobReport> Runner::run() {
@@ -430,10 +471,12 @@ std::vector<JobReport> Runner::run() {
       stopped = true;
     } else {
       const auto* known = dynamic_cast<const Error*>(&e);
-      r.status = "failed";
       r.code = known ? known->exit_code() : ExitCode::job_failed;
+      // a job the config or its input makes impossible (too large, an unreadable input) is invalid
+      r.status = r.code == ExitCode::invalid_input ? "invalid" : "failed";
       r.reason = e.what();
-      spdlog::error("{}: {}", r.name, e.what());
+      take_what_it_got(e, r);
+      spdlog::debug("{}: {}: {}", r.name, r.status, e.what());  // the summary (-q: stderr) says it once
     }
   };
   // The end of a job's report: a job left without a bundle leaves no empty folder; `done_` sees
@@ -467,7 +510,6 @@ std::vector<JobReport> Runner::run() {
       end = at;
       r.bundle = bundle;
       r.timings["write_s"] = std::chrono::duration<double>(at - publishing->start).count();
-      spdlog::info("{}: wrote {}", r.name, r.bundle.string());
     } catch (const std::exception& e) {
       record_failure(e, r);
     }
@@ -532,7 +574,8 @@ std::vector<JobReport> Runner::run() {
           BakeResult& result = baked.result;
           const double bake_s = baked.bake_s;
           for (const auto& [step_name, sec] : baked.steps) stage_s[step_name] = cl_util::seconds_json(sec);
-          for (const auto& w : result.warnings) spdlog::warn("{}: {}", name, w);
+          // the job's warnings are said once, by the summary (-q: on stderr)
+          for (const auto& w : result.warnings) spdlog::debug("{}: warning: {}", name, w);
           throw_if_stopped();
 
           json manifest = {
@@ -572,6 +615,7 @@ std::vector<JobReport> Runner::run() {
                                              [store, name, hash12, manifest = std::move(manifest),
                                               files = std::move(result.files)] {
                                                fs::path bundle = store.publish(name, hash12, manifest, files);
+                                               spdlog::info("{}: wrote {}", name, bundle.string());  // as it happens
                                                return std::make_pair(std::move(bundle), Clock::now());
                                              }),
                                   t0, start, store.job_dir(name)};

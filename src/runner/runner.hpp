@@ -90,6 +90,10 @@ struct TimedBake {
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
                      const RunProgress& progress, bool judge = true, Memo* memo = nullptr,
                      const std::string& bundle_hash = {}, double estimate_s = -1.0);
+// The job's accuracy records that miss their tolerance: BakeFailed (what it measured, its
+// parameters and warnings), or under `tolerance_advisory: true` a warning each (a failed
+// self_check is never advisory). bake_timed calls it when it judges.
+void judge_tolerances(const JobSpec& job, BakeResult& result);
 // Refuses (InputError at the job's entry) a job whose host-memory estimate exceeds what the
 // machine has available.
 void check_host_memory(const JobSpec& job, const MemoryEstimate& need);

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <map>
 
 #include "io/ktx2.hpp"
 #include "job/kind.hpp"
@@ -57,6 +58,17 @@ TEST(AtmosphereKtx2, HalfTexturesCarryTheirMeasuredRounding) {
     EXPECT_EQ(*k.value("specbake.bundle_hash"), m["job"]["hash"].get<std::string>());
     ASSERT_NE(k.value("KTXwriter"), nullptr);
     EXPECT_EQ(k.value("KTXwriter")->rfind("specbake ", 0), 0u);
+    // the same units in every copy: the manifest's for .bin, .exr and .ktx2, the KTX2's key/value
+    // data and the EXR's header (transmittance is a ratio, "1"; the others radiance units)
+    std::map<std::string, std::string> units;
+    for (const auto& file : m["files"]) units[file["path"].get<std::string>()] = file.value("units", "?");
+    const std::string bin_units = units[std::string(name) + ".bin"];
+    EXPECT_EQ(units[std::string(name) + ".ktx2"], bin_units);
+    EXPECT_EQ(units[std::string(name) + ".exr"], bin_units);
+    ASSERT_NE(k.value("specbake.units"), nullptr);
+    EXPECT_EQ(*k.value("specbake.units"), bin_units);
+    EXPECT_EQ(bin_units == "1", std::string(name) == "transmittance") << bin_units;
+    EXPECT_EQ(read(b / (std::string(name) + ".exr")).find("W m^-2") == std::string::npos, bin_units == "1");
     const auto f = bin_floats(b / (std::string(name) + ".bin"));  // [..][3]
     ASSERT_EQ(k.rgba.size() / 4, f.size() / 3);
     std::vector<float> widened(f.size());

@@ -281,6 +281,33 @@ TEST(AutoSettingsDevice, ATruthTooNoisyForTheToleranceIsSharpenedOnce) {
   EXPECT_EQ(given.record["rounds"][0]["truth_relative_se"], 0.01);
 }
 
+// `plan` runs the search as `run` would and reports a search that ends short of its tolerance as
+// a job that would fail (exit 1, its best try in the report), unless the tolerance is advisory.
+TEST(AutoSettingsCli, PlanReportsASearchThatFailsAsFailed) {
+  t::TempDir tmp;
+  const std::string job =
+      "specbake: 1\noutput: out\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 2\n"
+      "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 5, mu: 16, mu_s: 8, nu: 4}}\n"
+      "    spectrum: auto\n"
+      "    scene: {points: 6, relative_se: 0.1, sun_elevation_deg: [20, 60], tolerance_de2000: 0.001}\n";
+  t::write_file(tmp / "c.yaml", job);
+  auto p = t::run_cli({"plan", (tmp / "c.yaml").string(), "--report", (tmp / "r.json").string()}, tmp.path());
+  EXPECT_EQ(p.exit_code, 1) << p.out << p.err;
+  EXPECT_NE(p.out.find("0 planned, 1 failed"), std::string::npos) << p.out;
+  EXPECT_NE(p.out.find("sky: failed: spectrum: auto did not meet the scene's tolerance"), std::string::npos) << p.out;
+  const json r = t::read_json(tmp / "r.json");
+  EXPECT_EQ(r["jobs"][0]["status"], "failed");
+  EXPECT_EQ(r["jobs"][0]["exit_code"], 1);
+  EXPECT_FALSE(r["jobs"][0]["parameters"]["auto"]["met"].get<bool>()) << r.dump();
+  EXPECT_FALSE(r["jobs"][0]["parameters"]["auto"]["tries"].empty());
+  EXPECT_FALSE(fs::exists(tmp / "out"));
+
+  t::write_file(tmp / "c.yaml", job + "    tolerance_advisory: true\n");
+  p = t::run_cli({"plan", (tmp / "c.yaml").string()}, tmp.path());
+  EXPECT_EQ(p.exit_code, 0) << p.out << p.err;
+  EXPECT_NE(p.out.find("1 planned, 0 failed"), std::string::npos) << p.out;
+}
+
 TEST(AutoSettingsCli, MetAtTheStartBakesHalfTheDefaultSizes) {
   t::TempDir tmp;
   t::write_file(tmp / "c.yaml",

@@ -64,8 +64,9 @@ TEST(TruthCli, ContractColumnsDeterminismAndBundleLookups) {
       EXPECT_LT(std::fabs(std::log(L / lut)), std::log(2.0)) << rows[0][4 + 2 * c];
     }
   }
-  // Same seed, same bytes; another seed, other numbers.
-  ASSERT_EQ(truth("r2.csv", {"--bundle", (tmp / "out" / "sky" / "latest").string()}).exit_code, 0);
+  // Same seed, same bytes (the job folder names its latest bundle, as for inspect and diff);
+  // another seed, other numbers.
+  ASSERT_EQ(truth("r2.csv", {"--bundle", (tmp / "out" / "sky").string()}).exit_code, 0);
   EXPECT_EQ(read(tmp / "r1.csv"), read(tmp / "r2.csv"));
   ASSERT_EQ(truth("r3.csv", {"--seed", "7", "--orders", "1"}).exit_code, 0);
   EXPECT_NE(read(tmp / "r3.csv").substr(read(tmp / "r3.csv").find('\n')), read(tmp / "r1.csv").substr(read(tmp / "r1.csv").find('\n')));
@@ -91,6 +92,18 @@ TEST(TruthCli, BadInputs) {
   EXPECT_NE(r.err.find("did you mean 'sky'"), std::string::npos) << r.err;
   EXPECT_EQ(run("prism", "bad.csv").exit_code, 2);  // not an atmosphere job
   EXPECT_EQ(run("sky", "bad.csv", {"--orders", "zero"}).exit_code, 2);
+  // An output it cannot write, or a --bundle that is no bundle, is found before the trace (which
+  // at 10^9 walks a point would not end within the test's timeout).
+  t::write_file(tmp / "p.csv", "altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg\n0,0,30,0\n");
+  r = t::run_cli({"truth", (tmp / "c.yaml").string(), "--job", "sky", "--points", (tmp / "p.csv").string(), "--out",
+                  (tmp / "no-such-folder" / "r.csv").string(), "--paths", "1000000000"},
+                 tmp.path());
+  EXPECT_EQ(r.exit_code, 5) << r.err;
+  EXPECT_NE(r.err.find("no-such-folder"), std::string::npos) << r.err;
+  r = run("sky", "p.csv", {"--paths", "1000000000", "--bundle", tmp.path().string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("expected a bundle folder"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(tmp / "r.csv"));
 }
 
 }  // namespace

@@ -7,8 +7,10 @@
 
 #include <chrono>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <set>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -131,6 +133,40 @@ TEST_F(CliUser, KeepGoingRunsEveryValidJob) {
   EXPECT_TRUE(found) << rep.dump(1);
 }
 
+// Invalid jobs are named by their name and kind where the config gives them (else file:jobs[i]),
+// counted as invalid, said once; plan counts only what it planned; a config error without
+// --keep-going is in the report as an invalid job too.
+TEST_F(CliUser, InvalidJobsAreNamedAndCounted) {
+  const fs::path a = cfg(config("  - name: bad-a\n    kind: dispersion\n    sampels: 3\n    material: {glass: N-BK7}\n" +
+                                kPrism),
+                         "a.yaml");
+  const fs::path b = cfg(config("  - kind: diffraction\n    heightfield: {file: missing.png, dx_um: 0.1, height_um: 0.2}\n"),
+                         "b.yaml");
+  auto r = run({"plan", a.string(), b.string(), "--keep-going", "--report", (tmp_ / "p.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.out << r.err;
+  EXPECT_NE(r.out.find("1 planned, 0 failed, 2 invalid"), std::string::npos) << r.out;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("\nbad-a +dispersion +invalid"))) << r.out;
+  EXPECT_NE(r.out.find(b.string() + ":jobs[0]: invalid: "), std::string::npos) << r.out;
+  EXPECT_EQ(count(r.out + r.err, "unknown key 'sampels'"), 1) << r.out << r.err;
+  json rep = t::read_json(tmp_ / "p.json");
+  EXPECT_EQ(rep["summary"]["planned"], 1);
+  EXPECT_EQ(rep["summary"]["invalid"], 2);
+  EXPECT_EQ(rep["jobs"][1]["name"], "bad-a");
+  EXPECT_EQ(rep["jobs"][1]["kind"], "dispersion");
+  EXPECT_EQ(rep["jobs"][1]["status"], "invalid");
+  EXPECT_EQ(rep["jobs"][2]["name"], b.string() + ":jobs[0]");
+
+  r = run({"run", a.string(), "--report", (tmp_ / "r.json").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism"));
+  rep = t::read_json(tmp_ / "r.json");
+  EXPECT_EQ(rep["summary"]["invalid"], 1);
+  ASSERT_EQ(rep["jobs"].size(), 1u) << rep.dump();
+  EXPECT_EQ(rep["jobs"][0]["name"], "bad-a");
+  EXPECT_EQ(rep["jobs"][0]["exit_code"], 3);
+  EXPECT_NE(rep.value("error", "").find("sampels"), std::string::npos);
+}
+
 // Ctrl-C (or SIGTERM) ends the run at a safe point: no temporary folder, no lock, the report
 // and the summary say what finished, exit 130 (143 for SIGTERM).
 TEST_F(CliUser, InterruptStopsAtASafePoint) {
@@ -195,6 +231,59 @@ TEST_F(CliUser, QuietVerboseAndWarnings) {
   EXPECT_EQ(v.err.find("[trace]"), std::string::npos) << v.err;
 }
 
+// A job that misses a tolerance it has fails (exit 1, nothing published), and its report keeps
+// what it resolved and measured; `tolerance_advisory: true` publishes it with a warning. A
+// dispersion job's colour error is judged when the config gives tolerance_de2000.
+TEST_F(CliUser, AMissedToleranceFailsUnlessAdvisory) {
+  const std::string grating =
+      "  - name: grating\n    kind: diffraction\n"
+      "    procedural: {type: sine-grating, size: 64, dx_um: 0.25, period_um: 2.0, amplitude_um: 0.15}\n"
+      "    terms: 2\n";  // 2 Taylor terms at y_max = 5: an error of order 1 against the default 1e-4
+  const std::string prism = "  - name: prism\n    kind: dispersion\n    samples: 3\n    material: {glass: N-BK7}\n";
+  const fs::path strict = cfg(config(grating + prism + "    tolerance_de2000: 0.5\n"));
+  auto r = run({"run", strict.string(), "--report", (tmp_ / "r.json").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_NE(r.out.find("0 built, 0 up to date, 2 failed"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("grating: failed: missed its tolerance: vs_exact_transform"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("prism: failed: missed its tolerance: prism_de2000"), std::string::npos) << r.out;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("\ngrating +diffraction +failed +[0-9.]+ s "))) << r.out;
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "grating"));
+  EXPECT_FALSE(fs::exists(tmp_ / "out" / "prism"));
+  // a full-bin diffraction bundle carries no shader, and the summary says so
+  EXPECT_NE(r.out.find("2 taylor terms, field 64x64, no GLSL (table: none)"), std::string::npos) << r.out;
+  const json rep = t::read_json(tmp_ / "r.json");
+  for (const auto& j : rep["jobs"]) {
+    EXPECT_EQ(j["status"], "failed");
+    EXPECT_EQ(j["exit_code"], 1);
+    EXPECT_TRUE(j["parameters"].is_object() && !j["parameters"].empty()) << j.dump();
+    ASSERT_TRUE(j["accuracy"].is_array() && !j["accuracy"].empty()) << j.dump();
+    EXPECT_FALSE(j["accuracy"][0]["passed"].get<bool>()) << j.dump();
+  }
+  EXPECT_EQ(rep["summary"]["failed"], 2);
+
+  // advisory: both published, each with a warning naming what it missed
+  const fs::path advisory =
+      cfg(config(grating + "    tolerance_advisory: true\n" + prism + "    tolerance_de2000: 0.5\n    tolerance_advisory: true\n"),
+          "advisory.yaml");
+  r = run({"run", advisory.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("2 built"), std::string::npos) << r.out;
+  EXPECT_EQ(count(r.out, "tolerance_advisory: published although it misses its tolerance"), 2) << r.out;
+  const json m = t::read_json(tmp_ / "out" / "prism" / "latest" / "manifest.json");
+  EXPECT_EQ(m["config"]["tolerance_advisory"], true);
+
+  // no tolerance_de2000 given with fixed samples: the colour error is reported, not judged
+  r = run({"run", cfg(config(prism), "reported.yaml").string(), "--out", (tmp_ / "o2").string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  const json m2 = t::read_json(tmp_ / "o2" / "prism" / "latest" / "manifest.json");
+  EXPECT_TRUE(m2["accuracy"][0]["tolerance"].is_null()) << m2["accuracy"][0].dump();
+  EXPECT_FALSE(m2["config"].contains("tolerance_advisory"));
+
+  r = run({"run", cfg(config(prism + "    tolerance_advisory: yes\n"), "bad.yaml").string()});
+  EXPECT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("tolerance_advisory"), std::string::npos) << r.err;
+}
+
 // Options given an empty value, and an option followed by a config path.
 TEST_F(CliUser, EmptyValuesAndOptionArity) {
   const fs::path c = cfg(config(kPrism));
@@ -221,6 +310,53 @@ TEST_F(CliUser, SuggestionsForTypos) {
   EXPECT_EQ(r.exit_code, 3);
   EXPECT_NE(r.err.find("did you mean 'samples'"), std::string::npos) << r.err;
   r = run({"plan", c.string(), "--only", "prizm"});
+  // options, and `help` as a command
+  r = run({"run", "--frce", c.string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("unknown option '--frce' (did you mean '--force'?)"), std::string::npos) << r.err;
+  r = run({"help"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("Usage: specbake"), std::string::npos) << r.out;
+  r = run({"help", "run"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("--keep-going"), std::string::npos) << r.out;
+  r = run({"hlep"});
+  EXPECT_NE(r.err.find("did you mean 'help'"), std::string::npos) << r.err;
+}
+
+// diff: accuracy changes shown old -> new, every line short enough to read, a bad threshold
+// said in words.
+TEST_F(CliUser, DiffShowsAccuracyChangesInShortLines) {
+  const auto sky = [](int mu) {
+    return "  - name: sky\n    kind: atmosphere\n    orders: 3\n"
+           "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: " +
+           std::to_string(mu) + ", mu_s: 6, nu: 3}}\n    scene: {points: 16}\n";
+  };
+  ASSERT_EQ(run({"run", cfg(config(sky(8)), "a.yaml").string(), "--out", (tmp_ / "a").string()}).exit_code, 0);
+  ASSERT_EQ(run({"run", cfg(config(sky(10)), "b.yaml").string(), "--out", (tmp_ / "b").string()}).exit_code, 0);
+  auto r = run({"diff", (tmp_ / "a" / "sky").string(), (tmp_ / "b" / "sky").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_TRUE(std::regex_search(r.out, std::regex("accuracy changes:\n(  .*\n)*  vs_path_traced: [0-9.e+-]+ -> [0-9.e+-]+\n")))
+      << r.out;
+  EXPECT_NE(r.out.find("parameters.orders.per_order: list of 3, "), std::string::npos) << r.out;
+  std::istringstream lines(r.out);
+  for (std::string line; std::getline(lines, line);) EXPECT_LT(line.size(), 300u) << line;
+  r = run({"diff", (tmp_ / "a" / "sky").string(), (tmp_ / "b" / "sky").string(), "--fail-rel", "-1"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("expected a number >= 0, got '-1'"), std::string::npos) << r.err;
+  EXPECT_LT(r.err.size(), 200u) << r.err;
+}
+
+// A config without `output:` writes into ./assets of the working folder; the summary says so.
+TEST_F(CliUser, DefaultOutputIsSaid) {
+  const fs::path c = cfg("specbake: 1\njobs:\n" + kPrism, "no-output.yaml");
+  const auto r = run({"plan", c.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("bundles would go to " + (tmp_ / "assets").string() + " (the working folder's ./assets: " +
+                       c.string() + " has no `output:`"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(run({"plan", cfg(config(kPrism)).string()}).out.find("working folder's"), std::string::npos);
 }
 
 // YAML mistakes are reported where they begin.
@@ -377,6 +513,15 @@ TEST_F(CliUser, GcDryRunAndLeftovers) {
   fs::create_directories(tmp_ / "out" / "prism" / ".tmp-0123456789ab-999999");
   t::write_file(tmp_ / "out" / "prism" / ".lock", "999999\n");  // no process holds it
   const auto before = t::snapshot(tmp_ / "out");
+  // A job or bundle folder given for the output folder is refused, naming the folder to give.
+  for (const fs::path& wrong : {tmp_ / "out" / "prism", tmp_ / "out" / "prism" / "latest"}) {
+    const auto w = run({"gc", wrong.string(), "--keep", "1"});
+    EXPECT_EQ(w.exit_code, 2) << w.out << w.err;
+    EXPECT_NE(w.err.find("gc takes the output folder that holds the job folders: " + (tmp_ / "out").string()),
+              std::string::npos)
+        << w.err;
+  }
+  EXPECT_TRUE(t::snapshot(tmp_ / "out") == before);
   // Three bundles created within a second: keep 1 keeps latest and one newest (2 when they
   // differ by name order); the dry run and the real run agree on the list.
   auto r = run({"gc", (tmp_ / "out").string(), "--keep", "1", "--dry-run"});
@@ -472,11 +617,27 @@ namespace {
 // the step, what is running, the percentage and an ETA. `script` gives the run a terminal.
 TEST_F(CliUser, LiveProgressOnATerminal) {
   if (std::system("command -v script > /dev/null 2>&1") != 0) GTEST_SKIP() << "no `script` to provide a terminal";
-  const fs::path c = cfg(config(kSky));
+  const fs::path c = cfg(config(kSky + "  - name: flint\n    kind: dispersion\n    samples: 8\n    range_nm: [390, 780]\n"
+                                       "    material: {glass: N-SF11}\n"));
   const std::string text = run_on_terminal("run " + c.string() + " --out " + (tmp_ / "out").string());
-  EXPECT_NE(text.find("\r\033[K[1/1] sky: compute, order 2: scattering density"), std::string::npos) << text;
+  EXPECT_NE(text.find("\r\033[K[1/2] sky: compute, order 2: scattering density"), std::string::npos) << text;
   EXPECT_TRUE(std::regex_search(text, std::regex("[0-9]+ %, ETA [0-9.]+ s"))) << text;
-  EXPECT_NE(text.find("1 built"), std::string::npos) << text;
+  EXPECT_NE(text.find("2 built"), std::string::npos) << text;
+  // read as someone new: no log lines but warnings at the default verbosity, each warning once,
+  // the files step named once, and each job's percentage never going back
+  EXPECT_EQ(text.find("[info]"), std::string::npos) << text;
+  EXPECT_EQ(count(text, "the Cauchy/Abbe model"), 1) << text;
+  EXPECT_EQ(text.find("files, files"), std::string::npos) << text;
+  EXPECT_NE(text.find("flint: files "), std::string::npos) << text;
+  std::map<std::string, int> last;
+  const std::regex line("\\[[0-9]+/2\\] ([a-z]+): [^\r\n]*? +([0-9]+) %");
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), line); it != std::sregex_iterator(); ++it) {
+    const std::string job = (*it)[1];
+    const int percent = std::stoi((*it)[2]);
+    EXPECT_GE(percent, last[job]) << job << " went back to " << percent << " %";
+    last[job] = percent;
+  }
+  EXPECT_EQ(last.size(), 2u) << text;
 }
 
 // Before 5 % of a job is done the ETA comes from the estimate `plan` shows: the cost model

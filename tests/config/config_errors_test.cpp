@@ -3,6 +3,7 @@
 // and what was expected; nothing is written, and a bundle from an earlier good run into the
 // same output folder stays exactly as it was (every file's sha256, `latest`).
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <sys/stat.h>
 
@@ -226,6 +227,14 @@ TEST_F(ConfigErrors, MissingConfigIsAnIoError) {
   const auto r = t::run_cli({"run", (tmp_ / "nope.yaml").string()});
   EXPECT_EQ(r.exit_code, 5) << r.err;
   EXPECT_NE(r.err.find((tmp_ / "nope.yaml").string()), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("No such file or directory; expected a YAML file"), std::string::npos) << r.err;  // says why
+  if (::geteuid() != 0) {  // root reads any file; others get the system's reason
+    t::write_file(tmp_ / "locked.yaml", kGood);
+    fs::permissions(tmp_ / "locked.yaml", fs::perms::none);
+    const auto l = t::run_cli({"run", (tmp_ / "locked.yaml").string()});
+    EXPECT_EQ(l.exit_code, 5) << l.err;
+    EXPECT_NE(l.err.find("Permission denied"), std::string::npos) << l.err;
+  }
 }
 
 // An output folder that cannot be created: exit 5, naming the folder; nothing else written.

@@ -230,7 +230,15 @@ TEST(DiffractionCli, FixedTermsBelowToleranceAreFlaggedAndAutoFailsClearly) {
   tst::TempDir dir;
   const std::string field = "    procedural: {type: eggcrate, size: 32, dx_um: 0.1, period_um: 0.8, peak_to_valley_um: 1.2}\n";
   tst::write_file(dir / "fixed.yaml", config(field + "    expansion: taylor\n    terms: 6\n    crop: none\n"));
+  // a tolerance it misses fails the job (nothing published) ...
   auto r = tst::run_cli({"run", (dir / "fixed.yaml").string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out << r.err;
+  EXPECT_NE(r.out.find("missed its tolerance: vs_exact_transform"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "out/d/latest"));
+  // ... unless the job says it is advisory: then it is shipped, flagged
+  tst::write_file(dir / "fixed.yaml",
+                  config(field + "    expansion: taylor\n    terms: 6\n    crop: none\n    tolerance_advisory: true\n"));
+  r = tst::run_cli({"run", (dir / "fixed.yaml").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_NE((r.out + r.err).find("FIXED TERMS DO NOT MEET THE TOLERANCE"), std::string::npos) << r.err;
   const auto m = tst::read_json(dir / "out/d/latest/manifest.json");

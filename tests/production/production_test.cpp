@@ -373,7 +373,7 @@ TEST(Production, FullDiskFailsWithIoErrorAndKeepsPreviousBundle) {
       "find " + disk + " -type f ! -name .lock -exec sha256sum {} + | sort > before.txt; " +
       "readlink " + disk + "/prism-a/latest >> before.txt; " +
       "dd if=/dev/zero of=" + disk + "/filler bs=4k 2>/dev/null; " +
-      exe + " run c.yaml --out " + disk + " --force 2> err.txt; echo $? > rc.txt; " +
+      exe + " run c.yaml --out " + disk + " --force > err.txt 2>&1; echo $? > rc.txt; " +
       "rm " + disk + "/filler; " +
       "find " + disk + " -type f ! -name .lock -exec sha256sum {} + | sort > after.txt; " +
       "readlink " + disk + "/prism-a/latest >> after.txt; " +

@@ -411,7 +411,10 @@ json plan(const AtmosphereSpec& spec, JobContext& ctx) {
   AutoSearch found = search_settings(spec, ctx.device, ctx.progress, ctx.memo ? *ctx.memo : local);
   json p = parameters_json(found.resolved);
   p["auto"] = found.record;
-  if (!found.met) p["auto"]["failure"] = found.failure;
+  if (!found.met) {
+    if (ctx.judge) throw BakeFailed(found.failure, p);  // as `run` would fail: its best try reported
+    p["auto"]["failure"] = found.failure;
+  }
   return p;
 }
 
@@ -461,7 +464,7 @@ AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResu
   r.parameters["auto"] = auto_record;
   record_orders(use, b, r);
   if (!found.met) {
-    if (ctx.judge) throw JobError(found.failure);
+    if (ctx.judge) throw BakeFailed(found.failure, r.parameters, accuracy_json({checked->record}), r.warnings);
     r.warnings.push_back(found.failure);
   }
   return use;
@@ -572,7 +575,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
   for (std::string& w : sc.warnings) r.warnings.push_back(std::move(w));
   if (!sc.failure.empty()) {
-    if (ctx.judge) throw JobError(sc.failure);
+    if (ctx.judge) throw BakeFailed(sc.failure, r.parameters, accuracy_json(r.accuracy), r.warnings);
     r.warnings.push_back(sc.failure);
   }
 }
@@ -647,24 +650,25 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
     const std::vector<double>* data;
     std::uint32_t width, height, depth;
     const char* layout;
+    const std::string& units;
   };
   const std::uint32_t wd = static_cast<std::uint32_t>(s.scattering_width());
+  const std::string unitless = "1";  // transmittance is a ratio, as in its .bin and .exr
   const Texture textures[] = {
       {spec.out_transmittance, "transmittance", &L.transmittance, std::uint32_t(s.transmittance_w),
-       std::uint32_t(s.transmittance_h), 0, "2D: x = mu coordinate, y = r coordinate"},
+       std::uint32_t(s.transmittance_h), 0, "2D: x = mu coordinate, y = r coordinate", unitless},
       {spec.out_irradiance, "irradiance", &L.irradiance, std::uint32_t(s.irradiance_w), std::uint32_t(s.irradiance_h), 0,
-       "2D: x = mu_s coordinate, y = r coordinate"},
+       "2D: x = mu_s coordinate, y = r coordinate", units},
       {spec.out_scattering && !spec.ktx2_combined, "scattering", &L.scattering, wd, std::uint32_t(s.mu),
-       std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"},
+       std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r", units},
       {spec.out_single_mie && !spec.ktx2_combined, "single_mie_scattering", &L.single_mie, wd, std::uint32_t(s.mu),
-       std::uint32_t(s.r),
-       "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r"}};
+       std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r", units}};
   const std::string sizes = sizes_key(s);
   for (const Texture& t : textures) {
     if (!t.wanted) continue;
     const std::vector<float> f(t.data->begin(), t.data->end());
     add_ktx2_file(spec.ktx2,
-                  {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, units,
+                  {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, t.units,
                    std::string(t.name) + " (KTX2 copy)",
                    {{"specbake.parameterisation", param}, {"specbake.sizes", sizes}}},
                   ctx, r);
@@ -787,11 +791,11 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     r.files.push_back(std::move(f));
     encode.push_back([&r, at, bytes = std::move(bytes)] { r.files[at].bytes = bytes(); });
   };
-  auto attrs = [&](const std::string& layout, const std::string& content) {
+  auto attrs = [&](const std::string& layout, const std::string& content, const std::string& of = "") {
     return std::map<std::string, std::string>{{"specbake.layout", layout},
                                               {"specbake.content", content},
                                               {"specbake.parameterisation", param},
-                                              {"specbake.units", units}};
+                                              {"specbake.units", of.empty() ? units : of}};
   };
   if (spec.out_transmittance) {
     const std::string lay = "[r=" + std::to_string(s.transmittance_h) + "][mu=" + std::to_string(s.transmittance_w) +
@@ -801,7 +805,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
           [&] { return float32_le(L.transmittance, "transmittance"); });
     later({"transmittance.exr", "", "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32, row j = r index",
            "1", "transmittance (EXR copy)"},
-          [&, a = attrs(lay, "transmittance to the top boundary")] {
+          [&, a = attrs(lay, "transmittance to the top boundary", "1")] {
             return exr_of(s.transmittance_w, s.transmittance_h, L.transmittance, a);
           });
   }

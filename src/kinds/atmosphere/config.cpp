@@ -234,7 +234,7 @@ bool sizes_within_limits(const AtmosphereSpec& s) {
 }
 
 AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
-  job.allow_keys({"name", "kind", "preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
+  allow_job_keys(job, {"preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
                   "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
                   "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
                   "ktx2", "scene", "previews", "quadrature"});

@@ -175,7 +175,7 @@ void parse_table_keys(const At& job, DiffractionSpec& d) {
 }  // namespace
 
 DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
-  job.allow_keys({"name", "kind", "heightfield", "procedural", "range_nm", "w_max", "expansion", "terms", "tolerance",
+  allow_job_keys(job, {"heightfield", "procedural", "range_nm", "w_max", "expansion", "terms", "tolerance",
                   "center", "crop", "storage", "coherence", "table", "max_bundle_mb", "formats", "ktx2"});
   DiffractionSpec d;
   nlohmann::json field_norm;

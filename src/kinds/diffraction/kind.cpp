@@ -80,6 +80,8 @@ Kind kind() {
       s += ", field " + std::to_string(p["field"].value("width", 0)) + "x" + std::to_string(p["field"].value("height", 0));
     if (p.contains("table_size"))
       s += p["table_size"].is_string() ? ", table auto" : ", table " + p["table_size"].dump() + "^2";
+    else
+      s += ", no GLSL (table: none)";  // only a table is a shader's texture (docs/diffraction.md)
     if (p.contains("bins") && p["bins"].contains("ku"))
       s += ", bins " + p["bins"]["ku"].dump() + " x " + p["bins"]["kv"].dump();
     return s;

@@ -102,7 +102,7 @@ Material parse_material(const At& at, nlohmann::json& norm, Inputs& inputs) {
 }  // namespace
 
 DispersionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
-  job.allow_keys({"name", "kind", "samples", "sampling", "range_nm", "cmf", "material",
+  allow_job_keys(job, {"samples", "sampling", "range_nm", "cmf", "material",
                   "abbe_lines", "tolerance_de2000", "spread"});
   DispersionSpec d;
   d.samples = job.has("samples") ? job.child("samples").count_or_auto(1, kMaxSamples) : std::optional<int>(16);
@@ -150,6 +150,8 @@ DispersionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
           {"abbe_lines", to_string(d.abbe_lines)},
           {"tolerance_de2000", d.tolerance_de2000},
           {"spread", d.spread}};
+  d.judge_de2000 = !d.samples || job.has("tolerance_de2000");
+  if (d.samples && d.judge_de2000) norm["tolerance_de2000_judged"] = true;  // absent: as before, reported only
   return d;
 }
 

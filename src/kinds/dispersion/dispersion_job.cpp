@@ -486,7 +486,8 @@ void check_step(const DispersionSpec& spec, const Planned& p, const Tables& t, J
   ctx.progress("prism colour error", 0.85);
   PrismJudge judge(dev, spec);
   r.accuracy.push_back(Accuracy::judged(
-      "prism_de2000", "mean CIEDE2000 over lit pixels", judge.mean_delta_e(t), std::nullopt,
+      "prism_de2000", "mean CIEDE2000 over lit pixels", judge.mean_delta_e(t),
+      spec.judge_de2000 ? std::optional<double>(spec.tolerance_de2000) : std::nullopt,
       "the same prism picture from a 0.1 nm spectrum",
       {{"spread", spec.spread},
        {"note", "white box beam through a thin prism; falls slowly with N (about N^-1.3) and not monotonically"},

@@ -29,6 +29,9 @@ struct DispersionSpec : KindSpec {
   Material material;
   AbbeLines abbe_lines = AbbeLines::d;
   double tolerance_de2000 = 1.0;
+  // prism_de2000 is judged against tolerance_de2000 under samples: auto, and with fixed samples
+  // when the config gives tolerance_de2000 (else it is reported only)
+  bool judge_de2000 = false;
   double spread = 4.0;
 };
 
