@@ -73,9 +73,11 @@ TEST(AtmosphereRadiance, FilesHoldTheRadianceTheLuminanceTexturesWereSummedFrom)
           abs_sum += std::fabs(to_rgb[c][g] * v);
         }
         any_light = any_light || abs_sum > 0.0;
-        // The luminance is the double sum rounded once to float32 (2^-24 of it); the stored
-        // radiances are each rounded once (2^-24 of each term); twice that bounds both.
-        const double bound = std::ldexp(1.0, -23) * (std::fabs(lum[3 * i + c]) + abs_sum) + 1e-30;
+        // Both sides are float32 sums over the 2 orders made on the device (pass.hpp's Sums): the
+        // luminance's weighted sum and each stored radiance round once per order's addition and
+        // once when stored, 2^-24 each: 3 roundings a side bound both (one rounding a side was
+        // seen to be exceeded by 2 % once the density's θ rule changed the values).
+        const double bound = 3.0 * std::ldexp(1.0, -23) * (std::fabs(lum[3 * i + c]) + abs_sum) + 1e-30;
         worst = std::max(worst, std::fabs(sum - lum[3 * i + c]) / bound);
       }
     }

@@ -18,7 +18,7 @@ using nlohmann::json;
 const char* kGrating =
     "  - name: grating\n    kind: diffraction\n"
     "    procedural: {type: sine-grating, size: 32, dx_um: 0.125, period_um: 1.0, amplitude_um: 0.2}\n"
-    "    table: {size: 16}\n    coherence: {length_um: 3}\n";
+    "    table: {size: 16}\n    coherence: {length_um: 3}\n    tolerance_advisory: true\n";
 
 std::string prism(int samples) {
   return "  - name: prism\n    kind: dispersion\n    samples: " + std::to_string(samples) +

@@ -47,6 +47,7 @@ jobs:
     procedural: {type: sine-grating, size: 32, dx_um: 0.125, period_um: 1.0, amplitude_um: 0.2}
     table: {size: 16}
     coherence: {length_um: 3}
+    tolerance_advisory: true
   - name: prism
     kind: dispersion
     samples: %d
