@@ -13,6 +13,7 @@
 #include <mutex>
 #include <optional>
 #include <sstream>
+#include <set>
 
 #include "cl/device.hpp"
 #include "core/hash.hpp"
@@ -603,7 +604,11 @@ int cmd_report(const std::vector<std::string>& inputs, const std::string& out, b
     ReportPage page = folders.empty() ? ReportPage{} : report_page_from_output(folders);
     if (night) {
       for (const auto& shard : night->shards) page.sources.push_back(fs::absolute(shard.file).lexically_normal().string());
-      for (const auto& job : night->jobs) page.jobs.push_back(page_job_from_report_entry(job.decision().job));
+      // a job the output folders show already (its bundle, previews) is not listed twice
+      std::set<std::string> shown;
+      for (const auto& j : page.jobs) shown.insert(j.name);
+      for (const auto& job : night->jobs)
+        if (!shown.count(job.name)) page.jobs.push_back(page_job_from_report_entry(job.decision().job));
     }
     write_report_html(page, file);
     if (!quiet && !as_json)
