@@ -8,17 +8,18 @@
 // hundreds of km away within a few degrees of the horizontal, between two nodes. The default
 // rule packs the nodes towards the horizon, and the μ_s lookups blend the two texels
 // geometrically (the twilight sky falls by ~e per degree of sun elevation; the default μ_s
-// texels lie ~1.5° apart there, where a linear blend overstates it by up to 2×).
+// texels lie ~1.5° apart there, where a linear blend overstates it by up to 2×) in the
+// shipped lookups.
 //
-// The bounds. The truth's relative se at these points is ≤ 15 % (asserted; one view reached 15.6 % with half these walks, so ~11 % here; mostly
-// 2–6 %), which adds ≲ 0.06 to a mean of |log| over 48 values; what remains of the bake's
-// error is the textures' resolution in μ_s, ν and r (measured on 28 such views, orders ≤ 2:
-// mean |log(LUT/truth)| 0.14, 0.49 with the reference's rules; here 0.16 against 0.68, and
-// 0.14 against 0.70 with 2× the walks). Asserted: the mean of |log(LUT/truth)| over the points and channels below 0.3,
-// and no ratio below 0.5 (the fault was darkness); the reference rules must still miss both
-// here (mean above 0.4, a ratio below 0.5: they reach 0.27), showing the test can fail. Some
-// views stay too bright (up to 2.7× at 80° away from a sun 11° down, 440 nm): resolution, left
-// to larger sizes.
+// The bounds. The truth's relative se at these points is ≤ 15 % (asserted; one view reached
+// 15.6 % with half these walks, so ~11 % here; mostly 2–6 %), which adds ≲ 0.06 to a mean of
+// |log| over 48 values; what remains of the bake's error is the textures' resolution in μ_s, ν
+// and r and the bake's own linear μ_s lookups of J (measured on 28 such views, orders ≤ 2: mean
+// |log(LUT/truth)| 0.19, 0.49 with the reference's rules; here 0.20 against 0.68). Asserted:
+// the mean of |log(LUT/truth)| over the points and channels below 0.3, and no ratio below 0.5
+// (the fault was darkness); the reference rules must still miss both here (mean above 0.4, a
+// ratio below 0.5: they reach 0.27), showing the test can fail. Some views stay too bright (up
+// to 3.1× at 80° away from a sun 11° down, 440 nm): resolution, left to larger sizes.
 #include <gtest/gtest.h>
 
 #include <cmath>
