@@ -212,18 +212,8 @@ TEST(AtmosphereGl, ShippedSamplingMatchesTheHostOnLlvmpipe) {
 
   constexpr int kN = 48;
   const std::vector<View> views = preview_views(m, kN);
-  // The combined texture (RGB scattering, alpha single Mie red), as scattering.ktx2 holds it.
-  std::vector<double> combined(luts.scattering.size() / 3 * 4);
-  for (std::size_t i = 0; i < luts.scattering.size() / 3; ++i) {
-    for (int c = 0; c < 3; ++c) combined[4 * i + c] = luts.scattering[3 * i + c];
-    combined[4 * i + 3] = luts.single_mie[3 * i];
-  }
-  const Host host{glsl::atmosphere_of(m, luts.rgb),
-                  {luts.transmittance.data(), s.transmittance_w, s.transmittance_h},
-                  {luts.irradiance.data(), s.irradiance_w, s.irradiance_h},
-                  {luts.scattering.data(), s.scattering_width(), s.mu, s.r},
-                  {luts.single_mie.data(), s.scattering_width(), s.mu, s.r},
-                  {combined.data(), s.scattering_width(), s.mu, s.r, nullptr, 4}};
+  const std::vector<double> combined = combined_texture(luts);
+  const Host host = host_of(luts, combined);
 
   // Textures: units 0 transmittance, 1 irradiance, 2/3 scattering and single Mie 3D, 4/5 the same
   // tiled 2D, 6 the pixels' inputs (dir, kind), 7 the ground points (p_up, p_h), 8 the combined 3D.

@@ -61,6 +61,26 @@ struct Host {
   }
 };
 
+// The combined texture (RGB scattering, alpha single Mie red), as scattering.ktx2 holds it.
+inline std::vector<double> combined_texture(const atmosphere::Luts& luts) {
+  std::vector<double> combined(luts.scattering.size() / 3 * 4);
+  for (std::size_t i = 0; i < luts.scattering.size() / 3; ++i) {
+    for (int c = 0; c < 3; ++c) combined[4 * i + c] = luts.scattering[3 * i + c];
+    combined[4 * i + 3] = luts.single_mie[3 * i];
+  }
+  return combined;
+}
+// The host evaluation of a bundle's textures (`combined`: combined_texture(luts), kept alive).
+inline Host host_of(const atmosphere::Luts& luts, const std::vector<double>& combined) {
+  const auto& s = luts.model.sizes;
+  return Host{glsl::atmosphere_of(luts.model, luts.rgb),
+              {luts.transmittance.data(), s.transmittance_w, s.transmittance_h},
+              {luts.irradiance.data(), s.irradiance_w, s.irradiance_h},
+              {luts.scattering.data(), s.scattering_width(), s.mu, s.r},
+              {luts.single_mie.data(), s.scattering_width(), s.mu, s.r},
+              {combined.data(), s.scattering_width(), s.mu, s.r, nullptr, 4}};
+}
+
 // The per-pixel bound on |GL − host|, per output and channel, as three terms:
 //  - filtering: GL implementations resolve texel coordinates to 8 fractional bits (D3D11's
 //    minimum, which GL implementations follow), so each fetch may blend as if its coordinate were

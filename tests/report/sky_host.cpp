@@ -33,17 +33,8 @@ int main(int argc, char** argv) {
     const double h = f32(std::atof(argv[6]));
     const auto& m = luts.model;
     const auto& s = m.sizes;
-    std::vector<double> combined(luts.scattering.size() / 3 * 4);  // as the GL test's Host holds it
-    for (std::size_t i = 0; i < luts.scattering.size() / 3; ++i) {
-      for (int c = 0; c < 3; ++c) combined[4 * i + c] = luts.scattering[3 * i + c];
-      combined[4 * i + 3] = luts.single_mie[3 * i];
-    }
-    const Host host{glsl::atmosphere_of(m, luts.rgb),
-                    {luts.transmittance.data(), s.transmittance_w, s.transmittance_h},
-                    {luts.irradiance.data(), s.irradiance_w, s.irradiance_h},
-                    {luts.scattering.data(), s.scattering_width(), s.mu, s.r},
-                    {luts.single_mie.data(), s.scattering_width(), s.mu, s.r},
-                    {combined.data(), s.scattering_width(), s.mu, s.r, nullptr, 4}};
+    const std::vector<double> combined = combined_texture(luts);
+    const Host host = host_of(luts, combined);
     const dvec3 up{0, 0, 1};
     nlohmann::json kind = nlohmann::json::array(), value = nlohmann::json::array(), bound = nlohmann::json::array();
     for (int y = 0; y < n; ++y)
