@@ -1,0 +1,347 @@
+#!/usr/bin/env python3
+"""The benchmarks page: measure the speed targets on this machine, keep every run's record, and
+write docs/benchmarks.md from the records (one current table per target).
+
+    scripts/benchmarks.py measure [--only ID ...] [--repeats N] [--slow] [--device D]
+    scripts/benchmarks.py render
+    scripts/benchmarks.py list
+
+`measure` runs each target of scripts/bench/targets.json through the built `specbake` (or a
+fresh clone, for the clone target) and appends one record per target to
+scripts/bench/records.jsonl: the machine, the date, the version, the figure with its spread over
+the repeats, the load average it ran under, and the details the figure came from. Targets marked
+slow (the settings search, the fresh clone) run only with --slow or --only. `render` rewrites
+docs/benchmarks.md: per target the newest record of each machine, beside the newest record of
+that machine from an earlier version. Only the standard library is used.
+"""
+import argparse
+import datetime
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGETS = ROOT / "scripts" / "bench" / "targets.json"
+RECORDS = ROOT / "scripts" / "bench" / "records.jsonl"
+PAGE = ROOT / "docs" / "benchmarks.md"
+
+
+def load_targets():
+    return json.loads(TARGETS.read_text())["targets"]
+
+
+def load_records():
+    if not RECORDS.exists():
+        return []
+    out = []
+    for n, line in enumerate(RECORDS.read_text().splitlines(), 1):
+        if line.strip():
+            try:
+                out.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                sys.exit(f"{RECORDS}:{n}:{e.colno}: not a JSON record: {e.msg}")
+    return out
+
+
+def version():
+    """specbake's version and the commit measured (+dirty when the tree has changes)."""
+    def git(*a):
+        return subprocess.run(["git", "-C", str(ROOT), *a], capture_output=True, text=True).stdout.strip()
+    sha = git("rev-parse", "--short=7", "HEAD") or "unknown"
+    dirty = "-dirty" if git("status", "--porcelain", "--untracked-files=no") else ""
+    return f"{sha}{dirty}"
+
+
+def cpu_name():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def machine_of(device):
+    """The machine a record belongs to: the host's CPU and core count, and the OpenCL device."""
+    cores = os.cpu_count() or 0
+    kind = device.get("type", "cpu")
+    cls = ("cpu%d" % cores) if kind == "cpu" else kind
+    return {"class": cls, "cpu": cpu_name(), "cores": cores, "device": device.get("name", "?"),
+            "platform": device.get("platform", "?")}
+
+
+def run(cmd, **kw):
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, capture_output=True, text=True, **kw)
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        sys.stderr.write(p.stdout[-4000:] + p.stderr[-4000:])
+        raise RuntimeError(f"{' '.join(map(str, cmd))} exited {p.returncode}")
+    return wall
+
+
+def latest_manifest(out, job):
+    return json.loads((Path(out) / job / "latest" / "manifest.json").read_text())
+
+
+def record_of(manifest, kind):
+    for a in manifest.get("accuracy", []):
+        if a.get("name") == kind:
+            return a
+    return None
+
+
+def bake_facts(m, process_wall):
+    """What one run's manifest says about its time."""
+    t = m.get("timings_s", {})
+    steps = t.get("steps", {})
+    device = sum(s.get("device_s", 0.0) for s in steps.values())
+    facts = {"bake_s": t.get("bake"), "process_s": process_wall,
+             "steps_wall_s": {k: round(v.get("wall_s", 0.0), 3) for k, v in steps.items()},
+             "device_share": (device / t["bake"]) if t.get("bake") else None}
+    check = record_of(m, "vs_path_traced")
+    if check:
+        d = check.get("details", {})
+        truths = [d.get("truth", {}), d.get("spectral_truth", {})]
+        facts["truth_s"] = sum(x.get("seconds", 0.0) for x in truths if x and not x.get("reused"))
+        facts["truth_reused"] = any(x.get("reused") for x in truths if x)
+        se = d.get("standard_error", {})
+        facts["truth_se_relative_p99"] = se.get("relative", {}).get("p99")
+        facts["truth_se_de2000_p99"] = se.get("de2000", {}).get("p99")
+        facts["points_at_walk_cap"] = se.get("points_at_max_paths")
+        facts["vs_path_traced"] = check.get("value")
+    held = record_of(m, "vs_path_traced_held_out")
+    if held:
+        facts["held_out"] = held.get("value")
+    auto = m.get("parameters", {}).get("auto")
+    if isinstance(auto, dict) and "tries" in auto:
+        facts["tries"] = len(auto["tries"])
+    return facts
+
+
+_baked = {}
+
+
+def measure_bake(spec, args):
+    """A cold run into an empty output folder, then `repeats` warm runs (--force, kept truth);
+    targets that read the same job share its runs."""
+    repeats = spec.get("repeats", args.repeats)
+    key = (spec["config"], spec["job"], repeats)
+    if key not in _baked:
+        _baked[key] = bake_runs(spec, repeats, args)
+    return _baked[key]
+
+
+def bake_runs(spec, repeats, args):
+    exe = Path(args.specbake)
+    with tempfile.TemporaryDirectory(prefix="specbake-bench-") as out:
+        cmd = [str(exe), "-q", "run", str(ROOT / spec["config"]), "--only", spec["job"], "--out", out]
+        if args.device:
+            cmd += ["--device", args.device]
+        cold_wall = run(cmd)
+        cold_m = latest_manifest(out, spec["job"])
+        cold = bake_facts(cold_m, cold_wall)
+        warm = []
+        for _ in range(repeats):
+            w = run(cmd + ["--force"])
+            warm.append(bake_facts(latest_manifest(out, spec["job"]), w))
+    return cold_m.get("device", {}), cold, warm
+
+
+def figure_of(target, cold, warm):
+    """The target's figure, its spread and the runs it came from."""
+    f = target["figure"]
+    if f == "bake_s":
+        runs = [r["bake_s"] for r in warm] or [cold["bake_s"]]
+    elif f == "truth_s":
+        runs = [cold["truth_s"]]
+    elif f == "check_share_cold":
+        check = cold["steps_wall_s"].get("check", 0.0)
+        rest = cold["bake_s"] - check
+        runs = [100.0 * check / rest if rest > 0 else None]
+    else:
+        raise SystemExit(f"{TARGETS}: target {target['id']}: unknown figure '{f}'")
+    return statistics.median(runs), [min(runs), max(runs)], len(runs)
+
+
+def measure_clone(args):
+    with tempfile.TemporaryDirectory(prefix="specbake-clone-") as tmp:
+        clone = Path(tmp) / "specbake"
+        subprocess.run(["git", "clone", "-q", "--no-local", str(ROOT), str(clone)], check=True)
+        env = dict(os.environ, CCACHE_DISABLE="1", SPECBAKE_NO_INSTALL="1")
+        env.pop("SPECBAKE_CMAKE_ARGS", None)
+        t0 = time.perf_counter()
+        run([str(clone / "scripts" / "bake.sh")] + (["--device", args.device] if args.device else []), env=env)
+        wall = time.perf_counter() - t0
+        manifests = list((clone / "assets").glob("*/latest/manifest.json"))
+        device = json.loads(manifests[0].read_text()).get("device", {}) if manifests else {}
+    return device, {"clone_s": wall, "bundles": len(manifests)}
+
+
+def measure(args):
+    targets = load_targets()
+    if args.only:
+        chosen = [t for t in targets if t["id"] in args.only]
+    else:
+        chosen = [t for t in targets if args.slow or not t["measure"].get("slow")]
+    unknown = set(args.only or []) - {t["id"] for t in targets}
+    if unknown:
+        sys.exit(f"unknown target(s) {', '.join(sorted(unknown))}; `scripts/benchmarks.py list` shows them")
+    ver = version()
+    for t in chosen:
+        load = os.getloadavg()[0]
+        print(f"{t['id']}: measuring ({t['measure']['kind']}), load {load:.1f} ...", flush=True)
+        kind = t["measure"]["kind"]
+        if kind == "bake":
+            device, cold, warm = measure_bake(t["measure"], args)
+            fig, spread, n = figure_of(t, cold, warm)
+            details = {"cold": cold, "warm": warm}
+        elif kind == "clone":
+            device, facts = measure_clone(args)
+            fig, spread, n, details = facts["clone_s"], [facts["clone_s"]] * 2, 1, facts
+        else:
+            sys.exit(f"{TARGETS}: target {t['id']}: unknown measure kind '{kind}'")
+        rec = {"target": t["id"], "date": datetime.date.today().isoformat(), "version": ver,
+               "machine": machine_of(device), "figure": fig, "unit": t["unit"], "spread": spread, "runs": n,
+               "load_before": round(load, 2), "load_after": round(os.getloadavg()[0], 2), "details": details}
+        with RECORDS.open("a") as f:
+            f.write(json.dumps(rec, sort_keys=True) + "\n")
+        print(f"{t['id']}: {fig:.4g} {t['unit']} (spread {spread[0]:.4g}–{spread[1]:.4g}, {n} runs)", flush=True)
+
+
+def shown(v, unit):
+    if v is None:
+        return "—"
+    if unit == "s" and v >= 120:
+        return f"{v / 60:.1f} min"
+    return f"{v:.3g} {unit}" if unit != "%" else f"{v:.3g} %"
+
+
+def extra_of(rec):
+    """The figures beside the headline that say what it bought or cost."""
+    d = rec.get("details", {})
+    cold = d.get("cold", d)
+    bits = []
+    if cold.get("device_share") is not None and rec["machine"]["class"] != "cpu%d" % rec["machine"]["cores"]:
+        bits.append(f"device {100 * cold['device_share']:.0f} %")
+    if cold.get("tries") is not None:
+        bits.append(f"{cold['tries']} tries")
+    if cold.get("vs_path_traced") is not None:
+        bits.append(f"ΔE p99 {cold['vs_path_traced']:.3g}")
+    if cold.get("held_out") is not None:
+        bits.append(f"held out {cold['held_out']:.3g}")
+    if rec["target"] == "twilight-truth" and cold.get("truth_se_relative_p99") is not None:
+        bits.append(f"truth se p99 {100 * cold['truth_se_relative_p99']:.2g} %, {cold.get('points_at_walk_cap')} at cap")
+    if cold.get("bundles") is not None:
+        bits.append(f"{cold['bundles']} bundles")
+    if rec.get("source"):
+        bits.append(rec["source"])
+    return "; ".join(bits)
+
+
+def render(args):
+    targets = load_targets()
+    records = load_records()
+    lines = [
+        "# Benchmarks",
+        "",
+        "<!-- generated by scripts/benchmarks.py render from scripts/bench/records.jsonl; do not edit -->",
+        "",
+        "Speed targets and where they stand, one table per target: per machine the newest run, beside",
+        "that machine's newest run of an earlier version. Measure with `scripts/benchmarks.py measure`",
+        "(`--slow` adds the settings search and the fresh clone) and rewrite this page with",
+        "`scripts/benchmarks.py render`; the records (every run, with its details) are in",
+        "`scripts/bench/records.jsonl`, the targets in `scripts/bench/targets.json`.",
+        "",
+        "Times are the job's own seconds from its manifest (`timings_s.bake`), which the tool measures",
+        "honestly on asynchronous devices: each step's `device_s` sums its OpenCL commands' profiled",
+        "start-to-end times, `host_s` is the step's wall time less the time blocked waiting for the device.",
+        "Wall times on a shared machine move with its load: each run's load average is recorded, and",
+        "figures are compared within a machine, not across.",
+        "",
+        "Machines: `cpu2` is a 2-core CPU through PoCL (the CI machine's class), `gpu` a GPU through its",
+        "vendor's OpenCL driver.",
+        "",
+    ]
+    for t in targets:
+        mine = [r for r in records if r["target"] == t["id"]]
+        lines += [f"## {t['title']}", "", t["note"], ""]
+        if not mine:
+            lines += ["Not measured yet.", ""]
+            continue
+        lines += ["| machine | date | version | figure (spread, runs) | load | target | met | earlier version | details |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        by_machine = {}
+        for r in mine:
+            key = (r["machine"]["class"], r["machine"]["cpu"], r["machine"]["device"])
+            by_machine.setdefault(key, []).append(r)
+        for key in sorted(by_machine):
+            runs = sorted(by_machine[key], key=lambda r: r["date"])
+            cur = runs[-1]
+            earlier = [r for r in runs if r["version"] != cur["version"]]
+            prev = earlier[-1] if earlier else None
+            cls = cur["machine"]["class"]
+            goal = t["target"].get(cls) if cls in ("cpu2", "gpu") else None
+            met = "—" if goal is None else ("yes" if cur["figure"] <= goal else "**no**")
+            lo, hi = cur["spread"]
+            fig = shown(cur["figure"], t["unit"])
+            if cur["runs"] > 1:
+                fig += f" ({lo:.3g}–{hi:.3g}, {cur['runs']} runs)"
+            m = cur["machine"]
+            machine = f"{cls}: {m['cpu']}" + ("" if cls.startswith("cpu") else f" + {m['device']}")
+            lines.append(" | ".join([
+                "| " + machine, cur["date"], f"`{cur['version']}`", fig,
+                "—" if cur.get("load_before") is None else f"{cur['load_before']:.1f}", "—" if goal is None else f"≤ {shown(goal, t['unit'])}", met,
+                f"{shown(prev['figure'], t['unit'])} (`{prev['version']}`, {prev['date']})" if prev else "—",
+                extra_of(cur)]) + " |")
+        lines.append("")
+    text = "\n".join(lines)
+    if args.check:
+        if not PAGE.exists() or PAGE.read_text() != text:
+            sys.exit(f"{PAGE} is not what `scripts/benchmarks.py render` makes of {RECORDS}: run it and commit both")
+        print(f"{PAGE} is up to date")
+        return
+    PAGE.write_text(text)
+    print(f"wrote {PAGE} ({len(records)} records, {len(targets)} targets)")
+
+
+def list_targets(_args):
+    for t in load_targets():
+        slow = " (slow)" if t["measure"].get("slow") else ""
+        print(f"{t['id']:20} {t['title']}{slow}")
+
+
+def main():
+    global RECORDS, PAGE
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    m = sub.add_parser("measure", help="run the targets here and append their records")
+    m.add_argument("--only", nargs="+", metavar="ID", help="these targets (slow ones included)")
+    m.add_argument("--repeats", type=int, default=3, help="warm runs after the cold one (default 3)")
+    m.add_argument("--slow", action="store_true", help="also the slow targets (settings search, fresh clone)")
+    m.add_argument("--device", help="OpenCL device, as `specbake run --device`")
+    m.add_argument("--specbake", default=str(ROOT / "build" / "specbake"), help="the binary (default build/specbake)")
+    m.set_defaults(fn=measure)
+    r = sub.add_parser("render", help="write docs/benchmarks.md from the records")
+    r.add_argument("--check", action="store_true", help="only check that the page is up to date (exit 1 if not)")
+    r.set_defaults(fn=render)
+    sub.add_parser("list", help="the targets").set_defaults(fn=list_targets)
+    ap.add_argument("--records", default=str(RECORDS), help="the records file (default scripts/bench/records.jsonl)")
+    ap.add_argument("--page", default=str(PAGE), help="the page render writes (default docs/benchmarks.md)")
+    args = ap.parse_args()
+    RECORDS, PAGE = Path(args.records), Path(args.page)
+    if args.cmd == "measure" and not Path(args.specbake).exists() and not (args.only == ["fresh-clone"]):
+        sys.exit(f"{args.specbake}: no such binary; build it first (scripts/setup.sh specbake)")
+    args.fn(args)
+
+
+if __name__ == "__main__":
+    main()
