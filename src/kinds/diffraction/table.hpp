@@ -159,7 +159,7 @@ class TableMeasurement {
   // Everything: texels (direct sums made now), between texels, energy.
   TableError measure(const std::vector<Band>& bands, const TableGeometry& g, const std::vector<float>& terms) const;
   // `on` when its device has fp64 and is not a CPU, else null (the host): on a CPU device (PoCL) the
-  // host's threads and libm do these sums 2-3x faster (docs/diffraction.md, "Where the work runs").
+  // host's threads and libm do these sums 2-3x faster (docs/diffraction.md, "Speed").
   static const DeviceHeights* exact_device(const DeviceHeights* on);
 
  private:

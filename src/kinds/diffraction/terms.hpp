@@ -124,7 +124,7 @@ std::vector<cplx> reconstruct(const std::vector<cplx>& terms, const Bins& bins, 
 const Band& band_for(const std::vector<Band>& bands, double kappa);
 // `dev` where a pass that a CPU device runs slower than the host's threads (the previews, the
 // reconstruction error, the exact sums: PoCL's scalar double maths against the host's threads
-// and libm; docs/diffraction.md, "Where the work runs") should run on it: not a CPU; else null.
+// and libm; docs/diffraction.md, "Speed") should run on it: not a CPU; else null.
 inline cl_util::Device* unless_cpu(cl_util::Device& dev) { return dev.info().type == "cpu" ? nullptr : &dev; }
 // DIFFRACTION_TAYLOR or DIFFRACTION_CHEBYSHEV, as the .cl maths names an expansion.
 int expansion_id(Expansion e);
