@@ -551,8 +551,9 @@ int cmd_sweep(const SweepArgs& a, ProgressLine& progress_line, bool quiet) {
   }
   if (!quiet) {
     print_table(rows);
-    std::cout << r.points.size() << " point(s), " << failed << " failed; time: bake wall seconds without the check; "
-              << "front: * on the Pareto front\n"
+    std::cout << r.points.size() << " point(s), " << failed
+              << " failed; time: wall seconds of plan + compute (check, files and previews timed apart in "
+                 "sweep.json); front: * on the Pareto front\n"
               << "wrote " << (r.out / "sweep.json").string() << ", sweep.csv" << (r.plotted ? ", sweep.png" : "")
               << "\n";
   }

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <optional>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -204,6 +205,20 @@ std::vector<std::vector<std::string>> sweep_combinations(const std::vector<Vary>
   return out;
 }
 
+std::vector<std::size_t> bake_order(std::size_t n) {
+  std::vector<std::size_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = i;
+  std::uint64_t state = 0x9e3779b97f4a7c15ULL;  // splitmix64 from a fixed seed: the same order everywhere
+  auto next = [&state] {
+    std::uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+  };
+  for (std::size_t i = n; i > 1; --i) std::swap(order[i - 1], order[next() % i]);  // Fisher–Yates
+  return order;
+}
+
 void mark_pareto(std::vector<SweepPoint>& points) {
   for (auto& p : points) {
     p.pareto = false;
@@ -223,8 +238,11 @@ json SweepResult::json() const {
     for (std::size_t i = 0; i < varies.size(); ++i) values[varies[i].key] = p.values[i];
     nlohmann::json j = {{"values", values},   {"label", label_of(varies, p.values)},
                         {"status", p.status}, {"bake_s", p.bake_s},
+                        {"bake_s_spread", {p.bake_s_min, p.bake_s_max}},
                         {"wall_s", p.wall_s}, {"device_s", p.device_s},
-                        {"host_s", p.host_s}, {"runs", p.runs},
+                        {"host_s", p.host_s}, {"check_s", p.check_s},
+                        {"files_s", p.files_s}, {"runs", p.runs},
+                        {"order", p.order},
                         {"bundle_bytes", p.bundle_bytes}, {"pareto", p.pareto}};
     if (p.status == "measured") {
       j["error"] = p.error;
@@ -246,8 +264,11 @@ json SweepResult::json() const {
           {"job", job},
           {"kind", kind},
           {"varies", varies_j},
-          {"x", "bake_s: wall seconds of the bake without its check step (plan, compute, files); bakes under 1 s "
-                "are repeated (runs) and the fastest kept; device_s and host_s without the check too"},
+          {"x", "bake_s: wall seconds of the plan and compute steps (what the varied settings cost; the check and "
+                "the files with their previews are timed apart: check_s, files_s); after one untimed warm-up bake, "
+                "points are baked in a shuffled order (order); bakes under 1 s are repeated (runs), the fastest "
+                "kept and bake_s_spread giving the range over the runs; device_s and host_s of plan and compute"},
+          {"warmup", {{"point", warmup}, {"seconds", warmup_s}}},
           {"y", "error: the value of the kind's ground-truth accuracy record (see each point's record and unit)"},
           {"points", pts}};
 }
@@ -255,14 +276,16 @@ json SweepResult::json() const {
 std::string sweep_csv(const SweepResult& r) {
   std::string s;
   for (const auto& v : r.varies) s += csv_field(v.key) + ",";
-  s += "status,bake_s,wall_s,device_s,host_s,error,unit,record,tolerance,passed,pareto,settings\n";
+  s += "status,bake_s,wall_s,device_s,host_s,error,unit,record,tolerance,passed,pareto,settings,check_s,files_s,"
+       "bake_s_min,bake_s_max,order\n";
   for (const auto& p : r.points) {
     for (const auto& v : p.values) s += csv_field(v) + ",";
     const bool m = p.status == "measured";
     s += p.status + "," + fmt(p.bake_s) + "," + fmt(p.wall_s) + "," + fmt(p.device_s) + "," + fmt(p.host_s) + "," +
          (m ? exact(p.error) : "") + "," + csv_field(p.unit) + "," + p.record + "," +
          (p.tolerance ? exact(*p.tolerance) : "") + "," + (m ? (p.passed ? "1" : "0") : "") + "," +
-         (p.pareto ? "1" : "0") + "," + csv_field(m ? p.settings : p.reason) + "\n";
+         (p.pareto ? "1" : "0") + "," + csv_field(m ? p.settings : p.reason) + "," + fmt(p.check_s) + "," +
+         fmt(p.files_s) + "," + fmt(p.bake_s_min) + "," + fmt(p.bake_s_max) + "," + std::to_string(p.order) + "\n";
   }
   return s;
 }
@@ -331,37 +354,68 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
   Memo memo;
   memo.store = &results;
 
+  // Points are kept in the order they are listed, whatever the order they are baked in.
+  std::vector<std::optional<SweepPoint>> baked(jobs.size());
   auto write_files = [&] {
+    res.points.clear();
+    for (auto& p : baked)
+      if (p) res.points.push_back(*p);
     mark_pareto(res.points);
     write_whole(res.out / "sweep.json", res.json().dump(2) + "\n");
     write_whole(res.out / "sweep.csv", sweep_csv(res));
   };
-  for (std::size_t i = 0; i < jobs.size(); ++i) {
+  const std::vector<std::size_t> order = bake_order(jobs.size());
+  ProgressEvent ev;
+  ev.count = static_cast<int>(jobs.size());
+  {
+    // One untimed bake first: the device started, the kernels its settings need built and the
+    // truth traced (kept for every point), so the first timed point is not charged for them.
+    const std::size_t w = order.front();
+    ev.index = 0;
+    ev.job = o.job + " [warm-up: " + label_of(o.varies, combos[w]) + "]";
+    res.warmup = label_of(o.varies, combos[w]);
+    try {
+      res.warmup_s = bake_timed(kind, jobs[w], dev, ev, progress, /*judge=*/false, &memo).bake_s;
+    } catch (const Interrupted&) {
+      write_files();
+      throw;
+    } catch (const DeviceError&) {
+      throw;
+    } catch (const Error& e) {
+      spdlog::warn("sweep: the warm-up bake ({}) failed: {}", res.warmup, e.what());  // its point says so again
+    }
+  }
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    const std::size_t i = order[k];
     const JobSpec& job = jobs[i];
     SweepPoint p;
     p.values = combos[i];
+    p.order = static_cast<int>(k) + 1;
     const std::string label = label_of(o.varies, combos[i]);
-    ProgressEvent ev;
-    ev.index = static_cast<int>(i) + 1;
-    ev.count = static_cast<int>(jobs.size());
+    ev.index = static_cast<int>(k) + 1;
     ev.job = o.job + " [" + label + "]";
     try {
       // A bake shorter than kShortBake_s is repeated (while the repeats stay under kRepeatBudget_s)
-      // and its fastest run kept: timer noise and kernel builds (a point's first bake builds its
-      // programs, later points reuse them) would otherwise decide the order of short bakes.
+      // and its fastest run kept: timer noise decides the order of short bakes otherwise.
       TimedBake b = bake_timed(kind, job, dev, ev, progress, /*judge=*/false, &memo);
       auto measure = [&p](const TimedBake& t) {
-        double device = 0, host = 0, check_wall = 0;
+        double device = 0, host = 0, bake = 0, check = 0, files = 0;
         for (const auto& [step, sec] : t.steps) {
           if (step == to_string(Stage::check)) {
-            check_wall += sec.wall_s;
-            continue;
+            check += sec.wall_s;
+          } else if (step == to_string(Stage::files)) {
+            files += sec.wall_s;
+          } else {
+            bake += sec.wall_s;
+            device += sec.device_s;
+            host += sec.host_s();
           }
-          device += sec.device_s;
-          host += sec.host_s();
         }
-        const double bake = std::max(0.0, t.bake_s - check_wall);
-        if (p.runs == 0 || bake < p.bake_s) p.bake_s = bake, p.wall_s = t.bake_s, p.device_s = device, p.host_s = host;
+        if (p.runs == 0 || bake < p.bake_s)
+          p.bake_s = bake, p.wall_s = t.bake_s, p.device_s = device, p.host_s = host, p.check_s = check,
+          p.files_s = files;
+        p.bake_s_min = p.runs == 0 ? bake : std::min(p.bake_s_min, bake);
+        p.bake_s_max = p.runs == 0 ? bake : std::max(p.bake_s_max, bake);
         ++p.runs;
       };
       measure(b);
@@ -387,15 +441,16 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
         p.unit = truth->unit;
         p.tolerance = o.tolerance ? o.tolerance : truth->tolerance;
         // a record reported without judging may name the job's tolerance in its details
-        for (const char* k : {"tolerance_de2000", "tolerance"})
-          if (!p.tolerance && truth->details.is_object() && truth->details.contains(k) && truth->details[k].is_number())
-            p.tolerance = truth->details[k].get<double>();
+        for (const char* key : {"tolerance_de2000", "tolerance"})
+          if (!p.tolerance && truth->details.is_object() && truth->details.contains(key) &&
+              truth->details[key].is_number())
+            p.tolerance = truth->details[key].get<double>();
         p.passed = std::isfinite(p.error) && (!p.tolerance || p.error <= *p.tolerance);
         p.parameters = b.result.parameters;
         p.accuracy = accuracy_json(b.result.accuracy);
         p.settings = kind.describe ? kind.describe(b.result.parameters) : "";
       }
-      spdlog::info("sweep: [{}/{}] {}: {} in {:.2f} s", i + 1, jobs.size(), label,
+      spdlog::info("sweep: [{}/{}] {}: {} in {:.2f} s", k + 1, jobs.size(), label,
                    p.status == "measured" ? fmt(p.error) + (p.unit.empty() ? "" : " " + p.unit) : p.reason, p.bake_s);
     } catch (const Interrupted&) {
       write_files();
@@ -406,9 +461,9 @@ SweepResult run_sweep(const SweepOptions& o, const RunProgress& progress) {
     } catch (const Error& e) {
       p.status = "failed";
       p.reason = e.what();
-      spdlog::warn("sweep: [{}/{}] {}: failed: {}", i + 1, jobs.size(), label, e.what());
+      spdlog::warn("sweep: [{}/{}] {}: failed: {}", k + 1, jobs.size(), label, e.what());
     }
-    res.points.push_back(std::move(p));
+    baked[i] = std::move(p);
     write_files();  // after every point: an interrupted sweep keeps what it measured
   }
 

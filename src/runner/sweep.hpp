@@ -42,10 +42,13 @@ struct SweepPoint {
   std::vector<std::string> values;  // one per Vary, in order
   std::string status;               // measured | failed
   std::string reason;               // why it failed
-  double wall_s = 0.0;              // the whole bake, check included (of the fastest run)
-  double bake_s = 0.0;              // wall without the check step (the time the x axis shows)
-  double device_s = 0.0, host_s = 0.0;  // without the check step, as bake_s
+  double wall_s = 0.0;              // the whole bake: plan, compute, check, files (of the fastest run)
+  double bake_s = 0.0;              // plan + compute: what the varied settings cost (the x axis)
+  double device_s = 0.0, host_s = 0.0;  // of plan + compute, as bake_s
+  double check_s = 0.0, files_s = 0.0;  // timed apart: the check step; files and previews
   int runs = 0;                     // bakes timed (short ones are repeated; the fastest is kept)
+  double bake_s_min = 0.0, bake_s_max = 0.0;  // bake_s over the runs (equal for one run)
+  int order = 0;                    // when it was baked: 1 = first after the warm-up
   std::uint64_t bundle_bytes = 0;   // the bundle's files as the bake made them (manifest aside)
   double error = 0.0;
   std::string record, unit, metric;
@@ -63,12 +66,18 @@ struct SweepResult {
   std::filesystem::path out;
   bool plotted = false;
   std::string plot_note;  // why sweep.png is missing, if it is
+  std::string warmup;      // the combination baked untimed first (label), and its seconds
+  double warmup_s = 0.0;
   nlohmann::json json() const;
 };
 
 // The combinations of the varies (the first varies slowest); UsageError past kMaxSweepPoints.
 std::vector<std::vector<std::string>> sweep_combinations(const std::vector<Vary>& varies);
 inline constexpr std::size_t kMaxSweepPoints = 256;
+
+// The order the points are baked in: a permutation of 0..n-1 drawn from a fixed seed (the same
+// sweep bakes in the same order), so a point's time does not depend on where it is listed.
+std::vector<std::size_t> bake_order(std::size_t n);
 
 // Marks the points on the Pareto front of (bake_s, error): no other measured point is at least
 // as fast and as accurate and better in one of the two.

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
 #include <iomanip>
 #include <set>
 #include <sstream>
@@ -64,6 +65,21 @@ TEST(SweepVary, CombinationsFirstVarySlowestAndBounded) {
   EXPECT_THROW(specbake::sweep_combinations({parse_vary("sizes=50%"), parse_vary("sizes.scattering.nu=4")}),
                UsageError);
   EXPECT_THROW(specbake::sweep_combinations({}), UsageError);
+}
+
+// The bake order is a fixed shuffle: a permutation, the same every time, not the listed order
+// for a sweep of any size worth shuffling (so the first listed point is not always the first baked).
+TEST(SweepVary, BakeOrderIsAFixedPermutation) {
+  for (std::size_t n : {1u, 2u, 3u, 8u, 256u}) {
+    const auto a = specbake::bake_order(n), b = specbake::bake_order(n);
+    EXPECT_EQ(a, b) << n;
+    std::vector<std::size_t> sorted = a;
+    std::sort(sorted.begin(), sorted.end());
+    for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(sorted[i], i) << n;
+  }
+  std::vector<std::size_t> listed(8);
+  for (std::size_t i = 0; i < 8; ++i) listed[i] = i;
+  EXPECT_NE(specbake::bake_order(8), listed);
 }
 
 TEST(SweepVary, ParetoFront) {
@@ -181,12 +197,27 @@ TEST_F(Sweep, DispersionMeasuresWhatRunRecords) {
   EXPECT_EQ(s["schema"], "specbake.sweep/1");
   EXPECT_EQ(s["kind"], "dispersion");
   ASSERT_EQ(s["points"].size(), 3u);
+  std::set<int> orders;
   for (const auto& p : s["points"]) {
     EXPECT_EQ(p["status"], "measured");
     EXPECT_EQ(p["record"], "prism_de2000");
     EXPECT_GT(p["bake_s"].get<double>(), 0.0);
     EXPECT_GE(p["runs"].get<int>(), 1);
+    // bake_s is plan + compute of the fastest run: the check and the files (the prism preview)
+    // are timed apart, and the whole bake holds all three
+    EXPECT_GT(p["files_s"].get<double>(), 0.0);
+    EXPECT_NEAR(p["bake_s"].get<double>() + p["check_s"].get<double>() + p["files_s"].get<double>(),
+                p["wall_s"].get<double>(), 1e-3 * p["wall_s"].get<double>() + 1e-4);  // steps' own rounding
+    EXPECT_LE(p["bake_s_spread"][0].get<double>(), p["bake_s"].get<double>());
+    EXPECT_EQ(p["bake_s_spread"][0].get<double>(), p["bake_s"].get<double>()) << "the fastest run is kept";
+    EXPECT_GE(p["bake_s_spread"][1].get<double>(), p["bake_s"].get<double>());
+    orders.insert(p["order"].get<int>());
   }
+  EXPECT_EQ(orders, (std::set<int>{1, 2, 3})) << "every point baked once, in some order";
+  const auto order = specbake::bake_order(3);  // points listed in the --vary order, baked in this one
+  for (std::size_t k = 0; k < order.size(); ++k)
+    EXPECT_EQ(s["points"][order[k]]["order"].get<int>(), int(k) + 1) << k;
+  EXPECT_FALSE(s["warmup"]["point"].get<std::string>().empty());
   // 24 samples see the prism's spectrum far better than 2 (6.6e1 against ~1 CIEDE2000 here)
   EXPECT_LT(s["points"][2]["error"].get<double>(), 0.2 * s["points"][0]["error"].get<double>());
 
@@ -209,7 +240,8 @@ TEST_F(Sweep, DispersionMeasuresWhatRunRecords) {
   const auto rows = read_csv(tmp_ / "sw" / "sweep.csv");
   ASSERT_EQ(rows.size(), 4u);
   EXPECT_EQ(rows[0], (std::vector<std::string>{"samples", "status", "bake_s", "wall_s", "device_s", "host_s", "error",
-                                               "unit", "record", "tolerance", "passed", "pareto", "settings"}));
+                                               "unit", "record", "tolerance", "passed", "pareto", "settings",
+                                               "check_s", "files_s", "bake_s_min", "bake_s_max", "order"}));
   EXPECT_EQ(rows[3][0], "24");
   EXPECT_EQ(std::stod(rows[3][6]), s["points"][2]["error"].get<double>());
   // the job's tolerance_de2000 (default 1) is the line drawn
