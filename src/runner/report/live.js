@@ -33,6 +33,38 @@ window.specbakeLive = (function () {
       gl.useProgram(p);
       return p;
     },
+    // A float texture of `target` (TEXTURE_2D: dims [w, h]; TEXTURE_3D / TEXTURE_2D_ARRAY: [w, h, d])
+    // on `unit`, filtered LINEAR (or NEAREST) and clamped to its edges on every axis.
+    texture: function (gl, unit, target, internal, format, dims, values, filter) {
+      gl.activeTexture(gl.TEXTURE0 + unit);
+      var t = gl.createTexture(), f = filter || gl.LINEAR;
+      gl.bindTexture(target, t);
+      gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+      if (target === gl.TEXTURE_2D) gl.texImage2D(target, 0, internal, dims[0], dims[1], 0, format, gl.FLOAT, values);
+      else gl.texImage3D(target, 0, internal, dims[0], dims[1], dims[2], 0, format, gl.FLOAT, values);
+      gl.texParameteri(target, gl.TEXTURE_MIN_FILTER, f);
+      gl.texParameteri(target, gl.TEXTURE_MAG_FILTER, f);
+      gl.texParameteri(target, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+      gl.texParameteri(target, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+      if (target !== gl.TEXTURE_2D) gl.texParameteri(target, gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE);
+      return t;
+    },
+    // Views that filter float32 textures need OES_texture_float_linear.
+    needFloatFiltering: function (gl, what) {
+      if (!gl.getExtension('OES_texture_float_linear'))
+        throw new Unavailable('this WebGL2 cannot filter float32 textures (OES_texture_float_linear): the static ' +
+                              'previews show ' + what);
+    },
+    // The canvas' RGBA bytes, row 0 at the bottom (the browser test reads them).
+    pixels: function (gl, canvas) {
+      var out = new Uint8Array(4 * canvas.width * canvas.height);
+      gl.readPixels(0, 0, canvas.width, canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, out);
+      return Array.from(out);
+    },
+    // Redraws on every slider of the view.
+    onInput: function (root, draw) {
+      Array.prototype.forEach.call(root.querySelectorAll('input'), function (i) { i.addEventListener('input', draw); });
+    },
     floats: function (b64) {
       var s = atob(b64), a = new Uint8Array(s.length);
       for (var i = 0; i < s.length; ++i) a[i] = s.charCodeAt(i);

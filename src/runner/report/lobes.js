@@ -26,18 +26,10 @@
   function Lobes(root, data) {
     var canvas = root.querySelector('canvas');
     var gl = L.context(canvas, 'the lobes');
-    if (!gl.getExtension('OES_texture_float_linear'))
-      throw new L.Unavailable('this WebGL2 cannot filter float32 textures (OES_texture_float_linear): the static previews show the lobes');
+    L.needFloatFiltering(gl, 'the lobes');
     var program = L.program(gl, 'diffraction_brdf.glsl', data.glsl, ['sampler2DArray'], MAIN);
     var t = data.textures.table_terms, s = t.shape;  // [terms][iv][iu][re, im]
-    gl.activeTexture(gl.TEXTURE0);
-    gl.bindTexture(gl.TEXTURE_2D_ARRAY, gl.createTexture());
-    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
-    gl.texImage3D(gl.TEXTURE_2D_ARRAY, 0, gl.RG32F, s[2], s[1], s[0], 0, gl.RG, gl.FLOAT, L.floats(t.base64));
-    gl.texParameteri(gl.TEXTURE_2D_ARRAY, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
-    gl.texParameteri(gl.TEXTURE_2D_ARRAY, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
-    gl.texParameteri(gl.TEXTURE_2D_ARRAY, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
-    gl.texParameteri(gl.TEXTURE_2D_ARRAY, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    L.texture(gl, 0, gl.TEXTURE_2D_ARRAY, gl.RG32F, gl.RG, [s[2], s[1], s[0]], L.floats(t.base64));
     gl.uniform1i(gl.getUniformLocation(program, 'terms'), 0);
     function draw() {
       var p = L.values(root), a = p.light_angle_deg * Math.PI / 180;
@@ -47,15 +39,11 @@
       gl.viewport(0, 0, canvas.width, canvas.height);
       gl.drawArrays(gl.TRIANGLES, 0, 3);
     }
-    Array.prototype.forEach.call(root.querySelectorAll('input'), function (i) { i.addEventListener('input', draw); });
+    L.onInput(root, draw);
     draw();
     root.querySelector('.live-status').textContent = s[0] + ' terms, table ' + s[2] + ' x ' + s[1] +
         '; WebGL2: ' + (gl.getParameter(gl.VERSION) || '');
-    this.pixels = function () {
-      var out = new Uint8Array(4 * canvas.width * canvas.height);
-      gl.readPixels(0, 0, canvas.width, canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, out);
-      return Array.from(out);
-    };
+    this.pixels = function () { return L.pixels(gl, canvas); };
   }
 
   L.mount('live-lobes', Lobes, window.specbakeLobes);

@@ -59,11 +59,7 @@
     input.addEventListener('input', draw);
     draw();
     root.querySelector('.live-status').textContent = n + ' samples; WebGL2: ' + (gl.getParameter(gl.VERSION) || '');
-    this.pixels = function () {
-      var out = new Uint8Array(4 * w * canvas.height);
-      gl.readPixels(0, 0, w, canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, out);
-      return Array.from(out);
-    };
+    this.pixels = function () { return L.pixels(gl, canvas); };
   }
 
   L.mount('live-prism', Prism, window.specbakePrism);

@@ -57,25 +57,14 @@
   function Sky(root, data) {
     var canvas = root.querySelector('canvas'), status = root.querySelector('.live-status');
     var gl = L.context(canvas, 'the sky');
-    if (!gl.getExtension('OES_texture_float_linear'))
-      throw new L.Unavailable('this WebGL2 cannot filter float32 textures (OES_texture_float_linear): the static previews show the sky');
+    L.needFloatFiltering(gl, 'the sky');
     var floatTarget = gl.getExtension('EXT_color_buffer_float');
 
     var program = L.program(gl, 'sampling.glsl', data.glsl, ['sampler2D', 'sampler3D'], MAIN);
 
-    function texture(unit, target, tex) {
-      gl.activeTexture(gl.TEXTURE0 + unit);
-      var t = gl.createTexture();
-      gl.bindTexture(target, t);
-      var s = tex.shape, values = L.floats(tex.base64);
-      gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
-      if (target === gl.TEXTURE_2D) gl.texImage2D(target, 0, gl.RGB32F, s[1], s[0], 0, gl.RGB, gl.FLOAT, values);
-      else gl.texImage3D(target, 0, gl.RGB32F, s[2], s[1], s[0], 0, gl.RGB, gl.FLOAT, values);
-      gl.texParameteri(target, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
-      gl.texParameteri(target, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
-      gl.texParameteri(target, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
-      gl.texParameteri(target, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
-      if (target === gl.TEXTURE_3D) gl.texParameteri(target, gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE);
+    function texture(unit, target, tex) {  // [rows][cols] or [depth][rows][cols], RGB
+      var s = tex.shape, dims = s.length === 2 ? [s[1], s[0]] : [s[2], s[1], s[0]];
+      L.texture(gl, unit, target, gl.RGB32F, gl.RGB, dims, L.floats(tex.base64));
     }
     texture(0, gl.TEXTURE_2D, data.textures.transmittance);
     texture(1, gl.TEXTURE_3D, data.textures.scattering);
@@ -84,14 +73,11 @@
     gl.uniform1i(gl.getUniformLocation(program, 'scattering_texture'), 1);
     gl.uniform1i(gl.getUniformLocation(program, 'single_mie_scattering_texture'), 2);
     gl.uniform1i(gl.getUniformLocation(program, 'directions'), 3);
-    var dirTex = gl.createTexture(), dirSize = 0;
+    var dirTex = null, dirSize = 0;
     function useDirections(n) {
       if (n === dirSize) return;
-      gl.activeTexture(gl.TEXTURE3);
-      gl.bindTexture(gl.TEXTURE_2D, dirTex);
-      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, n, n, 0, gl.RGBA, gl.FLOAT, directions(n));
-      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
-      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+      if (dirTex) gl.deleteTexture(dirTex);
+      dirTex = L.texture(gl, 3, gl.TEXTURE_2D, gl.RGBA32F, gl.RGBA, [n, n], directions(n), gl.NEAREST);
       dirSize = n;
     }
     function draw(p, n, linear) {
@@ -110,7 +96,7 @@
       gl.bindFramebuffer(gl.FRAMEBUFFER, null);
       draw(L.values(root), canvas.width, false);
     }
-    Array.prototype.forEach.call(root.querySelectorAll('input'), function (i) { i.addEventListener('input', redraw); });
+    L.onInput(root, redraw);
     redraw();
     status.textContent = 'WebGL2: ' + (gl.getParameter(gl.VERSION) || '') + '; rendering live';
 
