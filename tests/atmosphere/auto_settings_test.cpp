@@ -45,14 +45,23 @@ std::vector<Refinement<S>> doubling(int limit = 1 << 20) {
   return r;
 }
 
-auto run(Model& m, double tolerance, double cap = 1e18, std::vector<Refinement<S>> refs = doubling()) {
+auto run(Model& m, double tolerance, double cap = 1e18, std::vector<Refinement<S>> refs = doubling(),
+         bool lazy = true) {
   return greedy_search<S, int>(
       S{2, 2, 2}, refs, [&](const S& s) { return m.cost(s); },
       [&](const S& s, const std::string&) {
         ++m.evaluations;
         return std::pair<double, int>{m.error(s), m.evaluations};
       },
-      [](const S& s) { return json(s); }, tolerance, cap);
+      [](const S& s) { return json(s); }, tolerance, cap, {}, {}, lazy);
+}
+
+// The refinements kept, step by step.
+std::vector<std::string> path_of(const nlohmann::json& tries) {
+  std::vector<std::string> p;
+  for (const auto& t : tries)
+    if (t.value("chosen", false)) p.push_back(t["refined"]);
+  return p;
 }
 
 // The axis with the most error per unit of price is refined first; the search stops as soon as
@@ -87,6 +96,29 @@ TEST(AutoSearch, RefinesTheAxisThatBuysTheMostErrorPerCost) {
   const auto d2 = run(dear, 4.2);  // start 4.5: one cheap refinement (−0.1875 each) cannot reach 4.2
   for (const auto& tr : d2.tries)
     if (tr["step"] == 1 && tr.value("chosen", false)) EXPECT_NE(tr["refined"], "axis0") << tr;
+}
+
+// Lazy steps: where gains only shrink as the error falls (here each axis' error k/n² quarters
+// with every doubling while its cost doubles), trying refinements in the order of their last
+// rates and stopping when none left can beat the best makes the same choices as trying all of
+// them, with fewer bakes; both meet the tolerance with the same state.
+TEST(AutoSearch, LazyStepsChooseAsExhaustiveOnesWithFewerBakes) {
+  for (const auto& [k, price] : std::vector<std::pair<std::array<double, 3>, std::array<double, 3>>>{
+           {{16.0, 1.0, 1.0}, {1.0, 1.0, 1.0}}, {{4.0, 9.0, 1.0}, {1.0, 3.0, 0.5}}, {{1.0, 1.0, 1.0}, {1.0, 2.0, 4.0}}}) {
+    Model lazy_m, full_m;
+    lazy_m.k = full_m.k = k;
+    lazy_m.price = full_m.price = price;
+    const auto lazy = run(lazy_m, 0.05, 1e18, doubling(), true);
+    const auto full = run(full_m, 0.05, 1e18, doubling(), false);
+    ASSERT_TRUE(lazy.met && full.met);
+    EXPECT_EQ(path_of(lazy.tries), path_of(full.tries));
+    EXPECT_EQ(lazy.best.state, full.best.state);
+    // the exhaustive search bakes 3 refinements a step; the lazy one all 3 in the first step only
+    const int steps = static_cast<int>(path_of(full.tries).size());
+    EXPECT_EQ(full.evaluations, 1 + 3 * steps);
+    EXPECT_LT(lazy.evaluations, full.evaluations);
+    EXPECT_LE(lazy.evaluations, 1 + 3 + 2 * (steps - 1)) << "at most two bakes a step after the first here";
+  }
 }
 
 // A floor no refinement lowers ends the search with the reason, not a loop.
