@@ -202,3 +202,53 @@ TEST_F(DispersionBundle, JsonAndGlslHoldTheSameNumbers) {
 }
 
 }  // namespace
+
+namespace {
+
+// `formats:` picks the copies a dispersion bundle holds: [json] leaves out the .bin tables,
+// [bin] dispersion.json; the GLSL and the preview come either way, and the manifest lists exactly
+// what is there (inspect verifies it). An empty list, another kind's format or a repeat is an
+// input error (exit 3) naming the key.
+TEST(DispersionFormats, OnlyTheListedCopies) {
+  t::TempDir tmp;
+  auto config = [&](const std::string& formats) {
+    return "specbake: 1\noutput: out\njobs:\n  - name: p\n    kind: dispersion\n    samples: 8\n"
+           "    material: {glass: N-BK7}\n" + (formats.empty() ? "" : "    formats: " + formats + "\n");
+  };
+  const char* bins[] = {"wavelengths.bin", "weights.bin", "matrices.bin", "ior_offsets.bin", "ior.bin"};
+  for (const std::string f : {"[json]", "[bin]", "[bin, json]"}) {
+    SCOPED_TRACE(f);
+    t::write_file(tmp / "c.yaml", config(f));
+    const auto r = t::run_cli({"run", (tmp / "c.yaml").string(), "--force"});
+    ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+    const auto b = tmp / "out" / "p" / "latest";
+    for (const char* bin : bins) EXPECT_EQ(t::fs::exists(b / bin), f != "[json]") << bin;
+    EXPECT_EQ(t::fs::exists(b / "dispersion.json"), f != "[bin]");
+    EXPECT_TRUE(t::fs::exists(b / "dispersion.glsl"));
+    EXPECT_TRUE(t::fs::exists(b / "preview" / "prism.png"));
+    const json m = t::read_json(b / "manifest.json");
+    for (const auto& file : m["files"]) EXPECT_TRUE(t::fs::exists(b / file["path"].get<std::string>())) << file["path"];
+    const auto inspect = t::run_cli({"inspect", b.string()});
+    EXPECT_EQ(inspect.exit_code, 0) << inspect.out << inspect.err;
+  }
+  // the default list keeps the bundle of a config that does not name it: [bin, json] and no key
+  // hash alike
+  t::write_file(tmp / "d.yaml", config(""));
+  const auto d = t::run_cli({"run", (tmp / "d.yaml").string()});
+  ASSERT_EQ(d.exit_code, 0) << d.err;
+  EXPECT_NE(d.out.find("up to date"), std::string::npos) << d.out;
+
+  for (const auto& [f, says] : std::vector<std::pair<std::string, std::string>>{
+           {"[]", "non-empty list of formats (bin, json)"},
+           {"[exr]", "expected a format of this kind (bin, json), got 'exr'"},
+           {"[jsn]", "did you mean 'json'?"},
+           {"[bin, bin]", "format 'bin' is listed twice"}}) {
+    t::write_file(tmp / "bad.yaml", config(f));
+    const auto r = t::run_cli({"run", (tmp / "bad.yaml").string()});
+    EXPECT_EQ(r.exit_code, 3) << f << r.err;
+    EXPECT_NE(r.err.find(says), std::string::npos) << f << ": " << r.err;
+    EXPECT_NE(r.err.find("formats"), std::string::npos) << r.err;
+  }
+}
+
+}  // namespace

@@ -5,6 +5,7 @@
 #include "core/resources.hpp"
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
+#include "job/formats.hpp"
 #include "kinds/dispersion/reference.hpp"
 #include "kinds/dispersion/spec.hpp"
 
@@ -103,7 +104,7 @@ Material parse_material(const At& at, nlohmann::json& norm, Inputs& inputs) {
 
 DispersionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   allow_job_keys(job, {"samples", "sampling", "range_nm", "cmf", "material",
-                  "abbe_lines", "tolerance_de2000", "spread"});
+                  "abbe_lines", "tolerance_de2000", "spread", "formats"});
   DispersionSpec d;
   d.samples = job.has("samples") ? job.child("samples").count_or_auto(1, kMaxSamples) : std::optional<int>(16);
   if (job.has("sampling"))
@@ -150,6 +151,9 @@ DispersionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
           {"abbe_lines", to_string(d.abbe_lines)},
           {"tolerance_de2000", d.tolerance_de2000},
           {"spread", d.spread}};
+  const auto formats = parse_formats(job, {"bin", "json"}, {"bin", "json"}, norm);
+  d.write_bin = formats.count("bin") > 0;
+  d.write_json = formats.count("json") > 0;
   d.judge_de2000 = !d.samples || job.has("tolerance_de2000");
   if (d.samples && d.judge_de2000) norm["tolerance_de2000_judged"] = true;  // absent: as before, reported only
   return d;

@@ -571,18 +571,20 @@ void files_step(const DispersionSpec& spec, const Planned& p, const Tables& t, J
   const auto Kf = as_float(t.K);
   ctx.progress("files", 0.95);
   const std::string le = "little-endian float32, C order";
-  r.files.push_back({"wavelengths.bin", float32_le(t.samples.lambda_nm, "wavelengths"), "float32", {n}, le, "nm",
-                     "sample wavelengths lambda_n, ascending"});
-  r.files.push_back({"weights.bin", float32_le(t.w_norm, "weights"), "float32", {n, 3}, le + "; [n][x,y,z]", "1",
-                     "normalised CMF weights W_n, sum over n = (1,1,1)"});
-  r.files.push_back({"matrices.bin", float32_le(t.K, "matrices"), "float32", {n, 3, 3},
-                     le + "; [n][row][col], applied as K_n * rgb (column vector)", "1",
-                     "spectral integration matrices K_n in linear sRGB, sum over n = I"});
-  r.files.push_back({"ior_offsets.bin", float32_le(t.offset, "ior offsets"), "float32", {n}, le, "1",
-                     "Offset(lambda_n) = (1/l^2 - 1/l_ref^2)/(1/l_F^2 - 1/l_C^2)"});
-  r.files.push_back({"ior.bin", float32_le(t.ior, "ior"), "float32", {n}, le, "1",
-                     std::string("refractive index n(lambda_n) from the ") +
-                         (p.material.sellmeier ? "Sellmeier fit" : "Cauchy/Abbe model")});
+  if (spec.write_bin) {
+    r.files.push_back({"wavelengths.bin", float32_le(t.samples.lambda_nm, "wavelengths"), "float32", {n}, le, "nm",
+                       "sample wavelengths lambda_n, ascending"});
+    r.files.push_back({"weights.bin", float32_le(t.w_norm, "weights"), "float32", {n, 3}, le + "; [n][x,y,z]", "1",
+                       "normalised CMF weights W_n, sum over n = (1,1,1)"});
+    r.files.push_back({"matrices.bin", float32_le(t.K, "matrices"), "float32", {n, 3, 3},
+                       le + "; [n][row][col], applied as K_n * rgb (column vector)", "1",
+                       "spectral integration matrices K_n in linear sRGB, sum over n = I"});
+    r.files.push_back({"ior_offsets.bin", float32_le(t.offset, "ior offsets"), "float32", {n}, le, "1",
+                       "Offset(lambda_n) = (1/l^2 - 1/l_ref^2)/(1/l_F^2 - 1/l_C^2)"});
+    r.files.push_back({"ior.bin", float32_le(t.ior, "ior"), "float32", {n}, le, "1",
+                       std::string("refractive index n(lambda_n) from the ") +
+                           (p.material.sellmeier ? "Sellmeier fit" : "Cauchy/Abbe model")});
+  }
   json tables = {{"samples", n},
                  {"wavelengths_nm", as_float(t.samples.lambda_nm)},
                  {"weights", json::array()},
@@ -599,7 +601,7 @@ void files_step(const DispersionSpec& spec, const Planned& p, const Tables& t, J
     for (int row = 0; row < 3; ++row) m.push_back({Kf[9 * i + 3 * row], Kf[9 * i + 3 * row + 1], Kf[9 * i + 3 * row + 2]});
     tables["matrices"].push_back(m);
   }
-  r.files.push_back({"dispersion.json", tables.dump(1) + "\n", "", {}, "", "", "the same tables as JSON"});
+  if (spec.write_json) r.files.push_back({"dispersion.json", tables.dump(1) + "\n", "", {}, "", "", "the same tables as JSON"});
   r.files.push_back({"dispersion.glsl", glsl_include(t, r.parameters), "", {}, "", "",
                      "GLSL: the tables as const arrays and specbake_dispersion_combine"});
   r.files.push_back(prism_preview(spec, t));

@@ -33,6 +33,8 @@ struct DispersionSpec : KindSpec {
   // when the config gives tolerance_de2000 (else it is reported only)
   bool judge_de2000 = false;
   double spread = 4.0;
+  // `formats:`: the .bin tables and/or dispersion.json (dispersion.glsl and the preview always)
+  bool write_bin = true, write_json = true;
 };
 
 inline constexpr int kMaxSamples = 4096;
