@@ -49,18 +49,18 @@ constexpr int kChannels = 3;
 constexpr int kMaxNodes = 32;  // Gauss–Legendre nodes per ray piece, at most
 
 struct Atmosphere {
-  double rb = 0, rt = 0, alpha = 0, g = 0;   // km, km, rad, Mie asymmetry
-  Layer rayleigh[2], mie[2], ozone[2];        // layer 0 below its width
+  double rb = 0, rt = 0, alpha = 0, g = 0;  // km, km, rad, Mie asymmetry
+  Layer rayleigh[2], mie[2], ozone[2];      // layer 0 below its width
   double E[kChannels]{}, beta_r[kChannels]{}, mie_s[kChannels]{}, mie_e[kChannels]{}, ozone_e[kChannels]{};
 };
 
 struct Settings {
-  int nodes = 6;              // Gauss–Legendre nodes per ray piece
-  double level_km = 6.0;      // altitude levels cutting the rays
+  int nodes = 6;          // Gauss–Legendre nodes per ray piece
+  double level_km = 6.0;  // altitude levels cutting the rays
   double max_piece_km = 100.0;
-  int view_nodes = 4;         // the view ray's (outer) pieces
+  int view_nodes = 4;  // the view ray's (outer) pieces
   double view_level_km = 6.0;
-  int sphere_nodes = 4;       // per elevation and per azimuth interval
+  int sphere_nodes = 4;              // per elevation and per azimuth interval
   double first_elevation_deg = 0.1;  // the smallest elevation interval next to the ground's horizon
   int table_h = 160, table_u = 240;  // the sun table's nodes in ρ and u
   // the same rule with half the nodes per piece and per interval (the table is the same: its
@@ -174,7 +174,8 @@ class Quadrature {
     for (std::size_t k = 0; k + 1 < cuts.size(); ++k) {
       const double mid = 0.5 * (cuts[k] + cuts[k + 1]), half = 0.5 * (cuts[k + 1] - cuts[k]);
       for (int i = 0; i < g.n; ++i) {
-        const double hh = std::max(std::sqrt(dot(axpy(p, mid + half * g.x[i], w), axpy(p, mid + half * g.x[i], w))) - a_.rb, 0.0);
+        const V3 q = axpy(p, mid + half * g.x[i], w);
+        const double hh = std::max(std::sqrt(dot(q, q)) - a_.rb, 0.0);
         out[0] += g.w[i] * half * density(a_.rayleigh, hh);
         out[1] += g.w[i] * half * density(a_.mie, hh);
         out[2] += g.w[i] * half * density(a_.ozone, hh);
@@ -224,9 +225,11 @@ class Quadrature {
   };
   Result orders_1_2(double h, double view_zenith, double sun_zenith, double azimuth) const {
     if (std::fabs(std::sin(azimuth)) > 1e-12)
-      throw std::invalid_argument("twilight_quadrature: the view must lie in the sun's vertical plane (azimuth 0 or 180°)");
+      throw std::invalid_argument(
+          "twilight_quadrature: the view must lie in the sun's vertical plane (azimuth 0 or 180°)");
     const V3 x{0, 0, a_.rb + h}, v{std::sin(view_zenith), 0, std::cos(view_zenith)};
-    const V3 sun{std::sin(sun_zenith) * std::cos(azimuth), std::sin(sun_zenith) * std::sin(azimuth), std::cos(sun_zenith)};
+    const V3 sun{std::sin(sun_zenith) * std::cos(azimuth), std::sin(sun_zenith) * std::sin(azimuth),
+                 std::cos(sun_zenith)};
     Result out;
     const double nu = dot(v, sun);
     {  // order 1: the view ray's single scattering, on the inner rule
@@ -263,7 +266,8 @@ class Quadrature {
         for (int c = 0; c < kChannels; ++c) {
           double tau = tau0[c];
           for (int j = 0; j < gv_.n; ++j) tau += half * gv_.S[i * gv_.n + j] * sig[j * kChannels + c];
-          out.L2[c] += gv_.w[i] * half * std::exp(-tau) * (a_.beta_r[c] * rho_r[i] * J[c][0] + a_.mie_s[c] * rho_m[i] * J[c][1]);
+          out.L2[c] +=
+              gv_.w[i] * half * std::exp(-tau) * (a_.beta_r[c] * rho_r[i] * J[c][0] + a_.mie_s[c] * rho_m[i] * J[c][1]);
         }
       }
       for (int c = 0; c < kChannels; ++c)
@@ -296,7 +300,8 @@ class Quadrature {
       for (int a = 0; a < gs_.n; ++a) {
         const double e = em + eh * gs_.x[a], we = gs_.w[a] * eh * std::cos(e);
         for (std::size_t ip = 0; ip + 1 < std::size(kPhi); ++ip) {
-          const double pm = 0.5 * (kPhi[ip] + kPhi[ip + 1]) * M_PI / 180, ph = 0.5 * (kPhi[ip + 1] - kPhi[ip]) * M_PI / 180;
+          const double pm = 0.5 * (kPhi[ip] + kPhi[ip + 1]) * M_PI / 180,
+                       ph = 0.5 * (kPhi[ip + 1] - kPhi[ip]) * M_PI / 180;
           for (int b = 0; b < gs_.n; ++b) {
             const double phi = pm + ph * gs_.x[b], wgt = 2.0 * we * gs_.w[b] * ph;  // × 2: the mirror half
             const double ce = std::cos(e), se = std::sin(e), cp = std::cos(phi), sp = std::sin(phi);
@@ -305,7 +310,8 @@ class Quadrature {
             double A[kChannels][2];
             if (!single(y, w, sun, A)) continue;
             const double cs = dot(w, sun), cv = dot(v, w);
-            const double pr_s = rayleigh_phase(cs), pm_s = mie_phase(cs), pr_v = rayleigh_phase(cv), pm_v = mie_phase(cv);
+            const double pr_s = rayleigh_phase(cs), pm_s = mie_phase(cs), pr_v = rayleigh_phase(cv),
+                         pm_v = mie_phase(cv);
             for (int c = 0; c < kChannels; ++c) {
               const double L1 = a_.E[c] * (a_.beta_r[c] * pr_s * A[c][0] + a_.mie_s[c] * pm_s * A[c][1]);
               J[c][0] += wgt * pr_v * L1;
@@ -332,7 +338,9 @@ class Quadrature {
     for (const Layer* prof : {a_.rayleigh, a_.mie, a_.ozone}) {
       if (prof[0].width > 0 && prof[0].width < top) out.push_back(prof[0].width);
       for (int l = 0; l < 2; ++l) {
-        auto raw = [&](double h) { return prof[l].exp_term * std::exp(prof[l].exp_scale * h) + prof[l].linear * h + prof[l].constant; };
+        auto raw = [&](double h) {
+          return prof[l].exp_term * std::exp(prof[l].exp_scale * h) + prof[l].linear * h + prof[l].constant;
+        };
         const double lo = l == 0 ? 0.0 : std::max(prof[0].width, 0.0), hi = l == 0 ? std::min(prof[0].width, top) : top;
         for (double bound : {0.0, 1.0}) {
           const int n = static_cast<int>((hi - lo) / 1e-3);
@@ -352,7 +360,8 @@ class Quadrature {
     std::sort(out.begin(), out.end());
   }
   // a ray p + sω with b = p·ω, c_perp = |p|² − b²: where it crosses the levels' spheres in (0, L)
-  void add_level_cuts(const std::vector<double>& levels, double b, double c_perp, double L, std::vector<double>& cuts) const {
+  void add_level_cuts(const std::vector<double>& levels, double b, double c_perp, double L,
+                      std::vector<double>& cuts) const {
     if (b < 0 && -b < L) cuts.push_back(-b);  // tangent point
     for (double lev : levels) {
       const double R = a_.rb + lev, d2 = R * R - c_perp;
@@ -406,7 +415,8 @@ class Quadrature {
     for (int c = 0; c < kChannels; ++c) A[c][0] = A[c][1] = 0.0;
     const double b = dot(p, w), c_perp = dot(p, p) - b * b;
     const bool ground = b < 0 && c_perp < a_.rb * a_.rb;
-    const double L = ground ? -b - std::sqrt(a_.rb * a_.rb - c_perp) : -b + std::sqrt(std::max(a_.rt * a_.rt - c_perp, 0.0));
+    const double L =
+        ground ? -b - std::sqrt(a_.rb * a_.rb - c_perp) : -b + std::sqrt(std::max(a_.rt * a_.rt - c_perp, 0.0));
     if (!(L > 0)) return false;
     // the penumbra's crossings first: the sunlit stretches, and the end of the last
     thread_local std::vector<double> cuts, all;
@@ -432,7 +442,8 @@ class Quadrature {
         rr[i] = density(a_.rayleigh, hh[i]);
         rm[i] = density(a_.mie, hh[i]);
         const double ro = density(a_.ozone, hh[i]);
-        for (int c = 0; c < kChannels; ++c) sig[i * kChannels + c] = a_.beta_r[c] * rr[i] + a_.mie_e[c] * rm[i] + a_.ozone_e[c] * ro;
+        for (int c = 0; c < kChannels; ++c)
+          sig[i * kChannels + c] = a_.beta_r[c] * rr[i] + a_.mie_e[c] * rm[i] + a_.ozone_e[c] * ro;
       }
       if (visible(axpy(p, mid, w), sun) > 0) {  // a sunlit piece (no crossing inside: lit throughout)
         for (int i = 0; i < g.n; ++i) {

@@ -117,8 +117,9 @@ TEST(TwilightTruth, OrdersOneAndTwoMatchAnIndependentQuadrature) {
       const auto exact = fine.lengths_to_top(h, mu, levels, g16);
       const auto table = fine.table_lookup(h, mu);
       for (int c = 0; c < 3; ++c)
-        table_tau = std::max(table_tau, std::fabs(a.beta_r[c] * (table[0] - exact[0]) + a.mie_e[c] * (table[1] - exact[1]) +
-                                                  a.ozone_e[c] * (table[2] - exact[2])));
+        table_tau =
+            std::max(table_tau, std::fabs(a.beta_r[c] * (table[0] - exact[0]) + a.mie_e[c] * (table[1] - exact[1]) +
+                                          a.ozone_e[c] * (table[2] - exact[2])));
     }
   }
   const double table_rel = std::expm1(table_tau);
@@ -142,18 +143,23 @@ TEST(TwilightTruth, OrdersOneAndTwoMatchAnIndependentQuadrature) {
   for (std::size_t p = 0; p < points.size(); ++p) {
     const TruthPoint& pt = points[p];
     const double deg = M_PI / 180;
-    const auto q = fine.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg, pt.view_sun_azimuth_deg * deg);
-    const auto h = half.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg, pt.view_sun_azimuth_deg * deg);
+    const auto q = fine.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
+                                   pt.view_sun_azimuth_deg * deg);
+    const auto h = half.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
+                                   pt.view_sun_azimuth_deg * deg);
     for (int c = 0; c < 3; ++c) {
       const double q1 = q.L1[c], q12 = q.L1[c] + q.L2[c];
-      const double e1 = std::fabs(q1 - h.L1[c]) + table_rel * q1, e12 = std::fabs(q12 - h.L1[c] - h.L2[c]) + table_rel * q12;
+      const double e1 = std::fabs(q1 - h.L1[c]) + table_rel * q1,
+                   e12 = std::fabs(q12 - h.L1[c] - h.L2[c]) + table_rel * q12;
       const double t1 = r.radiance_low[p * 3 + c], s1 = r.standard_error_low[p * 3 + c];
       const double t12 = r.L(p, c), s12 = r.se(p, c);
       const double z1 = q1 > 0 ? (t1 - q1) / std::hypot(s1, e1) : 0.0, z12 = (t12 - q12) / std::hypot(s12, e12);
-      std::printf("camera %2.0f km, sun %+3.0f°, azimuth %3.0f°, %s: order 1 %.4e ± %.1e, truth %.4e ± %.1e (%.1f %%), z %+.2f | "
-                  "orders 1-2 %.4e ± %.1e, truth %.4e ± %.1e (%.1f %%), z %+.2f\n",
-                  pt.altitude_km, 90 - pt.sun_zenith_deg, pt.view_sun_azimuth_deg, r.channel_names[c].c_str(), q1, e1, t1, s1,
-                  q1 > 0 ? 100 * s1 / t1 : 0.0, z1, q12, e12, t12, s12, 100 * s12 / t12, z12);
+      std::printf(
+          "camera %2.0f km, sun %+3.0f°, azimuth %3.0f°, %s: order 1 %.4e ± %.1e, truth %.4e ± %.1e (%.1f %%), z %+.2f "
+          "| "
+          "orders 1-2 %.4e ± %.1e, truth %.4e ± %.1e (%.1f %%), z %+.2f; %lld walks\n",
+          pt.altitude_km, 90 - pt.sun_zenith_deg, pt.view_sun_azimuth_deg, r.channel_names[c].c_str(), q1, e1, t1, s1,
+          q1 > 0 ? 100 * s1 / t1 : 0.0, z1, q12, e12, t12, s12, 100 * s12 / t12, z12, r.paths[p]);
       EXPECT_GT(q12, 0.0);
       if (q1 > 0) {
         EXPECT_LE(std::fabs(t1 - q1), 3 * s1 + e1) << "order 1, point " << p << " channel " << c;
@@ -168,10 +174,10 @@ TEST(TwilightTruth, OrdersOneAndTwoMatchAnIndependentQuadrature) {
       worst_se = std::max(worst_se, s12 / t12);
     }
   }
-  std::printf("table |Δτ| ≤ %.2g; χ² order 1 %.1f for %d, orders 1-2 %.1f for %d; worst relative se %.1f %%\n", table_tau,
-              chi2_1, n1, chi2_12, n12, 100 * worst_se);
-  std::printf("truth %.1f s (process CPU %.1f s), quadrature %.1f s (CPU %.1f s)\n", truth_s, truth_cpu, seconds_since(t0),
-              static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC);
+  std::printf("table |Δτ| ≤ %.2g; χ² order 1 %.1f for %d, orders 1-2 %.1f for %d; worst relative se %.1f %%\n",
+              table_tau, chi2_1, n1, chi2_12, n12, 100 * worst_se);
+  std::printf("truth %.1f s (process CPU %.1f s), quadrature %.1f s (CPU %.1f s)\n", truth_s, truth_cpu,
+              seconds_since(t0), static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC);
   EXPECT_LE(chi2_1, chi2_quantile(n1, 3.09));
   EXPECT_LE(chi2_12, chi2_quantile(n12, 3.09));
 }
