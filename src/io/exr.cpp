@@ -109,6 +109,8 @@ ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& chan
                                               sizeof(float) * nc * img.width));
     file.setFrameBuffer(fb);
     file.readPixels(dw.min.y, dw.max.y);
+    const Imf::Channel* first = nc > 0 ? file.header().channels().findChannel(channels[0]) : nullptr;
+    img.half = first && first->type == Imf::HALF;
     for (auto it = file.header().begin(); it != file.header().end(); ++it)
       if (auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) img.attributes[it.name()] = s->value();
     return img;

@@ -10,7 +10,7 @@ struct ExrImage {
   int width = 0, height = 0;
   std::vector<std::string> channels;  // e.g. {"R", "G", "B"}; stored in this order per pixel
   std::vector<float> pixels;          // [height][width][channels.size()], row 0 at the top
-  bool half = false;                  // store as 16-bit half instead of 32-bit float
+  bool half = false;                  // store as 16-bit half instead of 32-bit float (read: stored so)
   std::map<std::string, std::string> attributes;  // extra string header attributes
 };
 
