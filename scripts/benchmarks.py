@@ -107,6 +107,12 @@ def bake_facts(m, process_wall):
     facts = {"bake_s": t.get("bake"), "process_s": process_wall,
              "steps_wall_s": {k: round(v.get("wall_s", 0.0), 3) for k, v in steps.items()},
              "device_share": (device / t["bake"]) if t.get("bake") else None}
+    for kind in ("atmosphere", "diffraction"):
+        stages = m.get(kind, {}).get("timings_s", {})
+        stages = stages.get("total", stages) if isinstance(stages, dict) else {}
+        if stages:
+            facts["stages"] = {k: {x: round(y, 4) for x, y in v.items()} for k, v in stages.items()
+                               if isinstance(v, dict) and "wall_s" in v}
     check = record_of(m, "vs_path_traced")
     if check:
         d = check.get("details", {})
@@ -245,6 +251,27 @@ def extra_of(rec):
     if rec.get("source"):
         bits.append(rec["source"])
     return "; ".join(bits)
+
+
+def profile_of(target, by_machine):
+    """Where the newest run's time went, per stage of the job's own timings (device and host)."""
+    out = []
+    for key in sorted(by_machine):
+        cur = sorted(by_machine[key], key=lambda r: r["date"])[-1]
+        runs = cur.get("details", {}).get("warm") or [cur.get("details", {}).get("cold", {})]
+        stages = runs[-1].get("stages") if runs and runs[-1] else None
+        steps = runs[-1].get("steps_wall_s") if runs and runs[-1] else None
+        if not stages:
+            continue
+        m = cur["machine"]
+        out += [f"Where the time of `{cur['version']}` went on {m['class']} ({m['device']}), one warm run: the job's steps "
+                + ", ".join(f"{k} {v:.3g} s" for k, v in sorted((steps or {}).items())) + "; its stages, summed over "
+                "passes and orders (`device_s`: the stage's OpenCL commands; `host_s`: the rest of its wall time):", "",
+                "| stage | device_s | host_s | wall_s |", "|---|---|---|---|"]
+        for name, v in sorted(stages.items(), key=lambda kv: -kv[1].get("wall_s", 0.0)):
+            out.append(f"| {name} | {v.get('device_s', 0):.3g} | {v.get('host_s', 0):.3g} | {v.get('wall_s', 0):.3g} |")
+        out.append("")
+    return out
 
 
 def render(args):
