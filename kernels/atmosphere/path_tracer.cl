@@ -1,7 +1,7 @@
 /* path_tracer.cl — a Monte Carlo path tracer of the atmosphere model of atmosphere.cl: the
  * ground truth the precomputed LUTs are judged by. Shared by the OpenCL kernel
  * (kernels/atmosphere/truth_kernels.cl, real = double where the device has cl_khr_fp64, else
- * float) and the C++ double reference (src/kinds/atmosphere/truth_reference.hpp). Include it
+ * float) and the C++ double reference (src/kinds/atmosphere/truth/truth_reference.hpp). Include it
  * after atmosphere.cl, whose parameter block, density profiles, phase functions, distances and
  * sun terms it uses: the tracer and the LUT kernels cannot disagree on the model.
  *

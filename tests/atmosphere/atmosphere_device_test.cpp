@@ -12,7 +12,7 @@
 #include "atmosphere/sized.hpp"
 #include "io/exr.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

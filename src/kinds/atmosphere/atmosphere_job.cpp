@@ -16,9 +16,9 @@
 #include "core/text.hpp"
 #include "core/version.hpp"
 #include "io/exr.hpp"
-#include "kinds/atmosphere/auto_settings.hpp"
-#include "kinds/atmosphere/reference.hpp"
-#include "kinds/atmosphere/scene_check.hpp"
+#include "kinds/atmosphere/search/auto_settings.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
 
 namespace specbake::atmosphere {
 

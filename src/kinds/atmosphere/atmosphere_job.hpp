@@ -1,11 +1,11 @@
 #pragma once
 #include <string>
 
-#include "kinds/atmosphere/pass.hpp"
+#include "kinds/atmosphere/bake/pass.hpp"
 #include "job/kind.hpp"
-#include "kinds/atmosphere/render.hpp"
-#include "kinds/atmosphere/scene_check.hpp"
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
+#include "kinds/atmosphere/model/spec.hpp"
 
 namespace specbake::atmosphere {
 

@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/scene_check.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -14,7 +14,7 @@
 #include "core/text.hpp"
 #include "core/version.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/model/model.hpp"
 
 namespace specbake::atmosphere {
 

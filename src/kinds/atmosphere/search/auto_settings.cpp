@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/auto_settings.hpp"
+#include "kinds/atmosphere/search/auto_settings.hpp"
 
 #include <spdlog/spdlog.h>
 

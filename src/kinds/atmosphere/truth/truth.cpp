@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -10,8 +10,8 @@
 #include <memory>
 
 #include "cl/buffers.hpp"
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/truth_reference.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/truth/truth_reference.hpp"
 
 namespace specbake::atmosphere {
 

@@ -34,7 +34,7 @@
 #include "core/text.hpp"
 #include "job/kind.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/scene_check.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
 
 namespace specbake::atmosphere {
 

@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/pass.hpp"
+#include "kinds/atmosphere/bake/pass.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -13,7 +13,7 @@
 
 #include "cl/buffers.hpp"
 #include "core/parallel.hpp"
-#include "kinds/atmosphere/reference_widths.hpp"
+#include "kinds/atmosphere/bake/reference_widths.hpp"
 
 namespace specbake::atmosphere {
 

@@ -1,11 +1,11 @@
-#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/model/model.hpp"
 
 #include <cmath>
 #include <cstdio>
 
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
 
 namespace specbake::atmosphere {
 

@@ -11,8 +11,8 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 namespace specbake::atmosphere {
 

@@ -22,7 +22,7 @@
 
 #include "cl/device.hpp"
 #include "job/kind.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 namespace specbake::atmosphere {
 

@@ -26,7 +26,7 @@
 
 #include "cl/device.hpp"
 #include "core/config.hpp"
-#include "kinds/atmosphere/render.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
 #include "job/kind.hpp"
 
 namespace specbake::atmosphere {

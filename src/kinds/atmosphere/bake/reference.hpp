@@ -15,8 +15,8 @@
 #include <vector>
 
 #include "core/parallel.hpp"
-#include "kinds/atmosphere/pass.hpp"
-#include "kinds/atmosphere/texel_reads.hpp"
+#include "kinds/atmosphere/bake/pass.hpp"
+#include "kinds/atmosphere/bake/texel_reads.hpp"
 
 namespace specbake::atmosphere {
 
@@ -64,7 +64,7 @@ namespace ref3 {
 SPECBAKE_ATMOSPHERE_REF_PROLOGUE
 #define NCH 3
 #include "atmosphere/atmosphere.cl"
-#include "kinds/atmosphere/host_pass.inc"
+#include "kinds/atmosphere/bake/host_pass.inc"
 #undef NCH
 }  // namespace ref3
 

@@ -9,8 +9,8 @@
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
 #include "atmosphere/limits.h"
-#include "kinds/atmosphere/scene_check.hpp"
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
+#include "kinds/atmosphere/model/spec.hpp"
 
 namespace specbake::atmosphere {
 
