@@ -17,6 +17,7 @@
 #include "core/parallel.hpp"
 #include "kinds/atmosphere/bake/pass.hpp"
 #include "kinds/atmosphere/bake/texel_reads.hpp"
+#include "kinds/atmosphere/model/kernel_maths.hpp"
 
 namespace specbake::atmosphere {
 
@@ -55,10 +56,6 @@ struct LazyZeroAllocator {
   }
 };
 using HostTexture = std::vector<double, LazyZeroAllocator<double>>;
-
-#define SPECBAKE_ATMOSPHERE_REF_PROLOGUE                                                                    \
-  using real = double;                                                                                    \
-  using std::cos, std::exp, std::floor, std::fmax, std::fmin, std::sin, std::sqrt;
 
 namespace ref3 {
 SPECBAKE_ATMOSPHERE_REF_PROLOGUE

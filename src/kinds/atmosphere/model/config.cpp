@@ -9,7 +9,7 @@
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
 #include "atmosphere/limits.h"
-#include "kinds/atmosphere/truth/scene_check.hpp"
+#include "kinds/atmosphere/model/scene.hpp"
 #include "kinds/atmosphere/model/spec.hpp"
 
 namespace specbake::atmosphere {

@@ -8,7 +8,7 @@
 // the scene's points: one axis group 1.5× finer (scattering r, μ, μ_s, ν; transmittance; irradiance)
 // and the next channel count of the ladder rgb, 8, 12, 16, 24, 32, 48 wavelengths over 360–830 nm.
 // The refinement that lowers the judged error most per second of predicted bake time (the cost
-// model of estimated_seconds, so the choice does not depend on timer noise) is kept; one that
+// model of bake_seconds, so the choice does not depend on timer noise) is kept; one that
 // lowers the error by less than kMinGain of it does not count. When none lowers it, each is
 // tried applied twice, then three times (a plateau: 8 wavelengths can be
 // worse than rgb). The search ends when the tolerance is met, when nothing lowers the error
@@ -33,7 +33,7 @@
 
 #include "core/text.hpp"
 #include "job/kind.hpp"
-#include "kinds/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/bake/bake.hpp"
 #include "kinds/atmosphere/truth/scene_check.hpp"
 
 namespace specbake::atmosphere {

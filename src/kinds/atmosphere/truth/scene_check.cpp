@@ -13,7 +13,7 @@
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
 #include "core/version.hpp"
-#include "kinds/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/bake/bake.hpp"
 #include "kinds/atmosphere/model/model.hpp"
 
 namespace specbake::atmosphere {
@@ -140,24 +140,6 @@ std::string advice(const std::string& part, const AtmosphereSpec& spec, int orde
 
 }  // namespace
 
-const char* views_name(int v) { return v == 0 ? "sky" : v == 1 ? "ground" : "all"; }
-
-json scene_json(const AtmosphereScene& sc) {
-  if (!sc.check) return "none";
-  json j = {{"camera_altitude_km", {sc.camera_altitude_min_km, sc.camera_altitude_max_km}},
-            {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
-            {"views", views_name(sc.views)},
-            {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
-            {"view_sun_azimuth_deg", {sc.view_sun_azimuth_min_deg, sc.view_sun_azimuth_max_deg}},
-            {"points", sc.points},
-            {"relative_se", sc.relative_se},
-            {"seed", sc.seed}};
-  if (sc.tolerance_de2000) j["tolerance_de2000"] = *sc.tolerance_de2000;
-  if (sc.tolerance_relative) j["tolerance_relative"] = *sc.tolerance_relative;
-  j["exposure"] = sc.exposure_ev100 ? json{{"ev100", *sc.exposure_ev100}} : json("per-view");
-  return j;
-}
-
 double exposure_luminance(double ev100) { return 0.125 * std::exp2(ev100); }
 
 double displayed_de2000(const Vec3& test, const Vec3& ref, double exposure_y) {
@@ -202,23 +184,6 @@ std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::ve
     out[p] = d > 0.0 ? std::fabs(test[p][c] - ref[p][c]) / d : (test[p][c] != 0.0 ? 1.0 : 0.0);
   }
   return out;
-}
-
-std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first) {
-  const AtmosphereScene& sc = spec.scene;
-  TruthScene scene;
-  scene.altitude_min_km = sc.camera_altitude_min_km;
-  scene.altitude_max_km = sc.camera_altitude_max_km;
-  scene.sun_elevation_min_deg = sc.sun_elevation_min_deg;
-  scene.sun_elevation_max_deg = sc.sun_elevation_max_deg;
-  scene.views = sc.views == 0 ? TruthViews::sky : sc.views == 1 ? TruthViews::ground : TruthViews::all;
-  scene.view_elevation_min_deg = sc.view_elevation_min_deg;
-  scene.view_elevation_max_deg = sc.view_elevation_max_deg;
-  scene.view_sun_azimuth_min_deg = sc.view_sun_azimuth_min_deg;
-  scene.view_sun_azimuth_max_deg = sc.view_sun_azimuth_max_deg;
-  scene.count = sc.points;
-  scene.first = first;
-  return scene_points(scene, spec);
 }
 
 long long scene_walk_cap(double relative_se) {
