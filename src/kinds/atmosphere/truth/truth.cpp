@@ -410,7 +410,7 @@ struct Group {
   std::size_t first = 0, count = 0;
   Channels channels;
   AtmosphereParameters a{};
-  std::vector<double> tau, cdf, majorant;
+  std::vector<double> tau, cdf, medium;
 };
 std::vector<Group> groups_of(const Prepared& P) {
   std::vector<Group> out;
@@ -422,7 +422,7 @@ std::vector<Group> groups_of(const Prepared& P) {
     g.a = ref3::make_parameters(P.model, g.channels);
     g.tau = group_slice(P.node_tau, P.n_points, P.n_channels, first, g.count);
     g.cdf = group_slice(P.node_cdf, P.n_points, P.n_channels, first, g.count);
-    g.majorant = medium_table(P.model, g.channels);
+    g.medium = medium_table(P.model, g.channels);
     out.push_back(std::move(g));
   }
   return out;
@@ -438,7 +438,7 @@ class HostEngine final : public Engine {
     parallel_for(static_cast<long long>(P_.n_points) * stride, [&](long long id) {
       const int p = static_cast<int>(id / stride), j = static_cast<int>(id % stride);
       if (j >= count[p]) return;
-      ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.majorant.data(),
+      ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.medium.data(),
                              kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
                              o_.split_orders, static_cast<int>(o_.next_sun), static_cast<philox_u32>(o_.seed & 0xffffffffu),
                              static_cast<philox_u32>(o_.seed >> 32),
@@ -465,7 +465,7 @@ class DeviceEngine final : public Engine {
       b.block = ref3::parameter_block(g.a, dev.info().fp64);
       b.tau = cl_util::upload_real(dev, g.tau);
       b.cdf = cl_util::upload_real(dev, g.cdf);
-      b.majorant = cl_util::upload_real(dev, g.majorant);
+      b.medium = cl_util::upload_real(dev, g.medium);
       buffers_.push_back(std::move(b));
     }
   }
@@ -487,7 +487,7 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, node_t_);
       k.setArg(i++, b.tau);
       k.setArg(i++, b.cdf);
-      k.setArg(i++, b.majorant);
+      k.setArg(i++, b.medium);
       k.setArg(i++, static_cast<cl_int>(P_.n_points));
       k.setArg(i++, static_cast<cl_int>(P_.point_base));
       k.setArg(i++, static_cast<cl_int>(kNodes));
@@ -511,7 +511,7 @@ class DeviceEngine final : public Engine {
  private:
   struct GroupBuffers {
     std::vector<unsigned char> block;
-    cl::Buffer tau, cdf, majorant;
+    cl::Buffer tau, cdf, medium;
   };
   cl_util::Device& dev_;
   const Prepared& P_;
