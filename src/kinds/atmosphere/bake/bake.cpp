@@ -34,119 +34,173 @@ constexpr double kCheckTolerance = 2e-3;
 
 using MakeBackend = std::function<std::unique_ptr<PassBackend>(const Channels&, int width)>;
 
-Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progress& progress, int check_texels) {
-  Baked out;
-  const Model m = model_of(spec);
-  const Spectrum sp = spectrum_of(spec);
-  const Channels all = channels_at(spec, sp.lambda_nm);
-  const Channels rgb = channels_at(spec, {kLambdaR, kLambdaG, kLambdaB});
-  out.spectrum = sp;
-  out.luts.model = m;
-  out.luts.rgb = rgb;
-  const int n = static_cast<int>(all.size());
-  const int width = channels_per_pass(spec);
-  const int passes = (n + width - 1) / width;
-  const Sizes& s = m.sizes;
-  const std::size_t n_t = 1ULL * s.transmittance_w * s.transmittance_h;
-  out.passes = json::array();
-  out.self_checks = json::array();
-  std::map<std::string, cl_util::StageSeconds> stage_total;
+// The seconds of a bake's stages, summed over passes: in total by stage name and per order.
+struct StageClock {
+  std::map<std::string, cl_util::StageSeconds> total;
   std::map<int, std::map<std::string, cl_util::StageSeconds>> per_order;
-  std::map<int, double> relative;  // per order, the largest over passes
-  // host-only steps of the job: the backend's set-up (program build, allocations, layout check)
-  const auto host_stage = [&](const char* stage, auto&& f) {
-    cl_util::accumulate(stage_total[stage], cl_util::host_only(stage, f));
-  };
+
+  // a host-only step of the job: the backend's set-up (program build, allocations, layout check)
+  template <class F>
+  void host(const char* stage, F&& f) {
+    cl_util::accumulate(total[stage], cl_util::host_only(stage, f));
+  }
   // a step with device commands, on b's profiler (a host backend enqueues nothing)
-  const auto device_stage = [&](PassBackend& b, const char* stage, auto&& f) {
+  template <class F>
+  void device(PassBackend& b, const char* stage, F&& f) {
     cl_util::Profiler own;
     cl_util::Profiler& prof = b.profiler() ? *b.profiler() : own;
     cl_util::Profiler::Stage st(prof, stage);
     f();
     st.close();
     prof.settle();
-    cl_util::accumulate(stage_total[stage], *st.record());
-  };
-  // One backend serves every pass (its sums over passes stay where it is).
-  std::unique_ptr<PassBackend> backend;
-  host_stage("setup", [&] { backend = make(all.slice(0, std::min(width, n)), width); });
-  if (spec.store_radiance) {
-    out.radiance.lambda_nm = all.lambda_nm;
-    out.radiance.solar_irradiance = all.solar_irradiance;
+    cl_util::accumulate(total[stage], *st.record());
   }
-  for (int p = 0; p < passes; ++p) {
-    const int first = p * width, count = std::min(width, n - first);
-    const Channels ch = all.slice(first, count);
-    if (p > 0) backend->use_channels(ch);
+  // a pass's own stage times
+  void add(const std::vector<StageTime>& timings) {
+    for (const StageTime& t : timings) {
+      cl_util::accumulate(total[t.stage], t.seconds);
+      cl_util::accumulate(per_order[t.order][t.stage], t.seconds);
+    }
+  }
+  // {"total": {stage: seconds}, "per_order": [{stage: seconds, "order": n}]}
+  json to_json() const {
+    json out = {{"total", json::object()}, {"per_order", json::array()}};
+    for (const auto& [stage, sec] : total) out["total"][stage] = cl_util::seconds_json(sec);
+    for (const auto& [order, stages] : per_order) {
+      json o = json::object();
+      for (const auto& [stage, sec] : stages) o[stage] = cl_util::seconds_json(sec);
+      o["order"] = order;
+      out["per_order"].push_back(o);
+    }
+    return out;
+  }
+};
+
+// The plan of the pass of channels [first, first + count) of n, `width` wide: the spec's orders
+// and tolerance, and its channels → R,G,B weights (identity in rgb mode, the CIE weights in
+// spectral mode).
+PassPlan pass_plan(const AtmosphereSpec& spec, const Spectrum& sp, int n, int first, int count, int width,
+                   bool last_pass) {
+  PassPlan plan;
+  plan.orders = spec.orders.value_or(kMaxAutoOrders);
+  plan.auto_orders = !spec.orders.has_value();
+  plan.tolerance = spec.tolerance;
+  plan.to_rgb.assign(3 * width, 0.0);
+  for (int k = 0; k < 3; ++k)
+    for (int i = 0; i < count; ++i) plan.to_rgb[k * width + i] = sp.spectral ? sp.to_rgb[k * n + first + i] : (k == i);
+  plan.keep_textures = spec.store_radiance;
+  plan.last_pass = last_pass;
+  return plan;
+}
+
+// What the manifest says of order o: the max and mean it adds to scattering and irradiance, and
+// its relative change (the largest over passes; none for order 1).
+json order_json(int o, const OrderRgb& st_o, double rel) {
+  return {{"order", o},
+          {"scattering", {{"max", st_o.scattering_max}, {"mean", st_o.scattering_mean}}},
+          {"irradiance", st_o.irradiance_max.empty() ? json(nullptr)
+                                                     : json{{"max", st_o.irradiance_max}, {"mean", st_o.irradiance_mean}}},
+          {"relative_change", o == 1 ? json(nullptr) : json(rel)}};
+}
+
+// A bake in passes of `width` channels on backends from `make`: each pass self-checked, its
+// statistics and times kept, then the R,G,B textures read from the sums over the passes.
+class Baking {
+ public:
+  Baking(const AtmosphereSpec& spec, const MakeBackend& make, int check_texels)
+      : spec_(spec), make_(make), check_texels_(check_texels), m_(model_of(spec)), sp_(spectrum_of(spec)),
+        all_(channels_at(spec, sp_.lambda_nm)), n_(static_cast<int>(all_.size())), width_(channels_per_pass(spec)),
+        passes_((n_ + width_ - 1) / width_) {
+    out_.spectrum = sp_;
+    out_.luts.model = m_;
+    out_.luts.rgb = channels_at(spec, {kLambdaR, kLambdaG, kLambdaB});
+    out_.passes = json::array();
+    out_.self_checks = json::array();
+    if (spec.store_radiance) {
+      out_.radiance.lambda_nm = all_.lambda_nm;
+      out_.radiance.solar_irradiance = all_.solar_irradiance;
+    }
+  }
+
+  Baked run(const Progress& progress) {
+    // One backend serves every pass (its sums over passes stay where it is).
+    clock_.host("setup", [&] { backend_ = make_(all_.slice(0, std::min(width_, n_)), width_); });
+    for (int p = 0; p < passes_; ++p) pass(p, progress);
+    combine();
+    if (sp_.spectral) transmittance_rgb();
+    out_.timings = clock_.to_json();
+    const Sizes& s = m_.sizes;
+    if (out_.luts.transmittance.size() != 3ULL * s.transmittance_w * s.transmittance_h)
+      throw JobError("atmosphere: transmittance texture has the wrong size");
+    return std::move(out_);
+  }
+
+ private:
+  // Pass p: channels [p · width, ...), self-checked, its textures kept for `store: radiance`.
+  void pass(int p, const Progress& progress) {
+    const int first = p * width_, count = std::min(width_, n_ - first);
+    const Channels ch = all_.slice(first, count);
+    if (p > 0) backend_->use_channels(ch);
     std::unique_ptr<StageChecker> checker;
-    if (check_texels > 0) checker = make_stage_checker(m, ch, width, check_texels, kCheckFloor);
+    if (check_texels_ > 0) checker = make_stage_checker(m_, ch, width_, check_texels_, kCheckFloor);
     const CheckHook on_check = [&](const StageCheck& c) {
-      out.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
-                                 {"max_relative_error", c.max_rel}});
-      out.self_check_worst = std::max(out.self_check_worst, c.max_rel);
+      out_.self_checks.push_back({{"pass", p}, {"stage", c.stage}, {"order", c.order}, {"texels", c.texels},
+                                  {"max_relative_error", c.max_rel}});
+      out_.self_check_worst = std::max(out_.self_check_worst, c.max_rel);
       // stop here: later stages would only spread the NaN
       if (c.non_finite > 0) throw non_finite_error({c.stage, c.order, p, c.non_finite});
     };
-    // pass channels → R,G,B: identity in rgb mode, the CIE weights in spectral mode
-    PassPlan plan;
-    plan.orders = spec.orders.value_or(kMaxAutoOrders);
-    plan.auto_orders = !spec.orders.has_value();
-    plan.tolerance = spec.tolerance;
-    plan.to_rgb.assign(3 * width, 0.0);
-    for (int k = 0; k < 3; ++k)
-      for (int i = 0; i < count; ++i) plan.to_rgb[k * width + i] = sp.spectral ? sp.to_rgb[k * n + first + i] : (k == i);
-    plan.keep_textures = spec.store_radiance;
-    plan.last_pass = p + 1 == passes;
-    const double p0 = 0.9 * p / passes, p1 = 0.9 * (p + 1) / passes;
-    const PassResult r = run_pass(*backend, plan, progress, p0, p1, checker.get(), on_check);
-    for (const StageTime& t : r.timings) {
-      cl_util::accumulate(stage_total[t.stage], t.seconds);
-      cl_util::accumulate(per_order[t.order][t.stage], t.seconds);
-    }
-    for (const auto& o : r.orders) relative[o.order] = std::max(relative[o.order], o.relative);
-    if (spec.store_radiance) host_stage("combine", [&] { keep_radiance(out.radiance, s, first, count, width, r); });
-    out.orders_used = std::max(out.orders_used, r.orders_used);
-    out.converged = out.converged && r.converged;
-    out.passes.push_back({{"wavelengths_nm", ch.lambda_nm}, {"orders_used", r.orders_used}, {"converged", r.converged}});
+    const PassPlan plan = pass_plan(spec_, sp_, n_, first, count, width_, p + 1 == passes_);
+    const double p0 = 0.9 * p / passes_, p1 = 0.9 * (p + 1) / passes_;
+    const PassResult r = run_pass(*backend_, plan, progress, p0, p1, checker.get(), on_check);
+    clock_.add(r.timings);
+    for (const auto& o : r.orders) relative_[o.order] = std::max(relative_[o.order], o.relative);
+    if (spec_.store_radiance)
+      clock_.host("combine", [&] { keep_radiance(out_.radiance, m_.sizes, first, count, width_, r); });
+    out_.orders_used = std::max(out_.orders_used, r.orders_used);
+    out_.converged = out_.converged && r.converged;
+    out_.passes.push_back({{"wavelengths_nm", ch.lambda_nm}, {"orders_used", r.orders_used}, {"converged", r.converged}});
   }
+
   // The bake's R,G,B textures and each order's statistics, from the sums over the passes.
-  device_stage(*backend, "combine", [&] {
-    Sums& sums = backend->sums();
-    sums.read_rgb(Sum::irradiance, out.luts.irradiance);
-    sums.read_rgb(Sum::scattering, out.luts.scattering);
-    sums.read_rgb(Sum::single_mie, out.luts.single_mie);
-    if (!sp.spectral) out.luts.transmittance = backend->read(Tex::transmittance);
-    out.orders = json::array();
-    for (const auto& [o, rel] : relative) {
-      const OrderRgb st_o = sums.order_rgb(o);
-      out.orders.push_back(
-          {{"order", o},
-           {"scattering", {{"max", st_o.scattering_max}, {"mean", st_o.scattering_mean}}},
-           {"irradiance", st_o.irradiance_max.empty() ? json(nullptr)
-                                                      : json{{"max", st_o.irradiance_max}, {"mean", st_o.irradiance_mean}}},
-           {"relative_change", o == 1 ? json(nullptr) : json(rel)}});
-    }
-  });
-  if (sp.spectral) {
-    // The render-time transmittance is at 680/550/440 nm, as the GPU model's luminance mode.
-    std::unique_ptr<PassBackend> b;
-    cl_util::accumulate(stage_total["transmittance_rgb"],  // the 3-channel program's build
-                        cl_util::host_only("transmittance_rgb", [&] { b = make(rgb, 3); }));
-    device_stage(*b, "transmittance_rgb", [&] {
-      b->transmittance();
-      out.luts.transmittance = b->read(Tex::transmittance);
+  void combine() {
+    clock_.device(*backend_, "combine", [&] {
+      Sums& sums = backend_->sums();
+      sums.read_rgb(Sum::irradiance, out_.luts.irradiance);
+      sums.read_rgb(Sum::scattering, out_.luts.scattering);
+      sums.read_rgb(Sum::single_mie, out_.luts.single_mie);
+      if (!sp_.spectral) out_.luts.transmittance = backend_->read(Tex::transmittance);
+      out_.orders = json::array();
+      for (const auto& [o, rel] : relative_) out_.orders.push_back(order_json(o, sums.order_rgb(o), rel));
     });
   }
-  out.timings = {{"total", json::object()}, {"per_order", json::array()}};
-  for (const auto& [stage, sec] : stage_total) out.timings["total"][stage] = cl_util::seconds_json(sec);
-  for (const auto& [order, stages] : per_order) {
-    json o = json::object();
-    for (const auto& [stage, sec] : stages) o[stage] = cl_util::seconds_json(sec);
-    o["order"] = order;
-    out.timings["per_order"].push_back(o);
+
+  // Spectral bakes: the render-time transmittance is at 680/550/440 nm, as the GPU model's
+  // luminance mode.
+  void transmittance_rgb() {
+    std::unique_ptr<PassBackend> b;
+    clock_.host("transmittance_rgb", [&] { b = make_(out_.luts.rgb, 3); });  // the 3-channel program's build
+    clock_.device(*b, "transmittance_rgb", [&] {
+      b->transmittance();
+      out_.luts.transmittance = b->read(Tex::transmittance);
+    });
   }
-  if (out.luts.transmittance.size() != 3 * n_t) throw JobError("atmosphere: transmittance texture has the wrong size");
-  return out;
+
+  const AtmosphereSpec& spec_;
+  const MakeBackend& make_;
+  const int check_texels_;
+  const Model m_;
+  const Spectrum sp_;
+  const Channels all_;
+  const int n_, width_, passes_;
+  Baked out_;
+  StageClock clock_;
+  std::map<int, double> relative_;  // per order, the largest over passes
+  std::unique_ptr<PassBackend> backend_;
+};
+
+Baked bake_impl(const AtmosphereSpec& spec, const MakeBackend& make, const Progress& progress, int check_texels) {
+  return Baking(spec, make, check_texels).run(progress);
 }
 
 json profile_json(const DensityLayer* p) {
