@@ -453,57 +453,108 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
                         "error: the spectral_interpolation accuracy record"}};
 }
 
-void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
-  ctx.enter(Stage::files);
-  const Luts& L = b.luts;
-  const Sizes& s = L.model.sizes;
-  const auto t_files = std::chrono::steady_clock::now();
-  ctx.progress("files", 0.92);
-  const std::string le = "little-endian float32, C order, channels R,G,B innermost";
-  const std::string units = b.spectrum.spectral ? "linear sRGB luminance / 683 (W m^-2 sr^-1 CIE-weighted)"
-                                                : "W m^-2 nm^-1 (radiance textures: per sr) at 680/550/440 nm";
-  const std::string param = "Bruneton 2017 (r, mu, mu_s, nu) parameterisation, texel centres";
-  const int wd = s.scattering_width();
-  // The textures' files are listed here in their bundle order with their bytes encoded later, all
-  // at once on the host's threads (each task fills its own files' bytes: the same bundle whatever
-  // the thread count). The textures and the strings the tasks read outlive the tasks.
-  std::vector<std::function<void()>> encode;
-  const auto later = [&](OutputFile f, std::function<std::string()> bytes) {
-    const std::size_t at = r.files.size();
-    r.files.push_back(std::move(f));
-    encode.push_back([&r, at, bytes = std::move(bytes)] { r.files[at].bytes = bytes(); });
-  };
-  auto attrs = [&](const std::string& layout, const std::string& content, const std::string& of = "") {
-    return std::map<std::string, std::string>{{"specbake.layout", layout},
-                                              {"specbake.content", content},
-                                              {"specbake.parameterisation", param},
-                                              {"specbake.units", of.empty() ? units : of}};
-  };
-  if (spec.out_transmittance) {
-    const std::string lay = "[r=" + std::to_string(s.transmittance_h) + "][mu=" + std::to_string(s.transmittance_w) +
+// The R,G,B textures' .bin and .exr files. They are listed in their bundle order with their bytes
+// encoded later (encode_all), all at once on the host's threads (each task fills its own files'
+// bytes: the same bundle whatever the thread count). The textures and the strings the tasks read
+// outlive the tasks.
+class TextureFiles {
+ public:
+  TextureFiles(const Luts& L, const std::string& units, const std::string& param, BakeResult& r)
+      : L_(L), s_(L.model.sizes), units_(units), param_(param), r_(r) {}
+
+  void transmittance() {
+    const std::string lay = "[r=" + std::to_string(s_.transmittance_h) + "][mu=" + std::to_string(s_.transmittance_w) +
                             "][RGB]; u = mu coordinate, v = r coordinate";
-    later({"transmittance.bin", "", "float32", {s.transmittance_h, s.transmittance_w, 3}, le + "; " + lay, "1",
+    later({"transmittance.bin", "", "float32", {s_.transmittance_h, s_.transmittance_w, 3}, kLe + "; " + lay, "1",
            "transmittance to the top of the atmosphere at 680/550/440 nm"},
-          [&] { return float32_le(L.transmittance, "transmittance"); });
-    later({"transmittance.exr", "", "", {s.transmittance_h, s.transmittance_w, 3}, "EXR float32, row j = r index",
+          [&] { return float32_le(L_.transmittance, "transmittance"); });
+    later({"transmittance.exr", "", "", {s_.transmittance_h, s_.transmittance_w, 3}, "EXR float32, row j = r index",
            "1", "transmittance (EXR copy)"},
           [&, a = attrs(lay, "transmittance to the top boundary", "1")] {
-            return exr_of(s.transmittance_w, s.transmittance_h, L.transmittance, a);
+            return exr_of(s_.transmittance_w, s_.transmittance_h, L_.transmittance, a);
           });
   }
-  if (spec.out_irradiance) {
-    const std::string lay = "[r=" + std::to_string(s.irradiance_h) + "][mu_s=" + std::to_string(s.irradiance_w) +
+
+  void irradiance() {
+    const std::string lay = "[r=" + std::to_string(s_.irradiance_h) + "][mu_s=" + std::to_string(s_.irradiance_w) +
                             "][RGB]";
-    later({"irradiance.bin", "", "float32", {s.irradiance_h, s.irradiance_w, 3}, le + "; " + lay, units,
+    later({"irradiance.bin", "", "float32", {s_.irradiance_h, s_.irradiance_w, 3}, kLe + "; " + lay, units_,
            "sky (indirect) irradiance on a horizontal surface, orders 1..N-1, as the reference stores "
            "it: the direct sun is NOT included (add solar_irradiance * T_sun * cos)"},
-          [&] { return float32_le(L.irradiance, "irradiance"); });
-    later({"irradiance.exr", "", "", {s.irradiance_h, s.irradiance_w, 3}, "EXR float32, row j = r index", units,
+          [&] { return float32_le(L_.irradiance, "irradiance"); });
+    later({"irradiance.exr", "", "", {s_.irradiance_h, s_.irradiance_w, 3}, "EXR float32, row j = r index", units_,
            "irradiance (EXR copy)"},
           [&, a = attrs(lay, "indirect (sky) irradiance only")] {
-            return exr_of(s.irradiance_w, s.irradiance_h, L.irradiance, a);
+            return exr_of(s_.irradiance_w, s_.irradiance_h, L_.irradiance, a);
           });
   }
+
+  // A 4D texture (scattering, single Mie) in the 3D layout [r][mu][nu·mu_s].
+  void scattering_3d(const std::string& name, const std::vector<double>* data, const char* what) {
+    const int wd = s_.scattering_width();
+    const std::string lay = "[r=" + std::to_string(s_.r) + "][mu=" + std::to_string(s_.mu) + "][nu*mu_s=" +
+                            std::to_string(s_.nu) + "*" + std::to_string(s_.mu_s) + "][RGB]; x = nu_slice*MU_S + mu_s";
+    later({name + ".bin", "", "float32", {s_.r, s_.mu, wd, 3}, kLe + "; " + lay, units_, what},
+          [&, data, name] { return float32_le(*data, name); });
+    later({name + ".exr", "", "", {s_.r, s_.mu, wd, 3}, "EXR float32, row = r*MU + mu", units_, what},
+          [&, data, wd, a = attrs(lay + "; EXR rows = r*MU + mu (3D depth slices stacked)", what)] {
+            return exr_of(wd, s_.mu * s_.r, *data, a);
+          });
+  }
+
+  // The same texture in the tiled 2D layout [mu][r·nu·mu_s].
+  void scattering_tiled2d(const std::string& name, const std::vector<double>* data, const char* what) {
+    const int wd = s_.scattering_width();
+    // one tiled copy for both files, made by the first task to need it
+    const auto tiled = std::make_shared<std::vector<double>>();
+    const auto once = std::make_shared<std::once_flag>();
+    const auto tiled_of = [&s = s_, data, tiled, once]() -> const std::vector<double>& {
+      std::call_once(*once, [&] { *tiled = to_tiled2d(*data, s); });
+      return *tiled;
+    };
+    const std::string lay = "[mu=" + std::to_string(s_.mu) + "][r*nu*mu_s=" + std::to_string(s_.r) + "*" +
+                            std::to_string(s_.nu) + "*" + std::to_string(s_.mu_s) +
+                            "][RGB]; column = r*NU*MU_S + nu_slice*MU_S + mu_s";
+    later({name + "_tiled2d.bin", "", "float32", {s_.mu, s_.r * wd, 3}, kLe + "; " + lay, units_,
+           std::string(what) + " (tiled 2D layout)"},
+          [tiled_of, name] { return float32_le(tiled_of(), name); });
+    later({name + "_tiled2d.exr", "", "", {s_.mu, s_.r * wd, 3}, "EXR float32", units_,
+           std::string(what) + " (tiled 2D, EXR)"},
+          [&, wd, tiled_of, a = attrs(lay, what)] { return exr_of(s_.r * wd, s_.mu, tiled_of(), a); });
+  }
+
+  void encode_all() { parallel_for(static_cast<long long>(encode_.size()), [&](long long i) { encode_[i](); }); }
+
+ private:
+  inline static const std::string kLe = "little-endian float32, C order, channels R,G,B innermost";
+
+  void later(OutputFile f, std::function<std::string()> bytes) {
+    const std::size_t at = r_.files.size();
+    r_.files.push_back(std::move(f));
+    encode_.push_back([&r = r_, at, bytes = std::move(bytes)] { r.files[at].bytes = bytes(); });
+  }
+  std::map<std::string, std::string> attrs(const std::string& layout, const std::string& content,
+                                           const std::string& of = "") const {
+    return std::map<std::string, std::string>{{"specbake.layout", layout},
+                                              {"specbake.content", content},
+                                              {"specbake.parameterisation", param_},
+                                              {"specbake.units", of.empty() ? units_ : of}};
+  }
+
+  const Luts& L_;
+  const Sizes& s_;
+  const std::string& units_;
+  const std::string& param_;
+  BakeResult& r_;
+  std::vector<std::function<void()>> encode_;
+};
+
+// The R,G,B textures the spec asks for, in their layouts.
+void texture_files(const AtmosphereSpec& spec, const Luts& L, const std::string& units, const std::string& param,
+                   BakeResult& r) {
+  TextureFiles files(L, units, param, r);
+  if (spec.out_transmittance) files.transmittance();
+  if (spec.out_irradiance) files.irradiance();
   struct Tex3 {
     bool wanted;
     const char* name;
@@ -515,37 +566,40 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                         Tex3{spec.out_single_mie, "single_mie_scattering", &L.single_mie,
                              "single Mie scattering (no phase function)"}}) {
     if (!t.wanted) continue;
-    const std::string name = t.name;
-    if (spec.layout_3d) {
-      const std::string lay = "[r=" + std::to_string(s.r) + "][mu=" + std::to_string(s.mu) + "][nu*mu_s=" +
-                              std::to_string(s.nu) + "*" + std::to_string(s.mu_s) + "][RGB]; x = nu_slice*MU_S + mu_s";
-      later({name + ".bin", "", "float32", {s.r, s.mu, wd, 3}, le + "; " + lay, units, t.what},
-            [&, data = t.data, name] { return float32_le(*data, name); });
-      later({name + ".exr", "", "", {s.r, s.mu, wd, 3}, "EXR float32, row = r*MU + mu", units, t.what},
-            [&, data = t.data, a = attrs(lay + "; EXR rows = r*MU + mu (3D depth slices stacked)", t.what)] {
-              return exr_of(wd, s.mu * s.r, *data, a);
-            });
-    }
-    if (spec.layout_tiled2d) {
-      // one tiled copy for both files, made by the first task to need it
-      const auto tiled = std::make_shared<std::vector<double>>();
-      const auto once = std::make_shared<std::once_flag>();
-      const auto tiled_of = [&s, data = t.data, tiled, once]() -> const std::vector<double>& {
-        std::call_once(*once, [&] { *tiled = to_tiled2d(*data, s); });
-        return *tiled;
-      };
-      const std::string lay = "[mu=" + std::to_string(s.mu) + "][r*nu*mu_s=" + std::to_string(s.r) + "*" +
-                              std::to_string(s.nu) + "*" + std::to_string(s.mu_s) +
-                              "][RGB]; column = r*NU*MU_S + nu_slice*MU_S + mu_s";
-      later({name + "_tiled2d.bin", "", "float32", {s.mu, s.r * wd, 3}, le + "; " + lay, units,
-             std::string(t.what) + " (tiled 2D layout)"},
-            [tiled_of, name] { return float32_le(tiled_of(), name); });
-      later({name + "_tiled2d.exr", "", "", {s.mu, s.r * wd, 3}, "EXR float32", units,
-             std::string(t.what) + " (tiled 2D, EXR)"},
-            [&, tiled_of, a = attrs(lay, t.what)] { return exr_of(s.r * wd, s.mu, tiled_of(), a); });
-    }
+    if (spec.layout_3d) files.scattering_3d(t.name, t.data, t.what);
+    if (spec.layout_tiled2d) files.scattering_tiled2d(t.name, t.data, t.what);
   }
-  parallel_for(static_cast<long long>(encode.size()), [&](long long i) { encode[i](); });
+  files.encode_all();
+}
+
+// The manifest's timings: the bake's stages, then the files' and previews' seconds.
+void record_timings(const Baked& b, double files_s, double previews_s, BakeResult& r) {
+  json timings = b.timings;
+  const auto host_only = [](double s) { return json{{"device_s", 0.0}, {"host_s", s}, {"wall_s", s}}; };
+  timings["total"]["files"] = host_only(files_s);
+  timings["total"]["previews"] = host_only(previews_s);
+  timings["note"] = "per stage: device_s = sum of the OpenCL profiling times (end - start) of its commands, "
+                    "host_s = wall_s minus the time the host waited for the device, wall_s = elapsed; "
+                    "'self_check' = the double recomputation after each stage, 'host' = reads and sums between "
+                    "stages; in total only: 'setup' = each pass's program build, allocations and layout "
+                    "check, 'combine' = adding each pass into the bundle's textures; per_order[0] = "
+                    "transmittance and direct irradiance, per_order[n] = the stages of order n "
+                    "(indirect_irradiance of order n is computed during order n + 1)";
+  r.manifest_blocks["atmosphere"]["timings_s"] = timings;
+  for (const auto& [stage, sec] : timings["total"].items())
+    spdlog::debug("atmosphere: {} total: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", stage,
+                  sec["device_s"].get<double>(), sec["host_s"].get<double>(), sec["wall_s"].get<double>());
+}
+
+void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
+  ctx.enter(Stage::files);
+  const Luts& L = b.luts;
+  const auto t_files = std::chrono::steady_clock::now();
+  ctx.progress("files", 0.92);
+  const std::string units = b.spectrum.spectral ? "linear sRGB luminance / 683 (W m^-2 sr^-1 CIE-weighted)"
+                                                : "W m^-2 nm^-1 (radiance textures: per sr) at 680/550/440 nm";
+  const std::string param = "Bruneton 2017 (r, mu, mu_s, nu) parameterisation, texel centres";
+  texture_files(spec, L, units, param, r);
   if (spec.ktx2.enabled) ktx2_files(spec, L, units, param, ctx, r);
   if (!b.radiance.lambda_nm.empty()) spectral_files(spec, b.radiance, L.model, ctx, r);
   r.files.push_back({"sampling.glsl",
@@ -558,21 +612,8 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                                  spec.preview_size))
       r.files.push_back(std::move(f));
   const auto t_done = std::chrono::steady_clock::now();
-  json timings = b.timings;
-  const auto host_only = [](double s) { return json{{"device_s", 0.0}, {"host_s", s}, {"wall_s", s}}; };
-  timings["total"]["files"] = host_only(std::chrono::duration<double>(t_previews - t_files).count());
-  timings["total"]["previews"] = host_only(std::chrono::duration<double>(t_done - t_previews).count());
-  timings["note"] = "per stage: device_s = sum of the OpenCL profiling times (end - start) of its commands, "
-                    "host_s = wall_s minus the time the host waited for the device, wall_s = elapsed; "
-                    "'self_check' = the double recomputation after each stage, 'host' = reads and sums between "
-                    "stages; in total only: 'setup' = each pass's program build, allocations and layout "
-                    "check, 'combine' = adding each pass into the bundle's textures; per_order[0] = "
-                    "transmittance and direct irradiance, per_order[n] = the stages of order n "
-                    "(indirect_irradiance of order n is computed during order n + 1)";
-  r.manifest_blocks["atmosphere"]["timings_s"] = timings;
-  for (const auto& [stage, sec] : timings["total"].items())
-    spdlog::debug("atmosphere: {} total: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", stage,
-                  sec["device_s"].get<double>(), sec["host_s"].get<double>(), sec["wall_s"].get<double>());
+  record_timings(b, std::chrono::duration<double>(t_previews - t_files).count(),
+                 std::chrono::duration<double>(t_done - t_previews).count(), r);
 }
 
 }  // namespace
