@@ -1,6 +1,6 @@
 # Generates a C++ source defining specbake::atmosphere::kHostSources: the SHA-256 of the host
 # sources and data the atmosphere's path-traced truth depends on (each file's path and SHA-256,
-# in order). A kept truth's key carries it (src/kinds/atmosphere/scene_check.cpp), so a change
+# in order). A kept truth's key carries it (src/kinds/atmosphere/truth/scene_check.cpp), so a change
 # to any of them is never answered with a truth traced before it.
 # Invoked at build time:  cmake -DROOT=... -DOUT=... -DFILES="a;b;c" -P source_ids.cmake
 set(all "")

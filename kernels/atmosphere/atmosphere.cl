@@ -2,7 +2,7 @@
  * Atmospheric Scattering: a New Implementation" (2017), itself an update of Bruneton &
  * Neyret, "Precomputed Atmospheric Scattering", EGSR 2008. Shared by the OpenCL kernels
  * (kernels/atmosphere/kernels.cl, real = float) and the C++ double reference
- * (src/kinds/atmosphere/reference.hpp, real = double). The geometry and texture coordinates
+ * (src/kinds/atmosphere/bake/reference.hpp, real = double). The geometry and texture coordinates
  * are in lookup.cl, the rendering functions (GetSkyRadiance & co.) in render.glsl; both are also
  * the shipped sampling.glsl.
  *
@@ -91,7 +91,7 @@
  * name it (texture_2d_blend, texture_3d_column, the density's ground taps); offset in reals
  * from the texture's start, at a texel's first channel. Nothing in a kernel; the C++
  * reference defines it to note the texels a recomputation reads, so that a self-check fetches
- * only those from the device (src/kinds/atmosphere/texel_reads.hpp). */
+ * only those from the device (src/kinds/atmosphere/bake/texel_reads.hpp). */
 #ifndef NOTE_TEXEL
 #  define NOTE_TEXEL(tex, offset)
 #endif

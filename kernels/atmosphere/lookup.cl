@@ -3,10 +3,10 @@
  *
  * Compiled three ways, the same text each time:
  *   - into the bake's kernels (kernels/atmosphere/atmosphere.cl includes it; real = float),
- *   - into the C++ double reference (src/kinds/atmosphere/reference.hpp) and the host's
- *     rendering functions (src/kinds/atmosphere/shader_host.hpp, with render.glsl),
+ *   - into the C++ double reference (src/kinds/atmosphere/bake/reference.hpp) and the host's
+ *     rendering functions (src/kinds/atmosphere/shader/shader_host.hpp, with render.glsl),
  *   - into the bundle's sampling.glsl, pasted verbatim after a prelude that defines real, FN,
- *     R(x), REQUIRE, fmax, fmin and fabs (src/kinds/atmosphere/render.cpp, sampling_glsl).
+ *     R(x), REQUIRE, fmax, fmin and fabs (src/kinds/atmosphere/shader/render.cpp, sampling_glsl).
  * Hence the subset: scalars (real, int) only, sizes passed as real (no int → real casts, which
  * C and GLSL spell differently), no pointers, structs, `const` locals (GLSL wants constant
  * initialisers for those), overloads or names GLSL reserves (half, fixed, sample, input, ...);

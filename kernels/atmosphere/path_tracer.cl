@@ -1,7 +1,7 @@
 /* path_tracer.cl — a Monte Carlo path tracer of the atmosphere model of atmosphere.cl: the
  * ground truth the precomputed LUTs are judged by. Shared by the OpenCL kernel
  * (kernels/atmosphere/truth_kernels.cl, real = double where the device has cl_khr_fp64, else
- * float) and the C++ double reference (src/kinds/atmosphere/truth_reference.hpp). Include it
+ * float) and the C++ double reference (src/kinds/atmosphere/truth/truth_reference.hpp). Include it
  * after atmosphere.cl, whose parameter block, density profiles, phase functions, distances and
  * sun terms it uses: the tracer and the LUT kernels cannot disagree on the model.
  *
@@ -63,7 +63,7 @@
 #  error "include atmosphere/atmosphere.cl before path_tracer.cl"
 #endif
 
-#define TRUTH_SHELLS 256        /* majorant table: shells of thickness (rt − rb)/TRUTH_SHELLS */
+#define TRUTH_SHELLS 256        /* the medium table's majorants: shells of thickness (rt − rb)/TRUTH_SHELLS */
 #define TRUTH_MAX_KINKS 32      /* kink altitudes of the profiles the medium table can hold */
 /* The medium table (host-built, one per channel group): [TRUTH_SHELLS][NCH] majorants, then
  * the number of kink altitudes of the density profiles and up to TRUTH_MAX_KINKS of them
@@ -154,10 +154,10 @@ FN real truth_extinction(const AtmosphereParameters* a, int c, real h) {
   return s_t;
 }
 /* The majorant of channel c for a ray whose lowest remaining altitude is h_min. */
-FN real truth_majorant(const AtmosphereParameters* a, GLOBAL const real* majorant, int c, real h_min) {
+FN real truth_majorant(const AtmosphereParameters* a, GLOBAL const real* medium, int c, real h_min) {
   const real width = thickness(a) / (real)TRUTH_SHELLS;
   const int shell = clamp_int((int)floor(h_min / width), 0, TRUTH_SHELLS - 1);
-  return majorant[shell * NCH + c];
+  return medium[shell * NCH + c];
 }
 /* The lowest altitude of the ray (h, mu) that does not hit the ground: its start if it rises,
  * else its tangent point, at r √(1 − μ²) from the centre: ρ_t² = ρ² − (rμ)². */
@@ -257,7 +257,7 @@ FN real truth_optical_depth(const AtmosphereParameters* a, int c, GLOBAL const r
  * the ground, or one that descends and ends before its tangent point, is lowest at s_end
  * (the boost's factor 2 covers that altitude's rounding); one that passes its tangent point is
  * lowest there, and rises after it. */
-FN real truth_ratio_track(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu,
+FN real truth_ratio_track(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
                           int ground, real s_end, PhiloxStream* rng, int* violations) {
   const real s_tan = (mu < R(0.0) && !ground) ? -radius_of(a, h) * mu : R(-1.0);
   real h_min;
@@ -269,7 +269,7 @@ FN real truth_ratio_track(const AtmosphereParameters* a, int c, GLOBAL const rea
   }
   real s = R(0.0), t = R(1.0);
   for (;;) {
-    const real majorant_s = TRUTH_RATIO_BOOST * truth_majorant(a, majorant, c, h_min);
+    const real majorant_s = TRUTH_RATIO_BOOST * truth_majorant(a, medium, c, h_min);
     if (!(majorant_s > R(0.0))) break;
     s += -log(philox_uniform(rng)) / majorant_s;
     if (s >= s_end) break;
@@ -286,23 +286,23 @@ FN real truth_ratio_track(const AtmosphereParameters* a, int c, GLOBAL const rea
  * tracking. Twilight walks take the exact one: their grazing rays have optical depths of
  * several, where ratio tracking's relative variance e^{τ/boost} − 1 dominated the truth's
  * noise; daylight rays are short and thin, and ratio tracking (one or two steps) costs less. */
-FN real truth_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu,
+FN real truth_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
                             int ground, real s_end, int exact, PhiloxStream* rng, int* violations) {
-  if (exact) return exp(-truth_optical_depth(a, c, majorant, h, mu, s_end));
-  return truth_ratio_track(a, c, majorant, h, mu, ground, s_end, rng, violations);
+  if (exact) return exp(-truth_optical_depth(a, c, medium, h, mu, s_end));
+  return truth_ratio_track(a, c, medium, h, mu, ground, s_end, rng, violations);
 }
 /* T_sun from altitude h with sun cosine mu_s (visible fraction not included): along mu_s, or
  * along the horizon when the disc centre is below it. */
-FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu_s,
+FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu_s,
                                 int exact, PhiloxStream* rng, int* violations) {
   const real mu = fmax(mu_s, -horizon_distance(a, h) / radius_of(a, h));
-  return truth_transmittance(a, c, majorant, h, mu, 0, distance_to_top(a, h, mu), exact, rng, violations);
+  return truth_transmittance(a, c, medium, h, mu, 0, distance_to_top(a, h, mu), exact, rng, violations);
 }
 
 /* ---- free paths: delta tracking ------------------------------------------------------------ */
 /* From altitude h along mu: 0 if the walk leaves through the top, 1 if it collides (distance
  * in *s, altitude in *h_s), 2 if it reaches the ground (distance in *s). */
-FN int truth_free_path(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, real mu,
+FN int truth_free_path(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
                        PhiloxStream* rng, real* s_out, real* h_s_out, int* violations) {
   const int ground = ray_hits_ground(a, h, mu);
   const real d = distance_to_nearest_boundary(a, h, mu, ground);
@@ -310,7 +310,7 @@ FN int truth_free_path(const AtmosphereParameters* a, int c, GLOBAL const real* 
   real h_min = ground ? R(0.0) : truth_tangent_altitude(a, h, mu);
   real s = R(0.0);
   for (;;) {
-    const real majorant_s = truth_majorant(a, majorant, c, h_min);
+    const real majorant_s = truth_majorant(a, medium, c, h_min);
     if (!(majorant_s > R(0.0))) break; /* an empty medium */
     s += -log(philox_uniform(rng)) / majorant_s;
     if (s >= d) break;
@@ -395,7 +395,7 @@ FN real truth_sun_depth_guess(const AtmosphereParameters* a, int c, real h, real
   const real r_t = radius_of(a, h_t);
   return fmax(R(2.0) * truth_extinction(a, c, h_t) * sqrt(ATM_PI * r_t * H / R(2.0)) - up, R(0.0));
 }
-FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const real* majorant, real h, const real* z,
+FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, const real* z,
                             const real* w, const real* sun, int exact, PhiloxStream* rng, int* violations) {
   const real mu = clamp_cosine(dot3(w, z));
   const int ground = ray_hits_ground(a, h, mu);
@@ -463,8 +463,8 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     real s_r, s_m, s_t;
     truth_coefficients(a, c, h_s, &s_r, &s_m, &s_t);
     if (visible > R(0.0) && s_r + s_m > R(0.0) && pdf > R(0.0)) {
-      const real t_view = truth_transmittance(a, c, majorant, h, mu, ground, s, exact, rng, violations);
-      const real t_sun = truth_sun_transmittance(a, c, majorant, h_s, mu_s, exact, rng, violations);
+      const real t_view = truth_transmittance(a, c, medium, h, mu, ground, s, exact, rng, violations);
+      const real t_sun = truth_sun_transmittance(a, c, medium, h_s, mu_s, exact, rng, violations);
       value += t_view * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible / pdf;
     }
   }
@@ -474,8 +474,8 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     const real mu_s = clamp_cosine(dot3(sun, p) / sqrt(dot3(p, p)));
     const real cos_factor = sun_horizontal_cosine(a, mu_s);
     if (cos_factor > R(0.0)) {
-      const real t_view = truth_transmittance(a, c, majorant, h, mu, 1, d, exact, rng, violations);
-      const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, exact, rng, violations);
+      const real t_view = truth_transmittance(a, c, medium, h, mu, 1, d, exact, rng, violations);
+      const real t_sun = truth_sun_transmittance(a, c, medium, R(0.0), mu_s, exact, rng, violations);
       value += t_view * a->ground_albedo[c] / ATM_PI * e_sun * t_sun * cos_factor;
     }
   }
@@ -543,7 +543,7 @@ FN real truth_guide_pdf(const real* z, const real* sun, const real* w) {
  * roulette keeps every order's expectation, so both parts are unbiased; the split draws no
  * random numbers, so a walk's stream and value do not depend on it. */
 FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, GLOBAL const real* node_t,
-                   GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
+                   GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* medium,
                    int max_orders, int split_order, int next_sun, PhiloxStream* rng, real* radiance_low,
                    int* events, int* truncated, int* violations) {
   *radiance_low = R(0.0);
@@ -593,7 +593,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real albedo = a->ground_albedo[c];
       const real cos_factor = sun_done ? R(0.0) : sun_horizontal_cosine(a, mu_s);
       if (cos_factor > R(0.0) && albedo > R(0.0)) {
-        const real t_sun = truth_sun_transmittance(a, c, majorant, R(0.0), mu_s, use_line, rng, violations);
+        const real t_sun = truth_sun_transmittance(a, c, medium, R(0.0), mu_s, use_line, rng, violations);
         const real add = weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
         radiance += add;
         if (order <= split_order) *radiance_low += add;
@@ -612,7 +612,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real nu = clamp_cosine(dot3(w, sun));
       const real visible = sun_done ? R(0.0) : sun_visible_fraction(a, h, mu_s);
       if (visible > R(0.0) && s_r + s_m > R(0.0)) {
-        const real t_sun = truth_sun_transmittance(a, c, majorant, h, mu_s, use_line, rng, violations);
+        const real t_sun = truth_sun_transmittance(a, c, medium, h, mu_s, use_line, rng, violations);
         const real add = weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
         radiance += add;
         if (order <= split_order) *radiance_low += add;
@@ -645,7 +645,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
     sun_done = use_line;
     if (sun_done) {
       const real add =
-          weight * truth_next_sun_term(a, c, majorant, on_ground ? R(0.0) : h, z, w, sun, use_line, rng, violations);
+          weight * truth_next_sun_term(a, c, medium, on_ground ? R(0.0) : h, z, w, sun, use_line, rng, violations);
       radiance += add;
       if (order + 1 <= split_order) *radiance_low += add;
     }
@@ -666,7 +666,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
     const real mu = clamp_cosine(dot3(w, z));
     const real h_start = on_ground ? R(0.0) : h;
     real s, h_s;
-    const int what = truth_free_path(a, c, majorant, h_start, mu, rng, &s, &h_s, violations);
+    const int what = truth_free_path(a, c, medium, h_start, mu, rng, &s, &h_s, violations);
     if (what == 0) break;
     real z1[3];
     truth_move_zenith(a, h_start, z, w, s, z1);
@@ -691,10 +691,10 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
  * b·paths_per_batch ... (b + 1)·paths_per_batch − 1); channel c of this group is channel
  * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item: per channel
  * (mean, m2) of the whole walk, of orders 1..split_order and of the orders above it. Table
- * layouts: node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], majorant
- * [TRUTH_SHELLS][NCH]. */
+ * layouts: node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], medium
+ * as TRUTH_MEDIUM_SIZE describes it (majorants, then kinks). */
 FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
-                         GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* majorant,
+                         GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* medium,
                          int nodes, int p, int point_base, int b, int paths_per_batch, int max_orders,
                          int split_order, int next_sun, philox_u32 seed_lo, philox_u32 seed_hi, int channel_base,
                          int channels, GLOBAL real* out_item) {
@@ -710,7 +710,7 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
                            (philox_u32)(channel_base + c));
         real low;
         const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
-                                  node_cdf + (p * NCH + c) * nodes, majorant, max_orders, split_order, next_sun, &rng, &low,
+                                  node_cdf + (p * NCH + c) * nodes, medium, max_orders, split_order, next_sun, &rng, &low,
                                   &events, &truncated, &violations);
         const real xs[TRUTH_STATS] = {x, low, x - low};
         for (int k = 0; k < TRUTH_STATS; ++k) {

@@ -5,9 +5,9 @@
  *
  * Written once in the common subset of GLSL and C++: the bundle's sampling.glsl carries this
  * text verbatim (after lookup.cl and a prelude that defines real, FN, R, REQUIRE, fmax, fmin,
- * fabs, TEXTURE_RGB, TEXTURE_RGBA, OUT and INOUT; src/kinds/atmosphere/render.cpp), and the host
+ * fabs, TEXTURE_RGB, TEXTURE_RGBA, OUT and INOUT; src/kinds/atmosphere/shader/render.cpp), and the host
  * compiles the same text in double with GLM's vector types and a bilinear/trilinear filter with
- * the GPU's texel-centre and clamp-to-edge rules (src/kinds/atmosphere/shader_host.hpp): the previews, the scene check and the GL test's reference
+ * the GPU's texel-centre and clamp-to-edge rules (src/kinds/atmosphere/shader/shader_host.hpp): the previews, the scene check and the GL test's reference
  * are this code. Hence: vec2/vec3, scalars as real, sizes as real, no swizzles (.x .y .z only),
  * no `const` locals, flags as int, out-parameters as OUT(type), in-out ones as INOUT(type).
  *

@@ -15,7 +15,7 @@
 
 #include "registry/registry.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/scene_check.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
 
 using namespace specbake;
 using namespace specbake::atmosphere;

@@ -13,7 +13,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 using namespace specbake;
 using namespace specbake::atmosphere;

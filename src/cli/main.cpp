@@ -22,7 +22,7 @@
 #include "io/bundle_diff.hpp"
 #include "io/inspect.hpp"
 #include "io/output_folder.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 #include "runner/html_report.hpp"
 #include "runner/night_report.hpp"
 #include "runner/runner.hpp"

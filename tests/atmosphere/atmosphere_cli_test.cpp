@@ -33,7 +33,7 @@ TEST(AtmosphereCli, BakesABundleWithEveryFile) {
   EXPECT_EQ(m["parameters"]["orders"]["per_order"].size(), 3u);
   EXPECT_EQ(m["parameters"]["wavelengths_nm"].size(), 3u);
   EXPECT_TRUE(m["parameters"]["luminance_conversion"].contains("sky_spectral_radiance_to_luminance_lm_per_W"));
-  EXPECT_LE(specbake::find_accuracy(m["accuracy"], "self_check")->at("value").get<double>(), 2e-3);  // the job's bound (atmosphere_job.cpp)
+  EXPECT_LE(specbake::find_accuracy(m["accuracy"], "self_check")->at("value").get<double>(), 2e-3);  // the job's bound (bake/bake.cpp)
   {
     // every moment of the compute step belongs to a stage: the kernels', the checks', the host's
     // between them, each pass's set-up (program build, allocations) and its combination. The

@@ -12,7 +12,7 @@
 #include "atmosphere/sized.hpp"
 #include "io/exr.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;
@@ -97,7 +97,7 @@ void expect_all_finite(const Baked& b) {
 // times a texture's relative change per texel ≲ 10: 1e-5). The full bake chains transmittance,
 // single scattering and three orders: ≤ 6e-4 + 7 · 1e-4 ≈ 1.3e-3; 3e-3 leaves a factor 2.
 constexpr double kFloat32Chain = 3e-3;
-// The job's self-check bound (atmosphere_job.cpp): one stage, float32 against double.
+// The job's self-check bound (bake/bake.cpp): one stage, float32 against double.
 constexpr double kSelfCheckTolerance = 2e-3;
 // float64 kernels against the double host path: the same maths in the same precision, but a
 // different libm (exp: ≤ 1 ulp) and FMA contraction, so ~1e-15 per operation; amplified by the
@@ -411,7 +411,7 @@ TEST(AtmosphereDevice, Tiled2dSamplesEqual3d) {
 // Sizes an auto search chose for the default ground scene (16 wavelengths, 144 μ and 54 μ_s
 // texels): at the ground with the sun just below the horizon the indirect irradiance of order
 // 1 is ~0, and the float32 lookups near the sun's edge move it by ~2e-6 of the channel's
-// maximum, which the self-check's floor (1 % of the maximum, atmosphere_job.cpp) must allow; a
+// maximum, which the self-check's floor (1 % of the maximum, bake/bake.cpp) must allow; a
 // floor of 1e-3 failed this bake (2.3e-3 > 2e-3).
 TEST(AtmosphereDevice, SelfCheckAllowsTheSunsEdgeAtFineSizes) {
   const AtmosphereSpec s = sixteen_wavelengths(sized(earth(), {128, 32}, {72, 18}, {16, 144, 54, 6}), 4);

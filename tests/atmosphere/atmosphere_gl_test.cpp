@@ -18,9 +18,9 @@
 #include "atmosphere/npy.hpp"
 #include "core/parallel.hpp"
 #include "core/resources.hpp"
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/render.hpp"
-#include "kinds/atmosphere/shader_host.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
+#include "kinds/atmosphere/shader/shader_host.hpp"
 #include "support/gl_context.hpp"
 #include "support/testing.hpp"
 

@@ -6,8 +6,8 @@
 #include <cmath>
 
 #include "atmosphere/npy.hpp"
-#include "kinds/atmosphere/reference.hpp"
-#include "kinds/atmosphere/render.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

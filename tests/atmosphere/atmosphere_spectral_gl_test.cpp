@@ -13,7 +13,7 @@
 
 #include "core/parallel.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/shader_host.hpp"
+#include "kinds/atmosphere/shader/shader_host.hpp"
 #include "atmosphere/radiance_earth.hpp"
 #include "atmosphere/gl_perturb.hpp"
 #include "support/gl_context.hpp"

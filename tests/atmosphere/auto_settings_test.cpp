@@ -8,7 +8,7 @@
 #include <string>
 
 #include "atmosphere/spec_of.hpp"
-#include "kinds/atmosphere/auto_settings.hpp"
+#include "kinds/atmosphere/search/auto_settings.hpp"
 #include "support/testing.hpp"
 
 namespace {

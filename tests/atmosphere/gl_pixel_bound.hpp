@@ -1,6 +1,6 @@
 #pragma once
 // The atmosphere GL tests' per-pixel comparison: one pixel's float32 inputs, the outputs checked,
-// the host's double evaluation of the shipped shader's functions (kinds/atmosphere/shader_host.hpp)
+// the host's double evaluation of the shipped shader's functions (kinds/atmosphere/shader/shader_host.hpp)
 // and the bound on |GL − host| (bound_of). Used by the llvmpipe GL test and by the report page's
 // WebGL check (tests/report/sky_host.cpp).
 #include <cmath>
@@ -9,7 +9,7 @@
 #include <glm/glm.hpp>
 
 #include "atmosphere/gl_perturb.hpp"
-#include "kinds/atmosphere/shader_host.hpp"
+#include "kinds/atmosphere/shader/shader_host.hpp"
 
 namespace specbake::testing::gl_bound {
 

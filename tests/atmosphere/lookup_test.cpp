@@ -6,7 +6,7 @@
 #include <cmath>
 #include <limits>
 
-#include "kinds/atmosphere/shader_host.hpp"
+#include "kinds/atmosphere/shader/shader_host.hpp"
 
 namespace glsl = specbake::atmosphere::glsl;
 

@@ -4,7 +4,7 @@
 #include <array>
 
 #include "atmosphere/sized.hpp"
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/model/spec.hpp"
 
 namespace specbake::testing {
 

@@ -1,4 +1,4 @@
-// The scene check of atmosphere bakes (src/kinds/atmosphere/scene_check.hpp): the displayed-
+// The scene check of atmosphere bakes (src/kinds/atmosphere/truth/scene_check.hpp): the displayed-
 // colour difference against its closed form, the split of a walk into the bake's orders and
 // the rest, the manifest record and the per-point file through the CLI, the failing
 // tolerance, and the hard cases — twilight (sun at −6° and −12°), rays grazing the horizon
@@ -19,8 +19,8 @@
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/scene_check.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 #include "registry/registry.hpp"
 #include "support/testing.hpp"
 

@@ -5,9 +5,9 @@
 #include <array>
 #include <cmath>
 
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/truth.hpp"
-#include "kinds/atmosphere/truth_reference.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
+#include "kinds/atmosphere/truth/truth_reference.hpp"
 
 namespace specbake::atmosphere::quadrature {
 

@@ -2,7 +2,7 @@
 // A spec with the given texture sizes, for tests that bake at their own (small or odd) sizes.
 #include <array>
 
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/model/spec.hpp"
 
 namespace specbake::testing {
 

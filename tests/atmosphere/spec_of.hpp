@@ -3,7 +3,7 @@
 // spaces), parsed as a config file's job is.
 #include <string>
 
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/model/spec.hpp"
 #include "registry/registry.hpp"
 
 namespace specbake::testing {

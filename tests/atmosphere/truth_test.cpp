@@ -17,10 +17,10 @@
 #include "atmosphere/spec_of.hpp"
 #include "registry/registry.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/pass.hpp"
-#include "kinds/atmosphere/truth.hpp"
-#include "kinds/atmosphere/truth_reference.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/bake/pass.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
+#include "kinds/atmosphere/truth/truth_reference.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

@@ -27,7 +27,7 @@
 
 #include "atmosphere/spec_of.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

@@ -23,8 +23,8 @@
 
 #include "atmosphere/spec_of.hpp"
 #include "atmosphere/twilight_quadrature.hpp"
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;

@@ -7,7 +7,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
 #include "kinds/diffraction/reference.hpp"
 #include "kinds/dispersion/reference.hpp"
 

@@ -1,6 +1,6 @@
 // The host's side of the report page's WebGL check (tests/report/browser_test.py): for an
 // atmosphere bundle and the float32 inputs the page's live sky used (sun direction, altitude),
-// the double evaluation of the shipped GetSkyRadiance (kinds/atmosphere/shader_host.hpp, the same
+// the double evaluation of the shipped GetSkyRadiance (kinds/atmosphere/shader/shader_host.hpp, the same
 // source text as the bundle's sampling.glsl) from the bundle's float32 texels at each pixel of the
 // page's n x n equidistant fisheye, and the per-pixel bound on |GL − host| of the llvmpipe GL test
 // (atmosphere/gl_pixel_bound.hpp: texel-coordinate rounding, float32 geometry and arithmetic).
@@ -15,8 +15,8 @@
 
 #include "atmosphere/gl_pixel_bound.hpp"
 #include "core/errors.hpp"
-#include "kinds/atmosphere/render.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 using namespace specbake;
 using namespace specbake::testing::gl_bound;

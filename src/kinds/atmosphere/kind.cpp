@@ -6,7 +6,7 @@
 
 #include "atmosphere/limits.h"
 #include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 namespace specbake::atmosphere {
 

@@ -1,1 +1,1 @@
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/model/spec.hpp"

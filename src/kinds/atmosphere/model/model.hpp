@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/model/spec.hpp"
 
 namespace specbake::atmosphere {
 

@@ -8,7 +8,7 @@
 // scene's points: one axis group 1.5× finer (scattering r, μ, μ_s, ν; transmittance; irradiance)
 // and the next channel count of the ladder rgb, 8, 12, 16, 24, 32, 48 wavelengths over 360–830 nm.
 // The refinement that lowers the judged error most per second of predicted bake time (the cost
-// model of estimated_seconds, so the choice does not depend on timer noise) is kept; one that
+// model of bake_seconds, so the choice does not depend on timer noise) is kept; one that
 // lowers the error by less than kMinGain of it does not count. The first step bakes every
 // refinement; later steps try them in the order of what they bought when last tried and stop
 // once the best fresh gain per second is at least every untried one's last (lazy greedy: the
@@ -38,8 +38,8 @@
 
 #include "core/text.hpp"
 #include "job/kind.hpp"
-#include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/scene_check.hpp"
+#include "kinds/atmosphere/bake/bake.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
 
 namespace specbake::atmosphere {
 

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "cl/device.hpp"
-#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/model/model.hpp"
 #include "job/kind.hpp"
 
 namespace specbake::atmosphere {

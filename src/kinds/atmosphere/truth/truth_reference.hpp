@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "common/philox.h"  // at namespace scope: path_tracer.cl's own include is then a no-op
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
 
 namespace specbake::atmosphere::ref3 {
 using std::cbrt, std::fabs, std::log;

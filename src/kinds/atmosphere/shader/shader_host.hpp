@@ -10,8 +10,8 @@
 
 #include <glm/glm.hpp>
 
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/render.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
 
 namespace specbake::atmosphere::glsl {
 

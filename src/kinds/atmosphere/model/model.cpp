@@ -1,15 +1,23 @@
-#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/model/model.hpp"
 
 #include <cmath>
 #include <cstdio>
 
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/model/kernel_maths.hpp"
 
 namespace specbake::atmosphere {
 
 namespace {
+
+// The profiles' maths (atmosphere.cl's profile_density) in double.
+namespace maths {
+SPECBAKE_ATMOSPHERE_REF_PROLOGUE
+#define NCH 3
+#include "atmosphere/atmosphere.cl"
+#undef NCH
+}  // namespace maths
 
 // Provenance: the bin means published with E. Bruneton's precomputed_atmospheric_scattering
 // demo (atmosphere/demo/demo.cc): the ASTM G-173 extraterrestrial spectrum averaged over each
@@ -40,14 +48,14 @@ double table_at(const double* t, double nm) {
 // ∫ profile dh over the atmosphere (km), trapezoid at 1 m steps (exact for piecewise-linear
 // profiles whose kinks sit on whole metres, such as the ozone tent).
 double profile_column_km(const DensityLayer* layers, double thickness_km) {
-  ref3::DensityProfile p;
-  ref3::fill_profile(p, layers);
+  maths::DensityProfile p;
+  fill_profile(p, layers);
   const long n = std::max(1L, std::lround(thickness_km * 1000.0));
   const double dh = thickness_km / static_cast<double>(n);
   double s = 0.0;
   for (long i = 0; i <= n; ++i) {
     const double h = i * dh;
-    const double y = ref3::profile_density(&p, h);
+    const double y = maths::profile_density(&p, h);
     s += (i == 0 || i == n) ? 0.5 * y : y;
   }
   return s * dh;

@@ -9,8 +9,8 @@
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
 #include "atmosphere/limits.h"
-#include "kinds/atmosphere/scene_check.hpp"
-#include "kinds/atmosphere/spec.hpp"
+#include "kinds/atmosphere/model/scene.hpp"
+#include "kinds/atmosphere/model/spec.hpp"
 
 namespace specbake::atmosphere {
 
@@ -233,12 +233,10 @@ bool sizes_within_limits(const AtmosphereSpec& s) {
          1LL * s.scattering_r * s.scattering_mu * s.scattering_mu_s * s.scattering_nu <= kMaxScatteringTexels;
 }
 
-AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
-  allow_job_keys(job, {"preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
-                  "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
-                  "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
-                  "ktx2", "scene", "previews", "quadrature"});
-  AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
+namespace {
+
+// The planet: the preset, geometry, sun, ground and media (rayleigh, mie, ozone).
+void parse_planet(const At& job, AtmosphereSpec& s) {
   if (job.has("preset")) job.child("preset").choice<int>({{"earth", 0}});
   set_earth_profiles(s);
 
@@ -257,56 +255,48 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   if (job.has("rayleigh")) parse_rayleigh(job.child("rayleigh"), s);
   if (job.has("mie")) parse_mie(job.child("mie"), s);
   if (job.has("ozone")) parse_ozone(job.child("ozone"), s);
+}
 
-  if (job.has("spectrum")) {
-    const At sp = job.child("spectrum");
-    if (sp.node.IsScalar()) {
-      s.auto_spectrum = sp.choice<int>({{"rgb", 0}, {"auto", 1}}) == 1;
-    } else {
-      sp.expect_map("rgb or {min_nm, max_nm, count, store}");
-      sp.allow_keys({"min_nm", "max_nm", "count", "store"});
-      s.spectral = true;
-      if (sp.has("min_nm")) s.min_nm = sp.child("min_nm").number_in(360.0, 830.0, "in [360, 830] nm");
-      if (sp.has("max_nm")) s.max_nm = sp.child("max_nm").number_in(360.0, 830.0, "in [360, 830] nm");
-      if (!(s.min_nm < s.max_nm)) sp.fail("expected min_nm < max_nm");
-      if (sp.has("count")) {
-        const long long n = sp.child("count").integer();
-        if (n < 3 || n > 256) sp.child("count").fail("expected an integer in [3, 256], got " + sp.child("count").shown());
-        s.count = static_cast<int>(n);
-      }
-      if (sp.has("store"))
-        s.store_radiance = sp.child("store").choice<int>({{"luminance", 0}, {"radiance", 1}}) == 1;
-      if (s.store_radiance && s.count % 4 != 0)
-        (sp.has("count") ? sp.child("count") : sp.child("store"))
-            .fail("expected a count that is a multiple of 4 with store: radiance (four wavelengths per RGBA "
-                  "texel), got " + std::to_string(s.count));
-    }
+// `spectrum:` rgb, auto, or {min_nm, max_nm, count, store}.
+void parse_spectrum(const At& sp, AtmosphereSpec& s) {
+  if (sp.node.IsScalar()) {
+    s.auto_spectrum = sp.choice<int>({{"rgb", 0}, {"auto", 1}}) == 1;
+    return;
   }
-  if (job.has("orders")) {
-    const At o = job.child("orders");
-    if (o.node.IsScalar() && o.node.Scalar() == "auto") {
-      s.orders.reset();
-    } else {
-      long long n = 0;
-      try {
-        n = o.node.IsScalar() ? o.node.as<long long>() : 0;
-      } catch (const YAML::Exception&) {
-        n = 0;
-      }
-      if (n < 1 || n > 64) o.fail("expected an integer in [1, 64] or 'auto', got " + o.shown());
-      s.orders = static_cast<int>(n);
-    }
+  sp.expect_map("rgb or {min_nm, max_nm, count, store}");
+  sp.allow_keys({"min_nm", "max_nm", "count", "store"});
+  s.spectral = true;
+  if (sp.has("min_nm")) s.min_nm = sp.child("min_nm").number_in(360.0, 830.0, "in [360, 830] nm");
+  if (sp.has("max_nm")) s.max_nm = sp.child("max_nm").number_in(360.0, 830.0, "in [360, 830] nm");
+  if (!(s.min_nm < s.max_nm)) sp.fail("expected min_nm < max_nm");
+  if (sp.has("count")) {
+    const long long n = sp.child("count").integer();
+    if (n < 3 || n > 256) sp.child("count").fail("expected an integer in [3, 256], got " + sp.child("count").shown());
+    s.count = static_cast<int>(n);
   }
-  if (job.has("tolerance")) s.tolerance = job.child("tolerance").number_in(1e-8, 0.5, "in [1e-8, 0.5]");
-  if (job.has("sizes")) parse_sizes(job.child("sizes"), s);
-  if (job.has("quadrature")) parse_quadrature(job.child("quadrature"), s);
-  if (job.has("layout")) {
-    s.layout_3d = s.layout_tiled2d = false;
-    job.child("layout").each_item("layouts (3d, tiled2d)", [&](const At& it) {
-      const int v = it.choice<int>({{"3d", 0}, {"tiled2d", 1}});
-      (v == 0 ? s.layout_3d : s.layout_tiled2d) = true;
-    });
+  if (sp.has("store"))
+    s.store_radiance = sp.child("store").choice<int>({{"luminance", 0}, {"radiance", 1}}) == 1;
+  if (s.store_radiance && s.count % 4 != 0)
+    (sp.has("count") ? sp.child("count") : sp.child("store"))
+        .fail("expected a count that is a multiple of 4 with store: radiance (four wavelengths per RGBA "
+              "texel), got " + std::to_string(s.count));
+}
+
+// `orders:` a count in [1, 64], or auto (nullopt).
+std::optional<int> parse_orders(const At& o) {
+  if (o.node.IsScalar() && o.node.Scalar() == "auto") return std::nullopt;
+  long long n = 0;
+  try {
+    n = o.node.IsScalar() ? o.node.as<long long>() : 0;
+  } catch (const YAML::Exception&) {
+    n = 0;
   }
+  if (n < 1 || n > 64) o.fail("expected an integer in [1, 64] or 'auto', got " + o.shown());
+  return static_cast<int>(n);
+}
+
+// `outputs:` the textures to ship (single Mie only with mie).
+void parse_outputs(const At& job, AtmosphereSpec& s) {
   if (job.has("outputs")) {
     s.out_transmittance = s.out_irradiance = s.out_scattering = s.out_single_mie = false;
     job.child("outputs").each_item("outputs", [&](const At& it) {
@@ -325,9 +315,30 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   } else if (!s.mie) {
     s.out_single_mie = false;  // nothing to store: the default outputs leave it out
   }
+}
+
+// What to bake and how: spectrum, orders, tolerance, sizes, quadrature, layouts, outputs, precision.
+void parse_bake(const At& job, AtmosphereSpec& s) {
+  if (job.has("spectrum")) parse_spectrum(job.child("spectrum"), s);
+  if (job.has("orders")) s.orders = parse_orders(job.child("orders"));
+  if (job.has("tolerance")) s.tolerance = job.child("tolerance").number_in(1e-8, 0.5, "in [1e-8, 0.5]");
+  if (job.has("sizes")) parse_sizes(job.child("sizes"), s);
+  if (job.has("quadrature")) parse_quadrature(job.child("quadrature"), s);
+  if (job.has("layout")) {
+    s.layout_3d = s.layout_tiled2d = false;
+    job.child("layout").each_item("layouts (3d, tiled2d)", [&](const At& it) {
+      const int v = it.choice<int>({{"3d", 0}, {"tiled2d", 1}});
+      (v == 0 ? s.layout_3d : s.layout_tiled2d) = true;
+    });
+  }
+  parse_outputs(job, s);
   if (job.has("precision"))
     s.double_precision = job.child("precision").choice<int>({{"float", 0}, {"double", 1}}) == 1;
-  // after max_sun_zenith_deg: the scene's lowest sun defaults to what the textures hold
+}
+
+// The scene, and the tolerance the searches judge by (after the bake's keys: the scene's lowest
+// sun defaults to what the textures hold).
+void parse_checks(const At& job, AtmosphereSpec& s) {
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);
   // the searches judge bakes by the scene's tolerance
@@ -338,55 +349,26 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   if (s.auto_spectrum && (!s.scene.check || !s.scene.tolerance_de2000))
     job.child("spectrum").fail(std::string("spectrum: auto") + no_tolerance +
                                " (the spectral part of the error is a colour difference)");
+}
 
-  if (job.has("previews")) {  // `previews: none` or `previews: {size: N}`
-    const At p = job.child("previews");
-    if (p.node.IsScalar() && p.node.Scalar() == "none") {
-      s.preview_size = 0;
-    } else {
-      p.expect_map("previews: none, or {size: N} (pixels per view, an even number in [32, 2048])");
-      p.allow_keys({"size"});
-      if (p.has("size")) {
-        const At n = p.child("size");
-        const long long v = n.integer();
-        if (v < 32 || v > 2048 || v % 2) n.fail("expected an even number of pixels in [32, 2048], got " + n.shown());
-        s.preview_size = static_cast<int>(v);
-      }
-    }
+// `previews: none` or `previews: {size: N}`.
+void parse_previews(const At& p, AtmosphereSpec& s) {
+  if (p.node.IsScalar() && p.node.Scalar() == "none") {
+    s.preview_size = 0;
+    return;
   }
+  p.expect_map("previews: none, or {size: N} (pixels per view, an even number in [32, 2048])");
+  p.allow_keys({"size"});
+  if (p.has("size")) {
+    const At n = p.child("size");
+    const long long v = n.integer();
+    if (v < 32 || v > 2048 || v % 2) n.fail("expected an even number of pixels in [32, 2048], got " + n.shown());
+    s.preview_size = static_cast<int>(v);
+  }
+}
 
-  // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
-  const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
-  inputs.emplace_back(cmf.resource, sha256_hex(resource(cmf.resource)));
-  json layouts = json::array(), outputs = json::array();
-  if (s.layout_3d) layouts.push_back("3d");
-  if (s.layout_tiled2d) layouts.push_back("tiled2d");
-  if (s.out_transmittance) outputs.push_back("transmittance");
-  if (s.out_irradiance) outputs.push_back("irradiance");
-  if (s.out_scattering) outputs.push_back("scattering");
-  if (s.out_single_mie) outputs.push_back("single_mie_scattering");
-  norm = {{"kind", "atmosphere"},
-          {"bottom_radius_km", s.bottom_radius_km},
-          {"top_radius_km", s.top_radius_km},
-          {"sun_angular_radius_rad", s.sun_angular_radius_rad},
-          {"max_sun_zenith_deg", s.max_sun_zenith_deg},
-          {"ground_albedo", s.ground_albedo},
-          {"solar_irradiance_scale", s.solar_irradiance_scale},
-          {"spectrum", s.auto_spectrum ? json("auto")
-                       : s.spectral   ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}}
-                                      : json("rgb")},
-          {"orders", s.orders ? json(*s.orders) : json("auto")},
-          {"tolerance", s.tolerance},
-          {"sizes", {{"transmittance", {s.transmittance_mu, s.transmittance_r}},
-                     {"irradiance", {s.irradiance_mu_s, s.irradiance_r}},
-                     {"scattering", {{"r", s.scattering_r}, {"mu", s.scattering_mu}, {"mu_s", s.scattering_mu_s},
-                                     {"nu", s.scattering_nu}}}}},
-          {"quadrature", {{"density_theta", s.density_theta},
-                          {"density_rule", s.density_horizon ? "horizon" : "uniform"},
-                          {"mu_s_blend", s.mu_s_geometric ? "geometric" : "linear"}}},
-          {"layout", layouts},
-          {"outputs", outputs},
-          {"precision", s.double_precision ? "double" : "float"}};
+// `formats:` / `ktx2:` (into norm as well), and `ktx2: {scattering: rgba-combined}`.
+void parse_ktx2(const At& job, AtmosphereSpec& s, json& norm) {
   s.ktx2 = parse_ktx2_settings(job, norm, {"scattering"});
   if (s.ktx2.enabled && job.has("ktx2") && job.child("ktx2").has("scattering")) {
     const At k = job.child("ktx2").child("scattering");
@@ -396,13 +378,65 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
              "single Mie's red into the scattering texture's alpha)");
     if (s.ktx2_combined) norm["ktx2"]["scattering"] = "rgba-combined";  // rgb, the default, stays implicit
   }
+}
+
+// The entry as the config normalises it (the job's hash, the manifest), but for formats and ktx2.
+json normalised_json(const AtmosphereSpec& s) {
+  json layouts = json::array(), outputs = json::array();
+  if (s.layout_3d) layouts.push_back("3d");
+  if (s.layout_tiled2d) layouts.push_back("tiled2d");
+  if (s.out_transmittance) outputs.push_back("transmittance");
+  if (s.out_irradiance) outputs.push_back("irradiance");
+  if (s.out_scattering) outputs.push_back("scattering");
+  if (s.out_single_mie) outputs.push_back("single_mie_scattering");
+  json norm = {{"kind", "atmosphere"},
+               {"bottom_radius_km", s.bottom_radius_km},
+               {"top_radius_km", s.top_radius_km},
+               {"sun_angular_radius_rad", s.sun_angular_radius_rad},
+               {"max_sun_zenith_deg", s.max_sun_zenith_deg},
+               {"ground_albedo", s.ground_albedo},
+               {"solar_irradiance_scale", s.solar_irradiance_scale},
+               {"spectrum", s.auto_spectrum ? json("auto")
+                            : s.spectral   ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}}
+                                           : json("rgb")},
+               {"orders", s.orders ? json(*s.orders) : json("auto")},
+               {"tolerance", s.tolerance},
+               {"sizes", {{"transmittance", {s.transmittance_mu, s.transmittance_r}},
+                          {"irradiance", {s.irradiance_mu_s, s.irradiance_r}},
+                          {"scattering", {{"r", s.scattering_r}, {"mu", s.scattering_mu}, {"mu_s", s.scattering_mu_s},
+                                          {"nu", s.scattering_nu}}}}},
+               {"quadrature", {{"density_theta", s.density_theta},
+                               {"density_rule", s.density_horizon ? "horizon" : "uniform"},
+                               {"mu_s_blend", s.mu_s_geometric ? "geometric" : "linear"}}},
+               {"layout", layouts},
+               {"outputs", outputs},
+               {"precision", s.double_precision ? "double" : "float"}};
   if (s.auto_sizes) norm["sizes"] = "auto";
   if (s.store_radiance) norm["spectrum"]["store"] = "radiance";  // luminance, the default, stays implicit
   norm["scene"] = scene_json(s.scene);
   norm["previews"] = s.preview_size ? json{{"size", s.preview_size}} : json("none");
   norm.update(media_json(s));
+  return norm;
+}
+
+}  // namespace
+
+AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
+  allow_job_keys(job, {"preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
+                  "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
+                  "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
+                  "ktx2", "scene", "previews", "quadrature"});
+  AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
+  parse_planet(job, s);
+  parse_bake(job, s);
+  parse_checks(job, s);
+  if (job.has("previews")) parse_previews(job.child("previews"), s);
+  // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
+  const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
+  inputs.emplace_back(cmf.resource, sha256_hex(resource(cmf.resource)));
+  norm = normalised_json(s);
+  parse_ktx2(job, s, norm);
   return s;
 }
 
 }  // namespace specbake::atmosphere
-

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "io/bundle.hpp"
-#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/model/model.hpp"
 
 namespace specbake::atmosphere {
 

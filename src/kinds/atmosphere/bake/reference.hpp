@@ -15,8 +15,9 @@
 #include <vector>
 
 #include "core/parallel.hpp"
-#include "kinds/atmosphere/pass.hpp"
-#include "kinds/atmosphere/texel_reads.hpp"
+#include "kinds/atmosphere/bake/pass.hpp"
+#include "kinds/atmosphere/bake/texel_reads.hpp"
+#include "kinds/atmosphere/model/kernel_maths.hpp"
 
 namespace specbake::atmosphere {
 
@@ -56,15 +57,11 @@ struct LazyZeroAllocator {
 };
 using HostTexture = std::vector<double, LazyZeroAllocator<double>>;
 
-#define SPECBAKE_ATMOSPHERE_REF_PROLOGUE                                                                    \
-  using real = double;                                                                                    \
-  using std::cos, std::exp, std::floor, std::fmax, std::fmin, std::sin, std::sqrt;
-
 namespace ref3 {
 SPECBAKE_ATMOSPHERE_REF_PROLOGUE
 #define NCH 3
 #include "atmosphere/atmosphere.cl"
-#include "kinds/atmosphere/host_pass.inc"
+#include "kinds/atmosphere/bake/host_pass.inc"
 #undef NCH
 }  // namespace ref3
 

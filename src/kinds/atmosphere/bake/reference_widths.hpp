@@ -5,7 +5,7 @@
 // renderer and most tests use ref3 from reference.hpp.
 #include <string>
 
-#include "kinds/atmosphere/reference.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
 
 namespace specbake::atmosphere {
 
@@ -13,7 +13,7 @@ namespace ref4 {
 SPECBAKE_ATMOSPHERE_REF_PROLOGUE
 #define NCH 4
 #include "atmosphere/atmosphere.cl"
-#include "kinds/atmosphere/host_pass.inc"
+#include "kinds/atmosphere/bake/host_pass.inc"
 #undef NCH
 }  // namespace ref4
 
@@ -21,7 +21,7 @@ namespace ref8 {
 SPECBAKE_ATMOSPHERE_REF_PROLOGUE
 #define NCH 8
 #include "atmosphere/atmosphere.cl"
-#include "kinds/atmosphere/host_pass.inc"
+#include "kinds/atmosphere/bake/host_pass.inc"
 #undef NCH
 }  // namespace ref8
 
@@ -29,7 +29,7 @@ namespace ref16 {
 SPECBAKE_ATMOSPHERE_REF_PROLOGUE
 #define NCH 16
 #include "atmosphere/atmosphere.cl"
-#include "kinds/atmosphere/host_pass.inc"
+#include "kinds/atmosphere/bake/host_pass.inc"
 #undef NCH
 }  // namespace ref16
 

@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -10,8 +10,8 @@
 #include <memory>
 
 #include "cl/buffers.hpp"
-#include "kinds/atmosphere/model.hpp"
-#include "kinds/atmosphere/truth_reference.hpp"
+#include "kinds/atmosphere/model/model.hpp"
+#include "kinds/atmosphere/truth/truth_reference.hpp"
 
 namespace specbake::atmosphere {
 
@@ -175,20 +175,12 @@ void point_geometry(const AtmosphereParameters& a, const TruthPoint& p, double* 
   row[PT_NODES] = 2;  // refined by view_table
 }
 
-// Nodes, optical depth at the nodes and segment probabilities of one point's view ray, for
-// every channel.
-void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, double* row,
-                double* node_t, double* node_tau, double* node_cdf) {
-  const std::size_t C = ch.size();
-  for (int k = 0; k < kNodes; ++k) node_t[k] = 0.0;
-  for (std::size_t c = 0; c < C; ++c)
-    for (int k = 0; k < kNodes; ++k) node_tau[c * kNodes + k] = node_cdf[c * kNodes + k] = 0.0;
-  if (row[PT_NODES] == 0.0) return;
-  const double h = row[PT_H], mu = row[PT_MU], D = row[PT_D];
-  const int ground = row[PT_GROUND] != 0.0;
+// The nodes of a view ray of length D from (h, mu): kSegments equal segments and the crossings
+// of the kink altitudes (s² + 2 rμ s + (ρ² − ρ_k²) = 0), sorted, without near repeats, ending at D.
+std::vector<double> view_nodes(const AtmosphereParameters& a, const std::vector<double>& kinks, double h, double mu,
+                               double D) {
   std::vector<double> t;
   for (int k = 0; k <= kSegments; ++k) t.push_back(D * k / kSegments);
-  // crossings of the kink altitudes: s² + 2 rμ s + (ρ² − ρ_k²) = 0
   const double r_mu = (a.bottom_radius + h) * mu, rho2 = ref3::horizon_distance2(&a, h);
   for (double hk : kinks) {
     const double c0 = rho2 - ref3::horizon_distance2(&a, hk);
@@ -201,52 +193,63 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   std::sort(t.begin(), t.end());
   t.erase(std::unique(t.begin(), t.end(), [&](double x, double y) { return y - x < 1e-9 * D; }), t.end());
   t.back() = D;
-  const int n = static_cast<int>(t.size());
-  row[PT_NODES] = n;
-  for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
+  return t;
+}
 
-  // per segment: optical lengths of the three profiles, and per sub-segment its Rayleigh and
-  // Mie lengths (for the masses)
-  struct Sub {
-    double t_mid, l_r, l_m;
-    double visible;      // the sun's visible fraction at the middle
-    double sun_l[3];     // optical lengths (Rayleigh, Mie, absorption profiles) towards the sun from it
-  };
+// A sub-segment of a view ray: its middle, its Rayleigh and Mie lengths (for the masses), the
+// sun's visible fraction at the middle and the optical lengths (Rayleigh, Mie, absorption
+// profiles) towards the sun from it.
+struct Sub {
+  double t_mid, l_r, l_m;
+  double visible;
+  double sun_l[3];
+};
+
+// The sun's visible fraction and the optical lengths of the ray towards it (along the horizon
+// when the disc centre is below it, as the model does) from distance t_mid on the view ray of the
+// point `row`: 8-point Gauss–Legendre on each side of the sun ray's tangent point (an
+// approximation: it only shapes the sampling density).
+void sunlit(const AtmosphereParameters& a, const double* row, double t_mid, double h_mid, Sub& sub) {
+  const double h = row[PT_H];
   const double zenith[3] = {row[PT_Z], row[PT_Z + 1], row[PT_Z + 2]}, view[3] = {row[PT_V], row[PT_V + 1], row[PT_V + 2]},
                sun[3] = {row[PT_S], row[PT_S + 1], row[PT_S + 2]};
-  // the sun's visible fraction and the optical lengths of the ray towards it (along the
-  // horizon when the disc centre is below it, as the model does) from distance t on the view
-  // ray: 8-point Gauss–Legendre on each side of the sun ray's tangent point (an approximation:
-  // it only shapes the sampling density)
-  auto sunlit = [&](double t_mid, double h_mid, Sub& sub) {
-    const double r0 = a.bottom_radius + h;
-    double z[3];
-    for (int k = 0; k < 3; ++k) z[k] = r0 * zenith[k] + t_mid * view[k];
-    const double zn = std::sqrt(ref3::dot3(z, z));
-    const double mu_s = std::clamp(ref3::dot3(sun, z) / zn, -1.0, 1.0);
-    sub.visible = ref3::sun_visible_fraction(&a, h_mid, mu_s);
-    sub.sun_l[0] = sub.sun_l[1] = sub.sun_l[2] = 0.0;
-    if (!(sub.visible > 0.0)) return;
-    const double r = a.bottom_radius + h_mid;
-    const double mu = std::max(mu_s, -ref3::horizon_distance(&a, h_mid) / r);
-    const double d = ref3::distance_to_top(&a, h_mid, mu);
-    const double s_tan = mu < 0.0 ? std::min(-r * mu, d) : 0.0;
-    for (const auto& [lo, hi] : {std::pair{0.0, s_tan}, std::pair{s_tan, d}}) {
-      if (!(hi > lo)) continue;
-      const double c = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
-      for (int i = 0; i < 4; ++i)
-        for (int side = 0; side < 2; ++side) {
-          double h_s, mu_s_;
-          ref3::point_along(&a, h_mid, mu, side == 0 ? c - half * kGaussX[i] : c + half * kGaussX[i], 0, &h_s, &mu_s_);
-          const double w = kGaussW[i] * half;
-          sub.sun_l[0] += w * ref3::profile_density(&a.rayleigh_density, h_s);
-          sub.sun_l[1] += w * ref3::profile_density(&a.mie_density, h_s);
-          sub.sun_l[2] += w * ref3::profile_density(&a.absorption_density, h_s);
-        }
-    }
-  };
-  std::vector<std::array<double, 3>> lengths(n - 1);
-  std::vector<std::array<Sub, kSubSegments>> subs(n - 1);
+  const double r0 = a.bottom_radius + h;
+  double z[3];
+  for (int k = 0; k < 3; ++k) z[k] = r0 * zenith[k] + t_mid * view[k];
+  const double zn = std::sqrt(ref3::dot3(z, z));
+  const double mu_s = std::clamp(ref3::dot3(sun, z) / zn, -1.0, 1.0);
+  sub.visible = ref3::sun_visible_fraction(&a, h_mid, mu_s);
+  sub.sun_l[0] = sub.sun_l[1] = sub.sun_l[2] = 0.0;
+  if (!(sub.visible > 0.0)) return;
+  const double r = a.bottom_radius + h_mid;
+  const double mu = std::max(mu_s, -ref3::horizon_distance(&a, h_mid) / r);
+  const double d = ref3::distance_to_top(&a, h_mid, mu);
+  const double s_tan = mu < 0.0 ? std::min(-r * mu, d) : 0.0;
+  for (const auto& [lo, hi] : {std::pair{0.0, s_tan}, std::pair{s_tan, d}}) {
+    if (!(hi > lo)) continue;
+    const double c = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
+    for (int i = 0; i < 4; ++i)
+      for (int side = 0; side < 2; ++side) {
+        double h_s, mu_s_;
+        ref3::point_along(&a, h_mid, mu, side == 0 ? c - half * kGaussX[i] : c + half * kGaussX[i], 0, &h_s, &mu_s_);
+        const double w = kGaussW[i] * half;
+        sub.sun_l[0] += w * ref3::profile_density(&a.rayleigh_density, h_s);
+        sub.sun_l[1] += w * ref3::profile_density(&a.mie_density, h_s);
+        sub.sun_l[2] += w * ref3::profile_density(&a.absorption_density, h_s);
+      }
+  }
+}
+
+// Per segment between nodes t: the optical lengths of the three profiles, and its sub-segments.
+struct Segments {
+  std::vector<std::array<double, 3>> lengths;
+  std::vector<std::array<Sub, kSubSegments>> subs;
+};
+Segments view_segments(const AtmosphereParameters& a, const double* row, const std::vector<double>& t) {
+  const double h = row[PT_H], mu = row[PT_MU];
+  const int ground = row[PT_GROUND] != 0.0;
+  const int n = static_cast<int>(t.size());
+  Segments out{std::vector<std::array<double, 3>>(n - 1), std::vector<std::array<Sub, kSubSegments>>(n - 1)};
   for (int k = 0; k + 1 < n; ++k) {
     std::array<double, 3> l{0.0, 0.0, 0.0};
     const double dt = (t[k + 1] - t[k]) / kSubSegments;
@@ -256,7 +259,7 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
       {
         double h_mid, mu_mid;
         ref3::point_along(&a, h, mu, mid, ground, &h_mid, &mu_mid);
-        sunlit(mid, h_mid, sub);
+        sunlit(a, row, mid, h_mid, sub);
       }
       for (int i = 0; i < 4; ++i)
         for (int side = 0; side < 2; ++side) {
@@ -272,53 +275,74 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
           sub.l_r += rr;
           sub.l_m += rm;
         }
-      subs[k][j] = sub;
+      out.subs[k][j] = sub;
     }
-    lengths[k] = l;
+    out.lengths[k] = l;
   }
-  for (std::size_t c = 0; c < C; ++c) {
-    double* tau = node_tau + c * kNodes;
-    double* cdf = node_cdf + c * kNodes;
-    tau[0] = 0.0;
-    for (int k = 0; k + 1 < n; ++k)
-      tau[k + 1] = tau[k] + ch.rayleigh_scattering[c] * lengths[k][0] + ch.mie_extinction[c] * lengths[k][1] +
-                   ch.absorption_extinction[c] * lengths[k][2];
-    // segment masses ≈ ∫ β_s ρ T dt (and × V T_sun), T at each sub-segment's middle with τ
-    // linear between the nodes: only the pdf depends on them
-    std::vector<double> mass(n - 1, 0.0), lit(n - 1, 0.0);
-    double total = 0.0, total_lit = 0.0;
-    for (int k = 0; k + 1 < n; ++k) {
-      const double dt = t[k + 1] - t[k];
-      for (const Sub& sub : subs[k]) {
-        const double tau_s = tau[k] + (tau[k + 1] - tau[k]) * (sub.t_mid - t[k]) / dt;
-        const double m = (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * std::exp(-tau_s);
-        mass[k] += m;
-        if (sub.visible > 0.0)
-          lit[k] += m * sub.visible *
-                    std::exp(-(ch.rayleigh_scattering[c] * sub.sun_l[0] + ch.mie_extinction[c] * sub.sun_l[1] +
-                               ch.absorption_extinction[c] * sub.sun_l[2]));
-      }
-      total += mass[k];
-      total_lit += lit[k];
+  return out;
+}
+
+// Channel c's optical depth at the nodes and its segment probabilities (a cdf): segment masses
+// ≈ ∫ β_s ρ T dt (and × V T_sun for the sunlit share), T at each sub-segment's middle with τ
+// linear between the nodes (only the pdf depends on them), mixed with a uniform share.
+void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg, double* tau,
+                   double* cdf) {
+  const int n = static_cast<int>(t.size());
+  const double D = t.back();
+  tau[0] = 0.0;
+  for (int k = 0; k + 1 < n; ++k)
+    tau[k + 1] = tau[k] + ch.rayleigh_scattering[c] * seg.lengths[k][0] + ch.mie_extinction[c] * seg.lengths[k][1] +
+                 ch.absorption_extinction[c] * seg.lengths[k][2];
+  std::vector<double> mass(n - 1, 0.0), lit(n - 1, 0.0);
+  double total = 0.0, total_lit = 0.0;
+  for (int k = 0; k + 1 < n; ++k) {
+    const double dt = t[k + 1] - t[k];
+    for (const Sub& sub : seg.subs[k]) {
+      const double tau_s = tau[k] + (tau[k + 1] - tau[k]) * (sub.t_mid - t[k]) / dt;
+      const double m = (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * std::exp(-tau_s);
+      mass[k] += m;
+      if (sub.visible > 0.0)
+        lit[k] += m * sub.visible *
+                  std::exp(-(ch.rayleigh_scattering[c] * sub.sun_l[0] + ch.mie_extinction[c] * sub.sun_l[1] +
+                             ch.absorption_extinction[c] * sub.sun_l[2]));
     }
-    const double lit_share = total_lit > 0.0 ? kSunlitShare : 0.0;
-    cdf[0] = 0.0;
-    for (int k = 0; k + 1 < n; ++k) {
-      const double uniform = (t[k + 1] - t[k]) / D;
-      const double p = total > 0.0 ? (1.0 - kUniformMix) * ((1.0 - lit_share) * mass[k] / total +
-                                                            (lit_share > 0.0 ? lit_share * lit[k] / total_lit : 0.0)) +
-                                         kUniformMix * uniform
-                                   : uniform;
-      cdf[k + 1] = cdf[k] + p;
-    }
-    const double norm = cdf[n - 1];
-    for (int k = 1; k < n; ++k) cdf[k] /= norm;
-    cdf[n - 1] = 1.0;
-    for (int k = n; k < kNodes; ++k) {
-      tau[k] = tau[n - 1];
-      cdf[k] = 1.0;
-    }
+    total += mass[k];
+    total_lit += lit[k];
   }
+  const double lit_share = total_lit > 0.0 ? kSunlitShare : 0.0;
+  cdf[0] = 0.0;
+  for (int k = 0; k + 1 < n; ++k) {
+    const double uniform = (t[k + 1] - t[k]) / D;
+    const double p = total > 0.0 ? (1.0 - kUniformMix) * ((1.0 - lit_share) * mass[k] / total +
+                                                          (lit_share > 0.0 ? lit_share * lit[k] / total_lit : 0.0)) +
+                                       kUniformMix * uniform
+                                 : uniform;
+    cdf[k + 1] = cdf[k] + p;
+  }
+  const double norm = cdf[n - 1];
+  for (int k = 1; k < n; ++k) cdf[k] /= norm;
+  cdf[n - 1] = 1.0;
+  for (int k = n; k < kNodes; ++k) {
+    tau[k] = tau[n - 1];
+    cdf[k] = 1.0;
+  }
+}
+
+// Nodes, optical depth at the nodes and segment probabilities of one point's view ray, for
+// every channel.
+void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, double* row,
+                double* node_t, double* node_tau, double* node_cdf) {
+  const std::size_t C = ch.size();
+  for (int k = 0; k < kNodes; ++k) node_t[k] = 0.0;
+  for (std::size_t c = 0; c < C; ++c)
+    for (int k = 0; k < kNodes; ++k) node_tau[c * kNodes + k] = node_cdf[c * kNodes + k] = 0.0;
+  if (row[PT_NODES] == 0.0) return;
+  const std::vector<double> t = view_nodes(a, kinks, row[PT_H], row[PT_MU], row[PT_D]);
+  const int n = static_cast<int>(t.size());
+  row[PT_NODES] = n;
+  for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
+  const Segments seg = view_segments(a, row, t);
+  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, node_tau + c * kNodes, node_cdf + c * kNodes);
 }
 
 Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base) {
@@ -410,7 +434,7 @@ struct Group {
   std::size_t first = 0, count = 0;
   Channels channels;
   AtmosphereParameters a{};
-  std::vector<double> tau, cdf, majorant;
+  std::vector<double> tau, cdf, medium;
 };
 std::vector<Group> groups_of(const Prepared& P) {
   std::vector<Group> out;
@@ -422,7 +446,7 @@ std::vector<Group> groups_of(const Prepared& P) {
     g.a = ref3::make_parameters(P.model, g.channels);
     g.tau = group_slice(P.node_tau, P.n_points, P.n_channels, first, g.count);
     g.cdf = group_slice(P.node_cdf, P.n_points, P.n_channels, first, g.count);
-    g.majorant = medium_table(P.model, g.channels);
+    g.medium = medium_table(P.model, g.channels);
     out.push_back(std::move(g));
   }
   return out;
@@ -438,7 +462,7 @@ class HostEngine final : public Engine {
     parallel_for(static_cast<long long>(P_.n_points) * stride, [&](long long id) {
       const int p = static_cast<int>(id / stride), j = static_cast<int>(id % stride);
       if (j >= count[p]) return;
-      ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.majorant.data(),
+      ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.medium.data(),
                              kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
                              o_.split_orders, static_cast<int>(o_.next_sun), static_cast<philox_u32>(o_.seed & 0xffffffffu),
                              static_cast<philox_u32>(o_.seed >> 32),
@@ -465,7 +489,7 @@ class DeviceEngine final : public Engine {
       b.block = ref3::parameter_block(g.a, dev.info().fp64);
       b.tau = cl_util::upload_real(dev, g.tau);
       b.cdf = cl_util::upload_real(dev, g.cdf);
-      b.majorant = cl_util::upload_real(dev, g.majorant);
+      b.medium = cl_util::upload_real(dev, g.medium);
       buffers_.push_back(std::move(b));
     }
   }
@@ -487,7 +511,7 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, node_t_);
       k.setArg(i++, b.tau);
       k.setArg(i++, b.cdf);
-      k.setArg(i++, b.majorant);
+      k.setArg(i++, b.medium);
       k.setArg(i++, static_cast<cl_int>(P_.n_points));
       k.setArg(i++, static_cast<cl_int>(P_.point_base));
       k.setArg(i++, static_cast<cl_int>(kNodes));
@@ -511,7 +535,7 @@ class DeviceEngine final : public Engine {
  private:
   struct GroupBuffers {
     std::vector<unsigned char> block;
-    cl::Buffer tau, cdf, majorant;
+    cl::Buffer tau, cdf, medium;
   };
   cl_util::Device& dev_;
   const Prepared& P_;

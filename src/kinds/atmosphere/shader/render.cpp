@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/render.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -12,7 +12,7 @@
 #include "core/parallel.hpp"
 #include "core/text.hpp"
 #include "io/png.hpp"
-#include "kinds/atmosphere/shader_host.hpp"
+#include "kinds/atmosphere/shader/shader_host.hpp"
 
 namespace specbake::atmosphere {
 

@@ -22,7 +22,7 @@
 
 #include "cl/device.hpp"
 #include "job/kind.hpp"
-#include "kinds/atmosphere/truth.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 namespace specbake::atmosphere {
 
@@ -62,13 +62,7 @@ struct SceneCheck {
   double seconds = 0.0;
 };
 
-// `views` of a scene by name (sky, ground, all), and the scene as the config normalises it and
-// the record reports it.
-const char* views_name(int views);
-nlohmann::json scene_json(const AtmosphereScene& scene);
 
-// The scene's point set (Halton points first + 1 ...; `first` > 0 gives an independent set).
-std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first = 0);
 
 // The walks of a check's trace of `traced` (the bake's spec, or the spectral reference of an
 // rgb bake): 1024 per point and channel first, then top-ups until the standard error is the

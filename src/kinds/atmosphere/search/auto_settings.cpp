@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/auto_settings.hpp"
+#include "kinds/atmosphere/search/auto_settings.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -104,7 +104,7 @@ double p99_of(const SceneCheck& c, const char* part) {
 double predicted_bake_seconds(const AtmosphereSpec& spec) {
   AtmosphereSpec s = spec;
   s.scene.check = false;
-  return estimated_seconds(s);
+  return bake_seconds(s);
 }
 
 json settings_json(const AtmosphereSpec& s) {

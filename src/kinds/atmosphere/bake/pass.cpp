@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/pass.hpp"
+#include "kinds/atmosphere/bake/pass.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -13,7 +13,7 @@
 
 #include "cl/buffers.hpp"
 #include "core/parallel.hpp"
-#include "kinds/atmosphere/reference_widths.hpp"
+#include "kinds/atmosphere/bake/reference_widths.hpp"
 
 namespace specbake::atmosphere {
 
@@ -140,342 +140,38 @@ OrderRgb order_rgb_of(const ChannelStats* scattering, const ChannelStats* irradi
   return o;
 }
 
-class DeviceBackend final : public PassBackend, private Sums {
+// The device side of a backend's work: its program and parameter block, buffers, kernel
+// launches (with their work-group sizes) and blocking reads, each recorded on the device's
+// profiler.
+class DeviceQueue {
  public:
-  DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
-      : dev_(dev), model_(m), sizes_(m.sizes), width_(width), dbl_(dbl), lanes_(lanes(dev.info())),
-        block_(make_block(m, ch, width, dbl)) {
+  DeviceQueue(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
+      : dev_(dev), width_(width), dbl_(dbl), lanes_(lanes(dev.info())), block_(make_block(m, ch, width, dbl)) {
     const std::string options = std::string("-DNCH=") + std::to_string(width) + " -DNU_MAX=" +
                                 std::to_string(std::max(m.sizes.nu, kNuMaxAtLeast)) +
                                 " -DLANES=" + std::to_string(lanes_) + (dbl ? " -DSPECBAKE_REAL_DOUBLE" : "");
     if (dbl && !dev.info().fp64) throw DeviceError("precision: double needs a device with cl_khr_fp64");
     program_ = dev.build(kProgram, options);
-    n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
-    n_e_ = 1LL * sizes_.irradiance_w * sizes_.irradiance_h;
-    n_s_ = sizes_.scattering_texels();
-    n_ray_ = 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1) * (kRayFixed + width);
-    n_inc_ = 1LL * sizes_.r * sizes_.mu_s * model_.density_theta * (2 * sizes_.nu * width + width + kIncidenceFixed);
-    cl_util::checked("allocating atmosphere textures", [&] {
-      rays_ = alloc_reals(n_ray_);
-      incidence_ = alloc_reals(n_inc_);
-      T_ = alloc(n_t_);
-      dE_ = alloc(n_e_);
-      dR_ = alloc(n_s_);
-      dM_ = alloc(n_s_);
-      dS_ = alloc(n_s_);
-      J_ = alloc(n_s_);
-      return 0;
-    });
-    check_layout();
-    row_group_ = choose_row_group();
-    spdlog::debug("atmosphere: LANES {} (texels per work item of single and multiple scattering, suns side by side "
-                  "in the density); multiple scattering {} ({} B of local memory per row, {} B on the device)",
-                  lanes_,
-                  row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row" : "per texel",
-                  row_columns_bytes(), dev_.info().local_mem_bytes);
   }
-  int channels() const override { return width_; }
+  Device& dev() { return dev_; }
+  const cl::Program& program() const { return program_; }
+  const Block& block() const { return block_; }
+  int width() const { return width_; }
+  bool dbl() const { return dbl_; }
+  std::size_t lane_count() const { return lanes_; }
+  void use_block(Block b) { block_ = std::move(b); }
 
-  void transmittance() override { launch("transmittance_texture", n_t_, {&T_}); }
-  void direct_irradiance() override { launch("direct_irradiance_texture", n_e_, {&T_, &dE_}); }
-  // The ray-sample table depends on T only: built here, reused by every multiple_scattering().
-  void single_scattering() override {
-    launch("ray_sample_table", 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1), {&T_, &rays_});
-    launch("single_scattering_texture", row_chunks(), {&T_, &rays_, &dR_, &dM_});
-  }
-  void scattering_density(int order) override {
-    launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * model_.density_theta,
-           {&T_, &dR_, &dM_, &dS_, order, &incidence_});
-    launch("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s, {&incidence_, &dE_, order, &J_});
-  }
-  void indirect_irradiance(int order) override {
-    launch("indirect_irradiance_texture", n_e_, {&dR_, &dM_, &dS_, order, &dE_});
-  }
-  // One work group per (μ, r) row sharing its column blends in local memory
-  // (multiple_scattering_texture), or, where the device's local memory cannot hold a row's
-  // columns, one work item per texel (multiple_scattering_texels): the same operations.
-  void multiple_scattering() override {
-    if (row_group_ == 0) {
-      launch("multiple_scattering_texels", n_s_, {&rays_, &J_, &dS_});
-      return;
-    }
-    cl_util::checked("multiple_scattering_texture", [&] {
-      cl::Kernel k(program_, "multiple_scattering_texture");
-      k.setArg(0, block_.bytes.size(), block_.bytes.data());
-      k.setArg(1, rays_);
-      k.setArg(2, J_);
-      k.setArg(3, dS_);
-      k.setArg(4, cl::Local(row_columns_bytes()));
-      const std::size_t rows = static_cast<std::size_t>(sizes_.r) * sizes_.mu;
-      enqueue(k, cl::NDRange(rows * row_group_), cl::NDRange(row_group_));
-      return 0;
-    });
-  }
-
-  void read_into(Tex t, std::vector<double>& out) override {
-    cl_util::checked("reading an atmosphere texture", [&] {
-      read_reals(buffer(t), texels(t) * width_, out);
-      return 0;
-    });
-  }
-  void gather(Tex t, const std::vector<int>& ids, std::vector<double>& out) override {
-    out.clear();
-    if (ids.empty()) return;
-    cl_util::checked("gathering atmosphere texels", [&] {
-      const int n = static_cast<int>(ids.size());
-      cl::Buffer at(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, ids.size() * sizeof(int),
-                    const_cast<int*>(ids.data()));
-      cl::Buffer values = alloc_reals(1LL * n * width_);
-      launch("gather_texels", n, {&buffer(t), &at, n, &values});
-      read_reals(values, 1LL * n * width_, out);
-      return 0;
-    });
-  }
-  Scan scan(Tex t) override {
-    Scan s{std::vector<double>(width_, 0.0), 0};
-    cl_util::checked("scanning an atmosphere texture", [&] {
-      const long long n = texels(t);
-      const int items = static_cast<int>(std::min<long long>(n, kScanItems));
-      cl::Buffer max_abs = alloc_reals(1LL * items * width_);
-      cl::Buffer bad(dev_.context(), CL_MEM_READ_WRITE, items * sizeof(int));
-      launch("scan_texture", items, {&buffer(t), static_cast<int>(n), &max_abs, &bad});
-      std::vector<double> m;
-      read_reals(max_abs, 1LL * items * width_, m);
-      std::vector<int> b(items);
-      read_buffer(bad, items * sizeof(int), b.data());
-      for (int g = 0; g < items; ++g) {
-        s.non_finite += b[g];
-        for (int c = 0; c < width_; ++c) s.max_abs[c] = std::max(s.max_abs[c], m[1LL * g * width_ + c]);
-      }
-      return 0;
-    });
-    return s;
-  }
-  cl_util::Profiler* profiler() override { return &dev_.profiler(); }
-  Sums& sums() override { return *this; }
-  void use_channels(const Channels& ch) override { block_ = make_block(model_, ch, width_, dbl_); }
-
-  // ---- the sums, by kernels where the textures are (kernels.cl, "The sums") ----
-  void begin_pass(const std::vector<double>& to_rgb, bool last) override {
-    if (!S_()) allocate_sums();
-    to_rgb_ = cl_util::upload_real(dev_, to_rgb, dbl_);
-    last_pass_ = last;
-  }
-  void single() override {
-    cl_util::checked("atmosphere sums", [&] {
-      copy(dR_, S_, n_s_ * width_);
-      zero(E_, n_e_ * width_);
-      return 0;
-    });
-    add_order(1, 0, dR_, n_s_);
-  }
-  double add_irradiance(int order) override {
-    launch("add_values", n_e_ * width_, {&dE_, static_cast<int>(n_e_ * width_), &E_});
-    add_order(order, 1, dE_, n_e_);
-    return relative_change(dE_, E_, n_e_);
-  }
-  double add_scattering(int order) override {
-    if (!inverse_phase_())  // 1/P_R(ν) of every texel, decoded in double (as the host's reference does)
-      inverse_phase_ = cl_util::upload_real(dev_, inverse_rayleigh_phase(model_), dbl_);
-    launch("add_multiple_scattering", n_s_, {&dS_, &inverse_phase_, &S_, &add_});
-    add_order(order, 0, add_, n_s_);
-    return relative_change(add_, S_, n_s_);
-  }
-  void end_pass() override {
-    add_rgb(S_, n_s_, rgb_[0], !rgb_written_);
-    add_rgb(E_, n_e_, rgb_[1], !rgb_written_);
-    add_rgb(dM_, n_s_, rgb_[2], !rgb_written_);
-    rgb_written_ = true;
-  }
-  void read_pass(Sum s, std::vector<double>& out) override {
-    cl_util::checked("reading an atmosphere sum", [&] {
-      if (s == Sum::scattering) read_reals(S_, n_s_ * width_, out);
-      else if (s == Sum::irradiance) read_reals(E_, n_e_ * width_, out);
-      else read_reals(dM_, n_s_ * width_, out);
-      return 0;
-    });
-  }
-  void read_rgb(Sum s, std::vector<double>& out) override {
-    cl_util::checked("reading an atmosphere sum", [&] {
-      read_reals(rgb_[static_cast<int>(s)], 3 * (s == Sum::irradiance ? n_e_ : n_s_), out);
-      return 0;
-    });
-  }
-  OrderRgb order_rgb(int order) override {
-    const auto it = orders_.find(order);
-    if (it == orders_.end()) return {};
-    OrderSum& sum = it->second;
-    for (int which : {0, 1})
-      if (sum.added(which) && !sum.stats[which]) finish(sum, which);
-    return order_rgb_of(sum.stats[0] ? &*sum.stats[0] : nullptr, sum.stats[1] ? &*sum.stats[1] : nullptr);
-  }
-
- private:
   cl::Buffer alloc(long long texels) { return alloc_reals(texels * width_); }
   cl::Buffer alloc_reals(long long n) {
     return cl::Buffer(dev_.context(), CL_MEM_READ_WRITE,
                       std::max<long long>(n, 1) * (dbl_ ? sizeof(double) : sizeof(float)));
   }
-  long long texels(Tex t) const {
-    if (t == Tex::transmittance) return n_t_;
-    if (t == Tex::delta_irradiance) return n_e_;
-    return n_s_;
-  }
-  cl::Buffer& buffer(Tex t) {
-    switch (t) {
-      case Tex::transmittance: return T_;
-      case Tex::delta_irradiance: return dE_;
-      case Tex::delta_rayleigh: return dR_;
-      case Tex::delta_mie: return dM_;
-      case Tex::delta_multiple: return dS_;
-      case Tex::density: return J_;
-    }
-    return T_;
-  }
   void enqueue(cl::Kernel& k, long long n) { enqueue(k, cl::NDRange(static_cast<std::size_t>(n)), group_for(n)); }
-  // Work items per group for a kernel over n items. PoCL's CPU device runs a work group on one
-  // thread and keeps a copy of each item's private arrays on that thread's stack where they live
-  // across its work-item loop; left to choose, it takes the largest divisor of n up to 4096, and
-  // the density's incidence table (16 channels, NU = 20, scattering 16 × · × 54: 3456 items of
-  // ~2.8 KB) overran the 8 MiB stack and crashed the process. On a CPU device the group is the
-  // largest divisor of n up to kCpuGroupLimit (the largest kernel, the density at NU = 64 and 16
-  // channels, holds ~35 KB per item: 2.2 MiB a group); on other devices the driver chooses. The
-  // kernels share nothing within a group, so the results do not depend on it.
-  cl::NDRange group_for(long long n) const {
-    if (dev_.info().type != "cpu") return cl::NullRange;
-    long long g = std::min<long long>(kCpuGroupLimit, n);
-    while (g > 1 && n % g != 0) --g;
-    return cl::NDRange(static_cast<std::size_t>(g));
-  }
-  static constexpr long long kCpuGroupLimit = 64;
   void enqueue(cl::Kernel& k, const cl::NDRange& global, const cl::NDRange& local) {
     cl::Event ev;
     dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, global, local, nullptr, &ev);
     dev_.profiler().record(ev);
     dev_.profiler().wait([&] { dev_.queue().finish(); });
-  }
-  // Work items of a kernel that takes LANES texels of a (mu, r) row per item.
-  long long row_chunks() const {
-    const long long row = 1LL * sizes_.nu * sizes_.mu_s, lanes = static_cast<long long>(lanes_);
-    return 1LL * sizes_.r * sizes_.mu * ((row + lanes - 1) / lanes);
-  }
-  std::size_t row_columns_bytes() const {
-    return static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s * width_ * (dbl_ ? sizeof(double) : sizeof(float));
-  }
-  // Work-group size of the row kernel: the row's width over the texels per item, or the most
-  // the kernel allows (items then take several rounds); 0 when the device's local memory cannot
-  // hold the columns.
-  std::size_t choose_row_group() {
-    return cl_util::checked("sizing multiple_scattering_texture", [&]() -> std::size_t {
-      cl::Kernel k(program_, "multiple_scattering_texture");
-      const cl::Device d = dev_.context().getInfo<CL_CONTEXT_DEVICES>().front();
-      const std::size_t most = k.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(d);
-      const unsigned long long fixed = k.getWorkGroupInfo<CL_KERNEL_LOCAL_MEM_SIZE>(d);
-      if (fixed + row_columns_bytes() > dev_.info().local_mem_bytes) return 0;
-      const std::size_t row = static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s;
-      return std::min({most, dev_.info().max_work_group_size, (row + lanes_ - 1) / lanes_});
-    });
-  }
-  // The sums' buffers, on a pass's first use (a backend that only computes T needs none).
-  void allocate_sums() {
-    cl_util::checked("allocating the atmosphere sums", [&] {
-      S_ = alloc(n_s_);
-      E_ = alloc(n_e_);
-      add_ = alloc(n_s_);
-      rgb_[0] = alloc_reals(3 * n_s_);
-      rgb_[1] = alloc_reals(3 * n_e_);
-      rgb_[2] = alloc_reals(3 * n_s_);
-      return 0;
-    });
-  }
-  void zero(cl::Buffer& b, long long n) {
-    cl::Event ev;
-    if (dbl_) dev_.queue().enqueueFillBuffer(b, 0.0, 0, n * sizeof(double), nullptr, &ev);
-    else dev_.queue().enqueueFillBuffer(b, 0.0f, 0, n * sizeof(float), nullptr, &ev);
-    dev_.profiler().record(ev);
-  }
-  void copy(const cl::Buffer& from, cl::Buffer& to, long long n) {
-    cl::Event ev;
-    dev_.queue().enqueueCopyBuffer(from, to, 0, 0, n * (dbl_ ? sizeof(double) : sizeof(float)), nullptr, &ev);
-    dev_.profiler().record(ev);
-  }
-  // rgb ([texels][3]) += to_rgb · x ([texels][width]), or = where first.
-  void add_rgb(cl::Buffer& x, long long texels, cl::Buffer& rgb, bool first) {
-    launch("add_rgb", texels, {&x, &to_rgb_, static_cast<int>(texels), first ? 1 : 0, &rgb});
-  }
-  // What `order` adds ([texels][width]) into its R,G,B sum over passes (which: 0 scattering, 1
-  // irradiance); in the last pass the sum is complete: its statistics are taken and it is freed.
-  void add_order(int order, int which, cl::Buffer& x, long long texels) {
-    OrderSum& sum = orders_[order];
-    const bool first = !sum.added(which);
-    if (first)
-      cl_util::checked("allocating an order's sums", [&] {
-        sum.rgb[which] = alloc_reals(3 * texels);
-        return 0;
-      });
-    add_rgb(x, texels, sum.rgb[which], first);
-    if (last_pass_) finish(sum, which);
-  }
-  void finish(OrderSum& sum, int which) {
-    sum.stats[which] = stats(sum.rgb[which], which == 0 ? n_s_ : n_e_, 3);
-    sum.rgb[which] = cl::Buffer();
-  }
-  // Per channel max (floored at 0) and mean of x ([texels][channels]): partial results of
-  // kScanItems work items, combined on the host in item order.
-  ChannelStats stats(cl::Buffer& x, long long texels, int channels) {
-    const int items = static_cast<int>(std::min<long long>(texels, kScanItems));
-    ChannelStats st{std::vector<double>(channels, 0.0), std::vector<double>(channels, 0.0)};
-    cl_util::checked("atmosphere sums", [&] {
-      cl::Buffer mx = alloc_reals(1LL * items * channels), sum = alloc_reals(1LL * items * channels);
-      launch("channel_stats_partial", items, {&x, static_cast<int>(texels), channels, &mx, &sum});
-      std::vector<double> m, t;
-      read_reals(mx, 1LL * items * channels, m);
-      read_reals(sum, 1LL * items * channels, t);
-      for (int g = 0; g < items; ++g)
-        for (int c = 0; c < channels; ++c) {
-          st.max[c] = std::max(st.max[c], m[1LL * g * channels + c]);
-          st.mean[c] += t[1LL * g * channels + c];
-        }
-      for (double& v : st.mean) v /= static_cast<double>(std::max<long long>(texels, 1));
-      return 0;
-    });
-    return st;
-  }
-  // The largest |add| / sum where the sum exceeds kAutoFloor × its channel's maximum (Sums).
-  double relative_change(cl::Buffer& add, cl::Buffer& sum, long long texels) {
-    std::vector<double> floor = stats(sum, texels, width_).max;
-    for (double& f : floor) f *= kAutoFloor;
-    const int items = static_cast<int>(std::min<long long>(texels, kScanItems));
-    double out = 0.0;
-    cl_util::checked("atmosphere sums", [&] {
-      cl::Buffer fl = cl_util::upload_real(dev_, floor, dbl_), partial = alloc_reals(items);
-      launch("relative_change_partial", items, {&add, &sum, &fl, static_cast<int>(texels), &partial});
-      std::vector<double> r;
-      read_reals(partial, items, r);
-      for (double v : r) out = std::max(out, v);
-      return 0;
-    });
-    return out;
-  }
-  // n reals of a buffer into `out` as double (float buffers through a staging copy kept between reads).
-  void read_reals(const cl::Buffer& b, long long n, std::vector<double>& out) {
-    out.resize(n);
-    if (dbl_) {
-      read_buffer(b, n * sizeof(double), out.data());
-    } else {
-      staging_.resize(n);
-      read_buffer(b, n * sizeof(float), staging_.data());
-      copy_chunks(staging_, out);
-    }
-  }
-  // Work items of a texture scan (each takes every kScanItems-th texel): enough for a GPU's
-  // lanes, few enough that the partial maxima are a small read.
-  static constexpr long long kScanItems = 4096;
-  // A blocking read, recorded with its wait.
-  void read_buffer(const cl::Buffer& b, std::size_t bytes, void* to) {
-    cl::Event ev;
-    dev_.profiler().wait([&] { dev_.queue().enqueueReadBuffer(b, CL_TRUE, 0, bytes, to, nullptr, &ev); });
-    dev_.profiler().record(ev);
   }
   // Runs kernel `name` over n work items with the parameter block, then `args` in order
   // (device buffers, or the scattering order as an int).
@@ -491,6 +187,34 @@ class DeviceBackend final : public PassBackend, private Sums {
       enqueue(k, n);
       return 0;
     });
+  }
+  void zero(cl::Buffer& b, long long n) {
+    cl::Event ev;
+    if (dbl_) dev_.queue().enqueueFillBuffer(b, 0.0, 0, n * sizeof(double), nullptr, &ev);
+    else dev_.queue().enqueueFillBuffer(b, 0.0f, 0, n * sizeof(float), nullptr, &ev);
+    dev_.profiler().record(ev);
+  }
+  void copy(const cl::Buffer& from, cl::Buffer& to, long long n) {
+    cl::Event ev;
+    dev_.queue().enqueueCopyBuffer(from, to, 0, 0, n * (dbl_ ? sizeof(double) : sizeof(float)), nullptr, &ev);
+    dev_.profiler().record(ev);
+  }
+  // n reals of a buffer into `out` as double (float buffers through a staging copy kept between reads).
+  void read_reals(const cl::Buffer& b, long long n, std::vector<double>& out) {
+    out.resize(n);
+    if (dbl_) {
+      read_buffer(b, n * sizeof(double), out.data());
+    } else {
+      staging_.resize(n);
+      read_buffer(b, n * sizeof(float), staging_.data());
+      copy_chunks(staging_, out);
+    }
+  }
+  // A blocking read, recorded with its wait.
+  void read_buffer(const cl::Buffer& b, std::size_t bytes, void* to) {
+    cl::Event ev;
+    dev_.profiler().wait([&] { dev_.queue().enqueueReadBuffer(b, CL_TRUE, 0, bytes, to, nullptr, &ev); });
+    dev_.profiler().record(ev);
   }
   // The device must read the parameter block exactly as the host wrote it.
   void check_layout() {
@@ -525,26 +249,358 @@ class DeviceBackend final : public PassBackend, private Sums {
     });
   }
 
+ private:
+  // Work items per group for a kernel over n items. PoCL's CPU device runs a work group on one
+  // thread and keeps a copy of each item's private arrays on that thread's stack where they live
+  // across its work-item loop; left to choose, it takes the largest divisor of n up to 4096, and
+  // the density's incidence table (16 channels, NU = 20, scattering 16 × · × 54: 3456 items of
+  // ~2.8 KB) overran the 8 MiB stack and crashed the process. On a CPU device the group is the
+  // largest divisor of n up to kCpuGroupLimit (the largest kernel, the density at NU = 64 and 16
+  // channels, holds ~35 KB per item: 2.2 MiB a group); on other devices the driver chooses. The
+  // kernels share nothing within a group, so the results do not depend on it.
+  cl::NDRange group_for(long long n) const {
+    if (dev_.info().type != "cpu") return cl::NullRange;
+    long long g = std::min<long long>(kCpuGroupLimit, n);
+    while (g > 1 && n % g != 0) --g;
+    return cl::NDRange(static_cast<std::size_t>(g));
+  }
+  static constexpr long long kCpuGroupLimit = 64;
+
   Device& dev_;
-  Model model_;
-  Sizes sizes_;
   int width_;
   bool dbl_;
   std::size_t lanes_;  // LANES: texels per work item of the row kernels, suns side by side in the density
   Block block_;
   cl::Program program_;
-  long long n_t_ = 0, n_e_ = 0, n_s_ = 0, n_ray_ = 0, n_inc_ = 0;
-  std::size_t row_group_ = 0;
-  cl::Buffer T_, dE_, dR_, dM_, dS_, J_, rays_, incidence_;
-  // the sums: the pass's scattering and irradiance, an order's scattering addition, the
-  // channels → R,G,B weights, the bake's R,G,B textures (as Sum numbers them) and per order its
-  // R,G,B additions (scattering, irradiance; whether each is there yet)
+  std::vector<float> staging_;
+};
+
+// Work items of a texture scan (each takes every kScanItems-th texel): enough for a GPU's
+// lanes, few enough that the partial maxima are a small read.
+constexpr long long kScanItems = 4096;
+
+// A pass's textures on the device, [texels][width] each.
+struct DeviceTextures {
+  cl::Buffer T, dE, dR, dM, dS, J;
+};
+
+// The sums, by kernels where the textures are (kernels.cl, "The sums"): the pass's scattering
+// and irradiance, each order's R,G,B additions over the passes, and the bake's R,G,B textures.
+class DeviceSums final : public Sums {
+ public:
+  DeviceSums(DeviceQueue& q, DeviceTextures& tex, const Model& m)
+      : q_(q), tex_(tex), model_(m), n_e_(1LL * m.sizes.irradiance_w * m.sizes.irradiance_h),
+        n_s_(m.sizes.scattering_texels()), width_(q.width()) {}
+
+  void begin_pass(const std::vector<double>& to_rgb, bool last) override {
+    if (!S_()) allocate_sums();
+    to_rgb_ = cl_util::upload_real(q_.dev(), to_rgb, q_.dbl());
+    last_pass_ = last;
+  }
+  void single() override {
+    cl_util::checked("atmosphere sums", [&] {
+      q_.copy(tex_.dR, S_, n_s_ * width_);
+      q_.zero(E_, n_e_ * width_);
+      return 0;
+    });
+    add_order(1, 0, tex_.dR, n_s_);
+  }
+  double add_irradiance(int order) override {
+    q_.launch("add_values", n_e_ * width_, {&tex_.dE, static_cast<int>(n_e_ * width_), &E_});
+    add_order(order, 1, tex_.dE, n_e_);
+    return relative_change(tex_.dE, E_, n_e_);
+  }
+  double add_scattering(int order) override {
+    if (!inverse_phase_())  // 1/P_R(ν) of every texel, decoded in double (as the host's reference does)
+      inverse_phase_ = cl_util::upload_real(q_.dev(), inverse_rayleigh_phase(model_), q_.dbl());
+    q_.launch("add_multiple_scattering", n_s_, {&tex_.dS, &inverse_phase_, &S_, &add_});
+    add_order(order, 0, add_, n_s_);
+    return relative_change(add_, S_, n_s_);
+  }
+  void end_pass() override {
+    add_rgb(S_, n_s_, rgb_[0], !rgb_written_);
+    add_rgb(E_, n_e_, rgb_[1], !rgb_written_);
+    add_rgb(tex_.dM, n_s_, rgb_[2], !rgb_written_);
+    rgb_written_ = true;
+  }
+  void read_pass(Sum s, std::vector<double>& out) override {
+    cl_util::checked("reading an atmosphere sum", [&] {
+      if (s == Sum::scattering) q_.read_reals(S_, n_s_ * width_, out);
+      else if (s == Sum::irradiance) q_.read_reals(E_, n_e_ * width_, out);
+      else q_.read_reals(tex_.dM, n_s_ * width_, out);
+      return 0;
+    });
+  }
+  void read_rgb(Sum s, std::vector<double>& out) override {
+    cl_util::checked("reading an atmosphere sum", [&] {
+      q_.read_reals(rgb_[static_cast<int>(s)], 3 * (s == Sum::irradiance ? n_e_ : n_s_), out);
+      return 0;
+    });
+  }
+  OrderRgb order_rgb(int order) override {
+    const auto it = orders_.find(order);
+    if (it == orders_.end()) return {};
+    OrderSum& sum = it->second;
+    for (int which : {0, 1})
+      if (sum.added(which) && !sum.stats[which]) finish(sum, which);
+    return order_rgb_of(sum.stats[0] ? &*sum.stats[0] : nullptr, sum.stats[1] ? &*sum.stats[1] : nullptr);
+  }
+
+ private:
+  // The sums' buffers, on a pass's first use (a backend that only computes T needs none).
+  void allocate_sums() {
+    cl_util::checked("allocating the atmosphere sums", [&] {
+      S_ = q_.alloc(n_s_);
+      E_ = q_.alloc(n_e_);
+      add_ = q_.alloc(n_s_);
+      rgb_[0] = q_.alloc_reals(3 * n_s_);
+      rgb_[1] = q_.alloc_reals(3 * n_e_);
+      rgb_[2] = q_.alloc_reals(3 * n_s_);
+      return 0;
+    });
+  }
+  // rgb ([texels][3]) += to_rgb · x ([texels][width]), or = where first.
+  void add_rgb(cl::Buffer& x, long long texels, cl::Buffer& rgb, bool first) {
+    q_.launch("add_rgb", texels, {&x, &to_rgb_, static_cast<int>(texels), first ? 1 : 0, &rgb});
+  }
+  // What `order` adds ([texels][width]) into its R,G,B sum over passes (which: 0 scattering, 1
+  // irradiance); in the last pass the sum is complete: its statistics are taken and it is freed.
+  void add_order(int order, int which, cl::Buffer& x, long long texels) {
+    OrderSum& sum = orders_[order];
+    const bool first = !sum.added(which);
+    if (first)
+      cl_util::checked("allocating an order's sums", [&] {
+        sum.rgb[which] = q_.alloc_reals(3 * texels);
+        return 0;
+      });
+    add_rgb(x, texels, sum.rgb[which], first);
+    if (last_pass_) finish(sum, which);
+  }
+  void finish(OrderSum& sum, int which) {
+    sum.stats[which] = stats(sum.rgb[which], which == 0 ? n_s_ : n_e_, 3);
+    sum.rgb[which] = cl::Buffer();
+  }
+  // Per channel max (floored at 0) and mean of x ([texels][channels]): partial results of
+  // kScanItems work items, combined on the host in item order.
+  ChannelStats stats(cl::Buffer& x, long long texels, int channels) {
+    const int items = static_cast<int>(std::min<long long>(texels, kScanItems));
+    ChannelStats st{std::vector<double>(channels, 0.0), std::vector<double>(channels, 0.0)};
+    cl_util::checked("atmosphere sums", [&] {
+      cl::Buffer mx = q_.alloc_reals(1LL * items * channels), sum = q_.alloc_reals(1LL * items * channels);
+      q_.launch("channel_stats_partial", items, {&x, static_cast<int>(texels), channels, &mx, &sum});
+      std::vector<double> m, t;
+      q_.read_reals(mx, 1LL * items * channels, m);
+      q_.read_reals(sum, 1LL * items * channels, t);
+      for (int g = 0; g < items; ++g)
+        for (int c = 0; c < channels; ++c) {
+          st.max[c] = std::max(st.max[c], m[1LL * g * channels + c]);
+          st.mean[c] += t[1LL * g * channels + c];
+        }
+      for (double& v : st.mean) v /= static_cast<double>(std::max<long long>(texels, 1));
+      return 0;
+    });
+    return st;
+  }
+  // The largest |add| / sum where the sum exceeds kAutoFloor × its channel's maximum (Sums).
+  double relative_change(cl::Buffer& add, cl::Buffer& sum, long long texels) {
+    std::vector<double> floor = stats(sum, texels, width_).max;
+    for (double& f : floor) f *= kAutoFloor;
+    const int items = static_cast<int>(std::min<long long>(texels, kScanItems));
+    double out = 0.0;
+    cl_util::checked("atmosphere sums", [&] {
+      cl::Buffer fl = cl_util::upload_real(q_.dev(), floor, q_.dbl()), partial = q_.alloc_reals(items);
+      q_.launch("relative_change_partial", items, {&add, &sum, &fl, static_cast<int>(texels), &partial});
+      std::vector<double> r;
+      q_.read_reals(partial, items, r);
+      for (double v : r) out = std::max(out, v);
+      return 0;
+    });
+    return out;
+  }
+
+  DeviceQueue& q_;
+  DeviceTextures& tex_;
+  const Model& model_;
+  long long n_e_, n_s_;
+  int width_;
+  // the pass's scattering and irradiance, an order's scattering addition, the channels → R,G,B
+  // weights, the bake's R,G,B textures (as Sum numbers them) and per order its R,G,B additions
+  // (scattering, irradiance; whether each is there yet)
   cl::Buffer S_, E_, add_, to_rgb_, inverse_phase_;  // null until first used
   std::array<cl::Buffer, 3> rgb_;
   bool rgb_written_ = false;  // by a pass's end
   std::map<int, OrderSum> orders_;
   bool last_pass_ = true;
-  std::vector<float> staging_;
+};
+
+// A pass on an OpenCL device: the stages' kernels over the pass's textures, their reads, and the
+// sums over passes (DeviceSums).
+class DeviceBackend final : public PassBackend {
+ public:
+  DeviceBackend(Device& dev, const Model& m, const Channels& ch, int width, bool dbl)
+      : q_(dev, m, ch, width, dbl), model_(m), sizes_(m.sizes), width_(width), sums_(q_, tex_, model_) {
+    n_t_ = 1LL * sizes_.transmittance_w * sizes_.transmittance_h;
+    n_e_ = 1LL * sizes_.irradiance_w * sizes_.irradiance_h;
+    n_s_ = sizes_.scattering_texels();
+    allocate();
+    q_.check_layout();
+    row_group_ = choose_row_group();
+    spdlog::debug("atmosphere: LANES {} (texels per work item of single and multiple scattering, suns side by side "
+                  "in the density); multiple scattering {} ({} B of local memory per row, {} B on the device)",
+                  q_.lane_count(),
+                  row_group_ ? "in work groups of " + std::to_string(row_group_) + " per (mu, r) row" : "per texel",
+                  row_columns_bytes(), q_.dev().info().local_mem_bytes);
+  }
+  int channels() const override { return width_; }
+
+  void transmittance() override { q_.launch("transmittance_texture", n_t_, {&tex_.T}); }
+  void direct_irradiance() override { q_.launch("direct_irradiance_texture", n_e_, {&tex_.T, &tex_.dE}); }
+  // The ray-sample table depends on T only: built here, reused by every multiple_scattering().
+  void single_scattering() override {
+    q_.launch("ray_sample_table", 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1), {&tex_.T, &rays_});
+    q_.launch("single_scattering_texture", row_chunks(), {&tex_.T, &rays_, &tex_.dR, &tex_.dM});
+  }
+  void scattering_density(int order) override {
+    q_.launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * model_.density_theta,
+              {&tex_.T, &tex_.dR, &tex_.dM, &tex_.dS, order, &incidence_});
+    q_.launch("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s,
+              {&incidence_, &tex_.dE, order, &tex_.J});
+  }
+  void indirect_irradiance(int order) override {
+    q_.launch("indirect_irradiance_texture", n_e_, {&tex_.dR, &tex_.dM, &tex_.dS, order, &tex_.dE});
+  }
+  // One work group per (μ, r) row sharing its column blends in local memory
+  // (multiple_scattering_texture), or, where the device's local memory cannot hold a row's
+  // columns, one work item per texel (multiple_scattering_texels): the same operations.
+  void multiple_scattering() override {
+    if (row_group_ == 0) {
+      q_.launch("multiple_scattering_texels", n_s_, {&rays_, &tex_.J, &tex_.dS});
+      return;
+    }
+    cl_util::checked("multiple_scattering_texture", [&] {
+      cl::Kernel k(q_.program(), "multiple_scattering_texture");
+      k.setArg(0, q_.block().bytes.size(), q_.block().bytes.data());
+      k.setArg(1, rays_);
+      k.setArg(2, tex_.J);
+      k.setArg(3, tex_.dS);
+      k.setArg(4, cl::Local(row_columns_bytes()));
+      const std::size_t rows = static_cast<std::size_t>(sizes_.r) * sizes_.mu;
+      q_.enqueue(k, cl::NDRange(rows * row_group_), cl::NDRange(row_group_));
+      return 0;
+    });
+  }
+
+  void read_into(Tex t, std::vector<double>& out) override {
+    cl_util::checked("reading an atmosphere texture", [&] {
+      q_.read_reals(buffer(t), texels(t) * width_, out);
+      return 0;
+    });
+  }
+  void gather(Tex t, const std::vector<int>& ids, std::vector<double>& out) override {
+    out.clear();
+    if (ids.empty()) return;
+    cl_util::checked("gathering atmosphere texels", [&] {
+      const int n = static_cast<int>(ids.size());
+      cl::Buffer at(q_.dev().context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, ids.size() * sizeof(int),
+                    const_cast<int*>(ids.data()));
+      cl::Buffer values = q_.alloc_reals(1LL * n * width_);
+      q_.launch("gather_texels", n, {&buffer(t), &at, n, &values});
+      q_.read_reals(values, 1LL * n * width_, out);
+      return 0;
+    });
+  }
+  Scan scan(Tex t) override {
+    Scan s{std::vector<double>(width_, 0.0), 0};
+    cl_util::checked("scanning an atmosphere texture", [&] {
+      const long long n = texels(t);
+      const int items = static_cast<int>(std::min<long long>(n, kScanItems));
+      cl::Buffer max_abs = q_.alloc_reals(1LL * items * width_);
+      cl::Buffer bad(q_.dev().context(), CL_MEM_READ_WRITE, items * sizeof(int));
+      q_.launch("scan_texture", items, {&buffer(t), static_cast<int>(n), &max_abs, &bad});
+      std::vector<double> m;
+      q_.read_reals(max_abs, 1LL * items * width_, m);
+      std::vector<int> b(items);
+      q_.read_buffer(bad, items * sizeof(int), b.data());
+      for (int g = 0; g < items; ++g) {
+        s.non_finite += b[g];
+        for (int c = 0; c < width_; ++c) s.max_abs[c] = std::max(s.max_abs[c], m[1LL * g * width_ + c]);
+      }
+      return 0;
+    });
+    return s;
+  }
+  cl_util::Profiler* profiler() override { return &q_.dev().profiler(); }
+  Sums& sums() override { return sums_; }
+  void use_channels(const Channels& ch) override { q_.use_block(make_block(model_, ch, width_, q_.dbl())); }
+
+ private:
+  // The pass's textures and the tables of the scattering stages: ray samples
+  // [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][density_theta][(2 NU + 1) NCH + INC_FIXED].
+  void allocate() {
+    const long long n_ray = 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1) * (kRayFixed + width_);
+    const long long n_inc =
+        1LL * sizes_.r * sizes_.mu_s * model_.density_theta * (2 * sizes_.nu * width_ + width_ + kIncidenceFixed);
+    cl_util::checked("allocating atmosphere textures", [&] {
+      rays_ = q_.alloc_reals(n_ray);
+      incidence_ = q_.alloc_reals(n_inc);
+      tex_.T = q_.alloc(n_t_);
+      tex_.dE = q_.alloc(n_e_);
+      tex_.dR = q_.alloc(n_s_);
+      tex_.dM = q_.alloc(n_s_);
+      tex_.dS = q_.alloc(n_s_);
+      tex_.J = q_.alloc(n_s_);
+      return 0;
+    });
+  }
+  long long texels(Tex t) const {
+    if (t == Tex::transmittance) return n_t_;
+    if (t == Tex::delta_irradiance) return n_e_;
+    return n_s_;
+  }
+  cl::Buffer& buffer(Tex t) {
+    switch (t) {
+      case Tex::transmittance: return tex_.T;
+      case Tex::delta_irradiance: return tex_.dE;
+      case Tex::delta_rayleigh: return tex_.dR;
+      case Tex::delta_mie: return tex_.dM;
+      case Tex::delta_multiple: return tex_.dS;
+      case Tex::density: return tex_.J;
+    }
+    return tex_.T;
+  }
+  // Work items of a kernel that takes LANES texels of a (mu, r) row per item.
+  long long row_chunks() const {
+    const long long row = 1LL * sizes_.nu * sizes_.mu_s, lanes = static_cast<long long>(q_.lane_count());
+    return 1LL * sizes_.r * sizes_.mu * ((row + lanes - 1) / lanes);
+  }
+  std::size_t row_columns_bytes() const {
+    return static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s * width_ * (q_.dbl() ? sizeof(double) : sizeof(float));
+  }
+  // Work-group size of the row kernel: the row's width over the texels per item, or the most
+  // the kernel allows (items then take several rounds); 0 when the device's local memory cannot
+  // hold the columns.
+  std::size_t choose_row_group() {
+    return cl_util::checked("sizing multiple_scattering_texture", [&]() -> std::size_t {
+      cl::Kernel k(q_.program(), "multiple_scattering_texture");
+      Device& dev = q_.dev();
+      const cl::Device d = dev.context().getInfo<CL_CONTEXT_DEVICES>().front();
+      const std::size_t most = k.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(d);
+      const unsigned long long fixed = k.getWorkGroupInfo<CL_KERNEL_LOCAL_MEM_SIZE>(d);
+      if (fixed + row_columns_bytes() > dev.info().local_mem_bytes) return 0;
+      const std::size_t row = static_cast<std::size_t>(sizes_.nu) * sizes_.mu_s;
+      return std::min({most, dev.info().max_work_group_size, (row + q_.lane_count() - 1) / q_.lane_count()});
+    });
+  }
+
+  DeviceQueue q_;
+  Model model_;
+  Sizes sizes_;
+  int width_;
+  long long n_t_ = 0, n_e_ = 0, n_s_ = 0;
+  std::size_t row_group_ = 0;
+  DeviceTextures tex_;
+  cl::Buffer rays_, incidence_;
+  DeviceSums sums_;
 };
 
 // max over texels of |add| / acc, where acc exceeds kAutoFloor × its channel's maximum.
@@ -831,86 +887,125 @@ const char* to_string(PassStage s) {
   return "?";
 }
 
+namespace {
+
+// The times of a pass: every moment belongs to one stage, a timed stage, a hook ("self_check")
+// or the work in between ("sums": the sums' kernels on a device, on the host's threads for the
+// host backend, and reads; with the order of the stage after it).
+class PassTimeline {
+ public:
+  explicit PassTimeline(PassBackend& b) : prof_(b.profiler() ? *b.profiler() : own_), gap_(std::in_place, prof_, "sums", 0) {}
+
+  // Runs f as stage `stage` of `order`, closing the gap before it.
+  template <class F>
+  void stage(const std::string& stage, int order, F&& f) {
+    close_gap(order);
+    {
+      cl_util::Profiler::Stage st(prof_, stage, order);
+      f();
+      records_.push_back(st.close());
+    }
+    logged_.push_back(records_.back()->pending == 0);  // the stage's commands are done: log now
+    if (logged_.back()) log(*records_.back());
+    gap_.emplace(prof_, "sums", order);
+  }
+
+  // The pass's stages, once its last gap (of `order`) is closed and the device's times are in.
+  std::vector<StageTime> finish(int order) {
+    close_gap(order);
+    prof_.settle();  // times of commands still running when their stage closed
+    std::vector<StageTime> out;
+    for (std::size_t i = 0; i < records_.size(); ++i) {
+      const cl_util::StageSeconds& s = *records_[i];
+      if (!logged_[i]) log(s);
+      if (s.stage == "sums" && s.wall_s == 0.0 && s.commands == 0) continue;
+      out.push_back({s.stage, s.order, s});
+    }
+    return out;
+  }
+
+ private:
+  void close_gap(int order) {
+    gap_->record()->order = order;
+    records_.push_back(gap_->close());
+    logged_.push_back(true);
+    gap_.reset();
+  }
+  static void log(const cl_util::StageSeconds& s) {
+    spdlog::debug("atmosphere: {} (order {}): device {:.3f} s, host {:.3f} s (wall {:.3f} s)", s.stage, s.order,
+                  s.device_s, s.host_s(), s.wall_s);
+  }
+
+  cl_util::Profiler own_;  // the host backend enqueues nothing: device_s stays 0
+  cl_util::Profiler& prof_;
+  std::vector<cl_util::Profiler::Record> records_;
+  std::vector<bool> logged_;
+  std::optional<cl_util::Profiler::Stage> gap_;
+};
+
+// The pass's share [p0, p1] of the job's progress, by the rough relative cost of its stages.
+class PassProgress {
+ public:
+  PassProgress(const Progress& progress, const PassPlan& plan, int cap, double p0, double p1)
+      : progress_(progress), p0_(p0), p1_(p1), total_(0.12 + 0.72 * std::max(0, (plan.auto_orders ? 6 : cap) - 1)) {}
+  void step(const std::string& stage, double cost) {
+    done_ += cost;
+    progress_(stage, p0_ + (p1_ - p0_) * std::min(1.0, done_ / total_));
+  }
+
+ private:
+  const Progress& progress_;
+  double p0_, p1_, total_, done_ = 0.0;
+};
+
+}  // namespace
+
 PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progress,
                     double p0, double p1, StageChecker* checker, const CheckHook& on_check) {
   const int w = b.channels();
   const int cap = plan.auto_orders ? kMaxAutoOrders : plan.orders;
-  // rough relative cost of the stages, for progress only
-  const double total = 0.12 + 0.72 * std::max(0, (plan.auto_orders ? 6 : cap) - 1);
-  double done = 0.0;
-  auto step = [&](const std::string& stage, double cost) {
-    done += cost;
-    progress(stage, p0 + (p1 - p0) * std::min(1.0, done / total));
-  };
+  PassProgress steps(progress, plan, cap, p0, p1);
   PassResult r;
   r.width = w;
-  // Every moment of the pass belongs to one stage: a timed stage, a hook ("self_check") or
-  // the work in between ("sums": the sums' kernels on a device, on the host's threads for the
-  // host backend, and reads; with the order of the stage after it).
-  cl_util::Profiler own;  // the host backend enqueues nothing: device_s stays 0
-  cl_util::Profiler& prof = b.profiler() ? *b.profiler() : own;
-  std::vector<cl_util::Profiler::Record> records;
-  std::vector<bool> logged;
-  auto log = [&](const cl_util::StageSeconds& s) {
-    spdlog::debug("atmosphere: {} (order {}): device {:.3f} s, host {:.3f} s (wall {:.3f} s)", s.stage, s.order,
-                  s.device_s, s.host_s(), s.wall_s);
-  };
-  std::optional<cl_util::Profiler::Stage> gap(std::in_place, prof, "sums", 0);
-  auto run_stage = [&](const std::string& stage, int order, auto&& f) {
-    gap->record()->order = order;
-    records.push_back(gap->close());
-    logged.push_back(true);
-    gap.reset();
-    {
-      cl_util::Profiler::Stage st(prof, stage, order);
-      f();
-      records.push_back(st.close());
-    }
-    logged.push_back(records.back()->pending == 0);  // the stage's commands are done: log now
-    if (logged.back()) log(*records.back());
-    gap.emplace(prof, "sums", order);
-  };
+  PassTimeline timeline(b);
   auto hook = [&](PassStage stage, int order) {
     if (!checker) return;
-    run_stage("self_check", order, [&] {
+    timeline.stage("self_check", order, [&] {
       const StageCheck c = checker->check(b, stage, order);
       if (on_check) on_check(c);
     });
   };
-  auto timed = [&](PassStage what, int order, auto&& f) { run_stage(to_string(what), order, f); };
+  auto timed = [&](PassStage what, int order, auto&& f) {
+    timeline.stage(to_string(what), order, f);
+    hook(what, order);
+  };
   Sums& sums = b.sums();
   sums.begin_pass(plan.to_rgb.empty() ? first_three(w) : plan.to_rgb, plan.last_pass);
 
   timed(PassStage::transmittance, 0, [&] { b.transmittance(); });
-  hook(PassStage::transmittance, 0);
   timed(PassStage::direct_irradiance, 0, [&] { b.direct_irradiance(); });
-  hook(PassStage::direct_irradiance, 0);
   if (plan.keep_textures) {
     b.read_into(Tex::transmittance, r.transmittance);
     b.read_into(Tex::delta_irradiance, r.direct_irradiance);
   }
-  step("transmittance", 0.02);
+  steps.step("transmittance", 0.02);
   timed(PassStage::single_scattering, 1, [&] { b.single_scattering(); });
-  hook(PassStage::single_scattering, 1);
   sums.single();
-  step("single scattering", 0.1);
+  steps.step("single scattering", 0.1);
   r.orders.push_back({1, 1.0});
   r.orders_used = 1;
   r.converged = !plan.auto_orders;
   for (int n = 2; n <= cap; ++n) {
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
-    hook(PassStage::scattering_density, n);
-    step("order " + std::to_string(n) + ": scattering density", 0.55);
+    steps.step("order " + std::to_string(n) + ": scattering density", 0.55);
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
-    hook(PassStage::indirect_irradiance, n - 1);
     const double rel_e = sums.add_irradiance(n - 1);
-    step("order " + std::to_string(n) + ": indirect irradiance", 0.02);
+    steps.step("order " + std::to_string(n) + ": indirect irradiance", 0.02);
     timed(PassStage::multiple_scattering, n, [&] { b.multiple_scattering(); });
-    hook(PassStage::multiple_scattering, n);
     const double rel_s = sums.add_scattering(n);
     r.orders.push_back({n, std::max(rel_s, rel_e)});
     r.orders_used = n;
-    step("order " + std::to_string(n) + ": multiple scattering", 0.15);
+    steps.step("order " + std::to_string(n) + ": multiple scattering", 0.15);
     spdlog::debug("atmosphere: order {} adds at most {:.3e} (relative)", n, r.orders.back().relative);
     if (plan.auto_orders && r.orders.back().relative < plan.tolerance) {
       r.converged = true;
@@ -923,16 +1018,7 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
     sums.read_pass(Sum::irradiance, r.irradiance);
     sums.read_pass(Sum::single_mie, r.single_mie);
   }
-  gap->record()->order = r.orders_used;
-  records.push_back(gap->close());
-  logged.push_back(true);
-  prof.settle();  // times of commands still running when their stage closed
-  for (std::size_t i = 0; i < records.size(); ++i) {
-    const cl_util::StageSeconds& s = *records[i];
-    if (!logged[i]) log(s);
-    if (s.stage == "sums" && s.wall_s == 0.0 && s.commands == 0) continue;
-    r.timings.push_back({s.stage, s.order, s});
-  }
+  r.timings = timeline.finish(r.orders_used);
   return r;
 }
 

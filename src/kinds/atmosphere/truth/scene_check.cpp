@@ -1,4 +1,4 @@
-#include "kinds/atmosphere/scene_check.hpp"
+#include "kinds/atmosphere/truth/scene_check.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -13,8 +13,8 @@
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
 #include "core/version.hpp"
-#include "kinds/atmosphere/atmosphere_job.hpp"
-#include "kinds/atmosphere/model.hpp"
+#include "kinds/atmosphere/bake/bake.hpp"
+#include "kinds/atmosphere/model/model.hpp"
 
 namespace specbake::atmosphere {
 
@@ -140,24 +140,6 @@ std::string advice(const std::string& part, const AtmosphereSpec& spec, int orde
 
 }  // namespace
 
-const char* views_name(int v) { return v == 0 ? "sky" : v == 1 ? "ground" : "all"; }
-
-json scene_json(const AtmosphereScene& sc) {
-  if (!sc.check) return "none";
-  json j = {{"camera_altitude_km", {sc.camera_altitude_min_km, sc.camera_altitude_max_km}},
-            {"sun_elevation_deg", {sc.sun_elevation_min_deg, sc.sun_elevation_max_deg}},
-            {"views", views_name(sc.views)},
-            {"view_elevation_deg", {sc.view_elevation_min_deg, sc.view_elevation_max_deg}},
-            {"view_sun_azimuth_deg", {sc.view_sun_azimuth_min_deg, sc.view_sun_azimuth_max_deg}},
-            {"points", sc.points},
-            {"relative_se", sc.relative_se},
-            {"seed", sc.seed}};
-  if (sc.tolerance_de2000) j["tolerance_de2000"] = *sc.tolerance_de2000;
-  if (sc.tolerance_relative) j["tolerance_relative"] = *sc.tolerance_relative;
-  j["exposure"] = sc.exposure_ev100 ? json{{"ev100", *sc.exposure_ev100}} : json("per-view");
-  return j;
-}
-
 double exposure_luminance(double ev100) { return 0.125 * std::exp2(ev100); }
 
 double displayed_de2000(const Vec3& test, const Vec3& ref, double exposure_y) {
@@ -204,23 +186,6 @@ std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::ve
   return out;
 }
 
-std::vector<TruthPoint> scene_points_of(const AtmosphereSpec& spec, int first) {
-  const AtmosphereScene& sc = spec.scene;
-  TruthScene scene;
-  scene.altitude_min_km = sc.camera_altitude_min_km;
-  scene.altitude_max_km = sc.camera_altitude_max_km;
-  scene.sun_elevation_min_deg = sc.sun_elevation_min_deg;
-  scene.sun_elevation_max_deg = sc.sun_elevation_max_deg;
-  scene.views = sc.views == 0 ? TruthViews::sky : sc.views == 1 ? TruthViews::ground : TruthViews::all;
-  scene.view_elevation_min_deg = sc.view_elevation_min_deg;
-  scene.view_elevation_max_deg = sc.view_elevation_max_deg;
-  scene.view_sun_azimuth_min_deg = sc.view_sun_azimuth_min_deg;
-  scene.view_sun_azimuth_max_deg = sc.view_sun_azimuth_max_deg;
-  scene.count = sc.points;
-  scene.first = first;
-  return scene_points(scene, spec);
-}
-
 long long scene_walk_cap(double relative_se) {
   const double k = std::max(1.0, (kMaxPathsAt / relative_se) * (kMaxPathsAt / relative_se));
   return static_cast<long long>(std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * k)));
@@ -258,22 +223,26 @@ AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec) {
   return ss;
 }
 
-SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
-                       const Progress& progress, Memo* memo, int first) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const AtmosphereScene& sc = spec.scene;
-  const std::vector<TruthPoint> points = scene_points_of(spec, first);
-  // an independent point set also draws its walks from other streams
-  const std::uint64_t seed = sc.seed + static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
-  Memo local;
-  Memo& keep = memo ? *memo : local;
-  // Everything a trace depends on: the model and wavelengths, the scene and its point set, the
-  // walks' options (the split among them), the tracer's program and host code, the device and
-  // the tool.
+namespace {
+
+// The traces a check judges by: the bake's wavelengths (all orders, split at the bake's) and,
+// unless the bake is it, the spectral reference (48 wavelengths over 360–830 nm).
+struct SceneTraces {
+  TruthOptions o, so;       // their walks
+  bool reference = false;   // the spectral reference was traced
+  double split = 0.9;       // the progress at which the bake's trace ends
+  std::shared_ptr<const TruthResult> bake, spectral = std::make_shared<const TruthResult>();
+};
+
+// The scene's traces, each kept in `keep` under everything it depends on: the model and
+// wavelengths, the scene and its point set, the walks' options (the split among them), the
+// tracer's program and host code, the device and the tool.
+SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
+                        int first, std::uint64_t seed, cl_util::Device& dev, const Progress& progress, Memo& keep) {
   const std::string where = "/points " + sha256_hex(truth_points_csv(points)) + "/program " +
                             sha256_hex(expanded_program(kTruthProgram)) + "/host " + kHostSources + "/device " +
                             device_identity(dev.info()).dump() + "/version " + kVersion;
-  json scene = scene_json(sc);  // the tolerances judge the truth; they do not change it
+  json scene = scene_json(spec.scene);  // the tolerances judge the truth; they do not change it
   if (scene.is_object()) {
     scene.erase("tolerance_de2000");
     scene.erase("tolerance_relative");
@@ -288,8 +257,6 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     return std::string("atmosphere.truth/") + what + "/" + p["atmosphere"].dump() + p["channels"].dump() +
            scene.dump() + "/first " + std::to_string(first) + "/walks " + walks.dump() + where;
   };
-  const std::size_t n = points.size();
-  const Spectrum sp = spectrum_of(spec);
   auto report = [&](double from, double to) {
     return [&, from, to](std::string_view, double f) { progress("scene check", from + (to - from) * f); };
   };
@@ -307,85 +274,118 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
         });
   };
 
+  SceneTraces t;
   // The bake's wavelengths, all orders, split at the bake's orders.
-  TruthOptions o = scene_truth_options(spec, seed);
-  o.split_orders = orders_used;
+  t.o = scene_truth_options(spec, seed);
+  t.o.split_orders = orders_used;
   // The spectral reference (48 wavelengths over 360–830 nm) is traced unless the bake is it.
   const AtmosphereSpec ss = spectral_reference_of(spec);
-  const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm &&
-                           spec.max_nm == ss.max_nm);
-  const double split = reference ? 0.5 : 0.9;
-  const auto t_kept = trace(spec, "bake", o, 0.0, split);
-  const TruthResult& t = *t_kept;
-  const TruthBundleValues all = to_bundle_units(spec, t), low = to_bundle_units(spec, t.low_part());
-  const std::vector<Vec3> t_all = rows_of(all.radiance), t_low = rows_of(low.radiance), se_all = rows_of(all.standard_error);
-  const std::vector<Vec3> lut = lut_sky_radiance(luts, points);
-
+  t.reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm);
+  t.split = t.reference ? 0.5 : 0.9;
+  t.bake = trace(spec, "bake", t.o, 0.0, t.split);
   // the same sky as the reference spectrum (independent streams: another seed)
-  std::vector<Vec3> s_all, s_se;
-  std::shared_ptr<const TruthResult> s_kept = std::make_shared<const TruthResult>();
-  TruthOptions so = scene_truth_options(ss, seed + kSpectralSeedOffset);
-  if (reference)
-    s_kept = trace(ss, "reference", so, split, 1.0);
-  const TruthResult& s = *s_kept;
-  if (reference) {
-    const TruthBundleValues v = to_bundle_units(ss, s);
-    s_all = rows_of(v.radiance);
-    s_se = rows_of(v.standard_error);
-  }
+  t.so = scene_truth_options(ss, seed + kSpectralSeedOffset);
+  if (t.reference) t.spectral = trace(ss, "reference", t.so, t.split, 1.0);
+  return t;
+}
 
+// Per point, R, G, B: the truth and the LUT in the bundle's units, and the colours displayed
+// (linear sRGB luminance); the points darker than kDarkLuminance.
+struct SceneValues {
+  std::string units;                           // the bundle's
+  std::vector<Vec3> t_all, t_low, se_all, lut;  // all orders, the bake's orders, all orders' se, the LUT
+  std::vector<Vec3> s_all, s_se;               // the spectral reference and its se (when traced)
+  std::array<double, 3> k{}, k683{};           // radiance → luminance: the bake's, the reference's
+  std::vector<Vec3> shown_lut, shown_low, shown_all, shown_ref;
+  std::vector<char> dark;
+  long long n_dark = 0;
+};
+
+SceneValues scene_values(const AtmosphereSpec& spec, const Luts& luts, const std::vector<TruthPoint>& points,
+                         const SceneTraces& tr) {
+  SceneValues v;
+  const std::size_t n = points.size();
+  const TruthBundleValues all = to_bundle_units(spec, *tr.bake), low = to_bundle_units(spec, tr.bake->low_part());
+  v.units = all.units;
+  v.t_all = rows_of(all.radiance);
+  v.t_low = rows_of(low.radiance);
+  v.se_all = rows_of(all.standard_error);
+  v.lut = lut_sky_radiance(luts, points);
+  if (tr.reference) {
+    const TruthBundleValues s = to_bundle_units(spectral_reference_of(spec), *tr.spectral);
+    v.s_all = rows_of(s.radiance);
+    v.s_se = rows_of(s.standard_error);
+  }
   // displayed colours (linear sRGB luminance)
-  const std::array<double, 3> k = sp.sky_radiance_to_luminance;
-  const std::array<double, 3> k683{kMaxLuminousEfficacy, kMaxLuminousEfficacy, kMaxLuminousEfficacy};
-  std::vector<Vec3> shown_lut(n), shown_low(n), shown_all(n), shown_ref(n);
+  v.k = spectrum_of(spec).sky_radiance_to_luminance;
+  v.k683 = {kMaxLuminousEfficacy, kMaxLuminousEfficacy, kMaxLuminousEfficacy};
+  v.shown_lut.resize(n);
+  v.shown_low.resize(n);
+  v.shown_all.resize(n);
+  v.shown_ref.resize(n);
   for (std::size_t p = 0; p < n; ++p) {
-    shown_lut[p] = times(lut[p], k);
-    shown_low[p] = times(t_low[p], k);
-    shown_all[p] = times(t_all[p], k);
-    shown_ref[p] = reference ? times(s_all[p], k683) : shown_all[p];
+    v.shown_lut[p] = times(v.lut[p], v.k);
+    v.shown_low[p] = times(v.t_low[p], v.k);
+    v.shown_all[p] = times(v.t_all[p], v.k);
+    v.shown_ref[p] = tr.reference ? times(v.s_all[p], v.k683) : v.shown_all[p];
   }
-  // One exposure rule for every part and for the truth's se: per view, or the config's fixed one.
   // Views whose reference is darker than kDarkLuminance are reported apart, with their own figures.
-  const double exposure_y = sc.exposure_ev100 ? exposure_luminance(*sc.exposure_ev100) : 0.0;
-  std::vector<char> dark(n);
-  for (std::size_t p = 0; p < n; ++p) dark[p] = !(luminance_y(shown_ref[p]) >= kDarkLuminance);
-  const long long n_dark = std::count(dark.begin(), dark.end(), 1);
-  std::vector<Part> parts;
-  parts.push_back(make_part("total", &lut, &t_all, shown_lut, shown_ref, exposure_y, dark));
-  parts.push_back(make_part("lut_discretisation", &lut, &t_low, shown_lut, shown_low, exposure_y, dark));
-  parts.push_back(make_part("order_truncation", &t_low, &t_all, shown_low, shown_all, exposure_y, dark));
-  if (reference)
-    parts.push_back(make_part("spectral_sampling", nullptr, nullptr, shown_all, shown_ref, exposure_y, dark));
+  v.dark.resize(n);
+  for (std::size_t p = 0; p < n; ++p) v.dark[p] = !(luminance_y(v.shown_ref[p]) >= kDarkLuminance);
+  v.n_dark = std::count(v.dark.begin(), v.dark.end(), 1);
+  return v;
+}
 
-  // the truth's own standard error: relative per channel, and in ΔE as the colour moved by one
-  // se in each channel in turn, combined in quadrature
-  std::vector<double> se_rel, de_se(n);
-  const std::vector<Vec3>& ref_se = reference ? s_se : se_all;
-  const std::array<double, 3>& k_ref = reference ? k683 : k;
+// The error's parts: total, lut_discretisation, order_truncation and (with the reference)
+// spectral_sampling, under one exposure rule.
+std::vector<Part> scene_parts(const SceneValues& v, bool reference, double exposure_y) {
+  std::vector<Part> parts;
+  parts.push_back(make_part("total", &v.lut, &v.t_all, v.shown_lut, v.shown_ref, exposure_y, v.dark));
+  parts.push_back(make_part("lut_discretisation", &v.lut, &v.t_low, v.shown_lut, v.shown_low, exposure_y, v.dark));
+  parts.push_back(make_part("order_truncation", &v.t_low, &v.t_all, v.shown_low, v.shown_all, exposure_y, v.dark));
+  if (reference)
+    parts.push_back(make_part("spectral_sampling", nullptr, nullptr, v.shown_all, v.shown_ref, exposure_y, v.dark));
+  return parts;
+}
+
+// The truth's own standard error: relative per channel, and in ΔE as the colour moved by one se
+// in each channel in turn, combined in quadrature; the points that stopped at the walk cap.
+struct TruthNoise {
+  std::vector<double> se_rel, de_se;  // de_se: every point
+  long long below_target = 0;
+  ErrorSummary se_de, se_rel_summary;  // se_de over the lit points
+};
+
+TruthNoise truth_noise(const SceneValues& v, const SceneTraces& tr, double exposure_y) {
+  TruthNoise t;
+  const std::size_t n = v.t_all.size();
+  t.de_se.resize(n);
+  const std::vector<Vec3>& ref_se = tr.reference ? v.s_se : v.se_all;
+  const std::array<double, 3>& k_ref = tr.reference ? v.k683 : v.k;
   for (std::size_t p = 0; p < n; ++p) {
     double q = 0.0;
     for (int c = 0; c < 3; ++c) {
-      if (t_all[p][c] > 0.0) se_rel.push_back(se_all[p][c] / t_all[p][c]);
-      Vec3 moved = shown_ref[p];
+      if (v.t_all[p][c] > 0.0) t.se_rel.push_back(v.se_all[p][c] / v.t_all[p][c]);
+      Vec3 moved = v.shown_ref[p];
       moved[c] += ref_se[p][c] * k_ref[c];
-      const double d = displayed_de2000(moved, shown_ref[p], exposure_y);
+      const double d = displayed_de2000(moved, v.shown_ref[p], exposure_y);
       if (std::isfinite(d)) q += d * d;
     }
-    de_se[p] = std::sqrt(q);
+    t.de_se[p] = std::sqrt(q);
   }
-  long long below_target = 0;
   for (std::size_t p = 0; p < n; ++p)
-    if (t.paths[p] >= o.max_paths || (reference && s.paths[p] >= so.max_paths)) ++below_target;
+    if (tr.bake->paths[p] >= tr.o.max_paths || (tr.reference && tr.spectral->paths[p] >= tr.so.max_paths))
+      ++t.below_target;
+  t.se_de = summarize_errors(select_points(t.de_se, v.dark, false));
+  t.se_rel_summary = summarize_errors(t.se_rel);
+  return t;
+}
 
-  const ErrorSummary se_de = summarize_errors(select_points(de_se, dark, false)), se_rel_summary = summarize_errors(se_rel);
-  const Part& total = parts[0];
-  const bool by_radiance = sc.tolerance_relative.has_value();
-  // no lit point: nothing to judge the LUTs by (NaN fails the record)
-  const bool dark_scene = total.de_summary.count == 0;
-  const double value = dark_scene ? std::numeric_limits<double>::quiet_NaN()
-                            : by_radiance ? worst_relative_p99(total) : total.de_summary.p99;
-  const std::optional<double> tolerance = by_radiance ? sc.tolerance_relative : sc.tolerance_de2000;
-
+// The record's details: the scene, its point set, the exposure, the parts (lit and dark points),
+// the truth's standard error and summaries.
+json check_details(const AtmosphereSpec& spec, int orders_used, double exposure_y, const SceneValues& v,
+                   const SceneTraces& tr, const std::vector<Part>& parts, const TruthNoise& noise) {
+  const AtmosphereScene& sc = spec.scene;
   json details = {
       {"scene", scene_json(sc)},
       {"point_set", "Halton (bases 2, 3, 5, 7) from its second point: altitude and sun elevation uniform in their "
@@ -395,8 +395,8 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       {"orders_note", "the walks are split at the bake's order count (for spectral bakes in several passes with "
                       "orders: auto, the largest of the passes'; a pass that stopped earlier then counts its "
                       "missing orders as lut_discretisation)"},
-      {"points_without_light", std::count_if(shown_ref.begin(), shown_ref.end(),
-                                             [](const Vec3& v) { return !(luminance_y(v) > 0.0); })},
+      {"points_without_light", std::count_if(v.shown_ref.begin(), v.shown_ref.end(),
+                                             [](const Vec3& c) { return !(luminance_y(c) > 0.0); })},
       {"exposure", sc.exposure_ev100
                        ? "fixed, EV100 " + format_g(*sc.exposure_ev100) + ": luminance " +
                              format_g(exposure_y) + " cd/m^2 brought to 0.18 in every view, both colours scaled alike, "
@@ -406,38 +406,37 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                          "colours scaled alike, for every part and the truth's se; CIE L*a*b* against D65 (Y = 1), no "
                          "gamut clipping, no tone curve"},
       {"dark_points", {{"threshold_cd_m2", kDarkLuminance},
-                       {"count", n_dark},
+                       {"count", v.n_dark},
                        {"note", "views whose reference luminance is below the threshold: not in parts or "
                                 "standard_error, their own figures here"},
                        {"parts", json::object()},
-                       {"standard_error_de2000", summary_json(summarize_errors(select_points(de_se, dark, true)))}}},
+                       {"standard_error_de2000", summary_json(summarize_errors(select_points(noise.de_se, v.dark, true)))}}},
       {"relative_error", "|test - reference| / max(|reference|, 1e-3 x the channel's maximum over the points), "
                          "per channel in the bundle's units"},
       {"parts", json::object()},
-      {"standard_error", {{"relative", summary_json(summarize_errors(se_rel))},
-                          {"de2000", summary_json(se_de)},
+      {"standard_error", {{"relative", summary_json(summarize_errors(noise.se_rel))},
+                          {"de2000", summary_json(noise.se_de)},
                           {"target_relative", sc.relative_se},
-                          {"points_at_max_paths", below_target}}},  // reached the cap, met or not
-      {"truth", t.summary()}};
+                          {"points_at_max_paths", noise.below_target}}},  // reached the cap, met or not
+      {"truth", tr.bake->summary()}};
   for (const Part& part : parts) {
     details["parts"][part.name] = part_json(part, false);
-    if (n_dark > 0) details["dark_points"]["parts"][part.name] = part_json(part, true);
+    if (v.n_dark > 0) details["dark_points"]["parts"][part.name] = part_json(part, true);
   }
-  details["parts"]["total"]["note"] = reference ? "the LUT against the all-orders truth at the bake's wavelengths; "
-                                                  "de2000 against the 48-wavelength spectral truth (what the sky "
-                                                  "looks like)"
-                                                : "the LUT against the all-orders truth at the bake's wavelengths "
-                                                  "(the bake's are the 48 of the spectral reference)";
-  if (reference) details["spectral_truth"] = s.summary();
-  SceneCheck out;
-  out.record = Accuracy::judged(
-      "vs_path_traced",
-      by_radiance ? "p99 over the scene's points of the relative radiance error, worst channel"
-                  : "p99 over the scene's points of the CIEDE2000 of the displayed colour",
-      value, tolerance, "Monte Carlo path tracing of the same model at the scene's points (all orders)", details);
-  out.record.unit = by_radiance ? "p99 relative" : "p99 CIEDE2000";
+  details["parts"]["total"]["note"] = tr.reference ? "the LUT against the all-orders truth at the bake's wavelengths; "
+                                                     "de2000 against the 48-wavelength spectral truth (what the sky "
+                                                     "looks like)"
+                                                   : "the LUT against the all-orders truth at the bake's wavelengths "
+                                                     "(the bake's are the 48 of the spectral reference)";
+  if (tr.reference) details["spectral_truth"] = tr.spectral->summary();
+  return details;
+}
 
-  // the per-point file
+// scene_check.csv: per point the truth (all orders, its se, the bake's orders), the LUT, the
+// spectral reference, and the CIEDE2000 of each part and of the truth's se.
+OutputFile points_csv(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, const SceneValues& v,
+                      bool reference, const std::vector<Part>& parts, const TruthNoise& noise) {
+  const std::size_t n = points.size();
   std::string csv = std::string(kTruthPointsHeader) +
                     ",L_R,L_G,L_B,se_R,se_G,se_B,L_orders_R,L_orders_G,L_orders_B,lut_R,lut_G,lut_B";
   if (reference) csv += ",spectral_R,spectral_G,spectral_B";
@@ -449,70 +448,121 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
     std::string row = format_g(q.altitude_km) + "," + format_g(q.view_zenith_deg) + "," + format_g(q.sun_zenith_deg) + "," +
                       format_g(q.view_sun_azimuth_deg);
     char b[64];
-    auto add = [&](double v) {
-      std::snprintf(b, sizeof b, ",%.9g", v);
+    auto add = [&](double x) {
+      std::snprintf(b, sizeof b, ",%.9g", x);
       row += b;
     };
-    for (const auto* v : {&t_all, &se_all, &t_low, &lut})
-      for (int c = 0; c < 3; ++c) add((*v)[p][c]);
+    for (const auto* c : {&v.t_all, &v.se_all, &v.t_low, &v.lut})
+      for (int ch = 0; ch < 3; ++ch) add((*c)[p][ch]);
     if (reference)
-      for (int c = 0; c < 3; ++c) add(s_all[p][c]);
+      for (int ch = 0; ch < 3; ++ch) add(v.s_all[p][ch]);
     for (const Part& part : parts) add(part.de[p]);
-    add(de_se[p]);
+    add(noise.de_se[p]);
     csv += row + "\n";
   }
-  out.points_csv = {"scene_check.csv", csv, "", {static_cast<std::int64_t>(n)}, "CSV, one row per scene point",
-                    all.units + (reference && !spec.spectral ? "; spectral_* columns: linear sRGB luminance / 683" : ""),
-                    "the scene check per point: the truth (all orders, its se, the bake's orders), the LUT's "
-                    "GetSkyRadiance, and the CIEDE2000 of each part (docs/atmosphere.md, \"The scene check\")"};
+  return {"scene_check.csv", csv, "", {static_cast<std::int64_t>(n)}, "CSV, one row per scene point",
+          v.units + (reference && !spec.spectral ? "; spectral_* columns: linear sRGB luminance / 683" : ""),
+          "the scene check per point: the truth (all orders, its se, the bake's orders), the LUT's "
+          "GetSkyRadiance, and the CIEDE2000 of each part (docs/atmosphere.md, \"The scene check\")"};
+}
 
-  // what the truth cannot resolve, said in the record and the run summary
-  if (!dark_scene && se_de.p99 > kNoisyTruthShare * total.de_summary.p99)
-    out.warnings.push_back("scene check: the truth's own p99 standard error (" + format_g(se_de.p99) +
-                           " CIEDE2000) is more than half the reported p99 error (" + format_g(total.de_summary.p99) +
-                           "): the figure is mostly the truth's noise; lower scene.relative_se (now " +
-                           format_g(sc.relative_se) + ")");
-  if (below_target > 0)
-    out.warnings.push_back("scene check: " + std::to_string(below_target) + " of the " + std::to_string(n) +
-                           " points stopped at the truth's walk cap (" + std::to_string(o.max_paths) +
-                           " walks), their standard error above the target relative_se " + format_g(sc.relative_se) +
-                           " (standard_error in the record says how far)");
+// What the truth cannot resolve, said in the record and the run summary.
+std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n, bool dark_scene, const Part& total,
+                                        const TruthNoise& noise, long long max_paths, long long n_dark) {
+  std::vector<std::string> out;
+  if (!dark_scene && noise.se_de.p99 > kNoisyTruthShare * total.de_summary.p99)
+    out.push_back("scene check: the truth's own p99 standard error (" + format_g(noise.se_de.p99) +
+                  " CIEDE2000) is more than half the reported p99 error (" + format_g(total.de_summary.p99) +
+                  "): the figure is mostly the truth's noise; lower scene.relative_se (now " +
+                  format_g(sc.relative_se) + ")");
+  if (noise.below_target > 0)
+    out.push_back("scene check: " + std::to_string(noise.below_target) + " of the " + std::to_string(n) +
+                  " points stopped at the truth's walk cap (" + std::to_string(max_paths) +
+                  " walks), their standard error above the target relative_se " + format_g(sc.relative_se) +
+                  " (standard_error in the record says how far)");
   if (n_dark > 0)
-    out.warnings.push_back("scene check: " + std::to_string(n_dark) + " of the " + std::to_string(n) +
-                           " points are darker than " + format_g(kDarkLuminance) +
-                           " cd/m^2 and are reported apart (dark_points in the record)");
-  out.record.details["warnings"] = out.warnings;
-  if (dark_scene) {
-    out.failure = "scene check: none of the scene's " + std::to_string(n) +
-                  " points is brighter than " + format_g(kDarkLuminance) +
-                  " cd/m^2 in the path-traced truth (cameras " + format_g(sc.camera_altitude_min_km) + "-" +
-                  format_g(sc.camera_altitude_max_km) + " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " +
-                  format_g(sc.sun_elevation_max_deg) + " deg, " + views_name(sc.views) +
-                  " views), so the LUTs cannot be judged there; give the scene a sun and views that see sunlit "
-                  "air, or `scene: none`";
-  } else if (!out.record.passed) {
-    // the causes ranked by the judged measure: relative radiance (per channel, rgb truth) or CIEDE2000
-    auto measure = [&](const Part& part) { return by_radiance ? worst_relative_p99(part) : part.de_summary.p99; };
-    const Part* worst = nullptr;
-    std::string split_text;
-    for (std::size_t i = 1; i < parts.size(); ++i) {
-      if (by_radiance && !parts[i].has_relative) continue;  // spectral sampling has no radiance measure
-      if (!worst || measure(parts[i]) > measure(*worst)) worst = &parts[i];
-      split_text += (split_text.empty() ? "" : ", ") + parts[i].name + " " + format_g(measure(parts[i]));
-    }
-    const double noise = by_radiance ? se_rel_summary.p99 : se_de.p99;
-    out.failure = "scene check: p99 " + std::string(by_radiance ? "relative radiance error " : "CIEDE2000 ") +
-                  format_g(value) + " > tolerance " + format_g(*tolerance) + " at the scene's " + std::to_string(n) +
-                  " points (cameras " + format_g(sc.camera_altitude_min_km) + "-" + format_g(sc.camera_altitude_max_km) +
-                  " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " + format_g(sc.sun_elevation_max_deg) + " deg, " +
-                  views_name(sc.views) + " views). p99 by cause: " + split_text + "; the largest is " +
-                  worst->name + ": " + advice(worst->name, spec, orders_used) +
-                  ". The truth's own p99 standard error is " + format_g(noise) +
-                  (*tolerance <= 2.0 * noise ? " - comparable with the tolerance: lower scene.relative_se (now " +
-                                                   format_g(sc.relative_se) + ") before trusting the split"
-                                             : "") +
-                  ". Per point: scene_check.csv of a bake without the tolerance";
+    out.push_back("scene check: " + std::to_string(n_dark) + " of the " + std::to_string(n) +
+                  " points are darker than " + format_g(kDarkLuminance) +
+                  " cd/m^2 and are reported apart (dark_points in the record)");
+  return out;
+}
+
+// A scene without a lit point: the LUTs cannot be judged there.
+std::string dark_scene_failure(const AtmosphereScene& sc, std::size_t n) {
+  return "scene check: none of the scene's " + std::to_string(n) + " points is brighter than " +
+         format_g(kDarkLuminance) + " cd/m^2 in the path-traced truth (cameras " + format_g(sc.camera_altitude_min_km) +
+         "-" + format_g(sc.camera_altitude_max_km) + " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " +
+         format_g(sc.sun_elevation_max_deg) + " deg, " + views_name(sc.views) +
+         " views), so the LUTs cannot be judged there; give the scene a sun and views that see sunlit "
+         "air, or `scene: none`";
+}
+
+// A missed tolerance: the causes ranked by the judged measure (relative radiance per channel, rgb
+// truth, or CIEDE2000), what to raise for the largest, and the truth's own noise.
+std::string tolerance_failure(const AtmosphereSpec& spec, int orders_used, std::size_t n, bool by_radiance,
+                              double value, double tolerance, const std::vector<Part>& parts, const TruthNoise& noise) {
+  const AtmosphereScene& sc = spec.scene;
+  auto measure = [&](const Part& part) { return by_radiance ? worst_relative_p99(part) : part.de_summary.p99; };
+  const Part* worst = nullptr;
+  std::string split_text;
+  for (std::size_t i = 1; i < parts.size(); ++i) {
+    if (by_radiance && !parts[i].has_relative) continue;  // spectral sampling has no radiance measure
+    if (!worst || measure(parts[i]) > measure(*worst)) worst = &parts[i];
+    split_text += (split_text.empty() ? "" : ", ") + parts[i].name + " " + format_g(measure(parts[i]));
   }
+  const double se = by_radiance ? noise.se_rel_summary.p99 : noise.se_de.p99;
+  return "scene check: p99 " + std::string(by_radiance ? "relative radiance error " : "CIEDE2000 ") +
+         format_g(value) + " > tolerance " + format_g(tolerance) + " at the scene's " + std::to_string(n) +
+         " points (cameras " + format_g(sc.camera_altitude_min_km) + "-" + format_g(sc.camera_altitude_max_km) +
+         " km, sun " + format_g(sc.sun_elevation_min_deg) + " to " + format_g(sc.sun_elevation_max_deg) + " deg, " +
+         views_name(sc.views) + " views). p99 by cause: " + split_text + "; the largest is " + worst->name + ": " +
+         advice(worst->name, spec, orders_used) + ". The truth's own p99 standard error is " + format_g(se) +
+         (tolerance <= 2.0 * se ? " - comparable with the tolerance: lower scene.relative_se (now " +
+                                      format_g(sc.relative_se) + ") before trusting the split"
+                                : "") +
+         ". Per point: scene_check.csv of a bake without the tolerance";
+}
+
+}  // namespace
+
+SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
+                       const Progress& progress, Memo* memo, int first) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const AtmosphereScene& sc = spec.scene;
+  const std::vector<TruthPoint> points = scene_points_of(spec, first);
+  const std::size_t n = points.size();
+  // an independent point set also draws its walks from other streams
+  const std::uint64_t seed = sc.seed + static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
+  Memo local;
+  const SceneTraces tr = trace_scene(spec, points, orders_used, first, seed, dev, progress, memo ? *memo : local);
+  const SceneValues v = scene_values(spec, luts, points, tr);
+  // One exposure rule for every part and for the truth's se: per view, or the config's fixed one.
+  const double exposure_y = sc.exposure_ev100 ? exposure_luminance(*sc.exposure_ev100) : 0.0;
+  const std::vector<Part> parts = scene_parts(v, tr.reference, exposure_y);
+  const TruthNoise noise = truth_noise(v, tr, exposure_y);
+
+  const Part& total = parts[0];
+  const bool by_radiance = sc.tolerance_relative.has_value();
+  // no lit point: nothing to judge the LUTs by (NaN fails the record)
+  const bool dark_scene = total.de_summary.count == 0;
+  const double value = dark_scene ? std::numeric_limits<double>::quiet_NaN()
+                            : by_radiance ? worst_relative_p99(total) : total.de_summary.p99;
+  const std::optional<double> tolerance = by_radiance ? sc.tolerance_relative : sc.tolerance_de2000;
+  SceneCheck out;
+  out.record = Accuracy::judged(
+      "vs_path_traced",
+      by_radiance ? "p99 over the scene's points of the relative radiance error, worst channel"
+                  : "p99 over the scene's points of the CIEDE2000 of the displayed colour",
+      value, tolerance, "Monte Carlo path tracing of the same model at the scene's points (all orders)",
+      check_details(spec, orders_used, exposure_y, v, tr, parts, noise));
+  out.record.unit = by_radiance ? "p99 relative" : "p99 CIEDE2000";
+  out.points_csv = points_csv(spec, points, v, tr.reference, parts, noise);
+  out.warnings = check_warnings(sc, n, dark_scene, total, noise, tr.o.max_paths, v.n_dark);
+  out.record.details["warnings"] = out.warnings;
+  if (dark_scene)
+    out.failure = dark_scene_failure(sc, n);
+  else if (!out.record.passed)
+    out.failure = tolerance_failure(spec, orders_used, n, by_radiance, value, *tolerance, parts, noise);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   spdlog::debug("atmosphere: scene check of {} points in {:.2f} s: p99 CIEDE2000 {:.3g}, max {:.3g}", n, out.seconds,
                 total.de_summary.p99, total.de_summary.max);

@@ -9,7 +9,7 @@
 // Library entry points (the `specbake truth` command, the `scene:` block and the manifest
 // block are built on these):
 //   read_truth_points / parse_truth_points   POINTS.csv → points (InputError at file:line:column)
-//   scene_points                              a scene description → a low-discrepancy point set
+//   scene_points (model/scene.hpp)            a scene description → a low-discrepancy point set
 //   trace_truth                               points → radiance and standard error per channel
 //   trace_truth_reference                     the same walks in C++ double on the host (tests)
 //   to_bundle_units                           per wavelength → what the bundle stores (R, G, B)
@@ -26,8 +26,9 @@
 
 #include "cl/device.hpp"
 #include "core/config.hpp"
-#include "kinds/atmosphere/render.hpp"
 #include "job/kind.hpp"
+#include "kinds/atmosphere/model/scene.hpp"
+#include "kinds/atmosphere/shader/render.hpp"
 
 namespace specbake::atmosphere {
 
@@ -40,16 +41,6 @@ inline constexpr const char* kTruthProgram = "kernels/atmosphere/truth_kernels.c
 // src/core/, data/; generated at build time by cmake/source_ids.cmake): with the programs'
 // expanded sources, what identifies the code of a kept truth.
 extern const char* const kHostSources;
-
-// One view: a camera at altitude_km above the ground (above the top of the atmosphere: the
-// view enters it, as GetSkyRadiance does), looking at view_zenith_deg from the local zenith,
-// the sun at sun_zenith_deg, view_sun_azimuth_deg between the view's and the sun's azimuths.
-struct TruthPoint {
-  double altitude_km = 0.0;
-  double view_zenith_deg = 0.0;
-  double sun_zenith_deg = 0.0;
-  double view_sun_azimuth_deg = 0.0;
-};
 
 // The POINTS.csv header, exactly.
 inline constexpr const char* kTruthPointsHeader = "altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg";
@@ -160,24 +151,6 @@ std::string truth_result_csv(const AtmosphereSpec& spec, const std::vector<Truth
                              const std::vector<Vec3>* lut = nullptr);
 void write_text_file(const fs::path& file, const std::string& text);  // IoError on failure
 
-// A deterministic low-discrepancy point set (the Halton sequence in bases 2, 3, 5, 7, from its
-// second point, or from point `first` + 1): altitude uniform in [min, max], sun elevation uniform in [min, max], view directions uniform in solid angle
-// over the sky (above the planet's horizon; for cameras above the atmosphere, the part of it
-// that crosses the atmosphere), the ground, or all, within the view elevation range; view–sun
-// azimuth uniform in its range ([0, 180] by default). InputError when the ranges leave no view direction.
-enum class TruthViews { sky, ground, all };
-struct TruthScene {
-  double altitude_min_km = 0.0, altitude_max_km = 0.0;
-  double sun_elevation_min_deg = 0.0, sun_elevation_max_deg = 90.0;
-  TruthViews views = TruthViews::sky;
-  int count = 256;
-  int first = 0;  // index of the first Halton point: sets from disjoint ranges are independent point sets
-  // View elevations above the camera's horizontal plane (not the dipped horizon) the views are
-  // limited to, on top of `views` (e.g. [0, 2] for rays grazing the horizon from the ground).
-  double view_elevation_min_deg = -90.0, view_elevation_max_deg = 90.0;
-  double view_sun_azimuth_min_deg = 0.0, view_sun_azimuth_max_deg = 180.0;  // within [0, 180]
-};
-std::vector<TruthPoint> scene_points(const TruthScene& scene, const AtmosphereSpec& spec);
 
 // The final textures of a bundle (rgb or spectral; 3D layout), with the geometry from its
 // manifest. IoError for unreadable files, InputError (naming the manifest) for a bundle that

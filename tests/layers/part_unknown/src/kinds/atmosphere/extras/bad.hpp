@@ -1,0 +1,2 @@
+#pragma once
+#include "kinds/atmosphere/model/spec.hpp"
