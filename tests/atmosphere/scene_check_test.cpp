@@ -378,6 +378,37 @@ TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
 // other texture sizes; a scene with another seed, another ground albedo, or a split at other
 // orders is traced anew (the 48-wavelength reference, which has no split, is reused there); a
 // damaged entry is traced again, with the same result.
+// The settings search judges its tries by judge_scene: the same value as the full check's
+// (the LUT against the 48-wavelength reference, p99 CIEDE2000) and the same truth's se in ΔE,
+// from the reference's trace alone — which the full check then reuses (one trace, same key).
+TEST(SceneCheck, JudgeAloneGivesTheFullChecksValueFromTheReferenceTraceAlone) {
+  AtmosphereSpec s = spec_of(
+      "    orders: 2\n"
+      "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: 32, mu_s: 8, nu: 4}}\n"
+      "    scene: {points: 12, relative_se: 0.1, sun_elevation_deg: [-4, 60], tolerance_de2000: 1}\n");
+  ASSERT_TRUE(judged_by_reference_alone(s));
+  const Baked b = bake_luts(s, t::shared_device(), [](std::string_view, double) {}, 0);
+  Memo memo;
+  const SceneCheck judged = judge_scene(s, b.luts, t::shared_device(), [](std::string_view, double) {}, &memo);
+  EXPECT_EQ(memo.items.size(), 1u) << "only the reference is traced";
+  const SceneCheck full = check_scene(s, b.luts, b.orders_used, t::shared_device(), [](std::string_view, double) {}, &memo);
+  EXPECT_EQ(memo.items.size(), 2u) << "the full check adds the bake's wavelengths and reuses the reference";
+  EXPECT_EQ(judged.record.value, full.record.value);  // the same operations on the same values: exactly
+  EXPECT_EQ(judged.record.passed, full.record.passed);
+  EXPECT_EQ(judged.record.details.at("standard_error").at("de2000"),
+            full.record.details.at("standard_error").at("de2000"));
+  EXPECT_EQ(judged.record.details.at("parts").at("total").at("de2000"),
+            full.record.details.at("parts").at("total").at("de2000"));
+  EXPECT_FALSE(judged.record.details.at("parts").contains("lut_discretisation"));
+  // judged by relative radiance, or a bake of the reference's own wavelengths: the full check only
+  AtmosphereSpec relative = s;
+  relative.scene.tolerance_de2000.reset();
+  relative.scene.tolerance_relative = 0.05;
+  EXPECT_FALSE(judged_by_reference_alone(relative));
+  AtmosphereSpec ref = spectral_reference_of(s);
+  EXPECT_FALSE(judged_by_reference_alone(ref));
+}
+
 TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
   t::TempDir dir;
   const AtmosphereSpec s = spec_of(

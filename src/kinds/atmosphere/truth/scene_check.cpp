@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <stdexcept>
 
 #include "core/colour_space.hpp"
 #include "core/hash.hpp"
@@ -238,7 +239,8 @@ struct SceneTraces {
 // wavelengths, the scene and its point set, the walks' options (the split among them), the
 // tracer's program and host code, the device and the tool.
 SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
-                        int first, std::uint64_t seed, cl_util::Device& dev, const Progress& progress, Memo& keep) {
+                        int first, std::uint64_t seed, cl_util::Device& dev, const Progress& progress, Memo& keep,
+                        bool bake_wavelengths = true) {
   const std::string where = "/points " + sha256_hex(truth_points_csv(points)) + "/program " +
                             sha256_hex(expanded_program(kTruthProgram)) + "/host " + kHostSources + "/device " +
                             device_identity(dev.info()).dump() + "/version " + kVersion;
@@ -282,7 +284,10 @@ SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint
   const AtmosphereSpec ss = spectral_reference_of(spec);
   t.reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm);
   t.split = t.reference ? 0.5 : 0.9;
-  t.bake = trace(spec, "bake", t.o, 0.0, t.split);
+  if (bake_wavelengths)
+    t.bake = trace(spec, "bake", t.o, 0.0, t.split);
+  else
+    t.split = 0.0;  // judge_scene: the reference alone
   // the same sky as the reference spectrum (independent streams: another seed)
   t.so = scene_truth_options(ss, seed + kSpectralSeedOffset);
   if (t.reference) t.spectral = trace(ss, "reference", t.so, t.split, 1.0);
@@ -566,6 +571,67 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   spdlog::debug("atmosphere: scene check of {} points in {:.2f} s: p99 CIEDE2000 {:.3g}, max {:.3g}", n, out.seconds,
                 total.de_summary.p99, total.de_summary.max);
+  return out;
+}
+
+bool judged_by_reference_alone(const AtmosphereSpec& spec) {
+  const AtmosphereSpec ss = spectral_reference_of(spec);
+  const bool is_reference = spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm;
+  return !spec.scene.tolerance_relative && !is_reference;
+}
+
+SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::Device& dev, const Progress& progress,
+                       Memo* memo, int first) {
+  if (!judged_by_reference_alone(spec))
+    throw std::logic_error("judge_scene: a spec judged by relative radiance, or the spectral reference itself");
+  const auto t0 = std::chrono::steady_clock::now();
+  const AtmosphereScene& sc = spec.scene;
+  const std::vector<TruthPoint> points = scene_points_of(spec, first);
+  const std::size_t n = points.size();
+  const std::uint64_t seed = sc.seed + static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
+  Memo local;
+  // the same trace (same key) as check_scene's reference: one kept result serves both
+  const SceneTraces tr = trace_scene(spec, points, 0, first, seed, dev, progress, memo ? *memo : local, false);
+  const TruthBundleValues s = to_bundle_units(spectral_reference_of(spec), *tr.spectral);
+  const std::vector<Vec3> s_all = rows_of(s.radiance), s_se = rows_of(s.standard_error), lut = lut_sky_radiance(luts, points);
+  const std::array<double, 3> k = spectrum_of(spec).sky_radiance_to_luminance;
+  const std::array<double, 3> k683{kMaxLuminousEfficacy, kMaxLuminousEfficacy, kMaxLuminousEfficacy};
+  const double exposure_y = sc.exposure_ev100 ? exposure_luminance(*sc.exposure_ev100) : 0.0;
+  std::vector<Vec3> shown_lut(n), shown_ref(n);
+  std::vector<char> dark(n);
+  std::vector<double> de_se(n);
+  for (std::size_t p = 0; p < n; ++p) {
+    shown_lut[p] = times(lut[p], k);
+    shown_ref[p] = times(s_all[p], k683);
+    dark[p] = !(luminance_y(shown_ref[p]) >= kDarkLuminance);
+    double q = 0.0;  // the truth's se in ΔE, as truth_noise makes it
+    for (int c = 0; c < 3; ++c) {
+      Vec3 moved = shown_ref[p];
+      moved[c] += s_se[p][c] * k683[c];
+      const double d = displayed_de2000(moved, shown_ref[p], exposure_y);
+      if (std::isfinite(d)) q += d * d;
+    }
+    de_se[p] = std::sqrt(q);
+  }
+  const Part total = make_part("total", nullptr, nullptr, shown_lut, shown_ref, exposure_y, dark);
+  const bool dark_scene = total.de_summary.count == 0;
+  const double value = dark_scene ? std::numeric_limits<double>::quiet_NaN() : total.de_summary.p99;
+  long long at_cap = 0;
+  for (std::size_t p = 0; p < n; ++p) at_cap += tr.spectral->paths[p] >= tr.so.max_paths;
+  const json details = {
+      {"judged_only", "the p99 CIEDE2000 against the 48-wavelength reference alone (no parts: the truth at the "
+                      "bake's own wavelengths is not traced)"},
+      {"parts", {{"total", part_json(total, false)}}},
+      {"standard_error", {{"de2000", summary_json(summarize_errors(select_points(de_se, dark, false)))},
+                          {"target_relative", sc.relative_se},
+                          {"points_at_max_paths", at_cap}}},
+      {"dark_points", {{"threshold_cd_m2", kDarkLuminance}, {"count", std::count(dark.begin(), dark.end(), 1)}}}};
+  SceneCheck out;
+  out.record = Accuracy::judged("vs_path_traced", "p99 over the scene's points of the CIEDE2000 of the displayed colour",
+                                value, sc.tolerance_de2000, "Monte Carlo path tracing of the same model at the scene's "
+                                "points (all orders, the 48-wavelength reference)", details);
+  out.record.unit = "p99 CIEDE2000";
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }
 

@@ -85,4 +85,15 @@ AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_used, cl_util::Device& dev,
                        const Progress& progress, Memo* memo = nullptr, int first = 0);
 
+// Whether judge_scene can judge `spec`: a CIEDE2000 tolerance (the displayed colour against the
+// 48-wavelength reference) and a bake that is not that reference itself.
+bool judged_by_reference_alone(const AtmosphereSpec& spec);
+// The check's judged value alone, for the settings search's tries: the p99 CIEDE2000 of the LUT
+// against the spectral reference — the same number check_scene reports as `total` — from the
+// reference's trace only (the truth at the bake's own wavelengths, which only the parts need, is
+// not traced). The record holds the value, the truth's standard error in CIEDE2000 and the dark
+// points; no parts, no per-point file. Requires judged_by_reference_alone(spec).
+SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::Device& dev, const Progress& progress,
+                       Memo* memo = nullptr, int first = 0);
+
 }  // namespace specbake::atmosphere
