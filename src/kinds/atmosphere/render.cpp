@@ -481,7 +481,9 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       Rgb8 img = srgb8_image(n, n, views[v].shown);
       const int px = label_px(n);
       draw_label(img, Corner::top_left, {views[v].title}, px);
-      draw_label(img, Corner::top_right, {ev_text(views[v])}, px);
+      std::vector<std::string> ev{"EV100 " + format_g(views[v].ev100)};
+      if (views[v].ev100 > views[v].fixed_ev100) ev.push_back("raised from " + format_g(views[v].fixed_ev100));
+      draw_label(img, Corner::top_right, ev, px);
       draw_label(img, Corner::bottom_left, {tone_label}, px);
       pngs[v] = png_rgb8(n, n, img.rgb);
     } else {
