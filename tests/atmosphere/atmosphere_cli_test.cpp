@@ -123,7 +123,8 @@ TEST(AtmosphereCli, PreviewsHaveAFixedExposure) {
 // The default tone curve keeps the sky: the exposure rule (docs/atmosphere.md, "Previews") puts
 // the 99.5th percentile of each view's lit pixels at most at 97.5 % of white, so at most 0.5 % of
 // them reach code 255 (the sun's disc, a few pixels, among them), for the default Earth and for a
-// Mars-like sky (dust scattering forward, the brightest aureole of the configs) alike; the labels
+// Mars-like sky (dust scattering forward, the brightest aureole of the configs) alike, and with
+// either tone curve; the labels
 // (code ≤ 235) never count. Each view says what it is: the fisheye's top-left corner, black
 // outside the picture's circle, carries the label's ink; the Earth at sun +20° is not washed out
 // (the mean sRGB of its lit pixels was 0.79 before the fixed exposures put its median near x = 0.2).
@@ -132,17 +133,22 @@ TEST(AtmosphereCli, PreviewsKeepTheSkyAndAreLabelled) {
   const std::string common =
       "    orders: 2\n    scene: none\n    previews: {size: 128}\n"
       "    sizes: {transmittance: [64, 16], irradiance: [32, 8], scattering: {r: 8, mu: 32, mu_s: 16, nu: 8}}\n";
+  const std::string mars = "    bottom_radius_km: 3389.5\n    top_radius_km: 3469.5\n"
+                           "    sun_angular_radius_rad: 0.00307\n    solar_irradiance_scale: 0.431\n"
+                           "    ground_albedo: 0.25\n    max_sun_zenith_deg: 110\n"
+                           "    rayleigh: {scale_height_km: 11.1, scattering_per_m_at_1um: 2.0e-8}\n"
+                           "    mie: {scale_height_km: 11.0, extinction_per_m: 4.5e-5, angstrom_alpha: 0.0,\n"
+                           "          single_scattering_albedo: 0.95, phase_g: 0.7}\n    ozone: false\n";
+  // and with `tone: linear`, where only the raised exposures keep the Martian sky (at the fixed
+  // ones 6 % of its pixels at sun +20° and 11 % at −4° would clip)
+  std::string linear = common;
+  linear.replace(linear.find("{size: 128}"), 11, "{size: 128, tone: linear}");
   write_file(dir / "c.yaml", "specbake: 1\njobs:\n  - name: earth\n    kind: atmosphere\n" + common +
-                                 "  - name: mars\n    kind: atmosphere\n" + common +
-                                 "    bottom_radius_km: 3389.5\n    top_radius_km: 3469.5\n"
-                                 "    sun_angular_radius_rad: 0.00307\n    solar_irradiance_scale: 0.431\n"
-                                 "    ground_albedo: 0.25\n    max_sun_zenith_deg: 110\n"
-                                 "    rayleigh: {scale_height_km: 11.1, scattering_per_m_at_1um: 2.0e-8}\n"
-                                 "    mie: {scale_height_km: 11.0, extinction_per_m: 4.5e-5, angstrom_alpha: 0.0,\n"
-                                 "          single_scattering_albedo: 0.95, phase_g: 0.7}\n    ozone: false\n");
+                                 "  - name: mars\n    kind: atmosphere\n" + common + mars +
+                                 "  - name: mars-linear\n    kind: atmosphere\n" + linear + mars);
   const auto r = run_cli({"run", (dir / "c.yaml").string(), "--out", (dir / "out").string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  for (const char* job : {"earth", "mars"})
+  for (const char* job : {"earth", "mars", "mars-linear"})
     for (const char* png : {"sky_fisheye_sun_+60deg.png", "sky_fisheye_sun_+20deg.png", "sky_fisheye_sun_+05deg.png",
                             "sky_fisheye_sun_+00deg.png", "sky_fisheye_sun_-04deg.png", "planet_from_space.png"}) {
       const Image img = read_png(dir / "out" / job / "latest" / "preview" / png);
