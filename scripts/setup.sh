@@ -16,7 +16,7 @@ packages=(
   clang libclang-rt-14-dev
   python3-numpy python3-matplotlib libzstd-dev python3-venv
   glslang-tools libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri
-  chromium fonts-dejavu-core
+  chromium fonts-dejavu-core libfreetype-dev libfontconfig-dev
 )
 
 if [ "${SPECBAKE_NO_INSTALL:-0}" != 1 ]; then

@@ -79,6 +79,24 @@ std::uint8_t srgb8(float v) {
   return encoder(v);
 }
 
+float tone(float x, ToneCurve curve) {
+  if (!(x > 0.0f)) return 0.0f;  // ≤ 0 and NaN
+  if (curve == ToneCurve::linear) return std::min(x, 1.0f);
+  const float d = x * (2.51f * x + 0.03f) / (x * (2.43f * x + 0.59f) + 0.14f);
+  return std::min(d, 1.0f);
+}
+
+double tone_inverse(double d, ToneCurve curve) {
+  double lo = 0.0, hi = 16.0;  // the curves are non-decreasing and reach 1 by x = 7.25
+  for (int i = 0; i < 60; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (tone(static_cast<float>(mid), curve) >= d ? hi : lo) = mid;
+  }
+  return hi;
+}
+
+const char* name(ToneCurve curve) { return curve == ToneCurve::aces ? "aces" : "linear"; }
+
 std::string png_rgb8(int width, int height, const std::vector<std::uint8_t>& rgb) {
   if (width <= 0 || height <= 0 || rgb.size() != static_cast<std::size_t>(width) * height * 3)
     throw JobError("PNG image has inconsistent size");
@@ -105,10 +123,15 @@ std::string png_rgb8(int width, int height, const std::vector<std::uint8_t>& rgb
   return out;
 }
 
+Rgb8 srgb8_image(int width, int height, const std::vector<float>& rgb, float exposure) {
+  Rgb8 img(width, height);
+  if (img.rgb.size() != rgb.size()) throw JobError("PNG image has inconsistent size");
+  for (std::size_t i = 0; i < rgb.size(); ++i) img.rgb[i] = srgb8(rgb[i] * exposure);
+  return img;
+}
+
 std::string png_from_linear(int width, int height, const std::vector<float>& rgb, float exposure) {
-  std::vector<std::uint8_t> bytes(rgb.size());
-  for (std::size_t i = 0; i < rgb.size(); ++i) bytes[i] = srgb8(rgb[i] * exposure);
-  return png_rgb8(width, height, bytes);
+  return png_rgb8(width, height, srgb8_image(width, height, rgb, exposure).rgb);
 }
 
 }  // namespace specbake

@@ -1,6 +1,8 @@
 // The atmosphere job through the CLI: bundle contents, EXR attributes, GLSL, previews, errors.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include "io/exr.hpp"
 #include "job/kind.hpp"
 #include "support/testing.hpp"
@@ -110,11 +112,64 @@ TEST(AtmosphereCli, PreviewsHaveAFixedExposure) {
     const Image full = read_png(dir / "a" / "sky" / "latest" / "preview" / png);
     const Image half = read_png(dir / "b" / "sky" / "latest" / "preview" / png);
     EXPECT_EQ(full.width, 64);
-    // at the same exposure half the light reads darker: sRGB codes of 1 − e^{−x} against
-    // 1 − e^{−x/2}, lower wherever the pixel is lit and not black
+    // at the same exposure half the light reads darker: sRGB codes of ACES(x) against ACES(x/2),
+    // lower wherever the pixel is lit and not black (the rule raises neither view's EV100: their
+    // highlights are well inside the curve's shoulder)
     EXPECT_LT(mean(half), 0.9 * mean(full)) << png;
   }
   EXPECT_FALSE(fs::exists(dir / "c" / "sky" / "latest" / "preview"));
+}
+
+// The default tone curve keeps the sky: the exposure rule (docs/atmosphere.md, "Previews") puts
+// the 99.5th percentile of each view's lit pixels at most at 97.5 % of white, so at most 0.5 % of
+// them reach code 255 (the sun's disc, a few pixels, among them), for the default Earth and for a
+// Mars-like sky (dust scattering forward, the brightest aureole of the configs) alike, and with
+// either tone curve; the labels
+// (code ≤ 235) never count. Each view says what it is: the fisheye's top-left corner, black
+// outside the picture's circle, carries the label's ink; the Earth at sun +20° is not washed out
+// (the mean sRGB of its lit pixels was 0.79 before the fixed exposures put its median near x = 0.2).
+TEST(AtmosphereCli, PreviewsKeepTheSkyAndAreLabelled) {
+  TempDir dir;
+  const std::string common =
+      "    orders: 2\n    scene: none\n    previews: {size: 128}\n"
+      "    sizes: {transmittance: [64, 16], irradiance: [32, 8], scattering: {r: 8, mu: 32, mu_s: 16, nu: 8}}\n";
+  const std::string mars = "    bottom_radius_km: 3389.5\n    top_radius_km: 3469.5\n"
+                           "    sun_angular_radius_rad: 0.00307\n    solar_irradiance_scale: 0.431\n"
+                           "    ground_albedo: 0.25\n    max_sun_zenith_deg: 110\n"
+                           "    rayleigh: {scale_height_km: 11.1, scattering_per_m_at_1um: 2.0e-8}\n"
+                           "    mie: {scale_height_km: 11.0, extinction_per_m: 4.5e-5, angstrom_alpha: 0.0,\n"
+                           "          single_scattering_albedo: 0.95, phase_g: 0.7}\n    ozone: false\n";
+  // and with `tone: linear`, where only the raised exposures keep the Martian sky (at the fixed
+  // ones 6 % of its pixels at sun +20° and 11 % at −4° would clip)
+  std::string linear = common;
+  linear.replace(linear.find("{size: 128}"), 11, "{size: 128, tone: linear}");
+  write_file(dir / "c.yaml", "specbake: 1\njobs:\n  - name: earth\n    kind: atmosphere\n" + common +
+                                 "  - name: mars\n    kind: atmosphere\n" + common + mars +
+                                 "  - name: mars-linear\n    kind: atmosphere\n" + linear + mars);
+  const auto r = run_cli({"run", (dir / "c.yaml").string(), "--out", (dir / "out").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* job : {"earth", "mars", "mars-linear"})
+    for (const char* png : {"sky_fisheye_sun_+60deg.png", "sky_fisheye_sun_+20deg.png", "sky_fisheye_sun_+05deg.png",
+                            "sky_fisheye_sun_+00deg.png", "sky_fisheye_sun_-04deg.png", "planet_from_space.png"}) {
+      const Image img = read_png(dir / "out" / job / "latest" / "preview" / png);
+      ASSERT_EQ(img.width, 128);
+      long lit = 0, clipped = 0, ink = 0;
+      double sum = 0;
+      for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x) {
+          const unsigned char* p = &img.rgba[4 * (static_cast<std::size_t>(y) * img.width + x)];
+          const int top = std::max({p[0], p[1], p[2]});
+          lit += top > 0;
+          clipped += top == 255;
+          sum += (p[0] + p[1] + p[2]) / (3 * 255.0);
+          // the top-left 20 × 12 pixels lie outside the fisheye's circle (radius 64 about (64, 64))
+          ink += x < 20 && y < 12 && top >= 128;
+        }
+      EXPECT_LE(clipped, 0.005 * lit) << job << " " << png << ": " << clipped << " of " << lit;
+      if (std::string(png) != "planet_from_space.png") EXPECT_GT(ink, 10) << job << " " << png << ": no label";
+      if (std::string(job) == "earth" && std::string(png) == "sky_fisheye_sun_+20deg.png")
+        EXPECT_LT(sum / lit, 0.65) << "washed out";
+    }
 }
 
 TEST(AtmosphereCli, BadConfigsAreInputErrors) {
@@ -123,7 +178,8 @@ TEST(AtmosphereCli, BadConfigsAreInputErrors) {
   const std::pair<const char*, const char*> cases[] = {
       {"    colour: blue\n", "unknown key 'colour'"},
       {"    previews: {size: 31}\n", "even number of pixels in [32, 2048]"},
-      {"    previews: big\n", "previews: none, or {size: N}"},
+      {"    previews: big\n", "previews: none, or {size: N, tone: aces | linear}"},
+      {"    previews: {tone: filmic}\n", "expected one of aces | linear, got 'filmic'"},
       {"    sizes: {scattering: {mu: 7}}\n", "even mu"},
       {"    sizes: {scattering: {nu: 65}}\n", "at most 64"},
       {"    orders: 0\n", "orders"},

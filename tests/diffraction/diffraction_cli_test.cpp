@@ -6,6 +6,7 @@
 
 #include <boost/math/special_functions/bessel.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <cstring>
@@ -191,6 +192,24 @@ TEST(DiffractionCli, SineGratingBundleFollowsTheContract) {
   ASSERT_EQ(terms.size(), static_cast<std::size_t>(T) * K * K * 2);
   for (int n = 0; n < T; ++n) EXPECT_TRUE(fs::exists(b / ("terms/F_" + std::string(n < 10 ? "00" : "0") + std::to_string(n) + ".exr")));
   EXPECT_TRUE(fs::exists(b / "preview/white_normal.png"));
+  // The log view spans the decades below the brightest pixel that hold 99 % of the lit ones, each
+  // pixel's largest channel at its level: a channel reaches code 255 (linear ≥ 0.9957) only within
+  // 0.0043 · D decades (1 % for D ≤ 2) of the brightest, the grating's order peaks, a few pixels.
+  // Both views carry their label in the top-left corner (black: outside the (u, v) disk).
+  for (const char* png : {"preview/white_normal.png", "preview/white_normal_log.png"}) {
+    const auto img = tst::read_png(b / png);
+    int lit = 0, clipped = 0, ink = 0;
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) {
+        const unsigned char* q = &img.rgba[4 * (static_cast<std::size_t>(y) * img.width + x)];
+        const int top = std::max({q[0], q[1], q[2]});
+        lit += top > 0;
+        clipped += top == 255;
+        ink += x < 20 && y < 12 && top >= 128;
+      }
+    EXPECT_GT(ink, 10) << png << ": no label";
+    if (std::string(png) == "preview/white_normal_log.png") EXPECT_LE(clipped, 0.01 * lit) << clipped << " of " << lit;
+  }
   const auto spectrum = tst::read_f32(b / "spectrum.bin");
   EXPECT_EQ(spectrum.size(), 401u * 4);
   EXPECT_FLOAT_EQ(spectrum[0], 380.0f);

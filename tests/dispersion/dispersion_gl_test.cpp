@@ -41,7 +41,7 @@ TEST(DispersionGl, ShippedCombineMatchesTheHostSum) {
   // The bundle's picture of the prism (top: the samples through that sum; bottom: the dense spectrum).
   const auto prism = t::read_png(dir / "out/prism/latest/preview/prism.png");
   EXPECT_GT(prism.width, 32);
-  EXPECT_EQ(prism.height, 100);
+  EXPECT_EQ(prism.height, 194);  // two 80-pixel strips, 4 apart, and a 30-pixel wavelength scale
 
   const std::string fs = "#version 320 es\nprecision highp float;\nprecision highp sampler2DArray;\n" + glsl +
                          "uniform sampler2DArray renders;\nout vec4 colour;\n"

@@ -609,7 +609,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   ctx.progress("previews", 0.95);
   if (spec.preview_size > 0)
     for (auto& f : preview_files(L, b.spectrum.sky_radiance_to_luminance, b.spectrum.sun_radiance_to_luminance,
-                                 spec.preview_size))
+                                 spec.preview_size, spec.preview_tone))
       r.files.push_back(std::move(f));
   const auto t_done = std::chrono::steady_clock::now();
   record_timings(b, std::chrono::duration<double>(t_previews - t_files).count(),

@@ -19,6 +19,7 @@
 #include "core/text.hpp"
 #include "io/exr.hpp"
 #include "cl/buffers.hpp"
+#include "io/label.hpp"
 #include "io/png.hpp"
 #include "kinds/diffraction/planning.hpp"
 #include "kinds/diffraction/reference.hpp"
@@ -480,20 +481,38 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
       if (y > 0) lit.push_back(y);
     std::sort(lit.begin(), lit.end());
     const double hi = lit.empty() ? 1.0 : lit[static_cast<std::size_t>(0.995 * (lit.size() - 1))];
-    r.files.push_back({"preview/white_normal.png", png_from_linear(kPreviewSize, kPreviewSize, rgb,
-                                                                   static_cast<float>(hi > 0 ? 1.0 / hi : 1.0)),
-                       "", {kPreviewSize, kPreviewSize, 3}, "", "",
+    const int px = label_px(kPreviewSize);
+    const auto labelled = [&](const std::vector<float>& shown, float exposure, const std::string& scale) {
+      Rgb8 img = srgb8_image(kPreviewSize, kPreviewSize, shown, exposure);
+      draw_label(img, Corner::top_left, {"D65, normal incidence"}, px);
+      draw_label(img, Corner::bottom_left, {scale}, px);
+      return png_rgb8(kPreviewSize, kPreviewSize, img.rgb);
+    };
+    r.files.push_back({"preview/white_normal.png",
+                       labelled(rgb, static_cast<float>(hi > 0 ? 1.0 / hi : 1.0), "linear, white at 99.5th pct"), "",
+                       {kPreviewSize, kPreviewSize, 3}, "", "",
                        "diffracted colour over the (u,v) disk, D65 at normal incidence, exposure at the 99.5th "
-                       "percentile"});
-    // Log tone map: Y → log10(1 + 1e4·Y/Y_max)/4, chromaticity kept.
+                       "percentile; labelled"});
+    // Log scale: brightness log10(Y / Y_max) / D + 1 over the D decades below the brightest pixel that
+    // hold 99 % of the lit pixels (D rounded up to half a decade, at least 1 and at most 8), black
+    // below; the colour the pixel's linear sRGB scaled so that its largest channel is that
+    // brightness (chromaticity kept, nothing above white).
     const double y_max = lit.empty() ? 1.0 : lit.back();
-    std::vector<float> logrgb(rgb.size());
+    const double y_low = lit.empty() ? 1.0 : lit[static_cast<std::size_t>(0.01 * (lit.size() - 1))];
+    const double decades = std::clamp(std::ceil(2.0 * std::log10(y_max / y_low)) / 2.0, 1.0, 8.0);
+    std::vector<float> logrgb(rgb.size(), 0.0f);
     for (std::size_t i = 0; i < lum.size(); ++i) {
-      const double k = lum[i] > 0 ? std::log10(1.0 + 1e4 * lum[i] / y_max) / 4.0 / lum[i] : 0.0;
-      for (int c = 0; c < 3; ++c) logrgb[3 * i + c] = static_cast<float>(rgb[3 * i + c] * k);
+      const float top = std::max({rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]});
+      if (!(lum[i] > 0) || !(top > 0)) continue;
+      const double level = std::max(0.0, std::log10(lum[i] / y_max) / decades + 1.0);
+      for (int c = 0; c < 3; ++c) logrgb[3 * i + c] = static_cast<float>(rgb[3 * i + c] / top * level);
     }
-    r.files.push_back({"preview/white_normal_log.png", png_from_linear(kPreviewSize, kPreviewSize, logrgb), "",
-                       {kPreviewSize, kPreviewSize, 3}, "", "", "the same on a log10 brightness scale (4 decades)"});
+    r.files.push_back({"preview/white_normal_log.png", labelled(logrgb, 1.0f, "log10 Y, " + format_g(decades) +
+                                                                                    " decades below max"),
+                       "", {kPreviewSize, kPreviewSize, 3}, "", "",
+                       "the same on a log10 brightness scale over the " + format_g(decades) +
+                           " decades below the brightest pixel (those holding 99 % of the lit pixels; black below), "
+                           "each pixel's colour scaled to its largest channel; labelled"});
   } else {
     r.warnings.push_back("no preview: w_max < 1 does not reach normal incidence");
   }

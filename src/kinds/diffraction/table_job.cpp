@@ -13,6 +13,7 @@
 
 #include "core/text.hpp"
 #include "io/exr.hpp"
+#include "io/label.hpp"
 #include "io/png.hpp"
 #include "kinds/diffraction/brdf.hpp"
 #include "kinds/diffraction/shader.hpp"
@@ -75,18 +76,27 @@ void add_brdf_previews(const BrdfPictures& pictures, const BrdfTable& t, const W
   const auto lobes = pictures.lobes(wl, angles, kLobePanel);
   const float el = percentile_exposure(lobes);
   const int width = kLobePanel * static_cast<int>(angles.size());
-  r.files.push_back({"preview/brdf_lobes.png", png_from_linear(width, kLobePanel, lobes, el), "",
+  const std::string tone_label = "linear, white at 99.5th pct";
+  Rgb8 lobe_img = srgb8_image(width, kLobePanel, lobes, el);
+  for (std::size_t a = 0; a < angles.size(); ++a)
+    draw_label(lobe_img, static_cast<int>(a) * kLobePanel, 0, {"light " + format_g(angles[a]) + "° from normal"},
+               label_px(kLobePanel));
+  draw_label(lobe_img, Corner::bottom_left, {tone_label}, label_px(kLobePanel));
+  r.files.push_back({"preview/brdf_lobes.png", png_rgb8(width, kLobePanel, lobe_img.rgb), "",
                      {kLobePanel, width, 3}, "", "",
                      "Stam's diffraction BRDF from the table (Fresnel n = 1.5 and geometry factor, docs/diffraction.md) "
                      "times D65 over the outgoing hemisphere seen from above, light at 0, 30 and 60 degrees from the "
-                     "normal in the x-z plane; exposure " + format_g(el) + " (99.5th percentile of the lit pixels)"});
+                     "normal in the x-z plane; exposure " + format_g(el) + " (99.5th percentile of the lit pixels); labelled"});
   const auto sphere = pictures.sphere(wl, kSphereLight, kSpherePixels);
   const float es = percentile_exposure(sphere);
-  r.files.push_back({"preview/sphere.png", png_from_linear(kSpherePixels, kSpherePixels, sphere, es), "",
+  Rgb8 sphere_img = srgb8_image(kSpherePixels, kSpherePixels, sphere, es);
+  draw_label(sphere_img, Corner::top_left, {"D65 point light at (2, 1.5, 3)"}, label_px(kSpherePixels));
+  draw_label(sphere_img, Corner::bottom_left, {tone_label}, label_px(kSpherePixels));
+  r.files.push_back({"preview/sphere.png", png_rgb8(kSpherePixels, kSpherePixels, sphere_img.rgb), "",
                      {kSpherePixels, kSpherePixels, 3}, "", "",
                      "a unit sphere covered by the surface (tangent x along circles about the vertical axis), seen along "
                      "-z, lit by a D65 point light at (2, 1.5, 3) radii; exposure " + format_g(es) +
-                         " (99.5th percentile of the lit pixels)"});
+                         " (99.5th percentile of the lit pixels); labelled"});
   double peak = 0;
   for (float v : lobes) peak = std::max(peak, static_cast<double>(std::fabs(v)));
   const double scale = peak > 0 ? 1.0 / peak : 0.0;

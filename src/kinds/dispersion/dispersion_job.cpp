@@ -14,6 +14,7 @@
 #include "core/text.hpp"
 #include "core/colour_space.hpp"
 #include "core/spectral_data.hpp"
+#include "io/label.hpp"
 #include "io/png.hpp"
 #include "kinds/dispersion/combine.hpp"
 #include "kinds/dispersion/reference.hpp"
@@ -525,11 +526,14 @@ void check_step(const DispersionSpec& spec, const Planned& p, const Tables& t, J
 }
 
 // preview/prism.png: the thin-prism picture `samples: auto` judges (a white beam one unit wide,
-// sample n landing at spread·Offset(λ_n), 32 pixels per beam width): the top band through the
-// shipped shader's sum (combine.glsl, on the host), the bottom band from the dense 0.1 nm spectrum.
+// sample n landing at spread·Offset(λ_n), 32 pixels per beam width), each of its pixels drawn
+// `scale` pixels wide (the smallest whole number making the strip at least 512 wide): the top
+// strip through the shipped shader's sum (combine.glsl, on the host), the bottom one from the dense
+// 0.1 nm spectrum, each labelled, and a wavelength scale under them.
 OutputFile prism_preview(const DispersionSpec& spec, const Tables& t) {
   const PrismGeometry g = prism_geometry(spec);
-  const int w = g.pixels, band = 48, gap = 4, h = 2 * band + gap;
+  const int w = g.pixels, scale = std::max(1, (512 + w - 1) / w), W = w * scale;
+  const int band = 80, gap = 4, axis = 30, h = 2 * band + gap + axis;
   // Per-sample renders, [n][1][w][3]: the beam's coverage of each pixel, white.
   const auto x = landing_x(spec, t);
   const int n = static_cast<int>(x.size());
@@ -544,7 +548,7 @@ OutputFile prism_preview(const DispersionSpec& spec, const Tables& t) {
   const auto xd = landing_x(spec, dense);
   const auto white = white_xyz();
   const Mat3 m = xyz_to_srgb();
-  std::vector<float> rgb(3 * static_cast<std::size_t>(w) * h, 0.0f);
+  std::vector<float> rgb(3 * static_cast<std::size_t>(W) * h, 0.0f);
   for (int px = 0; px < w; ++px) {
     const auto sampled = combiner.combine({renders.data(), w, 1}, px, 0);
     double xyz[3];
@@ -552,17 +556,40 @@ OutputFile prism_preview(const DispersionSpec& spec, const Tables& t) {
                      xyz);
     for (int c = 0; c < 3; ++c) {
       const float truth = static_cast<float>(m[3 * c] * xyz[0] + m[3 * c + 1] * xyz[1] + m[3 * c + 2] * xyz[2]);
-      for (int y = 0; y < band; ++y) {
-        rgb[3 * (static_cast<std::size_t>(y) * w + px) + c] = static_cast<float>(sampled[c]);
-        rgb[3 * (static_cast<std::size_t>(band + gap + y) * w + px) + c] = truth;
-      }
+      for (int y = 0; y < band; ++y)
+        for (int k = 0; k < scale; ++k) {
+          const std::size_t X = static_cast<std::size_t>(px) * scale + k;
+          rgb[3 * (static_cast<std::size_t>(y) * W + X) + c] = static_cast<float>(sampled[c]);
+          rgb[3 * (static_cast<std::size_t>(band + gap + y) * W + X) + c] = truth;
+        }
     }
   }
-  return {"preview/prism.png", png_from_linear(w, h, rgb, 1.0f), "", {h, w, 3}, "8-bit sRGB", "",
+  Rgb8 img = srgb8_image(W, h, rgb);
+  const int px = 12;
+  draw_label(img, 0, 0, {"sampled: " + std::to_string(n) + " samples summed by dispersion.glsl"}, px);
+  draw_label(img, 0, band + gap, {"reference: dense 0.1 nm spectrum"}, px);
+  // The wavelength scale: a tick every 50 nm in the range (landing at spread·Offset(λ), the
+  // beam's centre), numbered every 100 nm.
+  const Lines l = lines_for(spec.abbe_lines);
+  const int y0 = 2 * band + gap;
+  for (int nm = 50 * static_cast<int>(std::ceil(spec.range_nm.lo / 50.0)); nm <= spec.range_nm.hi; nm += 50) {
+    const double at = (spec.spread * ref::abbe_offset(nm, l.ref_nm, l.F_nm, l.C_nm) - g.x0) / g.dx * scale;
+    const int X = static_cast<int>(std::lround(at));
+    if (X < 0 || X >= W) continue;
+    for (int y = y0; y < y0 + (nm % 100 ? 4 : 7); ++y)
+      for (int c = 0; c < 3; ++c) img.rgb[3 * (static_cast<std::size_t>(y) * W + X) + c] = 220;
+    if (nm % 100 == 0) {
+      const std::string label = std::to_string(nm) + " nm";
+      const int half = text_box({label}, px - 2).width / 2;
+      draw_label(img, std::clamp(X - half, 0, std::max(0, W - 2 * half - 4)), y0 + 8, {label}, px - 2);
+    }
+  }
+  return {"preview/prism.png", png_rgb8(W, h, img.rgb), "", {h, W, 3}, "8-bit sRGB", "",
           "a white beam through a thin prism of this glass (spread " + format_g(spec.spread) +
-              " beam widths between the range's ends): top, the " + std::to_string(n) +
+              " beam widths between the range's ends), " + std::to_string(scale) +
+              " pixels per pixel of the judged picture: top, the " + std::to_string(n) +
               " samples summed with K_n as dispersion.glsl sums them; bottom, the dense 0.1 nm spectrum; "
-              "linear sRGB clamped to [0, 1]"};
+              "linear sRGB clamped to [0, 1]; labelled, with a wavelength scale"};
 }
 
 void files_step(const DispersionSpec& spec, const Planned& p, const Tables& t, JobContext& ctx, BakeResult& r) {

@@ -351,20 +351,22 @@ void parse_checks(const At& job, AtmosphereSpec& s) {
                                " (the spectral part of the error is a colour difference)");
 }
 
-// `previews: none` or `previews: {size: N}`.
+// `previews: none` or `previews: {size: N, tone: aces | linear}`.
 void parse_previews(const At& p, AtmosphereSpec& s) {
   if (p.node.IsScalar() && p.node.Scalar() == "none") {
     s.preview_size = 0;
     return;
   }
-  p.expect_map("previews: none, or {size: N} (pixels per view, an even number in [32, 2048])");
-  p.allow_keys({"size"});
+  p.expect_map("previews: none, or {size: N, tone: aces | linear} (pixels per view, an even number in [32, 2048])");
+  p.allow_keys({"size", "tone"});
   if (p.has("size")) {
     const At n = p.child("size");
     const long long v = n.integer();
     if (v < 32 || v > 2048 || v % 2) n.fail("expected an even number of pixels in [32, 2048], got " + n.shown());
     s.preview_size = static_cast<int>(v);
   }
+  if (p.has("tone"))
+    s.preview_tone = p.child("tone").choice<ToneCurve>({{"aces", ToneCurve::aces}, {"linear", ToneCurve::linear}});
 }
 
 // `formats:` / `ktx2:` (into norm as well), and `ktx2: {scattering: rgba-combined}`.
@@ -414,7 +416,7 @@ json normalised_json(const AtmosphereSpec& s) {
   if (s.auto_sizes) norm["sizes"] = "auto";
   if (s.store_radiance) norm["spectrum"]["store"] = "radiance";  // luminance, the default, stays implicit
   norm["scene"] = scene_json(s.scene);
-  norm["previews"] = s.preview_size ? json{{"size", s.preview_size}} : json("none");
+  norm["previews"] = s.preview_size ? json{{"size", s.preview_size}, {"tone", name(s.preview_tone)}} : json("none");
   norm.update(media_json(s));
   return norm;
 }

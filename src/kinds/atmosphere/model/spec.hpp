@@ -4,6 +4,7 @@
 #include <optional>
 
 #include "core/config.hpp"
+#include "io/png.hpp"
 #include "job/ktx2_output.hpp"
 #include "media/media.hpp"
 
@@ -58,6 +59,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
   AtmosphereScene scene;
   int preview_size = 512;  // pixels per preview view; 0: `previews: none`
+  ToneCurve preview_tone = ToneCurve::aces;  // the previews' tone curve (`previews: {tone}`)
   // `sizes: auto` / `spectrum: auto`: the cheapest sizes / channel count whose bake meets the
   // scene's tolerance against the path-traced truth (auto_settings.hpp).
   bool auto_sizes = false, auto_spectrum = false;

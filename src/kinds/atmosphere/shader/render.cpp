@@ -11,6 +11,7 @@
 #include "core/glsl.hpp"
 #include "core/parallel.hpp"
 #include "core/text.hpp"
+#include "io/label.hpp"
 #include "io/png.hpp"
 #include "kinds/atmosphere/shader/shader_host.hpp"
 
@@ -279,15 +280,12 @@ Vec3 normalize(Vec3 v) {
   return {v[0] / l, v[1] / l, v[2] / l};
 }
 
-// An n × n view, exposed as a camera's (ISO 100 exposure value `ev100`: the luminance
-// 1.2·2^EV100 cd/m² maps to 1, then 1 − exp(−x); the sRGB curve comes with the PNG): shade(x, y),
-// linear sRGB luminance in cd/m², at every pixel centre, x right and y up, both in (−1, 1); RGB
-// innermost, row 0 at the top; pixels on the hardware threads. symmetric_in_y: shade(x, −y) =
-// shade(x, y) (a view symmetric about the plane through the zenith and the sun), so the lower
-// half is the upper one mirrored (n is even).
+// An n × n view: shade(x, y), linear sRGB luminance in cd/m², at every pixel centre, x right and
+// y up, both in (−1, 1); RGB innermost, row 0 at the top; pixels on the hardware threads.
+// symmetric_in_y: shade(x, −y) = shade(x, y) (a view symmetric about the plane through the zenith
+// and the sun), so the lower half is the upper one mirrored (n is even).
 template <class Shade>
-std::vector<float> render_exposed(int n, double ev100, Shade shade, bool symmetric_in_y = false) {
-  const double k = 1.0 / (1.2 * std::exp2(ev100));
+std::vector<float> render_view(int n, Shade shade, bool symmetric_in_y = false) {
   std::vector<float> px(3 * static_cast<std::size_t>(n) * n, 0.0f);
   const std::size_t rows = symmetric_in_y ? static_cast<std::size_t>(n / 2) : static_cast<std::size_t>(n);
   // rows of pixels on the host's threads (each thread writes whole rows: no cache line shared
@@ -295,8 +293,7 @@ std::vector<float> render_exposed(int n, double ev100, Shade shade, bool symmetr
   parallel_chunks(rows * n, static_cast<std::size_t>(n), [&](std::size_t first, std::size_t last, std::size_t) {
     for (std::size_t p = first; p < last; ++p) {
       const Vec3 v = shade((2.0 * (p % n) + 1.0) / n - 1.0, 1.0 - (2.0 * (p / n) + 1.0) / n);
-      for (int c = 0; c < 3; ++c)
-        px[3 * p + c] = v[c] > 0.0 ? static_cast<float>(1.0 - std::exp(-v[c] * k)) : 0.0f;
+      for (int c = 0; c < 3; ++c) px[3 * p + c] = v[c] > 0.0 ? static_cast<float>(v[c]) : 0.0f;
     }
   });
   const std::size_t row = 3 * static_cast<std::size_t>(n);
@@ -305,12 +302,41 @@ std::vector<float> render_exposed(int n, double ev100, Shade shade, bool symmetr
   return px;
 }
 
-// The views, their fixed exposures (EV100, docs/atmosphere.md "Previews") and descriptions.
+// A view and its exposure (docs/atmosphere.md, "Previews").
 struct PreviewView {
-  std::string file;
-  std::string what;
-  std::vector<float> exposed;  // render_exposed's
+  std::string file, what;
+  std::string title;        // what the picture shows, its label
+  double fixed_ev100 = 0;   // the view's fixed exposure
+  double ev100 = 0;         // the exposure it got: fixed_ev100, or raised to keep the highlights
+  std::vector<float> shown;  // display values in [0, 1] (exposed, through the tone curve), linear
 };
+
+// The exposure rule: the view's fixed EV100, raised (to a tenth of a stop) where the brightest
+// channel of the lit pixels' 99.5th percentile would land above kHighlight of white after the
+// tone curve; then x = L / (1.2 · 2^EV100) through the curve, per channel.
+constexpr double kHighlightPercentile = 0.995, kHighlight = 0.975;
+void expose(PreviewView& v, const std::vector<float>& lum, ToneCurve curve) {
+  std::vector<float> brightest;
+  brightest.reserve(lum.size() / 3);
+  for (std::size_t i = 0; i < lum.size(); i += 3) {
+    const float b = std::max({lum[i], lum[i + 1], lum[i + 2]});
+    if (b > 0.0f) brightest.push_back(b);
+  }
+  v.ev100 = v.fixed_ev100;
+  if (!brightest.empty()) {
+    const auto at = brightest.begin() + static_cast<std::ptrdiff_t>(kHighlightPercentile * (brightest.size() - 1));
+    std::nth_element(brightest.begin(), at, brightest.end());
+    const double needed = std::log2(*at / (1.2 * tone_inverse(kHighlight, curve)));
+    if (needed > v.fixed_ev100) v.ev100 = std::ceil(needed * 10.0 - 1e-9) / 10.0;
+  }
+  const float k = static_cast<float>(1.0 / (1.2 * std::exp2(v.ev100)));
+  v.shown.resize(lum.size());
+  for (std::size_t i = 0; i < lum.size(); ++i) v.shown[i] = tone(lum[i] * k, curve);
+}
+
+std::string ev_text(const PreviewView& v) {
+  return "EV100 " + format_g(v.ev100) + (v.ev100 > v.fixed_ev100 ? " (raised from " + format_g(v.fixed_ev100) + ")" : "");
+}
 
 }  // namespace
 
@@ -331,7 +357,7 @@ PlanetView planet_view(const Model& m) {
   PlanetView v;
   const double rb = m.bottom_radius_km;
   v.camera = {0.0, -3.2 * rb, 0.6 * rb};
-  v.sun = normalize({1.0, -0.6, 0.45});
+  v.sun = normalize({1.0, -0.15, 0.3});  // from the right, a little in front: the terminator in view
   v.fwd = normalize({-v.camera[0], -v.camera[1], -v.camera[2]});
   v.right = normalize({v.fwd[1], -v.fwd[0], 0.0});
   v.up = {v.right[1] * v.fwd[2] - v.right[2] * v.fwd[1], v.right[2] * v.fwd[0] - v.right[0] * v.fwd[2],
@@ -348,7 +374,7 @@ Vec3 PlanetView::direction(double x, double y) const {
 }
 
 std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
-                                      const std::array<double, 3>& k_sun, int n) {
+                                      const std::array<double, 3>& k_sun, int n, ToneCurve curve) {
   const auto t_render = std::chrono::steady_clock::now();
   const Renderer render(luts);
   const Model& m = luts.model;
@@ -363,7 +389,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     const Vec3 sun = fisheye_sun(fv);
     const Vec3 camera{0.0, 0.0, m.bottom_radius_km + kFisheyeAltitudeKm};
     const double disc = std::cos(std::max(alpha, M_PI / n));  // a pixel spans π/n of zenith angle
-    std::vector<float> img = render_exposed(n, fv.ev100, [&](double dx, double dy) {
+    const std::vector<float> scene = render_view(n, [&](double dx, double dy) {
       Vec3 lum{}, view{};
       if (!fisheye_direction(dx, dy, view)) return lum;
       Vec3 t{};
@@ -372,13 +398,19 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c] + (on_sun ? t[c] * sun_radiance[c] : 0.0);
       return lum;
     }, /*symmetric_in_y=*/true);  // the sun at azimuth 0: the sky mirrors across the picture's x axis
-    char name[64];
-    std::snprintf(name, sizeof name, "preview/sky_fisheye_sun_%+03.0fdeg.png", fv.sun_elevation_deg);
-    views.push_back({name,
-                     "sky and sun seen from 1 m above the ground (equidistant fisheye, zenith at the centre, sun at "
-                     "the right, elevation " + std::to_string(static_cast<int>(fv.sun_elevation_deg)) + " deg), EV100 " +
-                         format_g(fv.ev100) + ", from the baked LUTs through sampling.glsl's functions",
-                     std::move(img)});
+    char file[64], title[32];
+    std::snprintf(file, sizeof file, "preview/sky_fisheye_sun_%+03.0fdeg.png", fv.sun_elevation_deg);
+    std::snprintf(title, sizeof title, "sun %s%g°", fv.sun_elevation_deg < 0 ? "−" : "+",
+                  std::fabs(fv.sun_elevation_deg));
+    PreviewView v;
+    v.file = file;
+    v.title = title;
+    v.fixed_ev100 = fv.ev100;
+    expose(v, scene, curve);
+    v.what = "sky and sun seen from 1 m above the ground (equidistant fisheye, zenith at the centre, sun at the right, "
+             "elevation " + std::to_string(static_cast<int>(fv.sun_elevation_deg)) + " deg), " + ev_text(v) +
+             ", tone curve " + name(curve) + ", from the baked LUTs through sampling.glsl's functions";
+    views.push_back(std::move(v));
   }
   // The planet from space: Lambertian ground of the bake's albedo lit by sun and sky, seen through
   // the atmosphere; the limb from GetSkyRadiance. The whole planet and its atmosphere in frame.
@@ -389,7 +421,7 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
     const Vec3& sun = pv.sun;
     const double dist = std::sqrt(camera[0] * camera[0] + camera[1] * camera[1] + camera[2] * camera[2]);
     const double albedo = luts.rgb.ground_albedo.empty() ? 0.1 : luts.rgb.ground_albedo[0];
-    std::vector<float> img = render_exposed(n, pv.ev100, [&](double x, double y) {
+    const std::vector<float> scene = render_view(n, [&](double x, double y) {
       const Vec3 view = pv.direction(x, y);
       const double b = camera[0] * view[0] + camera[1] * view[1] + camera[2] * view[2];
       const double disc = b * b - (dist * dist - rb * rb);
@@ -409,25 +441,26 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
       }
       return lum;
     });
-    views.push_back({"preview/planet_from_space.png",
-                     "the planet seen from 3.2 radii away: ground (albedo " + format_g(albedo) +
-                         ") lit by sun and sky through the atmosphere, and the limb, EV100 " + format_g(pv.ev100) +
-                         ", from the baked LUTs "
-                         "through sampling.glsl's functions",
-                     std::move(img)});
+    PreviewView v;
+    v.file = "preview/planet_from_space.png";
+    v.title = "planet from 3.2 radii";
+    v.fixed_ev100 = pv.ev100;
+    expose(v, scene, curve);
+    v.what = "the planet seen from 3.2 radii away: ground (albedo " + format_g(albedo) +
+             ") lit by sun and sky through the atmosphere, and the limb, " + ev_text(v) + ", tone curve " +
+             name(curve) + ", from the baked LUTs through sampling.glsl's functions";
+    views.push_back(std::move(v));
   }
 
   const auto t_encode = std::chrono::steady_clock::now();
   std::vector<OutputFile> files;
-  // The contact sheet: every view at half size (2 × 2 box filter of the exposed values), three
-  // to a row in the order above.
+  // The contact sheet: every view at half size (2 × 2 box filter of the display values), three
+  // to a row in the order above, each tile labelled.
   const int tile = n / 2, cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
   std::vector<float> sheet(3 * static_cast<std::size_t>(cols * tile) * rows * tile, 0.0f);
-  // the contact sheet from the exposed views, then every PNG encoding (zlib, one thread per file)
-  // on the hardware threads
   std::string order;
   for (std::size_t v = 0; v < views.size(); ++v) {
-    const std::vector<float>& px = views[v].exposed;
+    const std::vector<float>& px = views[v].shown;
     const int x0 = static_cast<int>(v % cols) * tile, y0 = static_cast<int>(v / cols) * tile;
     for (int y = 0; y < tile; ++y)
       for (int x = 0; x < tile; ++x)
@@ -438,15 +471,37 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
         }
     order += (v ? ", " : "") + views[v].file.substr(8);
   }
+  // Labels: what the view shows (top left), its exposure (top right) and the tone curve (bottom
+  // left); the sheet's tiles the first two. Then every PNG encoding (zlib, one thread per file) on
+  // the hardware threads.
+  const std::string tone_label = std::string("tone ") + (curve == ToneCurve::aces ? "ACES filmic" : "linear");
   std::vector<std::string> pngs(views.size() + 1);
   parallel_for(static_cast<long long>(pngs.size()), [&](long long v) {
-    pngs[v] = v < static_cast<long long>(views.size()) ? png_from_linear(n, n, views[v].exposed, 1.0f)
-                                                        : png_from_linear(cols * tile, rows * tile, sheet, 1.0f);
+    if (v < static_cast<long long>(views.size())) {
+      Rgb8 img = srgb8_image(n, n, views[v].shown);
+      const int px = label_px(n);
+      draw_label(img, Corner::top_left, {views[v].title}, px);
+      std::vector<std::string> ev{"EV100 " + format_g(views[v].ev100)};
+      if (views[v].ev100 > views[v].fixed_ev100) ev.push_back("raised from " + format_g(views[v].fixed_ev100));
+      draw_label(img, Corner::top_right, ev, px);
+      draw_label(img, Corner::bottom_left, {tone_label}, px);
+      pngs[v] = png_rgb8(n, n, img.rgb);
+    } else {
+      Rgb8 img = srgb8_image(cols * tile, rows * tile, sheet);
+      const int px = label_px(tile);
+      for (std::size_t t = 0; t < views.size(); ++t) {
+        const int x0 = static_cast<int>(t % cols) * tile, y0 = static_cast<int>(t / cols) * tile;
+        draw_label(img, x0, y0, {views[t].title, "EV100 " + format_g(views[t].ev100)}, px);
+      }
+      draw_label(img, Corner::bottom_right, {"EV100 fixed per view, raised where highlights would clip", tone_label}, px);
+      pngs[v] = png_rgb8(cols * tile, rows * tile, img.rgb);
+    }
   });
   for (std::size_t v = 0; v < views.size(); ++v)
     files.push_back({views[v].file, std::move(pngs[v]), "", {n, n, 3}, "8-bit sRGB", "", views[v].what});
   files.push_back({"preview/contact_sheet.png", std::move(pngs.back()), "", {rows * tile, cols * tile, 3}, "8-bit sRGB",
-                   "", "every preview at half size, left to right and top to bottom: " + order});
+                   "", "every preview at half size, labelled with its view and EV100, left to right and top to bottom: " +
+                           order + "; tone curve " + name(curve)});
   const auto seconds = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
   spdlog::debug("atmosphere: previews: {} views of {} x {} rendered and exposed in {:.3f} s, encoded in {:.3f} s",
                 views.size(), n, n, seconds(t_render, t_encode), seconds(t_encode, std::chrono::steady_clock::now()));

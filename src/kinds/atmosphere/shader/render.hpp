@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "io/bundle.hpp"
+#include "io/png.hpp"
 #include "kinds/atmosphere/model/model.hpp"
 
 namespace specbake::atmosphere {
@@ -94,11 +95,12 @@ std::string sampling_spectral_glsl(const Model& m, const SpectralLuts& luts, con
 
 // The preview views' geometry, shared by the previews and the GL test that draws them with the
 // shipped shader. Fisheyes: from kFisheyeAltitudeKm above the ground, equidistant, zenith at the
-// centre, sun at azimuth 0 (the picture's right) at each elevation, with a fixed exposure.
+// centre, sun at azimuth 0 (the picture's right) at each elevation, with a fixed exposure (EV100)
+// that puts the default Earth's median sky pixel (its brightest channel) near x = 0.2 before the tone curve.
 struct FisheyeView {
   double sun_elevation_deg, ev100;
 };
-inline constexpr FisheyeView kFisheyeViews[] = {{60.0, 12.0}, {20.0, 11.5}, {5.0, 10.5}, {0.0, 9.0}, {-4.0, 4.5}};
+inline constexpr FisheyeView kFisheyeViews[] = {{60.0, 14.5}, {20.0, 14.0}, {5.0, 13.0}, {0.0, 11.5}, {-4.0, 7.5}};
 inline constexpr double kFisheyeAltitudeKm = 0.001;
 Vec3 fisheye_sun(const FisheyeView& v);
 // The view direction of picture point (x, y) ∈ (−1, 1)² (x right, y up); false outside the circle.
@@ -107,7 +109,7 @@ bool fisheye_direction(double x, double y, Vec3& view);
 // picture point (x, y) ∈ (−1, 1)²; the whole atmosphere in frame with a 15 % margin.
 struct PlanetView {
   Vec3 camera, sun;
-  double ev100 = 12.0;
+  double ev100 = 14.0;
   Vec3 direction(double x, double y) const;
   Vec3 fwd, right, up;
   double half = 0.0;
@@ -115,10 +117,11 @@ struct PlanetView {
 PlanetView planet_view(const Model& m);
 
 // Fisheye skies (with the sun's disc) from the ground at several sun elevations and the planet
-// seen from space, n × n pixels each at a fixed exposure per view, and a contact sheet of all;
+// seen from space, n × n pixels each at its view's exposure through `curve`, labelled, and a
+// contact sheet of all (docs/atmosphere.md, "Previews");
 // rendered through the shipped shader's functions (shader_host.hpp). k_sky, k_sun: radiance →
 // luminance factors (lm/W per channel).
 std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
-                                      const std::array<double, 3>& k_sun, int n);
+                                      const std::array<double, 3>& k_sun, int n, ToneCurve curve);
 
 }  // namespace specbake::atmosphere
