@@ -4,23 +4,18 @@
 
 #include "core/version.hpp"
 #include "io/ktx2.hpp"
+#include "job/formats.hpp"
 
 namespace specbake {
 
-Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm, const std::vector<std::string>& kind_keys) {
-  Ktx2Settings s;
-  if (job.has("formats")) {
-    const yaml::At f = job.child("formats");
-    bool bin = false, exr = false;
-    f.each_item("formats (bin, exr, ktx2)", [&](const yaml::At& it) {
-      switch (it.choice<int>({{"bin", 0}, {"exr", 1}, {"ktx2", 2}})) {
-        case 0: bin = true; break;
-        case 1: exr = true; break;
-        default: s.enabled = true; break;
-      }
-    });
-    if (!bin || !exr) f.fail("expected bin and exr in formats (every bundle has them; ktx2 is added on request)");
-  }
+TextureFormats parse_texture_formats(const yaml::At& job, nlohmann::json& norm,
+                                     const std::vector<std::string>& kind_keys) {
+  TextureFormats f;
+  const std::set<std::string> chosen = parse_formats(job, {"bin", "exr", "ktx2"}, {"bin", "exr"}, norm);
+  f.bin = chosen.count("bin") > 0;
+  f.exr = chosen.count("exr") > 0;
+  Ktx2Settings& s = f.ktx2;
+  s.enabled = chosen.count("ktx2") > 0;
   if (job.has("ktx2")) {
     const yaml::At k = job.child("ktx2");
     if (!s.enabled) k.fail("expected ktx2 settings only with ktx2 in formats");
@@ -31,11 +26,8 @@ Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm, cons
     if (k.has("format")) s.half = k.child("format").choice<int>({{"rgba16f", 1}, {"rgba32f", 0}}) == 1;
     if (k.has("zstd")) s.zstd = k.child("zstd").choice<int>({{"true", 1}, {"false", 0}}) == 1;
   }
-  if (s.enabled) {
-    norm["formats"] = {"bin", "exr", "ktx2"};
-    norm["ktx2"] = {{"format", s.half ? "rgba16f" : "rgba32f"}, {"zstd", s.zstd}};
-  }
-  return s;
+  if (s.enabled) norm["ktx2"] = {{"format", s.half ? "rgba16f" : "rgba32f"}, {"zstd", s.zstd}};
+  return f;
 }
 
 void add_ktx2_file(const Ktx2Settings& settings, const Ktx2Texture& t, const JobContext& ctx, BakeResult& r) {

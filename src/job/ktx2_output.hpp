@@ -21,12 +21,17 @@ struct Ktx2Settings {
   bool zstd = false;     // Zstandard supercompression
 };
 
-// Reads `formats` (bin and exr are always there; ktx2 adds the KTX2 copies) and `ktx2` from a
-// job entry, failing at the key with what was expected. `norm` gets the normalised keys when
-// KTX2 is on (they enter the bundle hash). `kind_keys`: further keys of `ktx2` the kind reads
-// itself (and normalises into norm["ktx2"]).
-Ktx2Settings parse_ktx2_settings(const yaml::At& job, nlohmann::json& norm,
-                                 const std::vector<std::string>& kind_keys = {});
+// What a texture kind's bundle holds: `formats:` any non-empty choice of bin (float32 .bin),
+// exr and ktx2 (default [bin, exr]; job/formats.hpp), and the `ktx2:` settings, which are only
+// accepted with ktx2 in formats. Fails at the key with what was expected. `norm` gets the
+// normalised keys where they differ from the defaults (they enter the bundle hash). `kind_keys`:
+// further keys of `ktx2` the kind reads itself (and normalises into norm["ktx2"]).
+struct TextureFormats {
+  bool bin = true, exr = true;
+  Ktx2Settings ktx2;
+};
+TextureFormats parse_texture_formats(const yaml::At& job, nlohmann::json& norm,
+                                     const std::vector<std::string>& kind_keys = {});
 
 // One texture to write as KTX2: a 2D, 3D or 2D array texture of 2, 3 or 4 channels.
 struct Ktx2Texture {

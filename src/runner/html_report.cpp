@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <set>
@@ -14,6 +15,7 @@
 #include "core/resources.hpp"
 #include "core/text.hpp"
 #include "io/bundle_diff.hpp"
+#include "io/bundle_texture.hpp"
 
 namespace specbake {
 
@@ -253,21 +255,41 @@ std::string no_live_view(const std::string& why) {
 }
 
 // The shipped text at `glsl_path` and the float32 files (name → path) into `data`; "" or the reason not.
+// A live view's data: the bundle's shipped GLSL and its textures (name, the file's stem, channels),
+// each read from whichever copy the bundle holds (.bin, EXR or KTX2: read_bundle_texture) with
+// its shape as the .bin has it ([..., channels]). "" when it could, else why not.
+struct LiveTexture {
+  std::string name, stem;
+  int channels = 3;
+};
 std::string live_data(const PageJob& j, const json& manifest, const std::string& glsl_path,
-                      const std::vector<std::pair<std::string, std::string>>& bins, json& data) {
+                      const std::vector<LiveTexture>& textures, json& data) {
   std::map<std::string, json> files;
   for (const auto& f : manifest.value("files", json::array())) files[f.value("path", "")] = f;
   std::string glsl;
   if (!files.count(glsl_path) || !read_bytes(j.bundle / glsl_path, glsl)) return "it has no " + glsl_path;
   data = {{"job", j.name}, {"glsl", glsl}, {"textures", json::object()}};
   std::uint64_t total = 0;
-  for (const auto& [name, path] : bins) {
-    if (!files.count(path)) return "it has no " + path + " (the live view reads it)";
-    total += files[path].value("bytes", std::uint64_t{0});
+  for (const auto& t : textures) {
+    json shape;
+    for (const char* ext : {".bin", ".exr", ".ktx2"})
+      if (shape.is_null() && files.count(t.stem + ext)) shape = files[t.stem + ext].value("shape", json::array());
+    if (shape.is_null() || shape.empty())
+      return "it has no " + t.stem + ".bin, .exr or .ktx2 (the live view reads one)";
+    shape.back() = t.channels;  // KTX2 copies hold RGBA: the view gets the channels the .bin has
+    std::uint64_t texels = 1;
+    for (std::size_t i = 0; i + 1 < shape.size(); ++i) texels *= shape[i].get<std::uint64_t>();
+    total += texels * static_cast<std::uint64_t>(t.channels) * 4;
     if (total > kLiveBytes) return "its data exceed the " + human_bytes(kLiveBytes) + " a page embeds per bundle";
-    std::string bytes;
-    if (!read_bytes(j.bundle / path, bytes)) return "cannot read " + (j.bundle / path).string();
-    data["textures"][name] = {{"shape", files[path].value("shape", json::array())}, {"base64", base64(bytes)}};
+    BundleTexture tex;
+    try {
+      tex = read_bundle_texture(j.bundle, t.stem, t.channels, texels);
+    } catch (const Error& e) {
+      return std::string("its ") + t.stem + " cannot be read (" + e.what() + ")";
+    }
+    std::string bytes(tex.values.size() * sizeof(float), '\0');
+    std::memcpy(bytes.data(), tex.values.data(), bytes.size());
+    data["textures"][t.name] = {{"shape", shape}, {"base64", base64(bytes)}, {"file", tex.file}};
   }
   return "";
 }
@@ -277,8 +299,8 @@ std::string live_data(const PageJob& j, const json& manifest, const std::string&
 std::string live_sky_html(const PageJob& j, const json& manifest, std::size_t index) {
   json data;
   const std::string why = live_data(j, manifest, "sampling.glsl",
-                                    {{"transmittance", "transmittance.bin"}, {"scattering", "scattering.bin"},
-                                     {"single_mie_scattering", "single_mie_scattering.bin"}},
+                                    {{"transmittance", "transmittance"}, {"scattering", "scattering"},
+                                     {"single_mie_scattering", "single_mie_scattering"}},
                                     data);
   if (!why.empty()) return no_live_view(why);
   if (data["glsl"].get<std::string>().find("this bundle has no 3D layout") != std::string::npos)
@@ -318,7 +340,7 @@ std::string live_prism_html(const PageJob& j, const json& manifest, std::size_t 
 std::string live_lobes_html(const PageJob& j, const json& manifest, std::size_t index) {
   json data;
   const std::string why =
-      live_data(j, manifest, "shader/diffraction_brdf.glsl", {{"table_terms", "table_terms.bin"}}, data);
+      live_data(j, manifest, "shader/diffraction_brdf.glsl", {{"table_terms", "table_terms", 2}}, data);
   if (!why.empty()) return no_live_view(why);
   return live_view_html(
       "live-lobes", index, 320, 320,

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <sstream>
 
 #include "io/ktx2.hpp"
 #include "job/kind.hpp"
@@ -170,4 +171,79 @@ TEST(AtmosphereKtx2, DiffComparesTexelsNotKeyValueData) {
   EXPECT_NE(r.out.find("same-values  scattering.ktx2"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("same  scattering.bin"), std::string::npos) << r.out;
 }
+}  // namespace
+
+namespace {
+
+// `formats: [ktx2]` alone: the bundle holds the KTX2 textures (and the GLSL, previews, scene
+// check) but no .bin or .exr, and the tools still read it: `inspect` checks it, `truth --bundle`
+// reads its textures from the KTX2 copies — float32 ones give the .bin bundle's lookups exactly,
+// half ones within their rounding; `formats: [exr]` likewise. rgba-combined needs bin or exr (the
+// combined KTX2 holds single Mie's red alone), and an unknown format is an input error.
+TEST(AtmosphereFormats, KtxOrExrAloneAndTheToolsReadThem) {
+  t::TempDir tmp;
+  auto bake_with = [&](const std::string& name, const std::string& formats) {
+    t::write_file(tmp / (name + ".yaml"),
+                  "specbake: 1\noutput: out\njobs:\n  - name: " + name + "\n    kind: atmosphere\n    orders: 2\n"
+                  "    sizes: {transmittance: [32, 8], irradiance: [16, 4], scattering: {r: 4, mu: 8, mu_s: 6, nu: 3}}\n"
+                  "    scene: {points: 8}\n    previews: none\n" + formats);
+    return t::run_cli({"run", (tmp / (name + ".yaml")).string()}, tmp.path());
+  };
+  ASSERT_EQ(bake_with("bin", "").exit_code, 0);
+  const auto k32 = bake_with("k32", "    formats: [ktx2]\n    ktx2: {format: rgba32f}\n");
+  ASSERT_EQ(k32.exit_code, 0) << k32.out << k32.err;
+  ASSERT_EQ(bake_with("k16", "    formats: [ktx2]\n").exit_code, 0);
+  ASSERT_EQ(bake_with("exr", "    formats: [exr]\n").exit_code, 0);
+  for (const char* job : {"k32", "k16", "exr"}) {
+    const fs::path b = tmp / "out" / job / "latest";
+    const std::string ext = std::string(job) == "exr" ? ".exr" : ".ktx2";
+    for (const char* tex : {"transmittance", "irradiance", "scattering", "single_mie_scattering"}) {
+      EXPECT_FALSE(fs::exists(b / (std::string(tex) + ".bin"))) << job << " " << tex;
+      EXPECT_EQ(fs::exists(b / (std::string(tex) + ".exr")), ext == ".exr") << job << " " << tex;
+      EXPECT_TRUE(fs::exists(b / (std::string(tex) + ext))) << job << " " << tex;
+    }
+    EXPECT_TRUE(fs::exists(b / "sampling.glsl"));
+    EXPECT_EQ(t::run_cli({"inspect", b.string()}).exit_code, 0) << job;
+  }
+
+  // the LUT's lookups at a few views, from each bundle's textures
+  t::write_file(tmp / "points.csv",
+                "altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg\n0.5,80,60,0\n2,45,85,90\n0,89,92,0\n");
+  auto lut_of = [&](const char* job) {
+    const auto r = t::run_cli({"truth", (tmp / (std::string(job) + ".yaml")).string(),
+                               "--job", job, "--points", (tmp / "points.csv").string(), "--out",
+                               (tmp / (std::string(job) + ".csv")).string(), "--paths", "64", "--bundle",
+                               (tmp / "out" / job).string()},
+                              tmp.path());
+    EXPECT_EQ(r.exit_code, 0) << job << r.out << r.err;
+    std::vector<double> lut;
+    std::istringstream in(t::read_file(tmp / (std::string(job) + ".csv")));
+    std::string line;
+    std::getline(in, line);  // header: ..., lut_R, lut_G, lut_B last
+    while (std::getline(in, line)) {
+      std::vector<std::string> cells;
+      std::stringstream ss(line);
+      for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+      for (std::size_t c = cells.size() - 3; c < cells.size(); ++c) lut.push_back(std::stod(cells[c]));
+    }
+    return lut;
+  };
+  const auto want = lut_of("bin");
+  ASSERT_EQ(want.size(), 9u);
+  EXPECT_EQ(lut_of("k32"), want) << "float32 KTX2 texels are the .bin's: the same lookups";
+  EXPECT_EQ(lut_of("exr"), want) << "float32 EXR texels are the .bin's: the same lookups";
+  // half texels: each within 2^-11 relative, and a lookup blends at most 16 of them with positive
+  // weights (and sums two such blends): within 2^-11 relative, plus the float rounding of the sums
+  const auto half = lut_of("k16");
+  for (std::size_t i = 0; i < want.size(); ++i)
+    EXPECT_NEAR(half[i], want[i], std::ldexp(std::fabs(want[i]), -11) + 1e-6 * std::fabs(want[i]) + 1e-30) << i;
+
+  const auto combined = bake_with("comb", "    formats: [ktx2]\n    ktx2: {scattering: rgba-combined}\n");
+  EXPECT_EQ(combined.exit_code, 3) << combined.err;
+  EXPECT_NE(combined.err.find("expected bin or exr in formats with rgba-combined"), std::string::npos) << combined.err;
+  const auto bad = bake_with("bad", "    formats: [png]\n");
+  EXPECT_EQ(bad.exit_code, 3) << bad.err;
+  EXPECT_NE(bad.err.find("expected a format of this kind (bin, exr, ktx2), got 'png'"), std::string::npos) << bad.err;
+}
+
 }  // namespace

@@ -87,3 +87,64 @@ TEST(DiffractionKtx2, SettingsWithoutTheFormatAreRefused) {
 }
 
 }  // namespace
+
+namespace {
+
+// `formats:` picks the terms' copies (any of bin, exr, ktx2) and `previews:` skips or sizes the
+// pictures. A table bundle with [ktx2] alone holds table_terms.ktx2 and its shader, no
+// table_terms.bin or per-term EXRs, and the report page's live lobes read the KTX2 copy;
+// [exr] alone keeps the per-term EXRs. previews: none leaves out every picture (and the fast
+// shader variants' records, measured on them); {size: N} makes every picture N pixels a side.
+TEST(DiffractionFormats, CopiesAndPreviewsAsAsked) {
+  t::TempDir tmp;
+  auto bake_with = [&](const std::string& name, const std::string& extra) {
+    t::write_file(tmp / (name + ".yaml"), std::string("specbake: 1\noutput: out\njobs:\n  - name: ") + name +
+                                               "\n    kind: diffraction\n" + kGrating + "    tolerance_advisory: true\n" +
+                                               extra);
+    return t::run_cli({"run", (tmp / (name + ".yaml")).string()}, tmp.path());
+  };
+  const std::string table = "    table: {size: 16}\n    coherence: {length_um: 3}\n";
+  ASSERT_EQ(bake_with("k", table + "    formats: [ktx2]\n    ktx2: {format: rgba32f}\n    previews: {size: 64}\n").exit_code, 0);
+  const fs::path k = tmp / "out" / "k" / "latest";
+  EXPECT_TRUE(fs::exists(k / "table_terms.ktx2"));
+  EXPECT_FALSE(fs::exists(k / "table_terms.bin"));
+  EXPECT_FALSE(fs::exists(k / "table"));
+  EXPECT_TRUE(fs::exists(k / "shader" / "diffraction_brdf.glsl"));
+  const json m = t::read_json(k / "manifest.json");
+  for (const auto& f : m["files"]) {
+    const std::string path = f["path"];
+    if (path == "preview/brdf_lobes.png") EXPECT_EQ(f["shape"], json({64, 192, 3}));
+    if (path == "preview/sphere.png") EXPECT_EQ(f["shape"], json({64, 64, 3}));
+  }
+  EXPECT_NE(specbake::find_accuracy(m["accuracy"], "shader_fast_vs_full"), nullptr);
+  EXPECT_EQ(t::run_cli({"inspect", k.string()}).exit_code, 0);
+  // the page's live lobes from the KTX2 copy
+  const auto page = t::run_cli({"report", (tmp / "out").string(), "--out", (tmp / "page.html").string()}, tmp.path());
+  ASSERT_EQ(page.exit_code, 0) << page.out << page.err;
+  EXPECT_NE(t::read_file(tmp / "page.html").find("\"file\":\"table_terms.ktx2\""), std::string::npos);
+
+  ASSERT_EQ(bake_with("e", "    formats: [exr]\n    previews: none\n").exit_code, 0);
+  const fs::path e = tmp / "out" / "e" / "latest";
+  EXPECT_FALSE(fs::exists(e / "terms.bin"));
+  EXPECT_TRUE(fs::exists(e / "terms" / "F_000.exr"));
+  EXPECT_FALSE(fs::exists(e / "preview"));
+  ASSERT_EQ(bake_with("n", table + "    previews: none\n").exit_code, 0);
+  const json mn = t::read_json(tmp / "out" / "n" / "latest" / "manifest.json");
+  EXPECT_FALSE(fs::exists(tmp / "out" / "n" / "latest" / "preview"));
+  EXPECT_EQ(specbake::find_accuracy(mn["accuracy"], "shader_fast_vs_full"), nullptr);
+  ASSERT_EQ(bake_with("s", "    previews: {size: 96}\n").exit_code, 0);
+  for (const auto& f : t::read_json(tmp / "out" / "s" / "latest" / "manifest.json")["files"])
+    if (f["path"] == "preview/white_normal.png") EXPECT_EQ(f["shape"], json({96, 96, 3}));
+
+  for (const auto& [extra, says] : std::vector<std::pair<std::string, std::string>>{
+           {"    previews: {size: 33}\n", "expected an even number of pixels in [32, 2048], got '33'"},
+           {"    previews: all\n", "previews: none, or {size: N}"},
+           {"    formats: [bin, bin]\n", "format 'bin' is listed twice"},
+           {"    formats: [json]\n", "expected a format of this kind (bin, exr, ktx2), got 'json'"}}) {
+    const auto r = bake_with("bad", extra);
+    EXPECT_EQ(r.exit_code, 3) << extra << r.err;
+    EXPECT_NE(r.err.find(says), std::string::npos) << extra << r.err;
+  }
+}
+
+}  // namespace

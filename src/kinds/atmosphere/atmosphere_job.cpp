@@ -406,23 +406,27 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
     const std::size_t texels = 1ULL * t.width * t.height;
     const std::string lay = "[set=" + std::to_string(sets) + "][" + std::to_string(t.height) + "][" +
                             std::to_string(t.width) + "][4]; " + t.axes;
-    r.files.push_back({t.name + ".bin", float32_le(*t.data, t.name), "float32", {sets, t.height, t.width, 4},
-                       le + "; " + lay, t.units, t.what});
-    ExrImage img;
-    img.width = t.width;
-    img.height = t.height;
-    for (int i = 0; i < n; ++i) img.channels.push_back(spectral_channel(t.exr_prefix, L.lambda_nm[i]));
-    img.pixels.resize(texels * n);
-    for (std::size_t p = 0; p < texels; ++p)
-      for (int i = 0; i < n; ++i) img.pixels[p * n + i] = (*t.data)[4 * ((i / 4) * texels + p) + i % 4];
-    img.attributes = {{"specbake.layout", std::string("channel per wavelength (Spectral OpenEXR names); ") + t.axes},
-                      {"specbake.content", t.what},
-                      {"specbake.units", t.units},
-                      {"specbake.wavelengths_nm", lambdas}};
-    r.files.push_back({t.name + ".exr", exr_bytes(img), "", {t.height, t.width, n},
-                       "EXR float32, one channel per wavelength", t.units, t.what + " (Spectral OpenEXR)"});
-    files.push_back(t.name + ".bin");
-    files.push_back(t.name + ".exr");
+    if (spec.write_bin) {
+      r.files.push_back({t.name + ".bin", float32_le(*t.data, t.name), "float32", {sets, t.height, t.width, 4},
+                         le + "; " + lay, t.units, t.what});
+      files.push_back(t.name + ".bin");
+    }
+    if (spec.write_exr) {
+      ExrImage img;
+      img.width = t.width;
+      img.height = t.height;
+      for (int i = 0; i < n; ++i) img.channels.push_back(spectral_channel(t.exr_prefix, L.lambda_nm[i]));
+      img.pixels.resize(texels * n);
+      for (std::size_t p = 0; p < texels; ++p)
+        for (int i = 0; i < n; ++i) img.pixels[p * n + i] = (*t.data)[4 * ((i / 4) * texels + p) + i % 4];
+      img.attributes = {{"specbake.layout", std::string("channel per wavelength (Spectral OpenEXR names); ") + t.axes},
+                        {"specbake.content", t.what},
+                        {"specbake.units", t.units},
+                        {"specbake.wavelengths_nm", lambdas}};
+      r.files.push_back({t.name + ".exr", exr_bytes(img), "", {t.height, t.width, n},
+                         "EXR float32, one channel per wavelength", t.units, t.what + " (Spectral OpenEXR)"});
+      files.push_back(t.name + ".exr");
+    }
     if (spec.ktx2.enabled) {
       add_ktx2_file(spec.ktx2,
                     {t.name + ".ktx2", std::uint32_t(t.width), std::uint32_t(t.height), 0, std::uint32_t(sets), 4,
@@ -459,8 +463,8 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
 // outlive the tasks.
 class TextureFiles {
  public:
-  TextureFiles(const Luts& L, const std::string& units, const std::string& param, BakeResult& r)
-      : L_(L), s_(L.model.sizes), units_(units), param_(param), r_(r) {}
+  TextureFiles(const Luts& L, const std::string& units, const std::string& param, bool bin, bool exr, BakeResult& r)
+      : L_(L), s_(L.model.sizes), units_(units), param_(param), bin_(bin), exr_(exr), r_(r) {}
 
   void transmittance() {
     const std::string lay = "[r=" + std::to_string(s_.transmittance_h) + "][mu=" + std::to_string(s_.transmittance_w) +
@@ -528,7 +532,10 @@ class TextureFiles {
  private:
   inline static const std::string kLe = "little-endian float32, C order, channels R,G,B innermost";
 
+  // A file whose bytes are encoded in encode_all, if `formats` holds its kind (.bin or .exr).
   void later(OutputFile f, std::function<std::string()> bytes) {
+    const bool is_exr = f.path.size() > 4 && f.path.compare(f.path.size() - 4, 4, ".exr") == 0;
+    if (is_exr ? !exr_ : !bin_) return;
     const std::size_t at = r_.files.size();
     r_.files.push_back(std::move(f));
     encode_.push_back([&r = r_, at, bytes = std::move(bytes)] { r.files[at].bytes = bytes(); });
@@ -545,6 +552,7 @@ class TextureFiles {
   const Sizes& s_;
   const std::string& units_;
   const std::string& param_;
+  const bool bin_, exr_;
   BakeResult& r_;
   std::vector<std::function<void()>> encode_;
 };
@@ -552,7 +560,7 @@ class TextureFiles {
 // The R,G,B textures the spec asks for, in their layouts.
 void texture_files(const AtmosphereSpec& spec, const Luts& L, const std::string& units, const std::string& param,
                    BakeResult& r) {
-  TextureFiles files(L, units, param, r);
+  TextureFiles files(L, units, param, spec.write_bin, spec.write_exr, r);
   if (spec.out_transmittance) files.transmittance();
   if (spec.out_irradiance) files.irradiance();
   struct Tex3 {

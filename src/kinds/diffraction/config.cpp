@@ -176,7 +176,7 @@ void parse_table_keys(const At& job, DiffractionSpec& d) {
 
 DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   allow_job_keys(job, {"heightfield", "procedural", "range_nm", "w_max", "expansion", "terms", "tolerance",
-                  "center", "crop", "storage", "coherence", "table", "max_bundle_mb", "formats", "ktx2"});
+                  "center", "crop", "storage", "coherence", "table", "max_bundle_mb", "formats", "ktx2", "previews"});
   DiffractionSpec d;
   nlohmann::json field_norm;
   if (job.has("heightfield") == job.has("procedural"))
@@ -254,7 +254,27 @@ DiffractionSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) 
                             : nlohmann::json{{"source_angular_diameter_deg", d.coherence.source_angular_diameter_deg}};
   }
   if (job.has("max_bundle_mb")) norm["max_bundle_mb"] = d.max_bundle_mb;
-  d.ktx2 = parse_ktx2_settings(job, norm);
+  if (job.has("previews")) {  // in the hash only when given
+    const At pv = job.child("previews");
+    if (pv.node.IsScalar() && pv.node.Scalar() == "none") {
+      d.previews = false;
+      norm["previews"] = "none";
+    } else {
+      pv.expect_map("previews: none, or {size: N} (pixels per picture side, an even number in [32, 2048])");
+      pv.allow_keys({"size"});
+      if (pv.has("size")) {
+        const At n = pv.child("size");
+        const long long v = n.integer();
+        if (v < 32 || v > 2048 || v % 2) n.fail("expected an even number of pixels in [32, 2048], got " + n.shown());
+        d.preview_size = static_cast<int>(v);
+        norm["previews"] = {{"size", d.preview_size}};
+      }
+    }
+  }
+  const TextureFormats f = parse_texture_formats(job, norm);
+  d.ktx2 = f.ktx2;
+  d.write_bin = f.bin;
+  d.write_exr = f.exr;
   return d;
 }
 

@@ -111,8 +111,7 @@ std::vector<double> measurement_kappas(const Plan& p) {
 }
 
 std::vector<double> preview_xyz(cl_util::Device* dev, const Field& f, const Plan& p, const Terms& t,
-                                const std::vector<double>& spectrum, double w_max) {
-  const int n = kPreviewSize;
+                                const std::vector<double>& spectrum, double w_max, int n) {
   const int step = static_cast<int>(kPreviewStepNm);
   std::vector<double> rows;  // every step-th spectrum row
   for (std::size_t row = 0; row < spectrum.size(); row += 4 * static_cast<std::size_t>(step))
@@ -256,8 +255,7 @@ Terms rounded_to_half(const Terms& t) {
 }
 
 // Linear sRGB of preview_xyz's picture, and each pixel's Y.
-std::vector<float> preview_rgb(const std::vector<double>& xyz, std::vector<double>& luminance) {
-  const int n = kPreviewSize;
+std::vector<float> preview_rgb(const std::vector<double>& xyz, int n, std::vector<double>& luminance) {
   luminance.assign(n * n, 0.0);
   const Mat3 M = xyz_to_srgb();
   std::vector<float> rgb(3 * n * n);
@@ -452,13 +450,16 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
   ctx.progress("files", 0.9);
   const int ku = p.bins.ku_count(), kv = p.bins.kv_count();
   const std::string le = "little-endian float32, C order";
-  tm.time("terms.bin", [&] {
-    r.files.push_back({"terms.bin", float32_le(terms.values, "FFT terms"), "float32", {p.total_terms, kv, ku, 2},
-                       le + "; [n][kv][ku][re,im], kv and ku ascending from the bins' lower ends (fftshifted)", "1",
-                       "F_n = DFT(q_n)/M^2 of every band's terms (see the manifest's diffraction block)"});
-  });
+  if (spec.write_bin)
+    tm.time("terms.bin", [&] {
+      r.files.push_back({"terms.bin", float32_le(terms.values, "FFT terms"), "float32", {p.total_terms, kv, ku, 2},
+                         le + "; [n][kv][ku][re,im], kv and ku ascending from the bins' lower ends (fftshifted)", "1",
+                         "F_n = DFT(q_n)/M^2 of every band's terms (see the manifest's diffraction block)"});
+    });
   const auto spectrum = add_spectrum_file(spec.range_nm, r);
-  add_term_exrs(terms.values, p.bands, ku, kv, spec.storage, "terms", "terms.bin", "rows kv, columns ku (fftshifted)", tm, r);
+  if (spec.write_exr)
+    add_term_exrs(terms.values, p.bands, ku, kv, spec.storage, "terms", "terms.bin", "rows kv, columns ku (fftshifted)",
+                  tm, r);
   if (spec.ktx2.enabled)
     tm.time("terms.ktx2", [&] {
       add_ktx2_file(spec.ktx2,
@@ -471,26 +472,29 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
     });
 
   ctx.progress("preview", 0.95);
-  if (spec.w_max >= 1.0) {
+  const int size = spec.preview_size > 0 ? spec.preview_size : kPreviewSize;
+  if (!spec.previews) {
+    // `previews: none`
+  } else if (spec.w_max >= 1.0) {
     std::vector<double> lum;
     const auto rgb = tm.time("preview", [&] {
-      return preview_rgb(preview_xyz(unless_cpu(dev), f, p, terms, spectrum, spec.w_max), lum);
+      return preview_rgb(preview_xyz(unless_cpu(dev), f, p, terms, spectrum, spec.w_max, size), size, lum);
     });
     std::vector<double> lit;
     for (double y : lum)
       if (y > 0) lit.push_back(y);
     std::sort(lit.begin(), lit.end());
     const double hi = lit.empty() ? 1.0 : lit[static_cast<std::size_t>(0.995 * (lit.size() - 1))];
-    const int px = label_px(kPreviewSize);
+    const int px = label_px(size);
     const auto labelled = [&](const std::vector<float>& shown, float exposure, const std::string& scale) {
-      Rgb8 img = srgb8_image(kPreviewSize, kPreviewSize, shown, exposure);
+      Rgb8 img = srgb8_image(size, size, shown, exposure);
       draw_label(img, Corner::top_left, {"D65, normal incidence"}, px);
       draw_label(img, Corner::bottom_left, {scale}, px);
-      return png_rgb8(kPreviewSize, kPreviewSize, img.rgb);
+      return png_rgb8(size, size, img.rgb);
     };
     r.files.push_back({"preview/white_normal.png",
                        labelled(rgb, static_cast<float>(hi > 0 ? 1.0 / hi : 1.0), "linear, white at 99.5th pct"), "",
-                       {kPreviewSize, kPreviewSize, 3}, "", "",
+                       {size, size, 3}, "", "",
                        "diffracted colour over the (u,v) disk, D65 at normal incidence, exposure at the 99.5th "
                        "percentile; labelled"});
     // Log scale: brightness log10(Y / Y_max) / D + 1 over the D decades below the brightest pixel that
@@ -509,7 +513,7 @@ void files_step(const DiffractionSpec& spec, JobContext& ctx, Work& w, BakeResul
     }
     r.files.push_back({"preview/white_normal_log.png", labelled(logrgb, 1.0f, "log10 Y, " + format_g(decades) +
                                                                                     " decades below max"),
-                       "", {kPreviewSize, kPreviewSize, 3}, "", "",
+                       "", {size, size, 3}, "", "",
                        "the same on a log10 brightness scale over the " + format_g(decades) +
                            " decades below the brightest pixel (those holding 99 % of the lit pixels; black below), "
                            "each pixel's colour scaled to its largest channel; labelled"});

@@ -24,7 +24,7 @@ void add_term_exrs(const std::vector<float>& values, const std::vector<Band>& ba
 // κ values where the error is measured: κ_lo, κ_hi, band edges and middles.
 std::vector<double> measurement_kappas(const Plan& p);
 
-// The non-table job's preview: CIE XYZ of each pixel of a kPreviewSize² picture of the (u, v)
+// The non-table job's preview: CIE XYZ of each pixel of an n² picture (kPreviewSize by default) of the (u, v)
 // disk, white D65 light at normal incidence, XYZ(u,v) = Σ_λ |P(u/λ, v/λ; κ)/M²|²·D65·x̄ȳz̄·Δλ every
 // 5 nm, w = 1 + √(1 − u² − v²), κ = 2πw/λ, |P|² bilinear between bins; no Fresnel or geometry
 // factor (kernels/diffraction/table.cl, bins_preview_xyz). On `dev` when given (diffraction_bins_preview,
@@ -33,7 +33,7 @@ std::vector<double> measurement_kappas(const Plan& p);
 inline constexpr int kPreviewSize = 192;
 struct Terms;
 std::vector<double> preview_xyz(cl_util::Device* dev, const Field& f, const Plan& p, const Terms& t,
-                                const std::vector<double>& spectrum, double w_max);
+                                const std::vector<double>& spectrum, double w_max, int n = kPreviewSize);
 
 // With a table (table_job.cpp): the bake, the plan's table block, and the size budget: the
 // planned bundle in MB, or an InputError at max_bundle_mb (or the table, or the job) naming

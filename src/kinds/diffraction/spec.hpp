@@ -55,7 +55,12 @@ struct DiffractionSpec : KindSpec {
   Centre center = Centre::mid_range;
   bool crop = true;  // crop: auto
   Storage storage = Storage::float32;
-  Ktx2Settings ktx2;  // `formats: [bin, exr, ktx2]`: the terms also as a KTX2 2D array texture
+  Ktx2Settings ktx2;  // `formats: [..., ktx2]`: the terms as a KTX2 2D array texture
+  bool write_bin = true, write_exr = true;  // `formats:` terms.bin / table_terms.bin, the per-term EXRs
+  // `previews: none | {size: N}`: no previews (nor the fast shader variants' error records, which
+  // are measured on the lobes picture), or N pixels per picture side (default: each picture's own)
+  bool previews = true;
+  int preview_size = 0;
   std::optional<TableSpec> table;  // nullopt: `table: none`, the full-bin terms.bin
   CoherenceSpec coherence;         // applies with a table
   double max_bundle_mb = 256.0;    // planned bundle size limit (MB = 1e6 bytes)

@@ -34,8 +34,8 @@ constexpr double kMB = 1e6;
 constexpr double kPreviewIor = 1.5;  // the Fresnel term's dielectric index (shader and previews)
 constexpr int kBrdfStepNm = 10;
 constexpr int kFastWavelengths = 8;  // the shader's fast variant     // wavelength step of the previews' spectral sums
-constexpr int kLobePanel = 256;     // pixels per side of each lobe panel
-constexpr int kSpherePixels = 512;  // the sphere preview's size
+constexpr int kDefaultLobePanel = 256;     // pixels per side of each lobe panel (`previews: {size}` sets both)
+constexpr int kDefaultSpherePixels = 512;  // the sphere preview's size
 constexpr std::array<double, 3> kSphereLight = {2.0, 1.5, 3.0};
 
 // Bytes of the data files: the float32 terms (.bin) and their EXR copies (float32 or half).
@@ -71,29 +71,30 @@ float percentile_exposure(const std::vector<float>& rgb) {
 // specular peak apart over `fast` and `wl`) against those, as fractions of the picture's peak
 // (max and rms over the pixels and channels, and the max near the peak).
 void add_brdf_previews(const BrdfPictures& pictures, const BrdfTable& t, const Wavelengths& wl, const Wavelengths& fast,
-                       BakeResult& r) {
+                       int size, BakeResult& r) {
+  const int panel = size > 0 ? size : kDefaultLobePanel, sphere_px = size > 0 ? size : kDefaultSpherePixels;
   const std::vector<double> angles = {0.0, 30.0, 60.0};
-  const auto lobes = pictures.lobes(wl, angles, kLobePanel);
+  const auto lobes = pictures.lobes(wl, angles, panel);
   const float el = percentile_exposure(lobes);
-  const int width = kLobePanel * static_cast<int>(angles.size());
+  const int width = panel * static_cast<int>(angles.size());
   const std::string tone_label = "linear, white at 99.5th pct";
-  Rgb8 lobe_img = srgb8_image(width, kLobePanel, lobes, el);
+  Rgb8 lobe_img = srgb8_image(width, panel, lobes, el);
   for (std::size_t a = 0; a < angles.size(); ++a)
-    draw_label(lobe_img, static_cast<int>(a) * kLobePanel, 0, {"light " + format_g(angles[a]) + "° from normal"},
-               label_px(kLobePanel));
-  draw_label(lobe_img, Corner::bottom_left, {tone_label}, label_px(kLobePanel));
-  r.files.push_back({"preview/brdf_lobes.png", png_rgb8(width, kLobePanel, lobe_img.rgb), "",
-                     {kLobePanel, width, 3}, "", "",
+    draw_label(lobe_img, static_cast<int>(a) * panel, 0, {"light " + format_g(angles[a]) + "° from normal"},
+               label_px(panel));
+  draw_label(lobe_img, Corner::bottom_left, {tone_label}, label_px(panel));
+  r.files.push_back({"preview/brdf_lobes.png", png_rgb8(width, panel, lobe_img.rgb), "",
+                     {panel, width, 3}, "", "",
                      "Stam's diffraction BRDF from the table (Fresnel n = 1.5 and geometry factor, docs/diffraction.md) "
                      "times D65 over the outgoing hemisphere seen from above, light at 0, 30 and 60 degrees from the "
                      "normal in the x-z plane; exposure " + format_g(el) + " (99.5th percentile of the lit pixels); labelled"});
-  const auto sphere = pictures.sphere(wl, kSphereLight, kSpherePixels);
+  const auto sphere = pictures.sphere(wl, kSphereLight, sphere_px);
   const float es = percentile_exposure(sphere);
-  Rgb8 sphere_img = srgb8_image(kSpherePixels, kSpherePixels, sphere, es);
-  draw_label(sphere_img, Corner::top_left, {"D65 point light at (2, 1.5, 3)"}, label_px(kSpherePixels));
-  draw_label(sphere_img, Corner::bottom_left, {tone_label}, label_px(kSpherePixels));
-  r.files.push_back({"preview/sphere.png", png_rgb8(kSpherePixels, kSpherePixels, sphere_img.rgb), "",
-                     {kSpherePixels, kSpherePixels, 3}, "", "",
+  Rgb8 sphere_img = srgb8_image(sphere_px, sphere_px, sphere, es);
+  draw_label(sphere_img, Corner::top_left, {"D65 point light at (2, 1.5, 3)"}, label_px(sphere_px));
+  draw_label(sphere_img, Corner::bottom_left, {tone_label}, label_px(sphere_px));
+  r.files.push_back({"preview/sphere.png", png_rgb8(sphere_px, sphere_px, sphere_img.rgb), "",
+                     {sphere_px, sphere_px, 3}, "", "",
                      "a unit sphere covered by the surface (tangent x along circles about the vertical axis), seen along "
                      "-z, lit by a D65 point light at (2, 1.5, 3) radii; exposure " + format_g(es) +
                          " (99.5th percentile of the lit pixels); labelled"});
@@ -101,7 +102,7 @@ void add_brdf_previews(const BrdfPictures& pictures, const BrdfTable& t, const W
   for (float v : lobes) peak = std::max(peak, static_cast<double>(std::fabs(v)));
   const double scale = peak > 0 ? 1.0 / peak : 0.0;
   // Pixels near the specular peak: where its shape G at 550 nm is ≥ 1e-2.
-  const std::vector<float> peak_shape = brdf_lobes_specular_peak(t, angles, kLobePanel, 0.55);
+  const std::vector<float> peak_shape = brdf_lobes_specular_peak(t, angles, panel, 0.55);
   const auto record = [&](const std::string& name, const std::string& function, const std::vector<float>& quick,
                           const std::string& what) {
     double worst = 0, sq = 0, worst_near = 0;
@@ -122,9 +123,9 @@ void add_brdf_previews(const BrdfPictures& pictures, const BrdfTable& t, const W
          {"near_specular", "pixels where the specular peak's exp(-4 pi^2 sigma^2 |f|^2) at 550 nm is >= 1e-2"}}));
   };
   const std::string few = std::to_string(fast.lambda_um.size()) + " wavelengths";
-  record("shader_fast_vs_full", "diffraction_srgb_fast", pictures.lobes(fast, angles, kLobePanel), few);
+  record("shader_fast_vs_full", "diffraction_srgb_fast", pictures.lobes(fast, angles, panel), few);
   record("shader_fast_specular_vs_full", "diffraction_srgb_fast_specular",
-         pictures.lobes_fast_specular(fast, wl, angles, kLobePanel),
+         pictures.lobes_fast_specular(fast, wl, angles, panel),
          few + " for the diffracted part, the specular peak every 10 nm");
 }
 
@@ -330,12 +331,14 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
                   {"tolerance", spec.tolerance}};
   const int n = g.size;
   const std::string le = "little-endian float32, C order";
-  r.files.push_back({"table_terms.bin", float32_le(values, "table terms"), "float32", {p.total_terms, n, n, 2},
-                     le + "; [n][iv][iu][re,im], texel centres s = 2(i+0.5)/N - 1 mapped as the manifest's table block",
-                     "1", "F_n of every band's terms at the table texels (see the manifest's diffraction block)"});
+  if (spec.write_bin)
+    r.files.push_back({"table_terms.bin", float32_le(values, "table terms"), "float32", {p.total_terms, n, n, 2},
+                       le + "; [n][iv][iu][re,im], texel centres s = 2(i+0.5)/N - 1 mapped as the manifest's table block",
+                       "1", "F_n of every band's terms at the table texels (see the manifest's diffraction block)"});
   const auto spectrum = add_spectrum_file(spec.range_nm, r);
-  add_term_exrs(values, p.bands, n, n, spec.storage, "table", "table_terms.bin",
-                "rows iv (f_v), columns iu (f_u), table texels", tm, r);
+  if (spec.write_exr)
+    add_term_exrs(values, p.bands, n, n, spec.storage, "table", "table_terms.bin",
+                  "rows iv (f_v), columns iu (f_u), table texels", tm, r);
   if (spec.ktx2.enabled)
     tm.time("table_terms.ktx2", [&] {
       add_ktx2_file(spec.ktx2,
@@ -350,10 +353,11 @@ BakeResult bake_table(const DiffractionSpec& spec, JobContext& ctx) {
   r.files.push_back({"shader/diffraction_brdf.glsl", diffraction_glsl(f, p.bands, g, win, kPreviewIor, fast), "", {},
                      "", "", "GLSL: the table's lookup and the BRDF the previews draw (Stam, relative form)"});
   ctx.progress("preview", 0.95);
-  tm.time("preview", [&] {
+  if (spec.previews) tm.time("preview", [&] {
     const BrdfTable table{f, p.bands, g, values, win.sum, kPreviewIor, win.sigma_um};
     // on a CPU device the host's threads (3.3 s against 2.3 s for the 8192² benchmark's previews)
-    add_brdf_previews(BrdfPictures(table, unless_cpu(ctx.device)), table, every_nm(spectrum, kBrdfStepNm), fast, r);
+    add_brdf_previews(BrdfPictures(table, unless_cpu(ctx.device)), table, every_nm(spectrum, kBrdfStepNm), fast,
+                      spec.preview_size, r);
   });
   block["timings_s"] = tm.json();
   r.manifest_blocks["diffraction"] = block;

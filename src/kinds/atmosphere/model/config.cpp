@@ -371,13 +371,19 @@ void parse_previews(const At& p, AtmosphereSpec& s) {
 
 // `formats:` / `ktx2:` (into norm as well), and `ktx2: {scattering: rgba-combined}`.
 void parse_ktx2(const At& job, AtmosphereSpec& s, json& norm) {
-  s.ktx2 = parse_ktx2_settings(job, norm, {"scattering"});
+  const TextureFormats f = parse_texture_formats(job, norm, {"scattering"});
+  s.ktx2 = f.ktx2;
+  s.write_bin = f.bin;
+  s.write_exr = f.exr;
   if (s.ktx2.enabled && job.has("ktx2") && job.child("ktx2").has("scattering")) {
     const At k = job.child("ktx2").child("scattering");
     s.ktx2_combined = k.choice<int>({{"rgb", 0}, {"rgba-combined", 1}}) == 1;
     if (s.ktx2_combined && !(s.out_scattering && s.out_single_mie))
       k.fail("expected rgba-combined only with both scattering and single_mie_scattering in outputs (it packs "
              "single Mie's red into the scattering texture's alpha)");
+    if (s.ktx2_combined && !s.write_bin && !s.write_exr)
+      k.fail("expected bin or exr in formats with rgba-combined: single Mie's green and blue are kept only "
+             "there (the combined KTX2 holds its red alone)");
     if (s.ktx2_combined) norm["ktx2"]["scattering"] = "rgba-combined";  // rgb, the default, stays implicit
   }
 }

@@ -55,6 +55,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
   // File formats of the textures: .bin and .exr always; KTX2 (2D/3D RGBA textures engines load) on request.
   Ktx2Settings ktx2;
+  bool write_bin = true, write_exr = true;  // `formats:` (with ktx2 above)
   bool ktx2_combined = false;  // ktx2: {scattering: rgba-combined}: single Mie red in scattering.ktx2's alpha
   bool double_precision = false;  // device arithmetic: float32 (default) or float64
   AtmosphereScene scene;

@@ -11,6 +11,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <spdlog/spdlog.h>
+
+#include "io/bundle_texture.hpp"
 #include "kinds/atmosphere/model/model.hpp"
 #include "kinds/atmosphere/truth/truth.hpp"
 
@@ -284,34 +287,24 @@ Luts load_bundle_luts(const fs::path& dir) {
     throw InputError(at, std::string("an atmosphere bundle manifest (") + e.what() + ")");
   }
   const Sizes& s = luts.model.sizes;
+  // from whichever copy the bundle holds (`formats:`): .bin, EXR or KTX2 (half copies: rounded)
   auto load = [&](const char* name, std::size_t count, bool required) {
     std::vector<double> v;
-    const fs::path p = dir / name;
-    std::error_code ec;
-    if (!fs::exists(p, ec)) {
-      if (required) throw InputError(at, std::string("a bundle with ") + name + " (outputs and layout 3d)");
+    if (!has_bundle_texture(dir, name)) {
+      if (required)
+        throw InputError(at, std::string("a bundle with ") + name + " (.bin, .exr or .ktx2: outputs and layout 3d)");
       v.assign(count, 0.0);
       return v;
     }
-    const std::string bytes = read_all(p);
-    if (bytes.size() != count * 4)
-      throw InputError(at, std::string(name) + " of " + std::to_string(count * 4) + " bytes (the manifest's sizes), found " +
-                               std::to_string(bytes.size()));
-    v.resize(count);
-    for (std::size_t i = 0; i < count; ++i) {
-      std::uint32_t u = 0;
-      for (int k = 0; k < 4; ++k) u |= static_cast<std::uint32_t>(static_cast<unsigned char>(bytes[4 * i + k])) << (8 * k);
-      float f;
-      std::memcpy(&f, &u, 4);
-      v[i] = f;
-    }
-    return v;
+    const BundleTexture t = read_bundle_texture(dir, name, 3, count / 3);
+    if (t.half) spdlog::info("truth: {} read from its half-precision copy {}", name, t.file);
+    return std::vector<double>(t.values.begin(), t.values.end());
   };
   const std::size_t n_s = 3 * static_cast<std::size_t>(s.scattering_texels());
-  luts.scattering = load("scattering.bin", n_s, true);
-  luts.single_mie = load("single_mie_scattering.bin", n_s, true);
-  luts.transmittance = load("transmittance.bin", 3ULL * s.transmittance_w * s.transmittance_h, false);
-  luts.irradiance = load("irradiance.bin", 3ULL * s.irradiance_w * s.irradiance_h, false);
+  luts.scattering = load("scattering", n_s, true);
+  luts.single_mie = load("single_mie_scattering", n_s, true);
+  luts.transmittance = load("transmittance", 3ULL * s.transmittance_w * s.transmittance_h, false);
+  luts.irradiance = load("irradiance", 3ULL * s.irradiance_w * s.irradiance_h, false);
   return luts;
 }
 
