@@ -32,7 +32,7 @@ sweep earth-spectral.yaml earth-spectral "spectrum.count=8,16,32,48" "sizes=50%"
 sweep hazy-earth.yaml hazy-earth "orders=2,4,8,auto" "sizes=50%"
 sweep mars.yaml mars "sizes=50%,100%" "orders=2,4"
 # diffraction tables: size and mapping, and the coherence length (sun: 39.9 µm), on the bundled
-# Elaphe scan and the sine grating (docs/diffraction.md, "Coherence and tables")
+# Elaphe scan and the sine grating (docs/diffraction-method.md, "Coherence and tables")
 sweep elaphe-diffraction.yaml elaphe:elaphe-table "table.size=64,96,128,192,256,384" "table.mapping=linear,power"
 sweep elaphe-diffraction.yaml elaphe:elaphe-coherence "coherence.length_um=10,20,40,80" "table.size=128,256"
 sweep sine-grating.yaml sine-grating:sine-grating-table "table.size=64,128,256,384" "table.mapping=linear,power"

@@ -523,7 +523,7 @@ FN_HOT ScatteringColumns scattering_columns(const AtmosphereParameters* a, real 
 /* One channel of the lookup from its columns' values (s0.i0, s0.i1, s1.i0, s1.i1) and weights
  * (s0.fx, s1.fx, f), trilinear as the reference. (The shipped lookups can blend μ_s
  * geometrically, render.glsl; here a pow per blend in the multiple scattering's inner loop
- * made a bake ~5× slower on a CPU, docs/atmosphere.md "Twilight".) */
+ * made a bake ~5× slower on a CPU, docs/atmosphere-method.md "Twilight".) */
 FN_HOT real scattering_blend(real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
   const real v0 = (R(1.0) - fx0) * c00 + fx0 * c01;
   const real v1 = (R(1.0) - fx1) * c10 + fx1 * c11;

@@ -362,7 +362,7 @@ FN real sample_henyey_greenstein_cosine(real g, real u) {
  * shadow's axis), so such a segment is dark all along. In twilight most vertices lie in the planet's shadow and a free path rarely ends in
  * sunlit air: this draws the point there (the plain estimate — the sun at the free path's end —
  * had 5–20× the variance per walk at views with the sun 3°–6° below the horizon,
- * docs/atmosphere.md "Twilight"). */
+ * docs/atmosphere-method.md "Twilight"). */
 #define TRUTH_LINE_SEGMENTS 8
 /* Which estimate of the sun at vertices after the first (a walk argument): the expectation
  * along the ray (truth_next_sun_term), the sun at the free path's end (plain next-event

@@ -1,6 +1,6 @@
 #pragma once
 // A deterministic nested quadrature, in double precision, of the first two scattering orders
-// of the atmosphere model (docs/atmosphere.md, "Path-traced truth"), written from the physics
+// of the atmosphere model (docs/atmosphere-method.md, "Path-traced truth"), written from the physics
 // alone so that it can judge the path tracer where its estimators matter most: twilight, with
 // the camera in the planet's shadow. It shares no code with the tracer or the bake: the
 // density profiles, phase functions, optical depths, the sun's visibility, the shadow geometry

@@ -25,7 +25,7 @@ struct ProceduralField {
   double amplitude_um = 0.0;  // sine: amplitude; binary/blazed: depth; eggcrate: peak-to-valley
 };
 
-// Partial coherence of the illumination (docs/diffraction.md, "Coherence and tables"): either a
+// Partial coherence of the illumination (docs/diffraction-method.md, "Coherence and tables"): either a
 // coherence length L (µm) or a uniform disc source of angular diameter θ (degrees; the sun:
 // 0.53°), whose van Cittert–Zernike length at the middle of range_nm is L = 2λ/(πθ).
 struct CoherenceSpec {

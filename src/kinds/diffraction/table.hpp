@@ -1,5 +1,5 @@
 #pragma once
-// Diffraction tables a shader can afford (docs/diffraction.md, "Coherence and tables").
+// Diffraction tables a shader can afford (docs/diffraction-method.md, "Coherence and tables").
 //
 // Coherence window. The field is weighted by the amplitude window
 //   w(x, y) = exp(−(x² + y²)/(2σ²)),   σ = L/√2,

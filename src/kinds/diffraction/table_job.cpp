@@ -2,7 +2,7 @@
 // the band/expansion plan of the full-bin job, the field weighted by the coherence window, the
 // terms F_n at the N×N table texels by a non-uniform FFT, their error measured at texels and
 // between them against direct sums, Parseval's energy ratio per κ, and the bundle size budget
-// every diffraction job obeys (table.hpp and docs/diffraction.md, "Coherence and tables").
+// every diffraction job obeys (table.hpp and docs/diffraction-method.md, "Coherence and tables").
 #include <Imath/half.h>
 #include <spdlog/spdlog.h>
 

@@ -1,6 +1,6 @@
 #pragma once
 // `sizes: auto` and `spectrum: auto`: the cheapest texture sizes and channel count whose bake meets
-// the scene's tolerance against the path-traced truth (docs/atmosphere.md, "Settings chosen from
+// the scene's tolerance against the path-traced truth (docs/atmosphere-method.md, "Settings chosen from
 // the scene").
 //
 // A greedy search over bakes. It starts at half the default sizes (sizes: auto) and rgb

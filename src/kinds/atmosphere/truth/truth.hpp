@@ -4,7 +4,7 @@
 // ray, all orders or orders 1..N; not the sun disc, not the ground's own radiance at the end
 // of the ray), computed from the same model (kernels/atmosphere/path_tracer.cl, which uses
 // atmosphere.cl's parameter block, profiles, phase functions and sun terms) without any table
-// of the bake. See docs/atmosphere.md, "Path-traced truth".
+// of the bake. See docs/atmosphere-method.md, "Path-traced truth".
 //
 // Library entry points (the `specbake truth` command, the `scene:` block and the manifest
 // block are built on these):
