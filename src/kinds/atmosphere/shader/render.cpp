@@ -373,10 +373,11 @@ Vec3 PlanetView::direction(double x, double y) const {
                     fwd[2] + sx * right[2] + sy * up[2]});
 }
 
-std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
-                                      const std::array<double, 3>& k_sun, int n, ToneCurve curve) {
-  const auto t_render = std::chrono::steady_clock::now();
-  const Renderer render(luts);
+namespace {
+
+// The fisheye skies (kFisheyeViews) with the sun's disc, rendered and exposed.
+std::vector<PreviewView> fisheye_previews(const Renderer& render, const Luts& luts, const std::array<double, 3>& k_sky,
+                                          const std::array<double, 3>& k_sun, int n, ToneCurve curve) {
   const Model& m = luts.model;
   const double alpha = m.sun_angular_radius_rad;
   // The sun's disc: radiance E_sun/(π α²) through the atmosphere, drawn at least one pixel wide.
@@ -412,53 +413,56 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
              ", tone curve " + name(curve) + ", from the baked LUTs through sampling.glsl's functions";
     views.push_back(std::move(v));
   }
-  // The planet from space: Lambertian ground of the bake's albedo lit by sun and sky, seen through
-  // the atmosphere; the limb from GetSkyRadiance. The whole planet and its atmosphere in frame.
-  {
-    const double rb = m.bottom_radius_km;
-    const PlanetView pv = planet_view(m);
-    const Vec3& camera = pv.camera;
-    const Vec3& sun = pv.sun;
-    const double dist = std::sqrt(camera[0] * camera[0] + camera[1] * camera[1] + camera[2] * camera[2]);
-    const double albedo = luts.rgb.ground_albedo.empty() ? 0.1 : luts.rgb.ground_albedo[0];
-    const std::vector<float> scene = render_view(n, [&](double x, double y) {
-      const Vec3 view = pv.direction(x, y);
-      const double b = camera[0] * view[0] + camera[1] * view[1] + camera[2] * view[2];
-      const double disc = b * b - (dist * dist - rb * rb);
-      Vec3 lum{};
-      if (disc >= 0.0 && -b - std::sqrt(disc) > 0.0) {
-        const double t = -b - std::sqrt(disc);
-        const Vec3 point{camera[0] + t * view[0], camera[1] + t * view[1], camera[2] + t * view[2]};
-        const Vec3 normal = normalize(point);
-        Vec3 sky{}, trans{};
-        const Vec3 sun_e = render.sun_and_sky_irradiance(point, normal, sun, &sky);
-        const Vec3 in = render.sky_radiance_to_point(camera, point, sun, &trans);
-        for (int c = 0; c < 3; ++c)
-          lum[c] = (albedo / M_PI * (sun_e[c] * k_sun[c] + sky[c] * k_sky[c])) * trans[c] + in[c] * k_sky[c];
-      } else {
-        const Vec3 l = render.sky_radiance(camera, view, sun, nullptr);
-        for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c];
-      }
-      return lum;
-    });
-    PreviewView v;
-    v.file = "preview/planet_from_space.png";
-    v.title = "planet from 3.2 radii";
-    v.fixed_ev100 = pv.ev100;
-    expose(v, scene, curve);
-    v.what = "the planet seen from 3.2 radii away: ground (albedo " + format_g(albedo) +
-             ") lit by sun and sky through the atmosphere, and the limb, " + ev_text(v) + ", tone curve " +
-             name(curve) + ", from the baked LUTs through sampling.glsl's functions";
-    views.push_back(std::move(v));
-  }
+  return views;
+}
 
-  const auto t_encode = std::chrono::steady_clock::now();
-  std::vector<OutputFile> files;
-  // The contact sheet: every view at half size (2 × 2 box filter of the display values), three
-  // to a row in the order above, each tile labelled.
+// The planet from space: Lambertian ground of the bake's albedo lit by sun and sky, seen through
+// the atmosphere; the limb from GetSkyRadiance. The whole planet and its atmosphere in frame.
+PreviewView planet_preview(const Renderer& render, const Luts& luts, const std::array<double, 3>& k_sky,
+                           const std::array<double, 3>& k_sun, int n, ToneCurve curve) {
+  const Model& m = luts.model;
+  const double rb = m.bottom_radius_km;
+  const PlanetView pv = planet_view(m);
+  const Vec3& camera = pv.camera;
+  const Vec3& sun = pv.sun;
+  const double dist = std::sqrt(camera[0] * camera[0] + camera[1] * camera[1] + camera[2] * camera[2]);
+  const double albedo = luts.rgb.ground_albedo.empty() ? 0.1 : luts.rgb.ground_albedo[0];
+  const std::vector<float> scene = render_view(n, [&](double x, double y) {
+    const Vec3 view = pv.direction(x, y);
+    const double b = camera[0] * view[0] + camera[1] * view[1] + camera[2] * view[2];
+    const double disc = b * b - (dist * dist - rb * rb);
+    Vec3 lum{};
+    if (disc >= 0.0 && -b - std::sqrt(disc) > 0.0) {
+      const double t = -b - std::sqrt(disc);
+      const Vec3 point{camera[0] + t * view[0], camera[1] + t * view[1], camera[2] + t * view[2]};
+      const Vec3 normal = normalize(point);
+      Vec3 sky{}, trans{};
+      const Vec3 sun_e = render.sun_and_sky_irradiance(point, normal, sun, &sky);
+      const Vec3 in = render.sky_radiance_to_point(camera, point, sun, &trans);
+      for (int c = 0; c < 3; ++c)
+        lum[c] = (albedo / M_PI * (sun_e[c] * k_sun[c] + sky[c] * k_sky[c])) * trans[c] + in[c] * k_sky[c];
+    } else {
+      const Vec3 l = render.sky_radiance(camera, view, sun, nullptr);
+      for (int c = 0; c < 3; ++c) lum[c] = l[c] * k_sky[c];
+    }
+    return lum;
+  });
+  PreviewView v;
+  v.file = "preview/planet_from_space.png";
+  v.title = "planet from 3.2 radii";
+  v.fixed_ev100 = pv.ev100;
+  expose(v, scene, curve);
+  v.what = "the planet seen from 3.2 radii away: ground (albedo " + format_g(albedo) +
+           ") lit by sun and sky through the atmosphere, and the limb, " + ev_text(v) + ", tone curve " +
+           name(curve) + ", from the baked LUTs through sampling.glsl's functions";
+  return v;
+}
+
+// The contact sheet: every view at half size (2 × 2 box filter of the display values), three
+// to a row in the order given; `order` lists the views' files in that order.
+std::vector<float> contact_sheet(const std::vector<PreviewView>& views, int n, std::string& order) {
   const int tile = n / 2, cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
   std::vector<float> sheet(3 * static_cast<std::size_t>(cols * tile) * rows * tile, 0.0f);
-  std::string order;
   for (std::size_t v = 0; v < views.size(); ++v) {
     const std::vector<float>& px = views[v].shown;
     const int x0 = static_cast<int>(v % cols) * tile, y0 = static_cast<int>(v / cols) * tile;
@@ -471,6 +475,22 @@ std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double,
         }
     order += (v ? ", " : "") + views[v].file.substr(8);
   }
+  return sheet;
+}
+
+}  // namespace
+
+std::vector<OutputFile> preview_files(const Luts& luts, const std::array<double, 3>& k_sky,
+                                      const std::array<double, 3>& k_sun, int n, ToneCurve curve) {
+  const auto t_render = std::chrono::steady_clock::now();
+  const Renderer render(luts);
+  std::vector<PreviewView> views = fisheye_previews(render, luts, k_sky, k_sun, n, curve);
+  views.push_back(planet_preview(render, luts, k_sky, k_sun, n, curve));
+  const auto t_encode = std::chrono::steady_clock::now();
+  std::vector<OutputFile> files;
+  const int tile = n / 2, cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
+  std::string order;
+  const std::vector<float> sheet = contact_sheet(views, n, order);
   // Labels: what the view shows (top left), its exposure (top right) and the tone curve (bottom
   // left); the sheet's tiles the first two. Then every PNG encoding (zlib, one thread per file) on
   // the hardware threads.
