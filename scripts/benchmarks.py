@@ -80,13 +80,21 @@ def machine_of(device):
             "platform": device.get("platform", "?")}
 
 
+class Failed(Exception):
+    """A measured run that failed: its wall time and why (the record says so)."""
+    def __init__(self, wall, why):
+        super().__init__(why)
+        self.wall, self.why = wall, why
+
+
 def run(cmd, **kw):
     t0 = time.perf_counter()
     p = subprocess.run(cmd, capture_output=True, text=True, **kw)
     wall = time.perf_counter() - t0
     if p.returncode != 0:
         sys.stderr.write(p.stdout[-4000:] + p.stderr[-4000:])
-        raise RuntimeError(f"{' '.join(map(str, cmd))} exited {p.returncode}")
+        lines = [l for l in (p.stdout + p.stderr).splitlines() if "failed" in l or "error" in l]
+        raise Failed(wall, f"exit {p.returncode}: " + (lines[-1][:300] if lines else "see its output"))
     return wall
 
 
@@ -208,10 +216,16 @@ def measure(args):
         load = os.getloadavg()[0]
         print(f"{t['id']}: measuring ({t['measure']['kind']}), load {load:.1f} ...", flush=True)
         kind = t["measure"]["kind"]
+        failed = None
         if kind == "bake":
-            device, cold, warm = measure_bake(t["measure"], args)
-            fig, spread, n = figure_of(t, cold, warm)
-            details = {"cold": cold, "warm": warm}
+            try:
+                device, cold, warm = measure_bake(t["measure"], args)
+                fig, spread, n = figure_of(t, cold, warm)
+                details = {"cold": cold, "warm": warm}
+            except Failed as e:  # recorded: how long it ran before it failed, and why
+                failed = e.why
+                device, fig, spread, n, details = {"type": "cpu" if args.device in (None, "cpu", "auto") else "gpu",
+                                                   "name": "?"}, e.wall, [e.wall, e.wall], 1, {"failed": e.why}
         elif kind == "clone":
             device, facts = measure_clone(args)
             fig, spread, n, details = facts["clone_s"], [facts["clone_s"]] * 2, 1, facts
@@ -220,9 +234,12 @@ def measure(args):
         rec = {"target": t["id"], "date": datetime.date.today().isoformat(), "version": ver,
                "machine": machine_of(device), "figure": fig, "unit": t["unit"], "spread": spread, "runs": n,
                "load_before": round(load, 2), "load_after": round(os.getloadavg()[0], 2), "details": details}
+        if failed:
+            rec["failed"] = failed
         with RECORDS.open("a") as f:
             f.write(json.dumps(rec, sort_keys=True) + "\n")
-        print(f"{t['id']}: {fig:.4g} {t['unit']} (spread {spread[0]:.4g}–{spread[1]:.4g}, {n} runs)", flush=True)
+        print(f"{t['id']}: {fig:.4g} {t['unit']} (spread {spread[0]:.4g}–{spread[1]:.4g}, {n} runs)"
+              + (f" FAILED: {failed}" if failed else ""), flush=True)
 
 
 def shown(v, unit):
@@ -250,6 +267,8 @@ def extra_of(rec):
         bits.append(f"truth se p99 {100 * cold['truth_se_relative_p99']:.2g} %, {cold.get('points_at_walk_cap')} at cap")
     if cold.get("bundles") is not None:
         bits.append(f"{cold['bundles']} bundles")
+    if rec.get("failed"):
+        bits.append("the job failed after this time: " + rec["failed"])
     if rec.get("source"):
         bits.append(rec["source"])
     return "; ".join(bits)
@@ -320,6 +339,8 @@ def render(args):
             cls = cur["machine"]["class"]
             goal = t["target"].get(cls) if cls in ("cpu2", "gpu") else None
             met = "—" if goal is None else ("yes" if cur["figure"] <= goal else "**no**")
+            if cur.get("failed"):
+                met = "**failed**"
             lo, hi = cur["spread"]
             fig = shown(cur["figure"], t["unit"])
             if cur["runs"] > 1:
