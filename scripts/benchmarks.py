@@ -353,6 +353,8 @@ def render(args):
                 f"{shown(prev['figure'], t['unit'])} (`{prev['version']}`, {prev['date']})" if prev else "—",
                 extra_of(cur)]) + " |")
         lines.append("")
+        if t.get("profile"):
+            lines += profile_of(t, by_machine)
     text = "\n".join(lines)
     if args.check:
         if not PAGE.exists() or PAGE.read_text() != text:
