@@ -353,6 +353,19 @@ std::vector<Part> scene_parts(const SceneValues& v, bool reference, double expos
   return parts;
 }
 
+// A point's truth se in ΔE: the displayed colour moved by one se (radiance se times the
+// luminance factor k) in each channel in turn, the ΔEs combined in quadrature.
+double se_de2000(const Vec3& shown, const Vec3& se, const std::array<double, 3>& k, double exposure_y) {
+  double q = 0.0;
+  for (int c = 0; c < 3; ++c) {
+    Vec3 moved = shown;
+    moved[c] += se[c] * k[c];
+    const double d = displayed_de2000(moved, shown, exposure_y);
+    if (std::isfinite(d)) q += d * d;
+  }
+  return std::sqrt(q);
+}
+
 // The truth's own standard error: relative per channel, and in ΔE as the colour moved by one se
 // in each channel in turn, combined in quadrature; the points that stopped at the walk cap.
 struct TruthNoise {
@@ -368,15 +381,9 @@ TruthNoise truth_noise(const SceneValues& v, const SceneTraces& tr, double expos
   const std::vector<Vec3>& ref_se = tr.reference ? v.s_se : v.se_all;
   const std::array<double, 3>& k_ref = tr.reference ? v.k683 : v.k;
   for (std::size_t p = 0; p < n; ++p) {
-    double q = 0.0;
-    for (int c = 0; c < 3; ++c) {
+    for (int c = 0; c < 3; ++c)
       if (v.t_all[p][c] > 0.0) t.se_rel.push_back(v.se_all[p][c] / v.t_all[p][c]);
-      Vec3 moved = v.shown_ref[p];
-      moved[c] += ref_se[p][c] * k_ref[c];
-      const double d = displayed_de2000(moved, v.shown_ref[p], exposure_y);
-      if (std::isfinite(d)) q += d * d;
-    }
-    t.de_se[p] = std::sqrt(q);
+    t.de_se[p] = se_de2000(v.shown_ref[p], ref_se[p], k_ref, exposure_y);
   }
   for (std::size_t p = 0; p < n; ++p)
     if (tr.bake->paths[p] >= tr.o.max_paths || (tr.reference && tr.spectral->paths[p] >= tr.so.max_paths))
@@ -604,14 +611,7 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
     shown_lut[p] = times(lut[p], k);
     shown_ref[p] = times(s_all[p], k683);
     dark[p] = !(luminance_y(shown_ref[p]) >= kDarkLuminance);
-    double q = 0.0;  // the truth's se in ΔE, as truth_noise makes it
-    for (int c = 0; c < 3; ++c) {
-      Vec3 moved = shown_ref[p];
-      moved[c] += s_se[p][c] * k683[c];
-      const double d = displayed_de2000(moved, shown_ref[p], exposure_y);
-      if (std::isfinite(d)) q += d * d;
-    }
-    de_se[p] = std::sqrt(q);
+    de_se[p] = se_de2000(shown_ref[p], s_se[p], k683, exposure_y);
   }
   const Part total = make_part("total", nullptr, nullptr, shown_lut, shown_ref, exposure_y, dark);
   const bool dark_scene = total.de_summary.count == 0;
