@@ -511,18 +511,33 @@ FN void truth_guide_frame(const real* z, const real* sun, real* t1, real* t2) {
   t2[1] = z[2] * t1[0] - z[0] * t1[2];
   t2[2] = z[0] * t1[1] - z[1] * t1[0];
 }
-FN real truth_guide_elevation_norm(void) { return R(2.0) * atan(R(0.5) * ATM_PI / TRUTH_GUIDE_WIDTH); }
-FN void truth_guide_sample(const real* z, const real* sun, real u_e, real u_phi, real* out) {
+/* The elevation the guide is centred on at altitude h: TRUTH_GUIDE_LIFT above the horizon's dip
+ * −acos(r_b/r). From an elevated vertex the sunlit air is seen past the tangent point of a ray
+ * that grazes the lower atmosphere towards the terminator: a band of elevations just above the
+ * dip (a tangent altitude h_t is seen at √(2h/r) − √(2(h − h_t)/r) above it, ~1–3° for h_t of
+ * 10–20 km), the horizontal only for a vertex on the ground. */
+#define TRUTH_GUIDE_LIFT R(0.03)
+FN real truth_guide_centre(const AtmosphereParameters* a, real h) {
+  return TRUTH_GUIDE_LIFT - acos(fmin(a->bottom_radius / radius_of(a, h), R(1.0)));
+}
+/* The Cauchy elevation about e0 truncated to [−π/2, π/2]: u_e ↦ e0 + W tan(lo + u_e (hi − lo)). */
+FN void truth_guide_range(real e0, real* lo, real* hi) {
+  *lo = atan((R(-0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
+  *hi = atan((R(0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
+}
+FN void truth_guide_sample(const real* z, const real* sun, real e0, real u_e, real u_phi, real* out) {
   real t1[3], t2[3];
   truth_guide_frame(z, sun, t1, t2);
   const real q = (R(1.0) - TRUTH_GUIDE_RHO) / (R(1.0) + TRUTH_GUIDE_RHO);
   const real phi = R(2.0) * atan(q * tan(ATM_PI * (u_phi - R(0.5))));
-  const real e = TRUTH_GUIDE_WIDTH * tan(truth_guide_elevation_norm() * (u_e - R(0.5)));
+  real lo, hi;
+  truth_guide_range(e0, &lo, &hi);
+  const real e = e0 + TRUTH_GUIDE_WIDTH * tan(lo + u_e * (hi - lo));
   const real ce = cos(e), se = sin(e), cp = cos(phi), sp = sin(phi);
   for (int k = 0; k < 3; ++k) out[k] = ce * (cp * t1[k] + sp * t2[k]) + se * z[k];
   v3_normalize(out);
 }
-FN real truth_guide_pdf(const real* z, const real* sun, const real* w) {
+FN real truth_guide_pdf(const real* z, const real* sun, real e0, const real* w) {
   real t1[3], t2[3];
   truth_guide_frame(z, sun, t1, t2);
   const real se = clamp_cosine(dot3(w, z));
@@ -531,9 +546,71 @@ FN real truth_guide_pdf(const real* z, const real* sun, const real* w) {
   const real e = asin(se), phi = atan2(dot3(w, t2), dot3(w, t1));
   const real rho = TRUTH_GUIDE_RHO;
   const real p_phi = (R(1.0) - rho * rho) / (R(2.0) * ATM_PI * (R(1.0) + rho * rho - R(2.0) * rho * cos(phi)));
-  const real x = e / TRUTH_GUIDE_WIDTH;
-  const real p_e = R(1.0) / (truth_guide_elevation_norm() * TRUTH_GUIDE_WIDTH * (R(1.0) + x * x));
+  const real x = (e - e0) / TRUTH_GUIDE_WIDTH;
+  real lo, hi;
+  truth_guide_range(e0, &lo, &hi);
+  const real p_e = R(1.0) / ((hi - lo) * TRUTH_GUIDE_WIDTH * (R(1.0) + x * x));
   return p_phi * p_e / ce;
+}
+
+/* ---- learned guides (twilight points) ------------------------------------------------------- */
+/* The guide above is a map from the unit square (u_e, u_φ) to directions, with pdf g(w) for
+ * uniform (u_e, u_φ). Where the light comes from is learned per point from a few pilot walks
+ * (truth.cpp, learn_guides): a piecewise-constant density h over TRUTH_GUIDE_E × TRUTH_GUIDE_PHI
+ * cells of (u_e, |2u_φ − 1|) (symmetric about the sun's azimuth), so the walk's first direction
+ * has the pdf h(u(w)) g(w) on the guided share. h is stored as the cells' cumulative masses
+ * (TRUTH_GUIDE_CELLS + 1 reals per point, the last 1). Every cell keeps a positive mass, so the
+ * learned pdf is positive wherever g is, and the one-sample mixture with the phase function
+ * stays unbiased whatever was learned. The view ray's segment table is learned likewise
+ * (node_cdf). Walks of a pilot launch write, per walk and channel, TRUTH_PILOT_STRIDE reals:
+ * the view ray's segment, the first direction's cell coordinates (u_e, |2u_φ − 1|; −1 when
+ * no direction was drawn), its mixture pdf over g, the walk's value and its value beyond
+ * order 1. */
+#define TRUTH_GUIDE_E 16
+#define TRUTH_GUIDE_PHI 8
+#define TRUTH_GUIDE_CELLS (TRUTH_GUIDE_E * TRUTH_GUIDE_PHI)
+#define TRUTH_GUIDE_LEARNED_SHARE R(0.8)
+#define TRUTH_PILOT_STRIDE 6
+#define TRUTH_MODE_PLAIN 0   /* the fixed tables */
+#define TRUTH_MODE_PILOT 1   /* the fixed tables, and the walks' pilot records */
+#define TRUTH_MODE_LEARNED 2 /* the learned view-ray table and first-direction cells */
+/* (u_e, |2u_φ − 1|) of the unit direction w: the inverse of truth_guide_sample. */
+FN void truth_guide_coordinates(const real* z, const real* sun, real e0, const real* w, real* u_e, real* u_abs) {
+  real t1[3], t2[3];
+  truth_guide_frame(z, sun, t1, t2);
+  const real e = asin(clamp_cosine(dot3(w, z)));
+  const real phi = atan2(dot3(w, t2), dot3(w, t1));
+  const real q = (R(1.0) - TRUTH_GUIDE_RHO) / (R(1.0) + TRUTH_GUIDE_RHO);
+  real lo, hi;
+  truth_guide_range(e0, &lo, &hi);
+  *u_e = fmin(fmax((atan((e - e0) / TRUTH_GUIDE_WIDTH) - lo) / (hi - lo), R(0.0)), R(1.0));
+  *u_abs = fmin(R(2.0) * atan(tan(R(0.5) * fabs(phi)) / q) / ATM_PI, R(1.0));
+}
+FN int truth_guide_cell(real u_e, real u_abs) {
+  int ie = (int)(u_e * (real)TRUTH_GUIDE_E), ip = (int)(u_abs * (real)TRUTH_GUIDE_PHI);
+  if (ie > TRUTH_GUIDE_E - 1) ie = TRUTH_GUIDE_E - 1;
+  if (ip > TRUTH_GUIDE_PHI - 1) ip = TRUTH_GUIDE_PHI - 1;
+  return ie * TRUTH_GUIDE_PHI + ip;
+}
+/* h(u) of a learned table (cells' cumulative masses) at the cell coordinates, per unit area. */
+FN real truth_learned_density(GLOBAL const real* cells, real u_e, real u_abs) {
+  const int j = truth_guide_cell(u_e, u_abs);
+  return (cells[j + 1] - cells[j]) * (real)TRUTH_GUIDE_CELLS;
+}
+/* A direction from a learned table: a cell by its mass, a point uniform in it, a random side
+ * of the sun's azimuth. */
+FN void truth_learned_sample(GLOBAL const real* cells, const real* z, const real* sun, real e0, real u_cell, real u1, real u2,
+                             real u_side, real* out) {
+  int lo = 0, hi = TRUTH_GUIDE_CELLS; /* cells[lo] ≤ u_cell < cells[hi] */
+  while (hi - lo > 1) {
+    const int mid = (lo + hi) / 2;
+    if (cells[mid] <= u_cell) lo = mid;
+    else hi = mid;
+  }
+  const int ie = lo / TRUTH_GUIDE_PHI, ip = lo % TRUTH_GUIDE_PHI;
+  const real u_e = ((real)ie + u1) / (real)TRUTH_GUIDE_E;
+  const real u_abs = ((real)ip + u2) / (real)TRUTH_GUIDE_PHI;
+  truth_guide_sample(z, sun, e0, u_e, u_side < R(0.5) ? R(0.5) - R(0.5) * u_abs : R(0.5) + R(0.5) * u_abs, out);
 }
 
 /* ---- one walk ---------------------------------------------------------------------------- */
@@ -544,9 +621,13 @@ FN real truth_guide_pdf(const real* z, const real* sun, const real* w) {
  * random numbers, so a walk's stream and value do not depend on it. */
 FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, GLOBAL const real* node_t,
                    GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* medium,
-                   int max_orders, int split_order, int next_sun, PhiloxStream* rng, real* radiance_low,
-                   int* events, int* truncated, int* violations) {
+                   GLOBAL const real* cells, int mode, int max_orders, int split_order, int next_sun,
+                   PhiloxStream* rng, real* radiance_low, real* pilot, int* events, int* truncated,
+                   int* violations) {
   *radiance_low = R(0.0);
+  pilot[0] = R(-1.0);
+  pilot[1] = pilot[2] = R(-1.0);
+  pilot[3] = pilot[4] = pilot[5] = R(0.0);
   const int use_line = next_sun == TRUTH_NEXT_SUN_LINE ||
                        (next_sun == TRUTH_NEXT_SUN_AUTO && pt[PT_MU_S] < truth_shadow_reach_cosine(a));
   const int n = (int)pt[PT_NODES];
@@ -566,6 +647,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
   const real t0 = node_t[lo], dt = node_t[lo + 1] - node_t[lo];
   if (!(p_k > R(0.0)) || !(dt > R(0.0))) return R(0.0);
   const real t = t0 + philox_uniform(rng) * dt;
+  pilot[0] = (real)lo;
   const real h0 = pt[PT_H], mu0 = pt[PT_MU];
   const int ground0 = pt[PT_GROUND] != R(0.0);
   const real tau = node_tau[lo] + truth_segment_depth(a, c, h0, mu0, ground0, t0, t);
@@ -583,7 +665,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
   }
   int on_ground = 0;
   int sun_done = 0; /* this vertex's sun term came with the previous vertex */
-  real radiance = R(0.0);
+  real radiance = R(0.0), order1 = R(0.0);
   for (int order = 1;; ++order) {
     *events += 1;
     const real mu_s = clamp_cosine(dot3(sun, z));
@@ -596,6 +678,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
         const real t_sun = truth_sun_transmittance(a, c, medium, R(0.0), mu_s, use_line, rng, violations);
         const real add = weight * albedo / ATM_PI * e_sun * t_sun * cos_factor;
         radiance += add;
+        if (order == 1) order1 += add;
         if (order <= split_order) *radiance_low += add;
       }
       if (max_orders > 0 && order >= max_orders) break;
@@ -615,6 +698,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
         const real t_sun = truth_sun_transmittance(a, c, medium, h, mu_s, use_line, rng, violations);
         const real add = weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
         radiance += add;
+        if (order == 1) order1 += add;
         if (order <= split_order) *radiance_low += add;
       }
       if (max_orders > 0 && order >= max_orders) break;
@@ -622,8 +706,16 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real g = a->mie_g;
       const real u_type = philox_uniform(rng), u_cos = philox_uniform(rng), u_phi = philox_uniform(rng);
       real w1[3];
-      if (use_line && philox_uniform(rng) < TRUTH_GUIDE_SHARE) {
-        truth_guide_sample(z, sun, u_cos, u_phi, w1);
+      const int learned = mode == TRUTH_MODE_LEARNED && order == 1 && use_line;
+      const real guide_share = learned ? TRUTH_GUIDE_LEARNED_SHARE : TRUTH_GUIDE_SHARE;
+      const real e0 = truth_guide_centre(a, h);
+      if (use_line && philox_uniform(rng) < guide_share) {
+        if (learned) {
+          const real u1 = philox_uniform(rng), u2 = philox_uniform(rng);
+          truth_learned_sample(cells, z, sun, e0, u_type, u1, u2, u_phi, w1);
+        } else {
+          truth_guide_sample(z, sun, e0, u_cos, u_phi, w1);
+        }
       } else {
         const real cos_t =
             u_type * (s_r + s_m) < s_r ? sample_rayleigh_cosine(u_cos) : sample_henyey_greenstein_cosine(g, u_cos);
@@ -635,8 +727,19 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real p_r = rayleigh_phase(cos_t);
       const real f = s_r * p_r + s_m * mie_phase(g, cos_t);
       const real pdf_phase = (s_r * p_r + s_m * henyey_greenstein_phase(g, cos_t)) / (s_r + s_m);
-      const real pdf = use_line ? (R(1.0) - TRUTH_GUIDE_SHARE) * pdf_phase + TRUTH_GUIDE_SHARE * truth_guide_pdf(z, sun, w1)
-                                : pdf_phase;
+      real pdf = pdf_phase;
+      if (use_line) {
+        const real g_w = truth_guide_pdf(z, sun, e0, w1);
+        real u_e, u_abs, h_u = R(1.0);
+        truth_guide_coordinates(z, sun, e0, w1, &u_e, &u_abs);
+        if (learned) h_u = truth_learned_density(cells, u_e, u_abs);
+        pdf = (R(1.0) - guide_share) * pdf_phase + guide_share * h_u * g_w;
+        if (order == 1) {
+          pilot[1] = u_e;
+          pilot[2] = u_abs;
+          pilot[3] = g_w > R(0.0) ? pdf / g_w : R(0.0);
+        }
+      }
       weight *= f / pdf;
       rho *= f / ((s_r + s_m) * pdf_phase);
       for (int k = 0; k < 3; ++k) w[k] = w1[k];
@@ -683,6 +786,8 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       on_ground = 1;
     }
   }
+  pilot[4] = radiance;
+  pilot[5] = radiance - order1;
   return radiance;
 }
 
@@ -692,12 +797,15 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
  * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item: per channel
  * (mean, m2) of the whole walk, of orders 1..split_order and of the orders above it. Table
  * layouts: node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], medium
- * as TRUTH_MEDIUM_SIZE describes it (majorants, then kinks). */
+ * as TRUTH_MEDIUM_SIZE describes it (majorants, then kinks), cells [P][TRUTH_GUIDE_CELLS + 1]
+ * (read in TRUTH_MODE_LEARNED only). A pilot launch (TRUTH_MODE_PILOT) also writes each walk's
+ * record at pilot_item [paths_per_batch][NCH][TRUTH_PILOT_STRIDE]. */
 FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
                          GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* medium,
                          int nodes, int p, int point_base, int b, int paths_per_batch, int max_orders,
                          int split_order, int next_sun, philox_u32 seed_lo, philox_u32 seed_hi, int channel_base,
-                         int channels, GLOBAL real* out_item) {
+                         int channels, GLOBAL const real* cells, int mode, GLOBAL real* out_item,
+                         GLOBAL real* pilot_item) {
   GLOBAL const real* pt = points + p * TRUTH_POINT_STRIDE;
   int events = 0, truncated = 0, violations = 0;
   for (int c = 0; c < NCH; ++c) {
@@ -708,10 +816,12 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
         philox_stream_init(&rng, seed_lo, seed_hi, (philox_u32)b * (philox_u32)paths_per_batch + (philox_u32)i,
                            (philox_u32)(point_base + p),
                            (philox_u32)(channel_base + c));
-        real low;
+        real low, rec[TRUTH_PILOT_STRIDE];
         const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
-                                  node_cdf + (p * NCH + c) * nodes, medium, max_orders, split_order, next_sun, &rng, &low,
-                                  &events, &truncated, &violations);
+                                  node_cdf + (p * NCH + c) * nodes, medium, cells + p * (TRUTH_GUIDE_CELLS + 1), mode,
+                                  max_orders, split_order, next_sun, &rng, &low, rec, &events, &truncated, &violations);
+        if (mode == TRUTH_MODE_PILOT)
+          for (int k = 0; k < TRUTH_PILOT_STRIDE; ++k) pilot_item[(i * NCH + c) * TRUTH_PILOT_STRIDE + k] = rec[k];
         const real xs[TRUTH_STATS] = {x, low, x - low};
         for (int k = 0; k < TRUTH_STATS; ++k) {
           const real delta = xs[k] - mean[k];

@@ -7,18 +7,21 @@
 
 /* Work item id → point p = id / batch_stride (point point_base + p of the request) and its
  * j-th batch of this launch, j = id % batch_stride (items with j >= batch_count[p] return at
- * once), walks of batch batch_base[p] + j; out holds [points][batch_stride][TRUTH_OUT_STRIDE]. */
+ * once), walks of batch batch_base[p] + j; out holds [points][batch_stride][TRUTH_OUT_STRIDE],
+ * pilot (a pilot launch) [points][batch_stride][paths_per_batch][NCH][TRUTH_PILOT_STRIDE]. */
 __kernel void truth_trace(AtmosphereParameters a, __global const real* points, __global const real* node_t,
                           __global const real* node_tau, __global const real* node_cdf,
                           __global const real* medium, int point_count, int point_base, int nodes,
                           __global const int* batch_base, __global const int* batch_count, int batch_stride,
                           int paths_per_batch, int max_orders, int split_order, int next_sun, uint seed_lo, uint seed_hi, int channel_base,
-                          int channels, __global real* out) {
+                          int channels, __global const real* cells, int mode, __global real* out,
+                          __global real* pilot) {
   const int id = get_global_id(0);
   if (id >= point_count * batch_stride) return;
   const int p = id / batch_stride, j = id % batch_stride;
   if (j >= batch_count[p]) return;
   truth_trace_item(&a, points, node_t, node_tau, node_cdf, medium, nodes, p, point_base, batch_base[p] + j,
                    paths_per_batch, max_orders, split_order, next_sun, seed_lo, seed_hi, channel_base, channels,
-                   out + (p * batch_stride + j) * TRUTH_OUT_STRIDE);
+                   cells, mode, out + (p * batch_stride + j) * TRUTH_OUT_STRIDE,
+                   pilot + (mode == TRUTH_MODE_PILOT ? (p * batch_stride + j) * paths_per_batch * NCH * TRUTH_PILOT_STRIDE : 0));
 }

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -35,8 +36,19 @@ constexpr int kSubSegments = 4;
 constexpr int kMaxKinkAltitudes = TRUTH_MAX_KINKS;
 constexpr int kNodes = kSegments + 1 + 2 * kMaxKinkAltitudes;
 // Segment probabilities mix in this much of the uniform density, so that every segment has a
-// positive probability whatever the approximations of the table.
+// positive probability whatever the approximations of the table; points in twilight mix in half:
+// there the light at a vertex grows steeply with its altitude (it sees sunlit air through
+// thinner air), which β_s ρ T does not know, and their pilot walks must explore the whole ray.
 constexpr double kUniformMix = 1e-3;
+constexpr double kUniformMixTwilight = 0.5;
+// Learned tables (twilight points, path_tracer.cl "learned guides"): pilot walks per point, all
+// channels together (at least one batch per channel); the view ray's learned bins; the share
+// of the fixed table kept in the learned one (a defensive mixture: a learned table is never
+// worse than 1/share times the fixed one's variance); the floor of each direction cell.
+constexpr double kPilotWalks = 1024;
+constexpr int kLearnBins = 24;
+constexpr double kKeepFixed = 0.2;
+constexpr double kCellFloor = 0.1;
 // The rest is an even mixture of two densities: ∝ β_s ρ T (what scattering of any order at the
 // vertex is weighted by) and ∝ β_s ρ T × V T_sun (single scattering: in twilight only the part
 // of the ray above the Earth's shadow is lit, and the first density alone would put most
@@ -135,6 +147,8 @@ struct Prepared {
   std::vector<double> node_t;    // [P][kNodes]
   std::vector<double> node_tau;  // [P][C][kNodes]
   std::vector<double> node_cdf;  // [P][C][kNodes]
+  std::vector<char> twilight;    // [P]: walks guided towards the sunlit air (path_tracer.cl use_line)
+  std::vector<double> cells;     // [P][TRUTH_GUIDE_CELLS + 1]: the learned first-direction cells
 };
 
 // The view ray of point p in the frame zenith = (0, 0, 1), view in the xz plane.
@@ -285,8 +299,8 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
 // Channel c's optical depth at the nodes and its segment probabilities (a cdf): segment masses
 // ≈ ∫ β_s ρ T dt (and × V T_sun for the sunlit share), T at each sub-segment's middle with τ
 // linear between the nodes (only the pdf depends on them), mixed with a uniform share.
-void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg, double* tau,
-                   double* cdf) {
+void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg,
+                   double uniform_mix, double* tau, double* cdf) {
   const int n = static_cast<int>(t.size());
   const double D = t.back();
   tau[0] = 0.0;
@@ -313,9 +327,9 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
   cdf[0] = 0.0;
   for (int k = 0; k + 1 < n; ++k) {
     const double uniform = (t[k + 1] - t[k]) / D;
-    const double p = total > 0.0 ? (1.0 - kUniformMix) * ((1.0 - lit_share) * mass[k] / total +
+    const double p = total > 0.0 ? (1.0 - uniform_mix) * ((1.0 - lit_share) * mass[k] / total +
                                                           (lit_share > 0.0 ? lit_share * lit[k] / total_lit : 0.0)) +
-                                       kUniformMix * uniform
+                                       uniform_mix * uniform
                                  : uniform;
     cdf[k + 1] = cdf[k] + p;
   }
@@ -330,8 +344,8 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
 
 // Nodes, optical depth at the nodes and segment probabilities of one point's view ray, for
 // every channel.
-void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, double* row,
-                double* node_t, double* node_tau, double* node_cdf) {
+void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, bool twilight,
+                double* row, double* node_t, double* node_tau, double* node_cdf) {
   const std::size_t C = ch.size();
   for (int k = 0; k < kNodes; ++k) node_t[k] = 0.0;
   for (std::size_t c = 0; c < C; ++c)
@@ -342,10 +356,12 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   row[PT_NODES] = n;
   for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
   const Segments seg = view_segments(a, row, t);
-  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, node_tau + c * kNodes, node_cdf + c * kNodes);
+  const double mix = twilight ? kUniformMixTwilight : kUniformMix;
+  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, mix, node_tau + c * kNodes, node_cdf + c * kNodes);
 }
 
-Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base) {
+Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base,
+                 const TruthOptions& o) {
   Prepared P;
   P.point_base = point_base;
   P.model = model_of(spec);
@@ -359,11 +375,21 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   P.node_t.assign(P.n_points * kNodes, 0.0);
   P.node_tau.assign(P.n_points * P.n_channels * kNodes, 0.0);
   P.node_cdf.assign(P.n_points * P.n_channels * kNodes, 0.0);
+  P.twilight.assign(P.n_points, 0);
+  P.cells.assign(P.n_points * (TRUTH_GUIDE_CELLS + 1), 0.0);
+  const double reach = ref3::truth_shadow_reach_cosine(&a);
   parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
     point_geometry(a, points[i], row);
-    view_table(a, P.channels, kinks, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
+    // the kernel's rule for guided walks (truth_walk's use_line)
+    const bool twilight = row[PT_NODES] != 0.0 && o.learn &&
+                          (o.next_sun == TruthOptions::NextSun::along_ray ||
+                           (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach));
+    P.twilight[i] = twilight;
+    view_table(a, P.channels, kinks, twilight, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
                &P.node_cdf[i * P.n_channels * kNodes]);
+    for (int j = 0; j <= TRUTH_GUIDE_CELLS; ++j)
+      P.cells[i * (TRUTH_GUIDE_CELLS + 1) + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
   });
   return P;
 }
@@ -422,12 +448,15 @@ struct Stat {
 };
 
 // Runs, for every point p, count[p] batches from batch base[p], of one channel group; returns
-// [P][stride][kStride].
+// [P][stride][kStride]. A pilot launch (TRUTH_MODE_PILOT) also fills *pilot with
+// [P][stride][paths_per_batch][kGroup][TRUTH_PILOT_STRIDE]; learn() replaces the view-ray
+// tables and first-direction cells that later TRUTH_MODE_LEARNED launches read.
 class Engine {
  public:
   virtual ~Engine() = default;
   virtual std::vector<double> run(std::size_t group, const std::vector<int>& base, const std::vector<int>& count,
-                                  int stride) = 0;
+                                  int stride, int mode, std::vector<double>* pilot) = 0;
+  virtual void learn(const Prepared& learned) = 0;
 };
 
 struct Group {
@@ -452,29 +481,47 @@ std::vector<Group> groups_of(const Prepared& P) {
   return out;
 }
 
+// The random streams' seed: pilot walks draw from their own family (the high word flipped).
+philox_u32 seed_high(const TruthOptions& o, int mode) {
+  const auto hi = static_cast<philox_u32>(o.seed >> 32);
+  return mode == TRUTH_MODE_PILOT ? hi ^ 0x9e3779b9u : hi;
+}
+std::size_t pilot_size(std::size_t points, int stride, int paths_per_batch) {
+  return points * static_cast<std::size_t>(stride) * static_cast<std::size_t>(paths_per_batch) * kGroup *
+         TRUTH_PILOT_STRIDE;
+}
+
 class HostEngine final : public Engine {
  public:
-  HostEngine(const Prepared& P, const TruthOptions& o) : P_(P), o_(o), groups_(groups_of(P)) {}
-  std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count,
-                          int stride) override {
+  HostEngine(const Prepared& P, const TruthOptions& o) : P_(P), o_(o), groups_(groups_of(P)), cells_(P.cells) {}
+  std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count, int stride,
+                          int mode, std::vector<double>* pilot) override {
     const Group& g = groups_[gi];
     std::vector<double> out(P_.n_points * stride * kStride, 0.0);
+    const std::size_t item_pilot = static_cast<std::size_t>(o_.paths_per_batch) * kGroup * TRUTH_PILOT_STRIDE;
+    if (mode == TRUTH_MODE_PILOT) pilot->assign(pilot_size(P_.n_points, stride, o_.paths_per_batch), 0.0);
     parallel_for(static_cast<long long>(P_.n_points) * stride, [&](long long id) {
       const int p = static_cast<int>(id / stride), j = static_cast<int>(id % stride);
       if (j >= count[p]) return;
       ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.medium.data(),
                              kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
                              o_.split_orders, static_cast<int>(o_.next_sun), static_cast<philox_u32>(o_.seed & 0xffffffffu),
-                             static_cast<philox_u32>(o_.seed >> 32),
-                             static_cast<int>(g.first), static_cast<int>(g.count), &out[id * kStride]);
+                             seed_high(o_, mode), static_cast<int>(g.first), static_cast<int>(g.count), cells_.data(),
+                             mode, &out[id * kStride],
+                             mode == TRUTH_MODE_PILOT ? &(*pilot)[static_cast<std::size_t>(id) * item_pilot] : nullptr);
     });
     return out;
+  }
+  void learn(const Prepared& learned) override {
+    for (Group& g : groups_) g.cdf = group_slice(learned.node_cdf, learned.n_points, learned.n_channels, g.first, g.count);
+    cells_ = learned.cells;
   }
 
  private:
   const Prepared& P_;
   const TruthOptions& o_;
   std::vector<Group> groups_;
+  std::vector<double> cells_;
 };
 
 class DeviceEngine final : public Engine {
@@ -484,6 +531,7 @@ class DeviceEngine final : public Engine {
     program_ = dev.build(kTruthProgram, std::string("-DNCH=") + std::to_string(kGroup) + " " + dev.real_options());
     points_ = cl_util::upload_real(dev, P.points);
     node_t_ = cl_util::upload_real(dev, P.node_t);
+    cells_ = cl_util::upload_real(dev, P.cells);
     for (const Group& g : groups_) {
       GroupBuffers b;
       b.block = ref3::parameter_block(g.a, dev.info().fp64);
@@ -493,17 +541,19 @@ class DeviceEngine final : public Engine {
       buffers_.push_back(std::move(b));
     }
   }
-  std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count,
-                          int stride) override {
+  std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count, int stride,
+                          int mode, std::vector<double>* pilot) override {
     const Group& g = groups_[gi];
     GroupBuffers& b = buffers_[gi];
     const std::size_t n_out = P_.n_points * stride * kStride;
+    const std::size_t n_pilot = mode == TRUTH_MODE_PILOT ? pilot_size(P_.n_points, stride, o_.paths_per_batch) : 1;
     return cl_util::checked("truth_trace", [&] {
       const cl::Buffer base_buf(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, base.size() * sizeof(int),
                                 const_cast<int*>(base.data()));
       const cl::Buffer count_buf(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, count.size() * sizeof(int),
                                  const_cast<int*>(count.data()));
       cl::Buffer out_buf = cl_util::device_real(dev_, n_out);
+      cl::Buffer pilot_buf = cl_util::device_real(dev_, n_pilot);
       cl::Kernel k(program_, "truth_trace");
       cl_uint i = 0;
       k.setArg(i++, b.block.size(), b.block.data());
@@ -523,13 +573,25 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, static_cast<cl_int>(o_.split_orders));
       k.setArg(i++, static_cast<cl_int>(o_.next_sun));
       k.setArg(i++, static_cast<cl_uint>(o_.seed & 0xffffffffu));
-      k.setArg(i++, static_cast<cl_uint>(o_.seed >> 32));
+      k.setArg(i++, static_cast<cl_uint>(seed_high(o_, mode)));
       k.setArg(i++, static_cast<cl_int>(g.first));
       k.setArg(i++, static_cast<cl_int>(g.count));
+      k.setArg(i++, cells_);
+      k.setArg(i++, static_cast<cl_int>(mode));
       k.setArg(i++, out_buf);
+      k.setArg(i++, pilot_buf);
       cl_util::run_1d(dev_, k, P_.n_points * static_cast<std::size_t>(stride));
+      if (mode == TRUTH_MODE_PILOT) *pilot = cl_util::download_real(dev_, pilot_buf, n_pilot);
       return cl_util::download_real(dev_, out_buf, n_out);
     });
+  }
+  void learn(const Prepared& learned) override {
+    cells_ = cl_util::upload_real(dev_, learned.cells);
+    for (std::size_t gi = 0; gi < groups_.size(); ++gi) {
+      groups_[gi].cdf = group_slice(learned.node_cdf, learned.n_points, learned.n_channels, groups_[gi].first,
+                                    groups_[gi].count);
+      buffers_[gi].cdf = cl_util::upload_real(dev_, groups_[gi].cdf);
+    }
   }
 
  private:
@@ -543,7 +605,7 @@ class DeviceEngine final : public Engine {
   std::vector<Group> groups_;
   std::vector<GroupBuffers> buffers_;
   cl::Program program_;
-  cl::Buffer points_, node_t_;
+  cl::Buffer points_, node_t_, cells_;
 };
 
 constexpr int kMaxRounds = 4;           // the first `paths`, then up to 3 top-ups towards the target
@@ -557,6 +619,135 @@ struct Totals {
   double events = 0.0;
   long long walks = 0, truncated = 0, violations = 0;
 };
+
+// One twilight point's pilot walks: per channel, per walk, its record (path_tracer.cl).
+struct PilotWalks {
+  std::vector<std::vector<std::array<double, TRUTH_PILOT_STRIDE>>> channel;  // [C][walks]
+};
+
+// The learned view-ray table of channel c: the fixed table's segments grouped into kLearnBins
+// bins of equal mass (averaged over the channels), each bin's mass ∝ √(its pooled second
+// moment) — the variance-optimal allocation for a pdf that is the fixed one reweighted per bin
+// (for a pdf q·c_k on bin k, Σ_k S_k / c_k with S_k = ∫_k f²/q is least at c_k Q_k ∝ √(S_k Q_k),
+// Q_k = 1/kLearnBins here) — mixed with kKeepFixed of the fixed table.
+void learn_view_table(const PilotWalks& w, const std::vector<double>& norm, int n, double* cdf_all, std::size_t C) {
+  std::vector<double> mean_mass(n - 1, 0.0);
+  for (std::size_t c = 0; c < C; ++c)
+    for (int k = 0; k + 1 < n; ++k) mean_mass[k] += (cdf_all[c * kNodes + k + 1] - cdf_all[c * kNodes + k]) / C;
+  std::vector<int> bin_of(n - 1, 0);
+  double below = 0.0;
+  for (int k = 0; k + 1 < n; ++k) {
+    bin_of[k] = std::min(kLearnBins - 1, static_cast<int>((below + 0.5 * mean_mass[k]) * kLearnBins));
+    below += mean_mass[k];
+  }
+  std::vector<double> second(kLearnBins, 0.0);
+  for (std::size_t c = 0; c < C; ++c) {
+    if (!(norm[c] > 0.0)) continue;
+    for (const auto& rec : w.channel[c]) {
+      const int seg = static_cast<int>(rec[0]);
+      if (seg < 0 || seg + 1 >= n) continue;
+      const double y = rec[4] / norm[c];
+      second[bin_of[seg]] += y * y / static_cast<double>(w.channel[c].size());
+    }
+  }
+  std::vector<double> bin_mass(kLearnBins, 0.0);
+  double total = 0.0;
+  for (int b = 0; b < kLearnBins; ++b) total += bin_mass[b] = std::sqrt(second[b]);
+  if (!(total > 0.0)) return;
+  for (std::size_t c = 0; c < C; ++c) {
+    double* cdf = cdf_all + c * kNodes;
+    std::vector<double> fixed(n - 1), fixed_bin(kLearnBins, 0.0);
+    for (int k = 0; k + 1 < n; ++k) fixed_bin[bin_of[k]] += fixed[k] = cdf[k + 1] - cdf[k];
+    double acc = 0.0;
+    for (int k = 0; k + 1 < n; ++k) {
+      const int b = bin_of[k];
+      const double learned = fixed_bin[b] > 0.0 ? bin_mass[b] / total * fixed[k] / fixed_bin[b] : 0.0;
+      acc += (1.0 - kKeepFixed) * learned + kKeepFixed * fixed[k];
+      cdf[k + 1] = acc;
+    }
+    for (int k = 1; k < n; ++k) cdf[k] /= acc;
+    cdf[n - 1] = 1.0;
+  }
+}
+
+// The learned first-direction cells: mass ∝ √(pooled ∫_cell F_u² du), from the pilot's values
+// beyond order 1 (Y² · q_u estimates it, q_u = the pilot's pdf over the guide's g), with a floor
+// of kCellFloor of the uniform table.
+void learn_cells(const PilotWalks& w, double* cells) {
+  const std::size_t C = w.channel.size();
+  std::vector<double> second(TRUTH_GUIDE_CELLS, 0.0);
+  for (std::size_t c = 0; c < C; ++c) {
+    double norm = 0.0;
+    for (const auto& rec : w.channel[c]) norm += std::fabs(rec[5]);
+    if (!(norm > 0.0)) continue;
+    norm /= static_cast<double>(w.channel[c].size());
+    for (const auto& rec : w.channel[c]) {
+      if (rec[1] < 0.0) continue;
+      const double y = rec[5] / norm;
+      second[ref3::truth_guide_cell(rec[1], rec[2])] += y * y * rec[3] / static_cast<double>(w.channel[c].size());
+    }
+  }
+  double total = 0.0;
+  for (double& x : second) total += x = std::sqrt(x);
+  cells[0] = 0.0;
+  for (int j = 0; j < TRUTH_GUIDE_CELLS; ++j) {
+    const double learned = total > 0.0 ? second[j] / total : 1.0 / TRUTH_GUIDE_CELLS;
+    cells[j + 1] = cells[j] + (1.0 - kCellFloor) * learned + kCellFloor / TRUTH_GUIDE_CELLS;
+  }
+  for (int j = 1; j <= TRUTH_GUIDE_CELLS; ++j) cells[j] /= cells[TRUTH_GUIDE_CELLS];
+}
+
+// Pilot walks for the twilight points, then their learned tables in the engine. The pilot's
+// walks only shape the tables: they are not part of the estimate (their streams are their own).
+void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Totals& totals) {
+  bool any = false;
+  for (char t : P.twilight) any = any || t;
+  if (!any) return;
+  const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
+  const int batches = std::max(1, static_cast<int>(std::ceil(kPilotWalks / static_cast<double>(P.n_channels) /
+                                                             o.paths_per_batch)));
+  std::vector<int> base(P.n_points, 0), count(P.n_points, 0);
+  for (std::size_t p = 0; p < P.n_points; ++p) count[p] = P.twilight[p] ? batches : 0;
+  std::vector<PilotWalks> walks(P.n_points);
+  for (auto& w : walks) w.channel.resize(P.n_channels);
+  std::vector<double> pilot;
+  for (std::size_t g = 0; g < n_groups; ++g) {
+    const std::size_t first = g * kGroup, n_ch = std::min<std::size_t>(kGroup, P.n_channels - first);
+    const std::vector<double> out = engine.run(g, base, count, batches, TRUTH_MODE_PILOT, &pilot);
+    for (std::size_t p = 0; p < P.n_points; ++p)
+      for (int j = 0; j < count[p]; ++j) {
+        const double* item = &out[(p * batches + j) * kStride];
+        totals.events += item[2 * TRUTH_STATS * kGroup];
+        totals.truncated += static_cast<long long>(item[2 * TRUTH_STATS * kGroup + 1]);
+        totals.violations += static_cast<long long>(item[2 * TRUTH_STATS * kGroup + 2]);
+        const double* rec = &pilot[(p * batches + j) * o.paths_per_batch * kGroup * TRUTH_PILOT_STRIDE];
+        for (int i = 0; i < o.paths_per_batch; ++i)
+          for (std::size_t c = 0; c < n_ch; ++c) {
+            std::array<double, TRUTH_PILOT_STRIDE> r{};
+            std::copy_n(rec + (i * kGroup + c) * TRUTH_PILOT_STRIDE, TRUTH_PILOT_STRIDE, r.begin());
+            walks[p].channel[first + c].push_back(r);
+          }
+      }
+  }
+  Prepared learned;
+  learned.n_points = P.n_points;
+  learned.n_channels = P.n_channels;
+  learned.node_cdf = P.node_cdf;
+  learned.cells = P.cells;
+  parallel_for(static_cast<long long>(P.n_points), [&](long long p) {
+    if (!P.twilight[p]) return;
+    const PilotWalks& w = walks[p];
+    std::vector<double> norm(P.n_channels, 0.0);
+    for (std::size_t c = 0; c < P.n_channels; ++c) {
+      for (const auto& rec : w.channel[c]) norm[c] += std::fabs(rec[4]);
+      norm[c] /= std::max<std::size_t>(1, w.channel[c].size());
+    }
+    const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
+    learn_view_table(w, norm, n, &learned.node_cdf[p * P.n_channels * kNodes], P.n_channels);
+    learn_cells(w, &learned.cells[p * (TRUTH_GUIDE_CELLS + 1)]);
+  });
+  engine.learn(learned);
+}
 
 // Traces one chunk of points into r (rows point_base ... of radiance, se, paths).
 void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, TruthResult& r, Totals& totals,
@@ -572,6 +763,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   const std::size_t weight_rows = o.target_weights.size() / P.n_channels;
   const long long launch_batches =
       std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
+  learn_tables(engine, P, o, totals);
   for (int round = 0; round < kMaxRounds; ++round) {
     for (;;) {
       std::vector<int> base(P.n_points), count(P.n_points);
@@ -584,7 +776,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
       if (stride == 0) break;
       for (std::size_t g = 0; g < n_groups; ++g) {
         const std::size_t first = g * kGroup, n_ch = std::min<std::size_t>(kGroup, P.n_channels - first);
-        const std::vector<double> out = engine.run(g, base, count, stride);
+        const std::vector<double> out = engine.run(g, base, count, stride, TRUTH_MODE_LEARNED, nullptr);
         for (std::size_t p = 0; p < P.n_points; ++p)
           for (int j = 0; j < count[p]; ++j) {
             const double* item = &out[(p * stride + j) * kStride];
@@ -693,7 +885,7 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
   for (std::size_t k = 0; k < n_chunks; ++k) {
     const std::size_t first = k * chunk, n = std::min(chunk, points.size() - first);
     const std::vector<TruthPoint> part(points.begin() + first, points.begin() + first + n);
-    const Prepared P = prepare(spec, part, first);
+    const Prepared P = prepare(spec, part, first, o);
     const auto engine = make_engine(P);
     trace_chunk(*engine, P, o, r, totals, [&](double f) {
       if (progress) progress("tracing", (static_cast<double>(k) + f) / static_cast<double>(n_chunks));

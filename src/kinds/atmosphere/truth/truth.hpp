@@ -69,6 +69,11 @@ struct TruthOptions {
   // or one of the two everywhere (tests compare them). Same expectation; other noise and cost.
   enum class NextSun { automatic = 0, along_ray = 1, at_vertex = 2 };
   NextSun next_sun = NextSun::automatic;
+  // Twilight points (those whose walks are guided towards the sunlit air) first trace a few
+  // pilot walks and learn from them where their light comes from: the view ray's segment
+  // table and the first direction's cells (path_tracer.cl "learned guides"). Same
+  // expectation; in deep twilight a fraction of the variance. false: the fixed tables.
+  bool learn = true;
 };
 
 // Radiance per point and traced channel, [point][channel] row-major.
