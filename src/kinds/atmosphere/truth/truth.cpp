@@ -381,8 +381,9 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
     point_geometry(a, points[i], row);
-    // the kernel's rule for guided walks (truth_walk's use_line)
-    const bool twilight = row[PT_NODES] != 0.0 && o.learn &&
+    // learning: guided walks (the kernel's rule, truth_walk's use_line) with the sun below the
+    // horizon; above it the fixed tables reach their precision at less cost than a pilot
+    const bool twilight = row[PT_NODES] != 0.0 && o.learn && row[PT_MU_S] < 0.0 &&
                           (o.next_sun == TruthOptions::NextSun::along_ray ||
                            (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach));
     P.twilight[i] = twilight;
@@ -625,12 +626,13 @@ struct PilotWalks {
   std::vector<std::vector<std::array<double, TRUTH_PILOT_STRIDE>>> channel;  // [C][walks]
 };
 
-// The learned view-ray table of channel c: the fixed table's segments grouped into kLearnBins
-// bins of equal mass (averaged over the channels), each bin's mass ∝ √(its pooled second
-// moment) — the variance-optimal allocation for a pdf that is the fixed one reweighted per bin
+// The learned view-ray tables: the fixed table's segments grouped into kLearnBins bins of equal
+// mass (averaged over the channels), each bin's mass ∝ √(its second moment, each channel's
+// histogram normalised to 1 and then summed: every channel has the same say, whatever its
+// radiance) — the variance-optimal allocation for a pdf that is the fixed one reweighted per bin
 // (for a pdf q·c_k on bin k, Σ_k S_k / c_k with S_k = ∫_k f²/q is least at c_k Q_k ∝ √(S_k Q_k),
 // Q_k = 1/kLearnBins here) — mixed with kKeepFixed of the fixed table.
-void learn_view_table(const PilotWalks& w, const std::vector<double>& norm, int n, double* cdf_all, std::size_t C) {
+void learn_view_table(const PilotWalks& w, int n, double* cdf_all, std::size_t C) {
   std::vector<double> mean_mass(n - 1, 0.0);
   for (std::size_t c = 0; c < C; ++c)
     for (int k = 0; k + 1 < n; ++k) mean_mass[k] += (cdf_all[c * kNodes + k + 1] - cdf_all[c * kNodes + k]) / C;
@@ -640,15 +642,18 @@ void learn_view_table(const PilotWalks& w, const std::vector<double>& norm, int 
     bin_of[k] = std::min(kLearnBins - 1, static_cast<int>((below + 0.5 * mean_mass[k]) * kLearnBins));
     below += mean_mass[k];
   }
-  std::vector<double> second(kLearnBins, 0.0);
+  std::vector<double> second(kLearnBins, 0.0), own(kLearnBins);
   for (std::size_t c = 0; c < C; ++c) {
-    if (!(norm[c] > 0.0)) continue;
+    std::fill(own.begin(), own.end(), 0.0);
+    double sum = 0.0;
     for (const auto& rec : w.channel[c]) {
       const int seg = static_cast<int>(rec[0]);
       if (seg < 0 || seg + 1 >= n) continue;
-      const double y = rec[4] / norm[c];
-      second[bin_of[seg]] += y * y / static_cast<double>(w.channel[c].size());
+      own[bin_of[seg]] += rec[4] * rec[4];
+      sum += rec[4] * rec[4];
     }
+    if (sum > 0.0)
+      for (int b = 0; b < kLearnBins; ++b) second[b] += own[b] / sum;
   }
   std::vector<double> bin_mass(kLearnBins, 0.0);
   double total = 0.0;
@@ -670,22 +675,23 @@ void learn_view_table(const PilotWalks& w, const std::vector<double>& norm, int 
   }
 }
 
-// The learned first-direction cells: mass ∝ √(pooled ∫_cell F_u² du), from the pilot's values
-// beyond order 1 (Y² · q_u estimates it, q_u = the pilot's pdf over the guide's g), with a floor
-// of kCellFloor of the uniform table.
+// The learned first-direction cells: mass ∝ √(∫_cell F_u² du), from the pilot's values beyond
+// order 1 (Y² · q_u estimates it, q_u = the pilot's pdf over the guide's g; pooled over the
+// channels as above), with a floor of kCellFloor of the uniform table.
 void learn_cells(const PilotWalks& w, double* cells) {
   const std::size_t C = w.channel.size();
-  std::vector<double> second(TRUTH_GUIDE_CELLS, 0.0);
+  std::vector<double> second(TRUTH_GUIDE_CELLS, 0.0), own(TRUTH_GUIDE_CELLS);
   for (std::size_t c = 0; c < C; ++c) {
-    double norm = 0.0;
-    for (const auto& rec : w.channel[c]) norm += std::fabs(rec[5]);
-    if (!(norm > 0.0)) continue;
-    norm /= static_cast<double>(w.channel[c].size());
+    std::fill(own.begin(), own.end(), 0.0);
+    double sum = 0.0;
     for (const auto& rec : w.channel[c]) {
       if (rec[1] < 0.0) continue;
-      const double y = rec[5] / norm;
-      second[ref3::truth_guide_cell(rec[1], rec[2])] += y * y * rec[3] / static_cast<double>(w.channel[c].size());
+      const double m = rec[5] * rec[5] * rec[3];
+      own[ref3::truth_guide_cell(rec[1], rec[2])] += m;
+      sum += m;
     }
+    if (sum > 0.0)
+      for (int j = 0; j < TRUTH_GUIDE_CELLS; ++j) second[j] += own[j] / sum;
   }
   double total = 0.0;
   for (double& x : second) total += x = std::sqrt(x);
@@ -737,13 +743,8 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
   parallel_for(static_cast<long long>(P.n_points), [&](long long p) {
     if (!P.twilight[p]) return;
     const PilotWalks& w = walks[p];
-    std::vector<double> norm(P.n_channels, 0.0);
-    for (std::size_t c = 0; c < P.n_channels; ++c) {
-      for (const auto& rec : w.channel[c]) norm[c] += std::fabs(rec[4]);
-      norm[c] /= std::max<std::size_t>(1, w.channel[c].size());
-    }
     const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
-    learn_view_table(w, norm, n, &learned.node_cdf[p * P.n_channels * kNodes], P.n_channels);
+    learn_view_table(w, n, &learned.node_cdf[p * P.n_channels * kNodes], P.n_channels);
     learn_cells(w, &learned.cells[p * (TRUTH_GUIDE_CELLS + 1)]);
   });
   engine.learn(learned);
