@@ -520,36 +520,36 @@ FN void truth_guide_frame(const real* z, const real* sun, real* t1, real* t2) {
 FN real truth_guide_centre(const AtmosphereParameters* a, real h) {
   return TRUTH_GUIDE_LIFT - acos(fmin(a->bottom_radius / radius_of(a, h), R(1.0)));
 }
-/* The Cauchy elevation about e0 truncated to [−π/2, π/2]: u_e ↦ e0 + W tan(lo + u_e (hi − lo)). */
-FN void truth_guide_range(real e0, real* lo, real* hi) {
-  *lo = atan((R(-0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
-  *hi = atan((R(0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
+/* The guide at one vertex: its frame (t1 towards the sun's azimuth, t2 = z × t1, z), and the
+ * Cauchy elevation about e0 truncated to [−π/2, π/2]: u_e ↦ e0 + W tan(lo + u_e (hi − lo)). */
+typedef struct {
+  real z[3], t1[3], t2[3];
+  real e0, lo, hi;
+} TruthGuide;
+FN void truth_guide_at(const real* z, const real* sun, real e0, TruthGuide* g) {
+  truth_guide_frame(z, sun, g->t1, g->t2);
+  for (int k = 0; k < 3; ++k) g->z[k] = z[k];
+  g->e0 = e0;
+  g->lo = atan((R(-0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
+  g->hi = atan((R(0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
 }
-FN void truth_guide_sample(const real* z, const real* sun, real e0, real u_e, real u_phi, real* out) {
-  real t1[3], t2[3];
-  truth_guide_frame(z, sun, t1, t2);
+FN void truth_guide_sample(const TruthGuide* g, real u_e, real u_phi, real* out) {
   const real q = (R(1.0) - TRUTH_GUIDE_RHO) / (R(1.0) + TRUTH_GUIDE_RHO);
   const real phi = R(2.0) * atan(q * tan(ATM_PI * (u_phi - R(0.5))));
-  real lo, hi;
-  truth_guide_range(e0, &lo, &hi);
-  const real e = e0 + TRUTH_GUIDE_WIDTH * tan(lo + u_e * (hi - lo));
+  const real e = g->e0 + TRUTH_GUIDE_WIDTH * tan(g->lo + u_e * (g->hi - g->lo));
   const real ce = cos(e), se = sin(e), cp = cos(phi), sp = sin(phi);
-  for (int k = 0; k < 3; ++k) out[k] = ce * (cp * t1[k] + sp * t2[k]) + se * z[k];
+  for (int k = 0; k < 3; ++k) out[k] = ce * (cp * g->t1[k] + sp * g->t2[k]) + se * g->z[k];
   v3_normalize(out);
 }
-FN real truth_guide_pdf(const real* z, const real* sun, real e0, const real* w) {
-  real t1[3], t2[3];
-  truth_guide_frame(z, sun, t1, t2);
-  const real se = clamp_cosine(dot3(w, z));
+FN real truth_guide_pdf(const TruthGuide* g, const real* w) {
+  const real se = clamp_cosine(dot3(w, g->z));
   const real ce = sqrt(fmax(R(1.0) - se * se, R(0.0)));
   if (!(ce > R(0.0))) return R(0.0); /* the pole: a null set, any finite value */
-  const real e = asin(se), phi = atan2(dot3(w, t2), dot3(w, t1));
+  const real e = asin(se), phi = atan2(dot3(w, g->t2), dot3(w, g->t1));
   const real rho = TRUTH_GUIDE_RHO;
   const real p_phi = (R(1.0) - rho * rho) / (R(2.0) * ATM_PI * (R(1.0) + rho * rho - R(2.0) * rho * cos(phi)));
-  const real x = (e - e0) / TRUTH_GUIDE_WIDTH;
-  real lo, hi;
-  truth_guide_range(e0, &lo, &hi);
-  const real p_e = R(1.0) / ((hi - lo) * TRUTH_GUIDE_WIDTH * (R(1.0) + x * x));
+  const real x = (e - g->e0) / TRUTH_GUIDE_WIDTH;
+  const real p_e = R(1.0) / ((g->hi - g->lo) * TRUTH_GUIDE_WIDTH * (R(1.0) + x * x));
   return p_phi * p_e / ce;
 }
 
@@ -575,15 +575,11 @@ FN real truth_guide_pdf(const real* z, const real* sun, real e0, const real* w) 
 #define TRUTH_MODE_PILOT 1   /* the fixed tables, and the walks' pilot records */
 #define TRUTH_MODE_LEARNED 2 /* the learned view-ray table and first-direction cells */
 /* (u_e, |2u_φ − 1|) of the unit direction w: the inverse of truth_guide_sample. */
-FN void truth_guide_coordinates(const real* z, const real* sun, real e0, const real* w, real* u_e, real* u_abs) {
-  real t1[3], t2[3];
-  truth_guide_frame(z, sun, t1, t2);
-  const real e = asin(clamp_cosine(dot3(w, z)));
-  const real phi = atan2(dot3(w, t2), dot3(w, t1));
+FN void truth_guide_coordinates(const TruthGuide* g, const real* w, real* u_e, real* u_abs) {
+  const real e = asin(clamp_cosine(dot3(w, g->z)));
+  const real phi = atan2(dot3(w, g->t2), dot3(w, g->t1));
   const real q = (R(1.0) - TRUTH_GUIDE_RHO) / (R(1.0) + TRUTH_GUIDE_RHO);
-  real lo, hi;
-  truth_guide_range(e0, &lo, &hi);
-  *u_e = fmin(fmax((atan((e - e0) / TRUTH_GUIDE_WIDTH) - lo) / (hi - lo), R(0.0)), R(1.0));
+  *u_e = fmin(fmax((atan((e - g->e0) / TRUTH_GUIDE_WIDTH) - g->lo) / (g->hi - g->lo), R(0.0)), R(1.0));
   *u_abs = fmin(R(2.0) * atan(tan(R(0.5) * fabs(phi)) / q) / ATM_PI, R(1.0));
 }
 FN int truth_guide_cell(real u_e, real u_abs) {
@@ -599,8 +595,8 @@ FN real truth_learned_density(GLOBAL const real* cells, real u_e, real u_abs) {
 }
 /* A direction from a learned table: a cell by its mass, a point uniform in it, a random side
  * of the sun's azimuth. */
-FN void truth_learned_sample(GLOBAL const real* cells, const real* z, const real* sun, real e0, real u_cell, real u1, real u2,
-                             real u_side, real* out) {
+FN void truth_learned_sample(GLOBAL const real* cells, const TruthGuide* g, real u_cell, real u1, real u2, real u_side,
+                             real* out) {
   int lo = 0, hi = TRUTH_GUIDE_CELLS; /* cells[lo] ≤ u_cell < cells[hi] */
   while (hi - lo > 1) {
     const int mid = (lo + hi) / 2;
@@ -610,7 +606,7 @@ FN void truth_learned_sample(GLOBAL const real* cells, const real* z, const real
   const int ie = lo / TRUTH_GUIDE_PHI, ip = lo % TRUTH_GUIDE_PHI;
   const real u_e = ((real)ie + u1) / (real)TRUTH_GUIDE_E;
   const real u_abs = ((real)ip + u2) / (real)TRUTH_GUIDE_PHI;
-  truth_guide_sample(z, sun, e0, u_e, u_side < R(0.5) ? R(0.5) - R(0.5) * u_abs : R(0.5) + R(0.5) * u_abs, out);
+  truth_guide_sample(g, u_e, u_side < R(0.5) ? R(0.5) - R(0.5) * u_abs : R(0.5) + R(0.5) * u_abs, out);
 }
 
 /* ---- one walk ---------------------------------------------------------------------------- */
@@ -625,9 +621,10 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
                    PhiloxStream* rng, real* radiance_low, real* pilot, int* events, int* truncated,
                    int* violations) {
   *radiance_low = R(0.0);
-  pilot[0] = R(-1.0);
-  pilot[1] = pilot[2] = R(-1.0);
-  pilot[3] = pilot[4] = pilot[5] = R(0.0);
+  if (mode == TRUTH_MODE_PILOT) {
+    pilot[0] = pilot[1] = pilot[2] = R(-1.0);
+    pilot[3] = pilot[4] = pilot[5] = R(0.0);
+  }
   const int use_line = next_sun == TRUTH_NEXT_SUN_LINE ||
                        (next_sun == TRUTH_NEXT_SUN_AUTO && pt[PT_MU_S] < truth_shadow_reach_cosine(a));
   const int n = (int)pt[PT_NODES];
@@ -647,7 +644,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
   const real t0 = node_t[lo], dt = node_t[lo + 1] - node_t[lo];
   if (!(p_k > R(0.0)) || !(dt > R(0.0))) return R(0.0);
   const real t = t0 + philox_uniform(rng) * dt;
-  pilot[0] = (real)lo;
+  if (mode == TRUTH_MODE_PILOT) pilot[0] = (real)lo;
   const real h0 = pt[PT_H], mu0 = pt[PT_MU];
   const int ground0 = pt[PT_GROUND] != R(0.0);
   const real tau = node_tau[lo] + truth_segment_depth(a, c, h0, mu0, ground0, t0, t);
@@ -708,13 +705,14 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       real w1[3];
       const int learned = mode == TRUTH_MODE_LEARNED && order == 1 && use_line;
       const real guide_share = learned ? TRUTH_GUIDE_LEARNED_SHARE : TRUTH_GUIDE_SHARE;
-      const real e0 = truth_guide_centre(a, h);
+      TruthGuide guide;
+      if (use_line) truth_guide_at(z, sun, learned ? truth_guide_centre(a, h) : R(0.0), &guide);
       if (use_line && philox_uniform(rng) < guide_share) {
         if (learned) {
           const real u1 = philox_uniform(rng), u2 = philox_uniform(rng);
-          truth_learned_sample(cells, z, sun, e0, u_type, u1, u2, u_phi, w1);
+          truth_learned_sample(cells, &guide, u_type, u1, u2, u_phi, w1);
         } else {
-          truth_guide_sample(z, sun, e0, u_cos, u_phi, w1);
+          truth_guide_sample(&guide, u_cos, u_phi, w1);
         }
       } else {
         const real cos_t =
@@ -729,12 +727,13 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real pdf_phase = (s_r * p_r + s_m * henyey_greenstein_phase(g, cos_t)) / (s_r + s_m);
       real pdf = pdf_phase;
       if (use_line) {
-        const real g_w = truth_guide_pdf(z, sun, e0, w1);
-        real u_e, u_abs, h_u = R(1.0);
-        truth_guide_coordinates(z, sun, e0, w1, &u_e, &u_abs);
+        const real g_w = truth_guide_pdf(&guide, w1);
+        real u_e = R(0.0), u_abs = R(0.0), h_u = R(1.0);
+        const int record = mode == TRUTH_MODE_PILOT && order == 1;
+        if (learned || record) truth_guide_coordinates(&guide, w1, &u_e, &u_abs);
         if (learned) h_u = truth_learned_density(cells, u_e, u_abs);
         pdf = (R(1.0) - guide_share) * pdf_phase + guide_share * h_u * g_w;
-        if (order == 1) {
+        if (record) {
           pilot[1] = u_e;
           pilot[2] = u_abs;
           pilot[3] = g_w > R(0.0) ? pdf / g_w : R(0.0);
@@ -786,8 +785,10 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       on_ground = 1;
     }
   }
-  pilot[4] = radiance;
-  pilot[5] = radiance - order1;
+  if (mode == TRUTH_MODE_PILOT) {
+    pilot[4] = radiance;
+    pilot[5] = radiance - order1;
+  }
   return radiance;
 }
 

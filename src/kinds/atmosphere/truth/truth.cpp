@@ -147,7 +147,7 @@ struct Prepared {
   std::vector<double> node_t;    // [P][kNodes]
   std::vector<double> node_tau;  // [P][C][kNodes]
   std::vector<double> node_cdf;  // [P][C][kNodes]
-  std::vector<char> twilight;    // [P]: walks guided towards the sunlit air (path_tracer.cl use_line)
+  std::vector<char> twilight;    // [P]: learns its tables (view_table says when)
   std::vector<double> cells;     // [P][TRUTH_GUIDE_CELLS + 1]: the learned first-direction cells
 };
 
@@ -344,20 +344,28 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
 
 // Nodes, optical depth at the nodes and segment probabilities of one point's view ray, for
 // every channel.
-void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, bool twilight,
+// Returns whether the point learns its tables: `guided` (its walks are guided towards sunlit
+// air) and no part of its view ray sees the sun, so that all its light comes from orders ≥ 2,
+// about which β_s ρ T knows nothing.
+bool view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, bool guided,
                 double* row, double* node_t, double* node_tau, double* node_cdf) {
   const std::size_t C = ch.size();
   for (int k = 0; k < kNodes; ++k) node_t[k] = 0.0;
   for (std::size_t c = 0; c < C; ++c)
     for (int k = 0; k < kNodes; ++k) node_tau[c * kNodes + k] = node_cdf[c * kNodes + k] = 0.0;
-  if (row[PT_NODES] == 0.0) return;
+  if (row[PT_NODES] == 0.0) return false;
   const std::vector<double> t = view_nodes(a, kinks, row[PT_H], row[PT_MU], row[PT_D]);
   const int n = static_cast<int>(t.size());
   row[PT_NODES] = n;
   for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
   const Segments seg = view_segments(a, row, t);
-  const double mix = twilight ? kUniformMixTwilight : kUniformMix;
+  bool lit = false;
+  for (const auto& subs : seg.subs)
+    for (const Sub& sub : subs) lit = lit || sub.visible > 0.0;
+  const bool learn = guided && !lit;
+  const double mix = learn ? kUniformMixTwilight : kUniformMix;
   for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, mix, node_tau + c * kNodes, node_cdf + c * kNodes);
+  return learn;
 }
 
 Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base,
@@ -381,13 +389,10 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
     point_geometry(a, points[i], row);
-    // learning: guided walks (the kernel's rule, truth_walk's use_line) with the sun below the
-    // horizon; above it the fixed tables reach their precision at less cost than a pilot
-    const bool twilight = row[PT_NODES] != 0.0 && o.learn && row[PT_MU_S] < 0.0 &&
-                          (o.next_sun == TruthOptions::NextSun::along_ray ||
-                           (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach));
-    P.twilight[i] = twilight;
-    view_table(a, P.channels, kinks, twilight, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
+    // the kernel's rule for guided walks (truth_walk's use_line)
+    const bool guided = o.learn && (o.next_sun == TruthOptions::NextSun::along_ray ||
+                                    (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach));
+    P.twilight[i] = view_table(a, P.channels, kinks, guided, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
                &P.node_cdf[i * P.n_channels * kNodes]);
     for (int j = 0; j <= TRUTH_GUIDE_CELLS; ++j)
       P.cells[i * (TRUTH_GUIDE_CELLS + 1) + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
