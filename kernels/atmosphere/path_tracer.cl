@@ -559,7 +559,9 @@ FN real truth_guide_pdf(const TruthGuide* g, const real* w) {
  * (truth.cpp, learn_guides): a piecewise-constant density h over TRUTH_GUIDE_E × TRUTH_GUIDE_PHI
  * cells of (u_e, |2u_φ − 1|) (symmetric about the sun's azimuth), so the walk's first direction
  * has the pdf h(u(w)) g(w) on the guided share. h is stored as the cells' cumulative masses
- * (TRUTH_GUIDE_CELLS + 1 reals per point, the last 1). Every cell keeps a positive mass, so the
+ * (TRUTH_GUIDE_CELLS + 1 reals per point, the last 1), then a flag: 1 if the point learned
+ * (TRUTH_GUIDE_STRIDE reals per point). The pilot's and the learned walks' first guide is
+ * centred above the vertex's horizon dip (truth_guide_centre), so that both share one map. Every cell keeps a positive mass, so the
  * learned pdf is positive wherever g is, and the one-sample mixture with the phase function
  * stays unbiased whatever was learned. The view ray's segment table is learned likewise
  * (node_cdf). Walks of a pilot launch write, per walk and channel, TRUTH_PILOT_STRIDE reals:
@@ -569,6 +571,7 @@ FN real truth_guide_pdf(const TruthGuide* g, const real* w) {
 #define TRUTH_GUIDE_E 16
 #define TRUTH_GUIDE_PHI 8
 #define TRUTH_GUIDE_CELLS (TRUTH_GUIDE_E * TRUTH_GUIDE_PHI)
+#define TRUTH_GUIDE_STRIDE (TRUTH_GUIDE_CELLS + 2)
 #define TRUTH_GUIDE_LEARNED_SHARE R(0.8)
 #define TRUTH_PILOT_STRIDE 6
 #define TRUTH_MODE_PLAIN 0   /* the fixed tables */
@@ -703,10 +706,12 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const real g = a->mie_g;
       const real u_type = philox_uniform(rng), u_cos = philox_uniform(rng), u_phi = philox_uniform(rng);
       real w1[3];
-      const int learned = mode == TRUTH_MODE_LEARNED && order == 1 && use_line;
+      const int learned =
+          mode == TRUTH_MODE_LEARNED && order == 1 && use_line && cells[TRUTH_GUIDE_CELLS + 1] != R(0.0);
+      const int record = mode == TRUTH_MODE_PILOT && order == 1 && use_line;
       const real guide_share = learned ? TRUTH_GUIDE_LEARNED_SHARE : TRUTH_GUIDE_SHARE;
       TruthGuide guide;
-      if (use_line) truth_guide_at(z, sun, learned ? truth_guide_centre(a, h) : R(0.0), &guide);
+      if (use_line) truth_guide_at(z, sun, learned || record ? truth_guide_centre(a, h) : R(0.0), &guide);
       if (use_line && philox_uniform(rng) < guide_share) {
         if (learned) {
           const real u1 = philox_uniform(rng), u2 = philox_uniform(rng);
@@ -729,7 +734,6 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       if (use_line) {
         const real g_w = truth_guide_pdf(&guide, w1);
         real u_e = R(0.0), u_abs = R(0.0), h_u = R(1.0);
-        const int record = mode == TRUTH_MODE_PILOT && order == 1;
         if (learned || record) truth_guide_coordinates(&guide, w1, &u_e, &u_abs);
         if (learned) h_u = truth_learned_density(cells, u_e, u_abs);
         pdf = (R(1.0) - guide_share) * pdf_phase + guide_share * h_u * g_w;
@@ -798,7 +802,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
  * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item: per channel
  * (mean, m2) of the whole walk, of orders 1..split_order and of the orders above it. Table
  * layouts: node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], medium
- * as TRUTH_MEDIUM_SIZE describes it (majorants, then kinks), cells [P][TRUTH_GUIDE_CELLS + 1]
+ * as TRUTH_MEDIUM_SIZE describes it (majorants, then kinks), cells [P][TRUTH_GUIDE_STRIDE]
  * (read in TRUTH_MODE_LEARNED only). A pilot launch (TRUTH_MODE_PILOT) also writes each walk's
  * record at pilot_item [paths_per_batch][NCH][TRUTH_PILOT_STRIDE]. */
 FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
@@ -819,7 +823,7 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
                            (philox_u32)(channel_base + c));
         real low, rec[TRUTH_PILOT_STRIDE];
         const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
-                                  node_cdf + (p * NCH + c) * nodes, medium, cells + p * (TRUTH_GUIDE_CELLS + 1), mode,
+                                  node_cdf + (p * NCH + c) * nodes, medium, cells + p * TRUTH_GUIDE_STRIDE, mode,
                                   max_orders, split_order, next_sun, &rng, &low, rec, &events, &truncated, &violations);
         if (mode == TRUTH_MODE_PILOT)
           for (int k = 0; k < TRUTH_PILOT_STRIDE; ++k) pilot_item[(i * NCH + c) * TRUTH_PILOT_STRIDE + k] = rec[k];

@@ -36,16 +36,20 @@ constexpr int kSubSegments = 4;
 constexpr int kMaxKinkAltitudes = TRUTH_MAX_KINKS;
 constexpr int kNodes = kSegments + 1 + 2 * kMaxKinkAltitudes;
 // Segment probabilities mix in this much of the uniform density, so that every segment has a
-// positive probability whatever the approximations of the table; points in twilight mix in half:
-// there the light at a vertex grows steeply with its altitude (it sees sunlit air through
-// thinner air), which β_s ρ T does not know, and their pilot walks must explore the whole ray.
+// positive probability whatever the approximations of the table. Pilot walks mix in half: in
+// twilight the light at a vertex grows steeply with its altitude (it sees sunlit air through
+// thinner air), which β_s ρ T does not know, and the pilot must explore the whole ray.
 constexpr double kUniformMix = 1e-3;
-constexpr double kUniformMixTwilight = 0.5;
+constexpr double kUniformMixPilot = 0.5;
 // Learned tables (twilight points, path_tracer.cl "learned guides"): pilot walks per point, all
 // channels together (at least one batch per channel); the view ray's learned bins; the share
-// of the fixed table kept in the learned one (a defensive mixture: a learned table is never
-// worse than 1/share times the fixed one's variance); the floor of each direction cell.
+// of the pilot's table kept in the learned one (a defensive mixture: a learned table is never
+// worse than 1/share times the pilot's variance); the floor of each direction cell; a point
+// keeps its learned tables only where the pilot predicts they cut the view ray's second moment
+// below this fraction of the fixed table's (learned walks reach sunlit air more often, so each
+// costs more: ~1.5× in twilight).
 constexpr double kPilotWalks = 1024;
+constexpr double kLearnGain = 0.5;
 constexpr int kLearnBins = 24;
 constexpr double kKeepFixed = 0.2;
 constexpr double kCellFloor = 0.1;
@@ -147,8 +151,8 @@ struct Prepared {
   std::vector<double> node_t;    // [P][kNodes]
   std::vector<double> node_tau;  // [P][C][kNodes]
   std::vector<double> node_cdf;  // [P][C][kNodes]
-  std::vector<char> twilight;    // [P]: learns its tables (view_table says when)
-  std::vector<double> cells;     // [P][TRUTH_GUIDE_CELLS + 1]: the learned first-direction cells
+  std::vector<char> twilight;    // [P]: may learn its tables (guided walks, the sun below the horizon)
+  std::vector<double> cells;     // [P][TRUTH_GUIDE_STRIDE]: the learned first-direction cells, flag
 };
 
 // The view ray of point p in the frame zenith = (0, 0, 1), view in the xz plane.
@@ -299,8 +303,8 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
 // Channel c's optical depth at the nodes and its segment probabilities (a cdf): segment masses
 // ≈ ∫ β_s ρ T dt (and × V T_sun for the sunlit share), T at each sub-segment's middle with τ
 // linear between the nodes (only the pdf depends on them), mixed with a uniform share.
-void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg,
-                   double uniform_mix, double* tau, double* cdf) {
+void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg, double* tau,
+                   double* cdf) {
   const int n = static_cast<int>(t.size());
   const double D = t.back();
   tau[0] = 0.0;
@@ -327,9 +331,9 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
   cdf[0] = 0.0;
   for (int k = 0; k + 1 < n; ++k) {
     const double uniform = (t[k + 1] - t[k]) / D;
-    const double p = total > 0.0 ? (1.0 - uniform_mix) * ((1.0 - lit_share) * mass[k] / total +
+    const double p = total > 0.0 ? (1.0 - kUniformMix) * ((1.0 - lit_share) * mass[k] / total +
                                                           (lit_share > 0.0 ? lit_share * lit[k] / total_lit : 0.0)) +
-                                       uniform_mix * uniform
+                                       kUniformMix * uniform
                                  : uniform;
     cdf[k + 1] = cdf[k] + p;
   }
@@ -344,28 +348,19 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
 
 // Nodes, optical depth at the nodes and segment probabilities of one point's view ray, for
 // every channel.
-// Returns whether the point learns its tables: `guided` (its walks are guided towards sunlit
-// air) and no part of its view ray sees the sun, so that all its light comes from orders ≥ 2,
-// about which β_s ρ T knows nothing.
-bool view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, bool guided,
-                double* row, double* node_t, double* node_tau, double* node_cdf) {
+void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, double* row,
+                double* node_t, double* node_tau, double* node_cdf) {
   const std::size_t C = ch.size();
   for (int k = 0; k < kNodes; ++k) node_t[k] = 0.0;
   for (std::size_t c = 0; c < C; ++c)
     for (int k = 0; k < kNodes; ++k) node_tau[c * kNodes + k] = node_cdf[c * kNodes + k] = 0.0;
-  if (row[PT_NODES] == 0.0) return false;
+  if (row[PT_NODES] == 0.0) return;
   const std::vector<double> t = view_nodes(a, kinks, row[PT_H], row[PT_MU], row[PT_D]);
   const int n = static_cast<int>(t.size());
   row[PT_NODES] = n;
   for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
   const Segments seg = view_segments(a, row, t);
-  bool lit = false;
-  for (const auto& subs : seg.subs)
-    for (const Sub& sub : subs) lit = lit || sub.visible > 0.0;
-  const bool learn = guided && !lit;
-  const double mix = learn ? kUniformMixTwilight : kUniformMix;
-  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, mix, node_tau + c * kNodes, node_cdf + c * kNodes);
-  return learn;
+  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, node_tau + c * kNodes, node_cdf + c * kNodes);
 }
 
 Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base,
@@ -384,18 +379,19 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   P.node_tau.assign(P.n_points * P.n_channels * kNodes, 0.0);
   P.node_cdf.assign(P.n_points * P.n_channels * kNodes, 0.0);
   P.twilight.assign(P.n_points, 0);
-  P.cells.assign(P.n_points * (TRUTH_GUIDE_CELLS + 1), 0.0);
+  P.cells.assign(P.n_points * TRUTH_GUIDE_STRIDE, 0.0);
   const double reach = ref3::truth_shadow_reach_cosine(&a);
   parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
     point_geometry(a, points[i], row);
-    // the kernel's rule for guided walks (truth_walk's use_line)
-    const bool guided = o.learn && (o.next_sun == TruthOptions::NextSun::along_ray ||
-                                    (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach));
-    P.twilight[i] = view_table(a, P.channels, kinks, guided, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
+    view_table(a, P.channels, kinks, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
                &P.node_cdf[i * P.n_channels * kNodes]);
     for (int j = 0; j <= TRUTH_GUIDE_CELLS; ++j)
-      P.cells[i * (TRUTH_GUIDE_CELLS + 1) + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
+      P.cells[i * TRUTH_GUIDE_STRIDE + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
+    // the kernel's rule for guided walks (truth_walk's use_line), the sun below the horizon
+    const bool guided = o.next_sun == TruthOptions::NextSun::along_ray ||
+                        (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach);
+    P.twilight[i] = o.learn && guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < 0.0;
   });
   return P;
 }
@@ -708,12 +704,63 @@ void learn_cells(const PilotWalks& w, double* cells) {
   for (int j = 1; j <= TRUTH_GUIDE_CELLS; ++j) cells[j] /= cells[TRUTH_GUIDE_CELLS];
 }
 
-// Pilot walks for the twilight points, then their learned tables in the engine. The pilot's
-// walks only shape the tables: they are not part of the estimate (their streams are their own).
+// The pilot's view-ray table of point p: the fixed one mixed half and half with the uniform
+// density (node_t: the segments' lengths).
+void explore_table(const Prepared& P, std::size_t p, double* cdf_all) {
+  const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
+  const double* t = &P.node_t[p * kNodes];
+  for (std::size_t c = 0; c < P.n_channels; ++c) {
+    double* cdf = cdf_all + c * kNodes;
+    double acc = 0.0, prev = 0.0;
+    for (int k = 0; k + 1 < n; ++k) {
+      const double fixed = cdf[k + 1] - prev;
+      prev = cdf[k + 1];
+      acc += (1.0 - kUniformMixPilot) * fixed + kUniformMixPilot * (t[k + 1] - t[k]) / t[n - 1];
+      cdf[k + 1] = acc;
+    }
+    for (int k = 1; k < n; ++k) cdf[k] /= acc;
+    cdf[n - 1] = 1.0;
+  }
+}
+
+// The second moment of the view-ray part of the estimate with table `to` over that with table
+// `from`, predicted from the pilot's walks (drawn with table `pilot`): for piecewise-constant
+// tables over the same segments, E_pilot[Y² q_pilot / q] is the second moment with q; each
+// channel's Y² normalised to sum 1, as the learning pools them.
+double predicted_ratio(const PilotWalks& w, int n, const double* pilot, const double* from, const double* to) {
+  double num = 0.0, den = 0.0;
+  auto mass = [](const double* cdf, int seg) { return cdf[seg + 1] - cdf[seg]; };
+  for (std::size_t c = 0; c < w.channel.size(); ++c) {
+    double sum = 0.0;
+    for (const auto& rec : w.channel[c]) sum += rec[4] * rec[4];
+    if (!(sum > 0.0)) continue;
+    const double *q_p = pilot + c * kNodes, *q_f = from + c * kNodes, *q_t = to + c * kNodes;
+    for (const auto& rec : w.channel[c]) {
+      const int seg = static_cast<int>(rec[0]);
+      if (seg < 0 || seg + 1 >= n || rec[4] == 0.0) continue;
+      const double y2 = rec[4] * rec[4] / sum, qp = mass(q_p, seg);
+      if (mass(q_t, seg) > 0.0) num += y2 * qp / mass(q_t, seg);
+      if (mass(q_f, seg) > 0.0) den += y2 * qp / mass(q_f, seg);
+    }
+  }
+  return den > 0.0 ? num / den : 1.0;
+}
+
+// Pilot walks for the twilight points, then their learned tables in the engine where the pilot
+// predicts a gain (kLearnGain). The pilot's walks only shape the tables: they are not part of
+// the estimate (their streams are their own).
 void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Totals& totals) {
   bool any = false;
   for (char t : P.twilight) any = any || t;
   if (!any) return;
+  Prepared tables;
+  tables.n_points = P.n_points;
+  tables.n_channels = P.n_channels;
+  tables.node_cdf = P.node_cdf;
+  tables.cells = P.cells;
+  for (std::size_t p = 0; p < P.n_points; ++p)
+    if (P.twilight[p]) explore_table(P, p, &tables.node_cdf[p * P.n_channels * kNodes]);
+  engine.learn(tables);
   const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
   const int batches = std::max(1, static_cast<int>(std::ceil(kPilotWalks / static_cast<double>(P.n_channels) /
                                                              o.paths_per_batch)));
@@ -740,18 +787,26 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
           }
       }
   }
-  Prepared learned;
-  learned.n_points = P.n_points;
-  learned.n_channels = P.n_channels;
-  learned.node_cdf = P.node_cdf;
-  learned.cells = P.cells;
+  Prepared learned = tables;
+  std::vector<char> keep(P.n_points, 0);
   parallel_for(static_cast<long long>(P.n_points), [&](long long p) {
-    if (!P.twilight[p]) return;
-    const PilotWalks& w = walks[p];
-    const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
-    learn_view_table(w, n, &learned.node_cdf[p * P.n_channels * kNodes], P.n_channels);
-    learn_cells(w, &learned.cells[p * (TRUTH_GUIDE_CELLS + 1)]);
+    const std::size_t at = p * P.n_channels * kNodes, size = P.n_channels * kNodes;
+    double* cdf = &learned.node_cdf[at];
+    if (P.twilight[p]) {
+      const PilotWalks& w = walks[p];
+      const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
+      learn_view_table(w, n, cdf, P.n_channels);
+      keep[p] = predicted_ratio(w, n, &tables.node_cdf[at], &P.node_cdf[at], cdf) < kLearnGain;
+      if (keep[p]) {
+        learn_cells(w, &learned.cells[p * TRUTH_GUIDE_STRIDE]);
+        learned.cells[p * TRUTH_GUIDE_STRIDE + TRUTH_GUIDE_CELLS + 1] = 1.0;
+      }
+    }
+    if (!keep[p]) std::copy_n(&P.node_cdf[at], size, cdf);  // the fixed table
   });
+  long long kept = 0;
+  for (char k : keep) kept += k;
+  spdlog::debug("truth: {} of {} points learned their tables", kept, P.n_points);
   engine.learn(learned);
 }
 
