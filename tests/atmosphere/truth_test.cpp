@@ -635,6 +635,37 @@ TEST(Truth, TargetRelativeStandardError) {
   EXPECT_GT(*std::max_element(r.paths.begin(), r.paths.end()), 512);  // someone needed more
 }
 
+// The events budget (what bounds the scene check in an optically thick atmosphere): in a
+// Rayleigh layer 100× the Earth's (walks of tens to hundreds of events), a point's walks stop at
+// the budget, whatever max_paths and the precision target ask, and the point says it stopped at
+// its cap; the first batch (which measures the events) is always traced. A budget of 20 events
+// a walk leaves these points their first batch alone; the default Earth's points (~2 events a
+// walk) meet a 5 % target within it.
+TEST(Truth, EventsBudgetBoundsLongWalks) {
+  AtmosphereSpec thick = earth();
+  thick.rayleigh_scattering_per_m_at_1um *= 100.0;
+  const std::vector<TruthPoint> points = {{0, 45, 30, 0}, {1, 80, 60, 90}};
+  TruthOptions o;
+  o.paths = 1024;
+  o.max_paths = 1 << 15;
+  o.target_relative_se = 1e-4;  // unreachable: only a cap stops the walks
+  o.max_events_per_point = 20.0 * o.paths_per_batch;
+  const TruthResult r = trace_truth(thick, device(), points, o);
+  EXPECT_GT(r.mean_events, 20.0);
+  for (std::size_t p = 0; p < points.size(); ++p) {
+    EXPECT_TRUE(r.at_cap[p]) << p;
+    EXPECT_EQ(r.paths[p], o.paths_per_batch) << p;
+  }
+  o.target_relative_se = 0.05;
+  o.paths = 256;
+  const TruthResult e = trace_truth(earth(), device(), points, o);
+  EXPECT_LT(e.mean_events, 20.0);
+  for (std::size_t p = 0; p < points.size(); ++p) {
+    EXPECT_FALSE(e.at_cap[p]) << p;
+    EXPECT_GT(e.paths[p], o.paths_per_batch) << p;
+  }
+}
+
 // ---- against the baked LUTs ------------------------------------------------------------------
 
 // High-sun points (sun zenith 15–45°; views from 0–3 km, at least 15° from the horizon, sky

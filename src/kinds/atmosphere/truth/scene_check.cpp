@@ -35,6 +35,11 @@ constexpr long long kFirstPaths = 1024;
 constexpr long long kMaxPaths = 1LL << 15;
 constexpr double kMaxPathsAt = 0.01;
 constexpr long long kMaxPathsEver = 1LL << 22;
+// The events budget per point and channel: the walk cap times this many scattering events per
+// walk (the default Earth's walks take ~2 on average, so it binds only where walks are long: an
+// optically thick atmosphere, whose walks take up to TRUTH_MAX_EVENTS; there it bounds the
+// check's cost at the price of its precision, which the record and the warnings report).
+constexpr double kEventsPerWalk = 8.0;
 // The spectral reference of rgb bakes: 48 bins of 9.79 nm over 360–830 nm (the spectral mode's
 // default), integrated with the CIE 1931 functions as a spectral bake does.
 constexpr int kReferenceWavelengths = 48;
@@ -197,6 +202,7 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
   const long long cap = scene_walk_cap(traced.scene.relative_se);
   o.paths = kFirstPaths;
   o.max_paths = cap;
+  o.max_events_per_point = kEventsPerWalk * static_cast<double>(cap);
   o.target_relative_se = traced.scene.relative_se;
   o.seed = seed;
   if (traced.spectral) {
@@ -204,6 +210,7 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
     const long long n = static_cast<long long>(sp.lambda_nm.size());
     o.paths = std::max<long long>(64, kFirstPaths * 3 / n);
     o.max_paths = std::max<long long>(o.paths, cap * 3 / n);
+    o.max_events_per_point = kEventsPerWalk * static_cast<double>(o.max_paths);
     // X, Y, Z rows over the wavelengths: the precision target
     const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
     o.target_weights.assign(3 * sp.lambda_nm.size(), 0.0);
@@ -386,7 +393,7 @@ TruthNoise truth_noise(const SceneValues& v, const SceneTraces& tr, double expos
     t.de_se[p] = se_de2000(v.shown_ref[p], ref_se[p], k_ref, exposure_y);
   }
   for (std::size_t p = 0; p < n; ++p)
-    if (tr.bake->paths[p] >= tr.o.max_paths || (tr.reference && tr.spectral->paths[p] >= tr.so.max_paths))
+    if (tr.bake->at_cap[p] || (tr.reference && tr.spectral->at_cap[p]))
       ++t.below_target;
   t.se_de = summarize_errors(select_points(t.de_se, v.dark, false));
   t.se_rel_summary = summarize_errors(t.se_rel);
@@ -490,7 +497,9 @@ std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n
   if (noise.below_target > 0)
     out.push_back("scene check: " + std::to_string(noise.below_target) + " of the " + std::to_string(n) +
                   " points stopped at the truth's walk cap (" + std::to_string(max_paths) +
-                  " walks), their standard error above the target relative_se " + format_g(sc.relative_se) +
+                  " walks, fewer where walks are long: " + format_g(kEventsPerWalk) +
+                  " scattering events a walk on average), their standard error above the target relative_se " +
+                  format_g(sc.relative_se) +
                   " (standard_error in the record says how far)");
   if (n_dark > 0)
     out.push_back("scene check: " + std::to_string(n_dark) + " of the " + std::to_string(n) +
@@ -617,7 +626,7 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
   const bool dark_scene = total.de_summary.count == 0;
   const double value = dark_scene ? std::numeric_limits<double>::quiet_NaN() : total.de_summary.p99;
   long long at_cap = 0;
-  for (std::size_t p = 0; p < n; ++p) at_cap += tr.spectral->paths[p] >= tr.so.max_paths;
+  for (std::size_t p = 0; p < n; ++p) at_cap += tr.spectral->at_cap[p];
   const json details = {
       {"judged_only", "the p99 CIEDE2000 against the 48-wavelength reference alone (no parts: the truth at the "
                       "bake's own wavelengths is not traced)"},

@@ -615,6 +615,10 @@ constexpr int kMaxRounds = 4;           // the first `paths`, then up to 3 top-u
 constexpr double kTopUpMargin = 1.1;    // a top-up asks for 10 % more walks than the estimate
 constexpr long long kLaunchWalks = 1LL << 16;  // walks per point and launch (progress, short launches)
 constexpr long long kLaunchItems = 1LL << 20;  // work items (batches) per launch: bounds the output buffer
+// Scattering events per launch (all points, one channel group), once the first batch of each
+// point has said how many events its walks take: launches of seconds, not hours, in an
+// optically thick atmosphere (progress, and an interrupt, between launches).
+constexpr double kLaunchEvents = 4e6;
 constexpr double kChunkTableBytes = 64e6;      // view-ray tables of one chunk of points (all channels)
 
 // What the walks of all chunks add up to.
@@ -777,6 +781,7 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
       for (int j = 0; j < count[p]; ++j) {
         const double* item = &out[(p * batches + j) * kStride];
         totals.events += item[2 * TRUTH_STATS * kGroup];
+        totals.walks += o.paths_per_batch * static_cast<long long>(n_ch);
         totals.truncated += static_cast<long long>(item[2 * TRUTH_STATS * kGroup + 1]);
         totals.violations += static_cast<long long>(item[2 * TRUTH_STATS * kGroup + 2]);
         const double* rec = &pilot[(p * batches + j) * o.paths_per_batch * kGroup * TRUTH_PILOT_STRIDE];
@@ -811,6 +816,28 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
   engine.learn(learned);
 }
 
+// After the first batch of every point (count[p] of them: 0 or 1): the batches per launch, from
+// the events a walk took (kLaunchEvents), and with an events budget each point's cap on batches
+// (want no more than it).
+void size_launches(const Prepared& P, const TruthOptions& o, const std::vector<double>& events,
+                   const std::vector<int>& count, long long& launch_batches, std::vector<long long>& cap,
+                   std::vector<long long>& want) {
+  const double ppb = o.paths_per_batch;
+  double per_batch = 0.0;  // events of one batch of every point, one channel group
+  for (std::size_t p = 0; p < P.n_points; ++p) {
+    if (count[p] == 0) continue;
+    const double per_walk = events[p] / (ppb * static_cast<double>(P.n_channels));
+    per_batch += per_walk * ppb * std::min<std::size_t>(kGroup, P.n_channels);
+    if (o.max_events_per_point > 0.0) {
+      const auto budget = static_cast<long long>(o.max_events_per_point / (std::max(per_walk, 1.0) * ppb));
+      cap[p] = std::max<long long>(1, std::min(cap[p], budget));
+      want[p] = std::min(want[p], cap[p]);
+    }
+  }
+  if (per_batch > 0.0)
+    launch_batches = std::max<long long>(1, std::min(launch_batches, static_cast<long long>(kLaunchEvents / per_batch)));
+}
+
 // Traces one chunk of points into r (rows point_base ... of radiance, se, paths).
 void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, TruthResult& r, Totals& totals,
                  const std::function<void(double)>& progress) {
@@ -823,8 +850,11 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   std::vector<Stat> stats(P.n_points * P.n_channels * kStats);
   auto stat = [&](std::size_t p, std::size_t c, int k = 0) -> Stat& { return stats[(p * P.n_channels + c) * kStats + k]; };
   const std::size_t weight_rows = o.target_weights.size() / P.n_channels;
-  const long long launch_batches =
+  long long launch_batches =
       std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
+  std::vector<long long> cap(P.n_points, max_batches);  // per point: max_batches, or the events budget's
+  std::vector<double> events(P.n_points, 0.0);          // per point, all its channels
+  bool probed = false;  // the first launch traces one batch per point: its events per walk
   learn_tables(engine, P, o, totals);
   for (int round = 0; round < kMaxRounds; ++round) {
     for (;;) {
@@ -832,7 +862,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
       int stride = 0;
       for (std::size_t p = 0; p < P.n_points; ++p) {
         base[p] = static_cast<int>(done[p]);
-        count[p] = static_cast<int>(std::min(want[p] - done[p], launch_batches));
+        count[p] = static_cast<int>(std::min(want[p] - done[p], probed ? launch_batches : 1LL));
         stride = std::max(stride, count[p]);
       }
       if (stride == 0) break;
@@ -847,9 +877,14 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
                 stat(p, first + c, k).merge(static_cast<double>(ppb), item[2 * (kStats * c + k)],
                                             item[2 * (kStats * c + k) + 1]);
             totals.events += item[2 * kStats * kGroup];
+            events[p] += item[2 * kStats * kGroup];
             totals.truncated += static_cast<long long>(item[2 * kStats * kGroup + 1]);
             totals.violations += static_cast<long long>(item[2 * kStats * kGroup + 2]);
           }
+      }
+      if (!probed) {
+        probed = true;
+        size_launches(P, o, events, count, launch_batches, cap, want);
       }
       long long total_done = 0, total_want = 0;
       for (std::size_t p = 0; p < P.n_points; ++p) {
@@ -883,7 +918,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
           ask(stat(p, 0).n, L, std::sqrt(var));
         }
       }
-      const long long w = std::min(max_batches, static_cast<long long>(std::ceil(need / ppb)));
+      const long long w = std::min(cap[p], static_cast<long long>(std::ceil(need / ppb)));
       if (w > want[p]) {
         want[p] = w;
         more = true;
@@ -894,6 +929,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   for (std::size_t p = 0; p < P.n_points; ++p) {
     const std::size_t row = P.point_base + p;
     r.paths[row] = done[p] * ppb;
+    r.at_cap[row] = done[p] >= cap[p];
     totals.walks += done[p] * ppb * static_cast<long long>(P.n_channels);
     for (std::size_t c = 0; c < P.n_channels; ++c) {
       const std::size_t i = row * P.n_channels + c;
@@ -933,6 +969,7 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
   r.radiance.assign(r.points * r.channels, 0.0);
   r.standard_error.assign(r.points * r.channels, 0.0);
   r.paths.assign(r.points, 0);
+  r.at_cap.assign(r.points, 0);
   if (!o.target_weights.empty() && o.target_weights.size() % r.channels != 0)
     throw InputError(Location{{}, 0, 0, "target_weights"},
                      "rows of " + std::to_string(r.channels) + " weights (one per traced channel)");

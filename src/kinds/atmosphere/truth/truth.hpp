@@ -74,6 +74,10 @@ struct TruthOptions {
   // table and the first direction's cells (path_tracer.cl "learned guides"). Same
   // expectation; in deep twilight a fraction of the variance. false: the fixed tables.
   bool learn = true;
+  // > 0: a point's walks stop once they would take more scattering events than this (per
+  // channel; measured on the point's first batch), whatever max_paths allows: what bounds the
+  // cost in an optically thick atmosphere, where a walk takes up to TRUTH_MAX_EVENTS events.
+  double max_events_per_point = 0.0;
 };
 
 // Radiance per point and traced channel, [point][channel] row-major.
@@ -84,6 +88,7 @@ struct TruthResult {
   std::vector<double> radiance;        // W m^-2 sr^-1 nm^-1
   std::vector<double> standard_error;  // of radiance, from the per-walk sample variance
   std::vector<long long> paths;        // walks per point (for each of its channels)
+  std::vector<char> at_cap;            // per point: its walks stopped at max_paths or the events budget
   // With TruthOptions::split_orders = N: the same walks' orders 1..N (low) and orders > N
   // (high), low + high = radiance; empty otherwise.
   int split_orders = 0;
