@@ -43,6 +43,8 @@
  *  - new directions: the mixture of Rayleigh (exact inversion) and Henyey–Greenstein with the
  *    same g, weighted by (β_R P_R + β_M P_M)/(β_R P_R + β_M P_HG) ∈ [0.57, 1.14] for g = 0.8;
  *    cosine-weighted after the ground (weight a);
+ *  - twilight points (sun below the horizon, guided walks) may first learn from pilot walks a
+ *    view-ray table and a density for their first direction ("learned guides" below);
  *  - Russian roulette on the relative throughput (all orders), or a stop after order N.
  * Majorant: σ̄ = max of σ_t over altitudes ≥ h_min (a table of TRUTH_SHELLS altitude shells
  * built by the host from the exact maxima of the profiles), h_min the lowest altitude left on
@@ -556,27 +558,27 @@ FN real truth_guide_pdf(const TruthGuide* g, const real* w) {
 /* ---- learned guides (twilight points) ------------------------------------------------------- */
 /* The guide above is a map from the unit square (u_e, u_φ) to directions, with pdf g(w) for
  * uniform (u_e, u_φ). Where the light comes from is learned per point from a few pilot walks
- * (truth.cpp, learn_guides): a piecewise-constant density h over TRUTH_GUIDE_E × TRUTH_GUIDE_PHI
+ * (truth.cpp, learn_tables): a piecewise-constant density h over TRUTH_GUIDE_E × TRUTH_GUIDE_PHI
  * cells of (u_e, |2u_φ − 1|) (symmetric about the sun's azimuth), so the walk's first direction
  * has the pdf h(u(w)) g(w) on the guided share. h is stored as the cells' cumulative masses
  * (TRUTH_GUIDE_CELLS + 1 reals per point, the last 1), then a flag: 1 if the point learned
- * (TRUTH_GUIDE_STRIDE reals per point). The pilot's and the learned walks' first guide is
- * centred above the vertex's horizon dip (truth_guide_centre), so that both share one map. Every cell keeps a positive mass, so the
+ * (TRUTH_GUIDE_STRIDE reals per point; a point that did not walks with the fixed guide). The
+ * pilot's and the learned walks' first guide is centred above the vertex's horizon dip
+ * (truth_guide_centre), so that both share one map. Every cell keeps a positive mass, so the
  * learned pdf is positive wherever g is, and the one-sample mixture with the phase function
  * stays unbiased whatever was learned. The view ray's segment table is learned likewise
- * (node_cdf). Walks of a pilot launch write, per walk and channel, TRUTH_PILOT_STRIDE reals:
- * the view ray's segment, the first direction's cell coordinates (u_e, |2u_φ − 1|; −1 when
- * no direction was drawn), its mixture pdf over g, the walk's value and its value beyond
- * order 1. */
+ * (node_cdf, host side). Walks of a pilot launch write, per walk and channel,
+ * TRUTH_PILOT_STRIDE reals: the view ray's segment, the first direction's cell coordinates
+ * (u_e, |2u_φ − 1|; −1 when no direction was drawn), its mixture pdf over g, the walk's value
+ * and its value beyond order 1. */
 #define TRUTH_GUIDE_E 16
 #define TRUTH_GUIDE_PHI 8
 #define TRUTH_GUIDE_CELLS (TRUTH_GUIDE_E * TRUTH_GUIDE_PHI)
 #define TRUTH_GUIDE_STRIDE (TRUTH_GUIDE_CELLS + 2)
 #define TRUTH_GUIDE_LEARNED_SHARE R(0.8)
 #define TRUTH_PILOT_STRIDE 6
-#define TRUTH_MODE_PLAIN 0   /* the fixed tables */
-#define TRUTH_MODE_PILOT 1   /* the fixed tables, and the walks' pilot records */
-#define TRUTH_MODE_LEARNED 2 /* the learned view-ray table and first-direction cells */
+#define TRUTH_MODE_PILOT 1   /* the pilot's tables, and the walks' pilot records */
+#define TRUTH_MODE_LEARNED 2 /* each point's tables: learned where its flag says so, else fixed */
 /* (u_e, |2u_φ − 1|) of the unit direction w: the inverse of truth_guide_sample. */
 FN void truth_guide_coordinates(const TruthGuide* g, const real* w, real* u_e, real* u_abs) {
   const real e = asin(clamp_cosine(dot3(w, g->z)));
