@@ -1043,7 +1043,9 @@ nlohmann::json TruthResult::summary() const {
                      "tabulated optical depth, delta tracking, sun by next-event estimation with ratio "
                      "tracking (at vertices after the first, for points whose sun is low enough for the "
                      "planet's shadow to matter, its expectation along the ray drawn on the ray's sunlit "
-                     "part), Philox4x32-10 streams per (seed, path, point, channel)"},
+                     "part; points with the sun below the horizon first trace pilot walks and keep a learned view-ray "
+                     "table and first direction where the pilot predicts a gain), Philox4x32-10 streams per (seed, "
+                     "path, point, channel)"},
           {"wavelengths_nm", lambda_nm},
           {"channels", channel_names},
           {"points", points},
