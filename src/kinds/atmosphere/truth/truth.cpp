@@ -632,6 +632,27 @@ struct PilotWalks {
   std::vector<std::vector<std::array<double, TRUTH_PILOT_STRIDE>>> channel;  // [C][walks]
 };
 
+// A second-moment histogram over n bins pooled over the channels: bin(record) (< 0: skip) and
+// moment(record) per walk, each channel's histogram normalised to sum 1 before they are added,
+// so that every channel has the same say whatever its radiance.
+template <class Bin, class Moment>
+std::vector<double> pooled_second_moments(const PilotWalks& w, int n, const Bin& bin, const Moment& moment) {
+  std::vector<double> pooled(n, 0.0), own(n);
+  for (const auto& walks : w.channel) {
+    std::fill(own.begin(), own.end(), 0.0);
+    double sum = 0.0;
+    for (const auto& rec : walks) {
+      const int b = bin(rec);
+      if (b < 0) continue;
+      own[b] += moment(rec);
+      sum += moment(rec);
+    }
+    if (sum > 0.0)
+      for (int b = 0; b < n; ++b) pooled[b] += own[b] / sum;
+  }
+  return pooled;
+}
+
 // The learned view-ray tables: the fixed table's segments grouped into kLearnBins bins of equal
 // mass (averaged over the channels), each bin's mass ∝ √(its second moment, each channel's
 // histogram normalised to 1 and then summed: every channel has the same say, whatever its
@@ -648,19 +669,13 @@ void learn_view_table(const PilotWalks& w, int n, double* cdf_all, std::size_t C
     bin_of[k] = std::min(kLearnBins - 1, static_cast<int>((below + 0.5 * mean_mass[k]) * kLearnBins));
     below += mean_mass[k];
   }
-  std::vector<double> second(kLearnBins, 0.0), own(kLearnBins);
-  for (std::size_t c = 0; c < C; ++c) {
-    std::fill(own.begin(), own.end(), 0.0);
-    double sum = 0.0;
-    for (const auto& rec : w.channel[c]) {
-      const int seg = static_cast<int>(rec[0]);
-      if (seg < 0 || seg + 1 >= n) continue;
-      own[bin_of[seg]] += rec[4] * rec[4];
-      sum += rec[4] * rec[4];
-    }
-    if (sum > 0.0)
-      for (int b = 0; b < kLearnBins; ++b) second[b] += own[b] / sum;
-  }
+  const std::vector<double> second = pooled_second_moments(
+      w, kLearnBins,
+      [&](const auto& rec) {
+        const int seg = static_cast<int>(rec[0]);
+        return seg < 0 || seg + 1 >= n ? -1 : bin_of[seg];
+      },
+      [](const auto& rec) { return rec[4] * rec[4]; });
   std::vector<double> bin_mass(kLearnBins, 0.0);
   double total = 0.0;
   for (int b = 0; b < kLearnBins; ++b) total += bin_mass[b] = std::sqrt(second[b]);
@@ -685,20 +700,9 @@ void learn_view_table(const PilotWalks& w, int n, double* cdf_all, std::size_t C
 // order 1 (Y² · q_u estimates it, q_u = the pilot's pdf over the guide's g; pooled over the
 // channels as above), with a floor of kCellFloor of the uniform table.
 void learn_cells(const PilotWalks& w, double* cells) {
-  const std::size_t C = w.channel.size();
-  std::vector<double> second(TRUTH_GUIDE_CELLS, 0.0), own(TRUTH_GUIDE_CELLS);
-  for (std::size_t c = 0; c < C; ++c) {
-    std::fill(own.begin(), own.end(), 0.0);
-    double sum = 0.0;
-    for (const auto& rec : w.channel[c]) {
-      if (rec[1] < 0.0) continue;
-      const double m = rec[5] * rec[5] * rec[3];
-      own[ref3::truth_guide_cell(rec[1], rec[2])] += m;
-      sum += m;
-    }
-    if (sum > 0.0)
-      for (int j = 0; j < TRUTH_GUIDE_CELLS; ++j) second[j] += own[j] / sum;
-  }
+  std::vector<double> second = pooled_second_moments(
+      w, TRUTH_GUIDE_CELLS, [](const auto& rec) { return rec[1] < 0.0 ? -1 : ref3::truth_guide_cell(rec[1], rec[2]); },
+      [](const auto& rec) { return rec[5] * rec[5] * rec[3]; });
   double total = 0.0;
   for (double& x : second) total += x = std::sqrt(x);
   cells[0] = 0.0;
