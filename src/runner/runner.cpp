@@ -348,8 +348,9 @@ std::vector<JobReport> Runner::plan() {
       calibrate_estimate(r.estimate, store.job_dir(it.job->name) / "latest", r.device);
       r.reason = current ? (options_.force ? "up to date; --force rebuilds it" : "up to date; would be skipped")
                          : "would be built";
-      // plan writes nothing: it reads what earlier runs kept (an auto search's scene truth)
-      const ResultStore results(results_dir(it.output), /*writable=*/false);
+      // plan publishes nothing; what an auto search traces and chooses is kept for `run` (and
+      // what earlier runs kept is read)
+      const ResultStore results(results_dir(it.output));
       Memo memo;
       memo.store = &results;
       JobContext ctx{devices.get(info)};

@@ -109,7 +109,8 @@ class Runner {
   // everything (usage, unwritable output); job failures are in the reports. On a stop request
   // the reports so far are returned with the current job marked "interrupted".
   std::vector<JobReport> run();
-  // What run() would do, with resolved parameters and estimates; writes nothing.
+  // What run() would do, with resolved parameters and estimates; publishes nothing (an atmosphere's
+  // auto search is kept in the output's result store for run()).
   std::vector<JobReport> plan();
 
  private:

@@ -332,7 +332,7 @@ TEST(AutoSettingsCli, PlanReportsASearchThatFailsAsFailed) {
   EXPECT_EQ(r["jobs"][0]["exit_code"], 1);
   EXPECT_FALSE(r["jobs"][0]["parameters"]["auto"]["met"].get<bool>()) << r.dump();
   EXPECT_FALSE(r["jobs"][0]["parameters"]["auto"]["tries"].empty());
-  EXPECT_FALSE(fs::exists(tmp / "out"));
+  EXPECT_FALSE(fs::exists(tmp / "out" / "sky"));  // no bundle (the search is kept in out/.results)
 
   t::write_file(tmp / "c.yaml", job + "    tolerance_advisory: true\n");
   p = t::run_cli({"plan", (tmp / "c.yaml").string()}, tmp.path());
@@ -349,7 +349,7 @@ TEST(AutoSettingsCli, MetAtTheStartBakesHalfTheDefaultSizes) {
   const auto p = t::run_cli({"plan", (tmp / "c.yaml").string(), "-v"}, tmp.path());
   ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
   EXPECT_NE(p.out.find("scattering 16x64x16x4"), std::string::npos) << p.out;  // the resolved sizes
-  EXPECT_FALSE(fs::exists(tmp / "out"));
+  EXPECT_FALSE(fs::exists(tmp / "out" / "sky"));  // no bundle (the search is kept in out/.results)
 
   const auto r = t::run_cli({"run", (tmp / "c.yaml").string()}, tmp.path());
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
@@ -383,6 +383,57 @@ TEST(AutoSettingsCli, MetAtTheStartBakesHalfTheDefaultSizes) {
       EXPECT_EQ(f["shape"], (json{16, 64, 64, 3})) << f;
     }
   EXPECT_TRUE(seen);
+}
+
+// `plan` keeps its search in the output's result store and `run` bakes the kept choice without
+// searching again (one bake, the same judged error: the same bytes on the same device); a plan
+// after that shows the kept search without baking; a change the search depends on (here the
+// tolerance) searches again.
+TEST(AutoSettingsCli, RunBakesThePlansKeptSearchWithoutSearchingAgain) {
+  t::TempDir tmp;
+  const std::string job =
+      "specbake: 1\noutput: out\njobs:\n  - name: sky\n    kind: atmosphere\n    orders: 2\n"
+      "    sizes: auto\n    spectrum: auto\n    previews: none\n";
+  t::write_file(tmp / "c.yaml",
+                job + "    scene: {points: 8, relative_se: 0.1, sun_elevation_deg: [20, 60], tolerance_de2000: 100}\n");
+  auto p = t::run_cli({"plan", (tmp / "c.yaml").string(), "-v", "--report", (tmp / "p.json").string()}, tmp.path());
+  ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
+  const json planned = t::read_json(tmp / "p.json")["jobs"][0]["parameters"]["auto"];
+  ASSERT_TRUE(planned.contains("kept")) << planned.dump();
+  EXPECT_FALSE(planned.contains("reused"));
+  const std::string entry = planned["kept"];
+  EXPECT_TRUE(fs::exists(tmp / "out" / ".results" / entry));
+  EXPECT_FALSE(fs::exists(tmp / "out" / "sky"));  // plan publishes no bundle
+
+  const auto r = t::run_cli({"run", (tmp / "c.yaml").string(), "-v"}, tmp.path());
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.err.find("without searching again"), std::string::npos) << r.err;
+  EXPECT_EQ(r.err.find("auto try"), std::string::npos) << r.err;  // no try baked
+  const json m = t::read_json(tmp / "out" / "sky" / "latest" / "manifest.json");
+  const json& a = m["parameters"]["auto"];
+  EXPECT_EQ(a["reused"], entry);
+  EXPECT_EQ(a["tries"], planned["tries"]);
+  EXPECT_EQ(a["chosen"], planned["chosen"]);
+  // the choice judged where the search judged it, with the kept truths: the same error
+  EXPECT_EQ(m["accuracy"][0]["value"].get<double>(), planned["rounds"][0]["error"].get<double>());
+  EXPECT_EQ(m["accuracy"][1]["value"].get<double>(), planned["rounds"][0]["held_out_error"].get<double>());
+  bool listed = false;
+  for (const auto& e : m["results_kept"]) listed = listed || e == entry;
+  EXPECT_TRUE(listed) << m["results_kept"];  // so `gc` keeps it
+
+  p = t::run_cli({"plan", (tmp / "c.yaml").string(), "-v", "--report", (tmp / "p.json").string()}, tmp.path());
+  ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
+  EXPECT_EQ(t::read_json(tmp / "p.json")["jobs"][0]["parameters"]["auto"]["reused"], entry);
+  EXPECT_EQ(p.err.find("auto try"), std::string::npos) << p.err;
+
+  t::write_file(tmp / "c.yaml",
+                job + "    scene: {points: 8, relative_se: 0.1, sun_elevation_deg: [20, 60], tolerance_de2000: 90}\n");
+  p = t::run_cli({"plan", (tmp / "c.yaml").string(), "-v", "--report", (tmp / "p.json").string()}, tmp.path());
+  ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
+  const json again = t::read_json(tmp / "p.json")["jobs"][0]["parameters"]["auto"];
+  EXPECT_FALSE(again.contains("reused")) << again.dump();
+  EXPECT_NE(again["kept"], entry);
+  EXPECT_NE(p.err.find("auto try"), std::string::npos) << p.err;
 }
 
 }  // namespace

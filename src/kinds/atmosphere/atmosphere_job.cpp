@@ -108,16 +108,36 @@ InterpolationError interpolation_error(const Model& m, const SpectralLuts& store
 }
 
 // With sizes: auto / spectrum: auto the plan runs the search (it bakes its tries on the device
-// and writes nothing) and shows the chosen settings and their predicted bake time.
+// and publishes nothing) and shows the chosen settings and their predicted bake time. The search
+// is kept in the output's result store, where `run` finds it and bakes the choice without
+// searching again; a search kept by an earlier plan or run is shown without baking anything.
 json plan(const AtmosphereSpec& spec, JobContext& ctx) {
   if (!spec.auto_sizes && !spec.auto_spectrum) return parameters_json(spec);
   Memo local;
-  AutoSearch found = search_settings(spec, ctx.device, ctx.progress, ctx.memo ? *ctx.memo : local);
-  json p = parameters_json(found.resolved);
-  p["auto"] = found.record;
-  if (!found.met) {
-    if (ctx.judge) throw BakeFailed(found.failure, p);  // as `run` would fail: its best try reported
-    p["auto"]["failure"] = found.failure;
+  Memo& memo = ctx.memo ? *ctx.memo : local;
+  AtmosphereSpec resolved;
+  json record;
+  bool met = false;
+  std::string failure;
+  if (std::optional<KeptSearch> k = find_kept_search(spec, ctx.device, memo)) {
+    resolved = with_settings(spec, k->chosen);
+    resolved.scene.relative_se = k->relative_se;
+    record = k->record;
+    record["reused"] = k->entry;
+    met = k->met;
+    failure = k->failure;
+  } else {
+    AutoSearch found = kept_search_settings(spec, ctx.device, ctx.progress, memo);
+    resolved = found.resolved;
+    record = found.record;
+    met = found.met;
+    failure = found.failure;
+  }
+  json p = parameters_json(resolved);
+  p["auto"] = record;
+  if (!met) {
+    if (ctx.judge) throw BakeFailed(failure, p);  // as `run` would fail: its best try reported
+    p["auto"]["failure"] = failure;
   }
   return p;
 }
@@ -156,7 +176,7 @@ void compute_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Ba
 AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b,
                            std::optional<SceneCheck>& checked, SceneCheck& held_out, int& held_out_first) {
   ctx.enter(Stage::compute);
-  AutoSearch found = search_settings(
+  AutoSearch found = kept_search_settings(
       spec, ctx.device, [&](std::string_view what, double f) { ctx.progress(what, f * kComputeShare); }, *ctx.memo);
   b = std::move(found.baked);
   checked = std::move(found.check);  // the search judged its choice already, and at held-out points

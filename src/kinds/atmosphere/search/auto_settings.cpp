@@ -11,7 +11,13 @@
 #include <vector>
 
 #include "atmosphere/limits.h"
+#include "core/hash.hpp"
 #include "core/text.hpp"
+#include "core/version.hpp"
+#include "io/result_store.hpp"
+#include "kinds/atmosphere/bake/pass.hpp"
+#include "kinds/atmosphere/model/scene.hpp"
+#include "kinds/atmosphere/truth/truth.hpp"
 
 namespace specbake::atmosphere {
 
@@ -113,6 +119,37 @@ json settings_json(const AtmosphereSpec& s) {
                      {"scattering", {{"r", s.scattering_r}, {"mu", s.scattering_mu}, {"mu_s", s.scattering_mu_s},
                                      {"nu", s.scattering_nu}}}}},
           {"spectrum", s.spectral ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}} : json("rgb")}};
+}
+
+AtmosphereSpec with_settings(const AtmosphereSpec& spec, const json& settings) {
+  AtmosphereSpec s = spec;
+  s.auto_sizes = s.auto_spectrum = false;
+  try {
+    const json& z = settings.at("sizes");
+    s.transmittance_mu = z.at("transmittance").at(0).get<int>();
+    s.transmittance_r = z.at("transmittance").at(1).get<int>();
+    s.irradiance_mu_s = z.at("irradiance").at(0).get<int>();
+    s.irradiance_r = z.at("irradiance").at(1).get<int>();
+    const json& sc = z.at("scattering");
+    s.scattering_r = sc.at("r").get<int>();
+    s.scattering_mu = sc.at("mu").get<int>();
+    s.scattering_mu_s = sc.at("mu_s").get<int>();
+    s.scattering_nu = sc.at("nu").get<int>();
+    const json& sp = settings.at("spectrum");
+    s.spectral = sp.is_object();
+    if (s.spectral) {
+      s.min_nm = sp.at("min_nm").get<double>();
+      s.max_nm = sp.at("max_nm").get<double>();
+      s.count = sp.at("count").get<int>();
+    } else if (sp != "rgb") {
+      throw std::runtime_error("spectrum is neither \"rgb\" nor {min_nm, max_nm, count}");
+    }
+  } catch (const json::exception& e) {
+    throw std::runtime_error(std::string("settings record: ") + e.what());
+  }
+  if (!sizes_within_limits(s) || s.scattering_mu % 2 != 0 || (s.spectral && s.count < 1))
+    throw std::runtime_error("settings record: sizes or spectrum out of range");
+  return s;
 }
 
 AtmosphereSpec search_start(const AtmosphereSpec& spec) {
@@ -324,6 +361,131 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                                  }()}}}};
   if (!stopped.is_null()) out.record["stopped"] = stopped;
   return out;
+}
+
+// ---- Kept searches -------------------------------------------------------------------------
+
+std::string search_key(const AtmosphereSpec& spec, cl_util::Device& dev) {
+  const json searched = {{"sizes", spec.auto_sizes},
+                         {"spectrum", spec.auto_spectrum},
+                         {"relative_se_given", spec.scene.relative_se_given}};
+  return std::string("atmosphere.search/") + parameters_json(spec).dump() + "/scene " + scene_json(spec.scene).dump() +
+         "/searched " + searched.dump() + "/bake " + sha256_hex(expanded_program(kProgram)) + "/truth " +
+         sha256_hex(expanded_program(kTruthProgram)) + "/host " + kHostSources + "/device " +
+         device_identity(dev.info()).dump() + "/version " + kVersion;
+}
+
+namespace {
+
+std::string kept_bytes(const KeptSearch& k) {
+  const json j = {{"chosen", k.chosen},
+                  {"judged_points", k.judged_points},
+                  {"relative_se", k.relative_se},
+                  {"held_out_first", k.held_out_first},
+                  {"met", k.met},
+                  {"unresolved", k.unresolved},
+                  {"failure", k.failure},
+                  {"record", k.record}};
+  const std::vector<std::uint8_t> cbor = json::to_cbor(j);
+  return std::string(cbor.begin(), cbor.end());
+}
+
+KeptSearch kept_from_bytes(const std::string& bytes) {
+  const json j = json::from_cbor(bytes);
+  KeptSearch k;
+  k.chosen = j.at("chosen");
+  k.judged_points = j.at("judged_points").get<int>();
+  k.relative_se = j.at("relative_se").get<double>();
+  k.held_out_first = j.at("held_out_first").get<int>();
+  k.met = j.at("met").get<bool>();
+  k.unresolved = j.at("unresolved").get<bool>();
+  k.failure = j.at("failure").get<std::string>();
+  k.record = j.at("record");
+  if (k.judged_points < 1 || !(k.relative_se > 0.0) || !k.record.is_object())
+    throw std::runtime_error("a search record out of range");
+  return k;
+}
+
+// The kept choice baked once and judged where its search judged it, with the same truths (kept
+// beside it): the same bytes as the search's own bake of it on the same device.
+AutoSearch replay(const AtmosphereSpec& spec, const KeptSearch& k, cl_util::Device& dev, const Progress& progress,
+                  Memo& memo) {
+  AutoSearch out;
+  out.resolved = with_settings(spec, k.chosen);
+  out.resolved.scene.relative_se = k.relative_se;
+  out.baked = bake_luts(out.resolved, dev, [&](std::string_view what, double f) {
+    progress("auto: the kept choice, " + std::string(what), 0.8 * f);
+  }, 24);
+  AtmosphereSpec judged = out.resolved;
+  judged.scene.points = k.judged_points;
+  out.check = check_scene(judged, out.baked.luts, out.baked.orders_used, dev, [&](std::string_view, double f) {
+    progress("auto: the choice's scene check", 0.8 + 0.15 * f);
+  }, &memo);
+  out.held_out_first = k.held_out_first;
+  if (k.held_out_first >= 0)
+    out.held_out = check_scene(out.resolved, out.baked.luts, out.baked.orders_used, dev,
+                               [&](std::string_view, double f) { progress("auto: held-out check", 0.95 + 0.05 * f); },
+                               &memo, k.held_out_first);
+  out.met = k.met;
+  out.unresolved = k.unresolved;
+  out.failure = k.failure;
+  out.record = k.record;
+  out.record["reused"] = k.entry;
+  const json& rounds = k.record.value("rounds", json::array());
+  const double searched = rounds.empty() ? std::nan("") : rounds.back().value("error", std::nan(""));
+  if (!(out.check.record.value == searched))
+    spdlog::warn("atmosphere: auto: the kept choice judges {} where its search judged {} (a bake that differs "
+                 "from the search's: another device state or driver?)",
+                 format_g(out.check.record.value), format_g(searched));
+  return out;
+}
+
+}  // namespace
+
+std::optional<KeptSearch> find_kept_search(const AtmosphereSpec& spec, cl_util::Device& dev, Memo& memo) {
+  if (!memo.store) return std::nullopt;
+  const std::string key = search_key(spec, dev);
+  const std::optional<std::string> bytes = memo.store->get(key);
+  if (!bytes) return std::nullopt;
+  const std::string name = ResultStore::name_of(key);
+  try {
+    KeptSearch k = kept_from_bytes(*bytes);
+    with_settings(spec, k.chosen);  // readable
+    k.entry = name;
+    return k;
+  } catch (const std::exception& e) {
+    spdlog::warn("{}: not used ({}); searching again", (memo.store->dir() / name).string(), e.what());
+    return std::nullopt;
+  }
+}
+
+AutoSearch kept_search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo) {
+  if (std::optional<KeptSearch> k = find_kept_search(spec, dev, memo)) {
+    spdlog::info("atmosphere: auto: the search kept in {} chose {}; baking it without searching again",
+                 (memo.store->dir() / k->entry).string(), k->chosen.dump());
+    memo.store_used.insert(k->entry);
+    return replay(spec, *k, dev, progress, memo);
+  }
+  AutoSearch found = search_settings(spec, dev, progress, memo);
+  if (memo.store) {
+    KeptSearch k;
+    k.chosen = settings_json(found.resolved);
+    const json& rounds = found.record.at("rounds");
+    k.judged_points = rounds.back().at("judged_points").at(1).get<int>();
+    k.relative_se = found.resolved.scene.relative_se;
+    k.held_out_first = found.held_out_first;
+    k.met = found.met;
+    k.unresolved = found.unresolved;
+    k.failure = found.failure;
+    k.record = found.record;
+    const std::string key = search_key(spec, dev);
+    if (memo.store->put(key, kept_bytes(k))) {
+      k.entry = ResultStore::name_of(key);
+      memo.store_used.insert(k.entry);
+      found.record["kept"] = k.entry;
+    }
+  }
+  return found;
 }
 
 }  // namespace specbake::atmosphere

@@ -229,5 +229,32 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
 
 // The sizes and spectrum of a spec as the manifest reports them.
 nlohmann::json settings_json(const AtmosphereSpec& spec);
+// `spec` with the sizes and spectrum of a settings_json record (auto flags cleared); throws
+// std::runtime_error on a record it cannot read.
+AtmosphereSpec with_settings(const AtmosphereSpec& spec, const nlohmann::json& settings);
+
+// A search's outcome as the result store keeps it: what `run` needs to bake the choice once and
+// judge it at the same points with the same (kept) truths, instead of searching again.
+struct KeptSearch {
+  nlohmann::json chosen;        // settings_json of the choice
+  int judged_points = 0;        // the last round's judged points [0, judged_points)
+  double relative_se = 0.0;     // the last round's truth (a default relative_se may have been halved)
+  int held_out_first = -1;      // its held-out points [first, first + n); -1: none
+  bool met = false, unresolved = false;
+  std::string failure;
+  nlohmann::json record;        // parameters.auto as the search wrote it
+  std::string entry;            // the store's file name it was read from or written to
+};
+// The key of a spec's search: everything a search depends on — the atmosphere, orders,
+// quadratures and scene with its tolerance (parameters_json, scene_json), which axes are searched,
+// the bake's and the tracer's expanded programs, the atmosphere's host sources (kHostSources), the
+// device and its build options, the tool's version.
+std::string search_key(const AtmosphereSpec& spec, cl_util::Device& dev);
+// The search kept under search_key in `memo.store`, or nothing (none, or unreadable: logged).
+std::optional<KeptSearch> find_kept_search(const AtmosphereSpec& spec, cl_util::Device& dev, Memo& memo);
+// search_settings through `memo.store`: a search kept by an earlier `plan` or `run` is replayed —
+// its choice baked once and judged at the same points (their truths kept too) — and a search made
+// here is kept (its record's `kept` names the entry; a replay's says `reused`).
+AutoSearch kept_search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo);
 
 }  // namespace specbake::atmosphere
