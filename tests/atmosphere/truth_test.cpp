@@ -703,6 +703,7 @@ TEST(Truth, AgainstBakedLutsAtHighSun) {
   half.scattering_mu = 64;
   half.scattering_mu_s = 16;
   half.scattering_nu = 4;
+  half.ray_simpson = false;  // REF's rule: e_res measures the resolution alone
   const Model hm = model_of(half);
   // the scattering of all orders (auto, as the bundle bakes it) and of the first 1 and 4 orders
   auto scattering_of = [&](int orders, bool auto_orders) {
@@ -764,6 +765,46 @@ TEST(Truth, AgainstBakedLutsAtHighSun) {
   std::printf("single scattering: resolution error %.2f%%, truth vs REF corrected for the rule: worst %.2f%%; "
               "all orders: truth vs LUT RMS %.2f%%, worst %.2f%%\n",
               100 * e_res, 100 * worst_1, 100 * std::sqrt(sq_all / (3.0 * points.size())), 100 * worst_all);
+}
+
+// The view rays' rule (`quadrature: {ray_rule: simpson}`, the default): single scattering of a
+// bake against the converged integral (single_scattering_quadrature, 1000 × 200 Simpson
+// intervals) at high-sun points where the reference's 50-interval trapezoid is off by several
+// per cent (the Mie layer's e^{−h/1.2 km} along steep rays). Bound per value: the texture's
+// resolution, taken as twice the bake's change from the same bake at 2× every size (the
+// interpolation converges at second order: the coarser bake's error ≈ 4/3 of that change), plus
+// Simpson's own error (dx/H)⁴/180 ≤ 6e-3 at dx = H, plus 1e-3 for float32 and the sun rays'
+// 500-interval trapezoid. The trapezoid bake itself misses this bound (checked too).
+TEST(Truth, SimpsonViewRaysMatchTheConvergedSingleScattering) {
+  AtmosphereSpec s = earth();
+  s.orders = 1;
+  const Medium M(s);
+  AtmosphereSpec fine = s, trapezoid = s;
+  scale_sizes(fine, 2.0);
+  trapezoid.ray_simpson = false;
+  const auto quiet = [](std::string_view, double) {};
+  const Baked b = bake_luts(s, device(), quiet, 24), bf = bake_luts(fine, device(), quiet, 24),
+              bt = bake_luts(trapezoid, device(), quiet, 24);
+  const std::vector<TruthPoint> points = {{0, 0, 20, 0},      {0.5, 10, 13, 26}, {0, 30, 30, 90},
+                                          {0.8, 35, 37, 12}, {0.4, 67, 63, 15}, {2, 20, 40, 160}};
+  const auto lut = lut_sky_radiance(b.luts, points), lut_fine = lut_sky_radiance(bf.luts, points),
+             lut_trapezoid = lut_sky_radiance(bt.luts, points);
+  double worst_simpson = 0.0, worst_trapezoid = 0.0;
+  bool trapezoid_misses = false;
+  for (std::size_t p = 0; p < points.size(); ++p) {
+    const auto exact = single_scattering_quadrature(M, points[p], 1000, 200);
+    for (int c = 0; c < 3; ++c) {
+      const double bound = 2.0 * std::fabs(lut[p][c] / lut_fine[p][c] - 1.0) + 6e-3 + 1e-3;
+      const double e = lut[p][c] / exact[c] - 1.0, e_trapezoid = lut_trapezoid[p][c] / exact[c] - 1.0;
+      EXPECT_LE(std::fabs(e), bound) << p << " " << c;
+      trapezoid_misses = trapezoid_misses || std::fabs(e_trapezoid) > bound;
+      worst_simpson = std::max(worst_simpson, std::fabs(e));
+      worst_trapezoid = std::max(worst_trapezoid, std::fabs(e_trapezoid));
+    }
+  }
+  EXPECT_TRUE(trapezoid_misses);
+  std::printf("single scattering against the converged integral: Simpson worst %.2f%%, trapezoid worst %.2f%%\n",
+              100 * worst_simpson, 100 * worst_trapezoid);
 }
 
 // ---- spectral results in the bundle's units ---------------------------------------------------

@@ -359,7 +359,9 @@ json parameters_json(const AtmosphereSpec& spec) {
   p["channels_per_pass"] = width;
   p["length_unit"] = "km (texture values do not depend on it)";
   p["quadrature"] = {{"transmittance", "trapezoid, 500 intervals"},
-                     {"single_and_multiple_scattering", "trapezoid, 50 intervals to the nearest boundary"},
+                     {"single_and_multiple_scattering", std::string(m.ray_simpson ? "Simpson" : "trapezoid") +
+                                                            ", 50 intervals to the nearest boundary"},
+                     {"ray_rule", m.ray_simpson ? "simpson" : "trapezoid"},
                      {"scattering_density", "midpoint " + std::to_string(m.density_theta) + " x 32 over the sphere, theta " +
                                                 (m.density_theta_power == 1.0 ? "uniform" : "packed towards the horizon")},
                      {"density_theta", m.density_theta},

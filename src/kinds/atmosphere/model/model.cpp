@@ -116,6 +116,7 @@ Model model_of(const AtmosphereSpec& s) {
   m.mu_s_min = std::cos(s.max_sun_zenith_deg * M_PI / 180.0);
   m.density_theta = s.density_theta;
   m.density_theta_power = s.density_horizon ? 2.0 : 1.0;
+  m.ray_simpson = s.ray_simpson;
   m.mu_s_geometric = s.mu_s_geometric;
   m.mie_g = s.mie_phase_g;
   for (int i = 0; i < 2; ++i) {

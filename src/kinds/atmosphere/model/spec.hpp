@@ -50,6 +50,9 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   // packed towards the horizon (default) or uniform as in the reference (docs/atmosphere.md).
   int density_theta = 16;
   bool density_horizon = true;
+  // the view rays' 50-interval rule of single and multiple scattering: Simpson (default) or the
+  // reference's trapezoid (`quadrature: {ray_rule}`)
+  bool ray_simpson = true;
   bool mu_s_geometric = true;  // the scattering textures' μ_s lookups: geometric (default) or linear
   bool layout_3d = true, layout_tiled2d = false;
   bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
