@@ -160,6 +160,9 @@ struct Kind {
   // Relative cost (arbitrary units, comparable across kinds) for balancing shards, and an
   // estimate of the job's wall time in seconds on a 2-core CPU device (for `plan`).
   std::function<double(const JobSpec& job)> cost_s;
+  // Optional: cost_s when results kept in ctx.memo's store change what the job costs (an
+  // atmosphere's kept settings search: one bake instead of a search); nullopt when they do not.
+  std::function<std::optional<double>(const JobSpec& job, JobContext& ctx)> kept_cost_s;
   std::function<MemoryEstimate(const JobSpec& job)> memory;
   // The OpenCL programs the kind builds (paths of embedded kernel files): their fully expanded
   // sources enter the bundle hash, so a change to any file they include makes a new bundle.

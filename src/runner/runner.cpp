@@ -277,6 +277,19 @@ void read_bundle_summary(const fs::path& bundle, JobReport& r) {
   }
 }
 
+// The kind's model of the job's cost given the results kept for it (kept_cost_s), in place of
+// cost_s, calibrated as estimate_json's is. Unchanged where nothing kept applies.
+void apply_kept_cost(const Kind& kind, const JobSpec& job, JobContext& ctx, json& estimate, const fs::path& latest,
+                     const json& device) {
+  if (!kind.kept_cost_s) return;
+  const std::optional<double> s = kind.kept_cost_s(job, ctx);
+  if (!s) return;
+  estimate["seconds"] = *s;
+  estimate["seconds_2core_cpu"] = *s;
+  estimate["basis"] = "2-core CPU model of the kept search's choice";
+  calibrate_estimate(estimate, latest, device);
+}
+
 }  // namespace
 
 Runner::Runner(std::vector<Config> configs, RunOptions options, RunProgress progress, JobDone done)
@@ -357,6 +370,8 @@ std::vector<JobReport> Runner::plan() {
       ctx.memo = &memo;
       ctx.judge = !it.job->tolerance_advisory;  // as `run` judges: a search `run` would fail with fails here
       r.parameters = kind.plan(*it.job, ctx);
+      // what `run` then costs when the plan kept work for it (an atmosphere's settings search)
+      apply_kept_cost(kind, *it.job, ctx, r.estimate, store.job_dir(it.job->name) / "latest", r.device);
       const MemoryEstimate need = kind.memory(*it.job);
       check_device_memory(*it.job, need, info);
       check_host_memory(*it.job, need);
@@ -371,6 +386,7 @@ std::vector<JobReport> Runner::plan() {
   }
   return reports;
 }
+
 
 // Refuses a job whose host-memory estimate exceeds what the machine has available.
 void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
@@ -570,6 +586,11 @@ std::vector<JobReport> Runner::run() {
           memo.store = &results;
           json estimate = estimate_json(kind, *it.job);
           calibrate_estimate(estimate, store.job_dir(name) / "latest", r.device);
+          {
+            JobContext probe{dev};
+            probe.memo = &memo;
+            apply_kept_cost(kind, *it.job, probe, estimate, store.job_dir(name) / "latest", r.device);
+          }
           TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, &memo, r.hash,
                                        estimate.value("seconds", -1.0));
           BakeResult& result = baked.result;

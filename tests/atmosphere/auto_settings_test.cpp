@@ -399,6 +399,9 @@ TEST(AutoSettingsCli, RunBakesThePlansKeptSearchWithoutSearchingAgain) {
   auto p = t::run_cli({"plan", (tmp / "c.yaml").string(), "-v", "--report", (tmp / "p.json").string()}, tmp.path());
   ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
   const json planned = t::read_json(tmp / "p.json")["jobs"][0]["parameters"]["auto"];
+  // the estimate is what `run` then costs: the kept choice's bake, not a search
+  const json estimate = t::read_json(tmp / "p.json")["jobs"][0]["estimate"];
+  EXPECT_EQ(estimate["basis"], "2-core CPU model of the kept search's choice") << estimate;
   ASSERT_TRUE(planned.contains("kept")) << planned.dump();
   EXPECT_FALSE(planned.contains("reused"));
   const std::string entry = planned["kept"];

@@ -49,6 +49,13 @@ double estimated_seconds(const AtmosphereSpec& spec) {
   return bake_seconds(spec);
 }
 
+std::optional<double> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx) {
+  if (!(spec.auto_sizes || spec.auto_spectrum) || !ctx.memo) return std::nullopt;
+  const std::optional<KeptSearch> k = find_kept_search(spec, ctx.device, *ctx.memo);
+  if (!k) return std::nullopt;
+  return bake_seconds(with_settings(spec, k->chosen));  // the choice's bake; its scene check reads kept truths
+}
+
 std::vector<double> interpolation_test_wavelengths(const std::vector<double>& stored) {
   std::vector<double> out;
   const int gaps = static_cast<int>(stored.size()) - 1;

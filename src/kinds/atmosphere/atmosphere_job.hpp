@@ -1,4 +1,5 @@
 #pragma once
+#include <optional>
 // An atmosphere job: its plan, its bake (the bake, the scene check or the settings search, the
 // spectral interpolation check) and its bundle's files.
 #include <string>
@@ -18,6 +19,9 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx);
 // `spectrum: auto` kTypicalTries bakes of the search's start without their scene checks, plus
 // one scene check (and interpolation pass).
 double estimated_seconds(const AtmosphereSpec& spec);
+// With a search kept in ctx.memo's store (`plan` keeps the search it runs): the kept choice's
+// bake_seconds, what `run` then costs; nullopt without one.
+std::optional<double> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx);
 
 // `spectrum: {store: radiance}`: what the linear interpolation between stored wavelengths of
 // sampling_spectral.glsl (GetSkyRadianceAtWavelength & co.) costs. Measured at wavelengths halfway

@@ -61,6 +61,7 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
 Kind kind() {
   Kind k = Kind::of<AtmosphereSpec>("atmosphere", "Bruneton 2017 precomputed atmospheric scattering LUTs, all orders", parse_spec, plan, bake);
   k.cost_s = [](const JobSpec& j) { return estimated_seconds(j.as<AtmosphereSpec>()); };
+  k.kept_cost_s = [](const JobSpec& j, JobContext& ctx) { return kept_estimated_seconds(j.as<AtmosphereSpec>(), ctx); };
   k.memory = [](const JobSpec& j) { return device_memory(j.as<AtmosphereSpec>()); };
   k.programs = {kProgram, kTruthProgram};
   k.truth_records = {"vs_path_traced"};
