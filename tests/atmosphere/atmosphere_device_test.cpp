@@ -116,7 +116,7 @@ std::string ref(const std::string& name) { return (specbake::testing::refdata_di
 // the parameterisation, not from a discriminant that is 0 ± rounding; reported separately).
 TEST(AtmosphereDevice, FullSizeEarthMatchesReferenceTextures) {
   AtmosphereSpec s = earth();  // with the reference's quadratures (`quadrature: reference`)
-  s.density_horizon = s.mu_s_geometric = s.ray_simpson = false;
+  s.density_horizon = s.mu_s_geometric = s.ray_simpson = s.phase_nu_slice = false;
   const Baked b = bake_luts(s, device(), kQuiet, 0);
   expect_all_finite(b);
   const auto T = specbake::testing::read_npy(ref("textures/transmittance.npy"));

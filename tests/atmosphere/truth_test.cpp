@@ -703,7 +703,7 @@ TEST(Truth, AgainstBakedLutsAtHighSun) {
   half.scattering_mu = 64;
   half.scattering_mu_s = 16;
   half.scattering_nu = 4;
-  half.ray_simpson = false;  // REF's rule: e_res measures the resolution alone
+  half.ray_simpson = half.phase_nu_slice = false;  // REF's rules: e_res measures the resolution alone
   const Model hm = model_of(half);
   // the scattering of all orders (auto, as the bundle bakes it) and of the first 1 and 4 orders
   auto scattering_of = [&](int orders, bool auto_orders) {

@@ -362,6 +362,7 @@ json parameters_json(const AtmosphereSpec& spec) {
                      {"single_and_multiple_scattering", std::string(m.ray_simpson ? "Simpson" : "trapezoid") +
                                                             ", 50 intervals to the nearest boundary"},
                      {"ray_rule", m.ray_simpson ? "simpson" : "trapezoid"},
+                     {"phase_nu", m.phase_nu_slice ? "slice" : "clamped"},
                      {"scattering_density", "midpoint " + std::to_string(m.density_theta) + " x 32 over the sphere, theta " +
                                                 (m.density_theta_power == 1.0 ? "uniform" : "packed towards the horizon")},
                      {"density_theta", m.density_theta},

@@ -624,8 +624,12 @@ double relative_change(const std::vector<double>& add, const std::vector<double>
   return out;
 }
 
-// 1 / P_R(ν) for every texel of the scattering texture (ν as the texel decodes it): each (μ, μ_s)
-// column decoded once, its NU slices' ν from that (scattering_nu_of_slice, as the texel's decode).
+// 1 / P_R(ν) for every texel of the scattering texture: the slice's own ν (phase_nu_slice), or ν as
+// the texel decodes it, clamped to the (μ, μ_s) column's feasible range (scattering_nu_of_slice, the
+// reference's). The lookup multiplies by P_R of the view's ν, which lies between the slices around
+// it: with the clamped ν, a texel whose slices all clamp (μ_s = 1, where every ν is μ) comes back
+// scaled by P_R(ν_view)/P_R(μ) — up to 1.47× — and the coarse μ_s texels of a high sun blend it in
+// (docs/atmosphere-method.md, "Daylight").
 std::vector<double> inverse_rayleigh_phase(const Model& m) {
   const auto a = ref3::make_parameters(m, Channels{});
   const Sizes& s = m.sizes;
@@ -638,7 +642,9 @@ std::vector<double> inverse_rayleigh_phase(const Model& m) {
       int ground;
       ref3::scattering_params_from_texel(&a, i, y, z, &h, &mu, &mu_s, &nu, &ground);
       for (int k = 0; k < s.nu; ++k)
-        out[row * wd + k * s.mu_s + i] = 1.0 / ref3::rayleigh_phase(ref3::scattering_nu_of_slice(&a, k, mu, mu_s));
+        out[row * wd + k * s.mu_s + i] =
+            1.0 / ref3::rayleigh_phase(m.phase_nu_slice ? ref3::scattering_u_nu_of_slice(&a, k) * 2.0 - 1.0
+                                                        : ref3::scattering_nu_of_slice(&a, k, mu, mu_s));
     }
   });
   return out;

@@ -53,6 +53,10 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   // the view rays' 50-interval rule of single and multiple scattering: Simpson (default) or the
   // reference's trapezoid (`quadrature: {ray_rule}`)
   bool ray_simpson = true;
+  // `quadrature: {phase_nu}`: the ν at which the multiple scattering is divided by P_R(ν) when it is
+  // stored — the slice's own ν (default), or its ν clamped to the texel's feasible range as the
+  // reference does (docs/atmosphere-method.md, "Daylight")
+  bool phase_nu_slice = true;
   bool mu_s_geometric = true;  // the scattering textures' μ_s lookups: geometric (default) or linear
   bool layout_3d = true, layout_tiled2d = false;
   bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
