@@ -68,6 +68,13 @@ double chi2_quantile(double nu, double z) {
   return nu * std::pow(1.0 - k + z * std::sqrt(k), 3.0);
 }
 
+// The quadrature's orders 1 and 2 at a truth point (degrees in, radians to the quadrature).
+auto orders_1_2_at(const tq::Quadrature& quadrature, const TruthPoint& pt) {
+  const double deg = M_PI / 180;
+  return quadrature.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
+                               pt.view_sun_azimuth_deg * deg);
+}
+
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -143,11 +150,7 @@ TEST(TwilightTruth, OrdersOneAndTwoMatchAnIndependentQuadrature) {
   double worst_se = 0.0;
   for (std::size_t p = 0; p < points.size(); ++p) {
     const TruthPoint& pt = points[p];
-    const double deg = M_PI / 180;
-    const auto q = fine.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
-                                   pt.view_sun_azimuth_deg * deg);
-    const auto h = half.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
-                                   pt.view_sun_azimuth_deg * deg);
+    const auto q = orders_1_2_at(fine, pt), h = orders_1_2_at(half, pt);
     for (int c = 0; c < 3; ++c) {
       const double q1 = q.L1[c], q12 = q.L1[c] + q.L2[c];
       const double e1 = std::fabs(q1 - h.L1[c]) + table_rel * q1,
@@ -207,11 +210,7 @@ TEST(TwilightTruth, OrdersOneAndTwoMatchTheQuadratureInDaylight) {
   double chi2 = 0.0;
   for (std::size_t p = 0; p < points.size(); ++p) {
     const TruthPoint& pt = points[p];
-    const double deg = M_PI / 180;
-    const auto q = fine.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
-                                   pt.view_sun_azimuth_deg * deg);
-    const auto h = half.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
-                                   pt.view_sun_azimuth_deg * deg);
+    const auto q = orders_1_2_at(fine, pt), h = orders_1_2_at(half, pt);
     for (int c = 0; c < 3; ++c) {
       const double q12 = q.L1[c] + q.L2[c], e12 = std::fabs(q12 - h.L1[c] - h.L2[c]) + kTableRel * q12;
       const double t = r.L(p, c), se = r.se(p, c), z = (t - q12) / std::hypot(se, e12);
@@ -250,9 +249,7 @@ TEST(TwilightTruth, MultipleScatteringPhaseAtTheSlicesNuUnderAHighSun) {
   double worst = 0.0, worst_clamped = 0.0;
   for (std::size_t p = 0; p < points.size(); ++p) {
     const TruthPoint& pt = points[p];
-    const double deg = M_PI / 180;
-    const auto q = fine.orders_1_2(pt.altitude_km, pt.view_zenith_deg * deg, pt.sun_zenith_deg * deg,
-                                   pt.view_sun_azimuth_deg * deg);
+    const auto q = orders_1_2_at(fine, pt);
     for (int c = 0; c < 3; ++c) {
       const double q12 = q.L1[c] + q.L2[c], e = lut[p][c] / q12 - 1, e_clamped = lut_clamped[p][c] / q12 - 1;
       EXPECT_LE(std::fabs(e), 0.015) << "point " << p << " channel " << c;
