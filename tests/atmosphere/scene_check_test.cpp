@@ -627,3 +627,49 @@ INSTANTIATE_TEST_SUITE_P(Atmosphere, HardCases, ::testing::Range(0, 7), [](const
     if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
   return n;
 });
+
+// ---- what the check costs (plan's estimate) -------------------------------------------------
+
+// The check's cost model (check_seconds) rests on walk_events_estimate: the events a walk takes,
+// from the atmosphere's optical depth. Against the tracer's own walks at points the fit never saw
+// (4 views, 256 walks each, the Earth and its Rayleigh ×3, ×30 and ×300): within a factor 1.5
+// (the fit's residuals at its own points are < 10 %; other views take other paths, and the
+// estimate is for a scene's mean). Then what plan shows follows: the check's seconds grow with
+// the optical depth, and an optically thick atmosphere's check, bounded by the events budget,
+// is predicted to take minutes (Rayleigh ×1000, 8 points: measured 15.4 min, model 16).
+TEST(SceneCheckCost, WalkEventsFollowTheOpticalDepth) {
+  const std::vector<TruthPoint> points = {{0, 30, 20, 40}, {1.5, 70, 50, 100}, {0.3, 85, 75, 10}, {1, 50, 35, 160}};
+  for (double k : {1.0, 3.0, 30.0, 300.0}) {
+    AtmosphereSpec s = spec_of("    preset: earth\n");
+    s.rayleigh_scattering_per_m_at_1um *= k;
+    TruthOptions o;
+    o.paths = 256;
+    const TruthResult r = trace_truth(s, t::shared_device(), points, o);
+    const double model = walk_events_estimate(s);
+    std::printf("Rayleigh x%g: %.2f events a walk traced, %.2f estimated\n", k, r.mean_events, model);
+    EXPECT_LT(model, 1.5 * r.mean_events) << k;
+    EXPECT_GT(model, r.mean_events / 1.5) << k;
+  }
+}
+
+TEST(SceneCheckCost, AThickAtmospheresCheckIsPredictedAndBounded) {
+  const std::string scene = "    scene: {points: 8}\n";
+  auto rayleigh = [&](double k) {
+    AtmosphereSpec s = spec_of("    preset: earth\n" + scene);
+    s.rayleigh_scattering_per_m_at_1um *= k;
+    return s;
+  };
+  const double earth = check_seconds(rayleigh(1.0)), r10 = check_seconds(rayleigh(10.0)),
+               r100 = check_seconds(rayleigh(100.0)), r1000 = check_seconds(rayleigh(1000.0));
+  std::printf("check seconds, 8 points: Earth %.1f, Rayleigh x10 %.1f, x100 %.1f, x1000 %.1f\n", earth, r10, r100, r1000);
+  EXPECT_LT(earth, r10);
+  EXPECT_LT(r10, r100);
+  EXPECT_LT(r100, r1000);
+  EXPECT_GT(r1000, 5 * 60.0);  // minutes, and said so before the run
+  // bounded: every point stops at its events budget, and walks at the tracer's 1000 events, so
+  // 3× the depth again adds little (only an event's cost still grows)
+  EXPECT_LT(check_seconds(rayleigh(10000.0)), 1.1 * check_seconds(rayleigh(3000.0)));
+  EXPECT_EQ(check_seconds(spec_of("    preset: earth\n    scene: none\n")), 0.0);
+  // and the job's estimate carries it
+  EXPECT_GT(estimated_seconds(rayleigh(1000.0)), r1000);
+}

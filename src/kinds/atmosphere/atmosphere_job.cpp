@@ -41,12 +41,12 @@ std::string exr_of(int width, int height, const std::vector<double>& rgb,
 double estimated_seconds(const AtmosphereSpec& spec) {
   if (spec.auto_sizes || spec.auto_spectrum) {
     const AtmosphereSpec start = search_start(spec);
-    AtmosphereSpec bare = start;  // what each try costs; the check and the interpolation pass run once
-    bare.scene.check = false;
+    AtmosphereSpec bare = start;  // what each try costs; the interpolation pass runs once
     bare.store_radiance = false;
-    return kTypicalTries * estimated_seconds(bare) + (estimated_seconds(start) - estimated_seconds(bare));
+    // the truth is traced once and kept for every try, and once more at the held-out points
+    return kTypicalTries * bake_seconds(bare) + (bake_seconds(start) - bake_seconds(bare)) + 2.0 * check_seconds(start);
   }
-  return bake_seconds(spec);
+  return bake_seconds(spec) + check_seconds(spec);
 }
 
 std::optional<double> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx) {

@@ -15,9 +15,9 @@ namespace specbake::atmosphere {
 nlohmann::json plan(const AtmosphereSpec& spec, JobContext& ctx);
 BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx);
 
-// Wall seconds of a job on a 2-core CPU device (PoCL): bake_seconds, or for `sizes: auto` /
-// `spectrum: auto` kTypicalTries bakes of the search's start without their scene checks, plus
-// one scene check (and interpolation pass).
+// Wall seconds of a job on a 2-core CPU device (PoCL): bake_seconds plus check_seconds (its truth
+// traced), or for `sizes: auto` / `spectrum: auto` kTypicalTries bakes of the search's start,
+// the truth traced once and at the held-out points (and the interpolation pass).
 double estimated_seconds(const AtmosphereSpec& spec);
 // With a search kept in ctx.memo's store (`plan` keeps the search it runs): the kept choice's
 // bake_seconds, what `run` then costs; nullopt without one.

@@ -260,8 +260,6 @@ double bake_seconds(const AtmosphereSpec& spec) {
   const int channels = spec.spectral ? spec.count : 3;
   const int passes = (channels + width - 1) / width;
   const int orders = spec.orders ? *spec.orders : 10;
-  // the scene check: ~0.07 s per point (default Earth rgb, 128 points: 9.2 s, both traces)
-  const double check = spec.scene.check ? 0.07 * spec.scene.points : 0.0;
   // transmittance (once per pass) and indirect irradiance (per order) texels: small beside the
   // scattering texels at the default sizes (0.2-0.4 s), but what refining those textures costs
   const double transmittance = double(spec.transmittance_mu) * spec.transmittance_r;
@@ -270,8 +268,11 @@ double bake_seconds(const AtmosphereSpec& spec) {
   const int tests = std::min(kInterpolationTests, channels - 1);
   const double interpolation =
       spec.store_radiance ? orders * (texels / 1048576.0) * (4.6 + 0.14 * pass_width_for(tests)) : 0.0;
-  return 1.0 + orders * passes * (texels / 1048576.0) * (4.6 + 0.14 * width) +
-         passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + check + interpolation;
+  // the scattering density's share of an order grows with its θ nodes: about half of it at 16
+  // (16 wavelengths, default sizes: 7.5 / 11.4 / 19.5 s of compute at 16 / 32 / 64 θ)
+  const double theta = 0.5 + 0.5 * spec.density_theta / 16.0;
+  return 1.0 + orders * passes * theta * (texels / 1048576.0) * (4.6 + 0.14 * width) +
+         passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + interpolation;
 }
 
 json parameters_json(const AtmosphereSpec& spec) {

@@ -29,12 +29,12 @@ int channels_per_pass(const AtmosphereSpec& spec);
 // (interpolation_test_wavelengths, atmosphere_job.hpp).
 inline constexpr int kInterpolationTests = 8;
 
-// Wall seconds of one bake with its scene check (no search) on a 2-core CPU device (PoCL), from
-// a cost model calibrated on the bundled configs: per order and pass, a geometry part and a
-// per-channel part, both proportional to the scattering texels (default Earth rgb ~31 s with its
-// scene check, 48 wavelengths ~90 s, 13 orders ~90 s), small terms for the transmittance and
-// irradiance texels (from a default bake's stage times), plus the scene check (~0.07 s a point)
-// and `store: radiance`'s interpolation pass. `orders: auto` is costed at 10 orders.
+// Wall seconds of one bake without its scene check (truth/scene_check.hpp, check_seconds) and
+// search on a 2-core CPU device (PoCL), from a cost model calibrated on the bundled configs: per
+// order and pass, a geometry part and a per-channel part, both proportional to the scattering
+// texels and growing with the density's θ nodes, small terms for the transmittance and
+// irradiance texels (from a default bake's stage times), and `store: radiance`'s interpolation
+// pass. `orders: auto` is costed at 10 orders.
 double bake_seconds(const AtmosphereSpec& spec);
 
 // A stage whose outputs held values that are not finite (NaN or ±inf): the bake stops there.

@@ -104,6 +104,7 @@ void parse_quadrature(const At& at, AtmosphereSpec& s) {
   if (at.node.IsScalar()) {
     at.choice<int>({{"reference", 0}});
     s.density_theta = 16;
+    s.density_theta_given = true;
     s.density_horizon = s.mu_s_geometric = s.ray_simpson = s.phase_nu_slice = false;
     return;
   }
@@ -119,6 +120,7 @@ void parse_quadrature(const At& at, AtmosphereSpec& s) {
     if (v < 4 || v > DENSITY_THETA_MAX || v % 2)
       n.fail("expected an even number of θ nodes in [4, " + std::to_string(DENSITY_THETA_MAX) + "], got " + n.shown());
     s.density_theta = static_cast<int>(v);
+    s.density_theta_given = true;
   }
   if (at.has("density_rule"))
     s.density_horizon = at.child("density_rule").choice<int>({{"horizon", 1}, {"uniform", 0}}) == 1;
@@ -340,10 +342,16 @@ void parse_bake(const At& job, AtmosphereSpec& s) {
 }
 
 // The scene, and the tolerance the searches judge by (after the bake's keys: the scene's lowest
-// sun defaults to what the textures hold).
+// sun defaults to what the textures hold). A scene in deep twilight (sun below −6°) gets the
+// density's horizon rule with 32 θ nodes unless the config gives the count: there the light of
+// orders ≥ 2 arrives within a few degrees of the horizontal, and 16 nodes leave it unconverged
+// (measured: docs/atmosphere.md, "Twilight"); other scenes keep 16, which they do not need more of.
 void parse_checks(const At& job, AtmosphereSpec& s) {
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);
+  if (!s.density_theta_given && s.density_horizon && s.scene.check &&
+      s.scene.sun_elevation_min_deg < kDeepTwilightSunDeg)
+    s.density_theta = kDeepTwilightDensityTheta;
   // the searches judge bakes by the scene's tolerance
   const char* no_tolerance = " searches for the cheapest bake that meets the scene's tolerance against the "
                              "path-traced truth; expected a scene with tolerance_de2000";

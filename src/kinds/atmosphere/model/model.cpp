@@ -133,6 +133,18 @@ Model model_of(const AtmosphereSpec& s) {
   return m;
 }
 
+double vertical_scattering_depth(const AtmosphereSpec& spec, const std::vector<double>& lambda_nm) {
+  if (lambda_nm.empty()) return 0.0;
+  const Channels ch = channels_at(spec, lambda_nm);
+  const double thickness = spec.top_radius_km - spec.bottom_radius_km;
+  const double rayleigh = profile_column_km(spec.rayleigh_density, thickness),
+               mie = profile_column_km(spec.mie_density, thickness);
+  double tau = 0.0;
+  for (std::size_t c = 0; c < lambda_nm.size(); ++c)
+    tau += ch.rayleigh_scattering[c] * rayleigh + ch.mie_scattering[c] * mie;  // per km × km
+  return tau / static_cast<double>(lambda_nm.size());
+}
+
 Channels channels_at(const AtmosphereSpec& s, const std::vector<double>& lambda_nm) {
   const Model m = model_of(s);
   Channels c;

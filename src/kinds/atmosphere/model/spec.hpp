@@ -50,6 +50,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   // packed towards the horizon (default) or uniform as in the reference (docs/atmosphere.md).
   int density_theta = 16;
   bool density_horizon = true;
+  bool density_theta_given = false;  // `quadrature: {density_theta}` (or `reference`); else the scene decides (config.cpp)
   // the view rays' 50-interval rule of single and multiple scattering: Simpson (default) or the
   // reference's trapezoid (`quadrature: {ray_rule}`)
   bool ray_simpson = true;
@@ -76,6 +77,10 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
 // Texture size limits (config errors name them; searches stay inside them).
 inline constexpr int kMaxAtmosphereAxis = 4096;
 inline constexpr long long kMaxScatteringTexels = 1LL << 26;
+// Scenes whose sun goes below this (deep twilight) get kDeepTwilightDensityTheta θ nodes in the
+// scattering density unless the config gives them (config.cpp, parse_checks).
+inline constexpr double kDeepTwilightSunDeg = -6.0;
+inline constexpr int kDeepTwilightDensityTheta = 32;
 
 namespace atmosphere {
 // Every texture axis of a spec: transmittance [mu, r], irradiance [mu_s, r], scattering r, mu,

@@ -231,6 +231,57 @@ AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec) {
   return ss;
 }
 
+double walk_events_estimate(const AtmosphereSpec& spec) {
+  // f(τ) = 1.57 + 1.59 τ + 0.20 τ² (τ: the vertical scattering depth averaged over the bake's
+  // wavelengths; ~τ² once light diffuses), saturating at ~450 (walks stop at 1000 events, and
+  // Russian roulette ends many before): the mean events a walk took at the default scene's
+  // points for the Earth (τ 0.14: 1.8), its Rayleigh ×10 (1.4: 4.3), ×100 (14: 57) and ×1000
+  // (140: 399).
+  const double tau = vertical_scattering_depth(spec, spectrum_of(spec).lambda_nm);
+  const double f = 1.57 + 1.59 * tau + 0.20 * tau * tau;
+  return std::min(static_cast<double>(kTruthMaxEvents), 1.0 / (1.0 / f + 1.0 / 450.0));
+}
+
+double check_seconds(const AtmosphereSpec& spec) {
+  if (!spec.scene.check) return 0.0;
+  // Measured on the 2-core CPU (PoCL), default Earth, rgb, relative_se 1 %, both traces (the
+  // bake's wavelengths and the 48-wavelength reference; a 16-wavelength bake costs the same, as
+  // its walks are shared out over its wavelengths), seconds per point by the point's sun: high
+  // (0.061), low (0.51: below acos(r_b/r_t) + α, where each vertex's sun term is taken along its
+  // ray with exact optical depths) and below the horizon (1.1: learned tables, walks at the cap).
+  constexpr double kHighSun = 0.061, kLowSun = 0.51, kBelowHorizon = 1.1, kEarthEvents = 1.8;
+  // Longer walks also need more of them (their radiance is noisier): Rayleigh ×10, 4.3 events a
+  // walk, took 1.23 s a point against the Earth's 0.164 over the same scene: (4.3/1.8)^2.3.
+  constexpr double kLongerWalks = 2.3;
+  const double deg = 180.0 / M_PI;
+  const double low_sun = (std::acos(spec.bottom_radius_km / spec.top_radius_km) + spec.sun_angular_radius_rad) * deg;
+  const double finer = (kMaxPathsAt / spec.scene.relative_se) * (kMaxPathsAt / spec.scene.relative_se);
+  const double e = walk_events_estimate(spec);
+  // What bounds a point: per channel its walk cap W, or the events budget kEventsPerWalk · W,
+  // but at least one batch of 64 walks (which measures the events). An event's seconds grow with
+  // the walk's length (delta tracking through denser air): 5.0 µs at 57 events a walk, 56 µs at
+  // 399 (Rayleigh ×100 and ×1000, every point at the budget); ~3 µs in the Earth's twilight walks
+  // (exact sun optical depths at every vertex; most points there at the cap: 1.1 s a point).
+  const double event_s = std::max(3.0e-6, 5.0e-6 * std::pow(e / 57.0, 1.26));
+  auto bounded = [&](const AtmosphereSpec& traced) {
+    const TruthOptions o = scene_truth_options(traced, 0);
+    const double w = static_cast<double>(o.max_paths);
+    const double channels = traced.spectral ? static_cast<double>(spectrum_of(traced).lambda_nm.size()) : 3.0;
+    return channels * std::max(64.0 * e, std::min(w * e, o.max_events_per_point)) * event_s;
+  };
+  const AtmosphereSpec ss = spectral_reference_of(spec);
+  const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm);
+  const double bound = bounded(spec) + (reference ? bounded(ss) : 0.0);
+  const double traces = reference ? 1.0 : 0.5;  // the per-point figures above hold both
+  double s = 0.0;
+  for (const TruthPoint& p : scene_points_of(spec)) {
+    const double sun = 90.0 - p.sun_zenith_deg;
+    const double walks = sun >= low_sun ? kHighSun : sun >= 0.0 ? kLowSun : kBelowHorizon;
+    s += std::min(traces * walks * finer * std::pow(std::max(1.0, e / kEarthEvents), kLongerWalks), bound);
+  }
+  return s;
+}
+
 namespace {
 
 // The traces a check judges by: the bake's wavelengths (all orders, split at the bake's) and,

@@ -77,6 +77,18 @@ long long scene_walk_cap(double relative_se);
 // The spectral reference of an rgb bake: the same atmosphere at 48 wavelengths over 360–830 nm.
 AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 
+// What the scene check of `spec` costs when its truth is traced (not kept): wall seconds on the
+// 2-core CPU through PoCL, a model like bake_seconds (docs/atmosphere.md, "The scene check",
+// "Cost"). Per point of the scene, the seconds its walks took on the default Earth in its sun
+// band (daylight, low sun, below the horizon: the twilight estimators cost more per walk and
+// more walks stop at the cap), times the events a walk takes in this atmosphere against the
+// Earth's (walks_events_per_walk), at most the events budget's seconds; 0 without a check.
+double check_seconds(const AtmosphereSpec& spec);
+// The truth's scattering events per walk, estimated from the atmosphere's vertical scattering
+// optical depth at the bake's wavelengths (a fit to measured walks: ~1.8 for the Earth, ~60 at
+// 100× its Rayleigh), at most the tracer's limit of 1000.
+double walk_events_estimate(const AtmosphereSpec& spec);
+
 // Traces the scene of `spec` and judges `luts` (baked with `orders_used` orders) against it.
 // `first` > 0 judges an independent point set of the same scene (scene_points_of; the walks
 // then use other random streams too). With `memo`, the traces are kept there and reused by

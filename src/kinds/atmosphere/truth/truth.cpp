@@ -16,6 +16,8 @@
 
 namespace specbake::atmosphere {
 
+const int kTruthMaxEvents = TRUTH_MAX_EVENTS;
+
 // TruthOptions::NextSun is the walk's next_sun argument (path_tracer.cl).
 static_assert(static_cast<int>(TruthOptions::NextSun::automatic) == TRUTH_NEXT_SUN_AUTO &&
               static_cast<int>(TruthOptions::NextSun::along_ray) == TRUTH_NEXT_SUN_LINE &&

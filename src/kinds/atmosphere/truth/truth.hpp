@@ -42,6 +42,9 @@ inline constexpr const char* kTruthProgram = "kernels/atmosphere/truth_kernels.c
 // expanded sources, what identifies the code of a kept truth.
 extern const char* const kHostSources;
 
+// A walk of all orders stops after this many scattering events (path_tracer.cl, TRUTH_MAX_EVENTS).
+extern const int kTruthMaxEvents;
+
 // The POINTS.csv header, exactly.
 inline constexpr const char* kTruthPointsHeader = "altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg";
 
