@@ -28,11 +28,13 @@
 #include "atmosphere/spec_of.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
 #include "kinds/atmosphere/truth/truth.hpp"
+#include "kinds/atmosphere/truth/twilight_strip.hpp"
 #include "support/testing.hpp"
 
 using namespace specbake;
 using namespace specbake::atmosphere;
 namespace t = specbake::testing;
+using nlohmann::json;
 
 namespace {
 
@@ -135,4 +137,43 @@ TEST(Twilight, DensityNodesConvergeByThirtyTwo) {
   std::printf("mean |log(LUT_n / LUT_64)|: 16 nodes %.4f, 32 nodes %.4f (worst %.4f)\n", d16, d32, worst32);
   EXPECT_LT(2.0 * d32, d16);
   EXPECT_LT(worst32, std::log(1.1));
+}
+
+// The twilight strip (preview/twilight_strip.png) shows what it says: made for scenes that reach
+// deep twilight with previews on, the bake beside the truth at the same views, and a colour
+// difference that sees a missing part of the sky — a bake of single scattering alone has no
+// light where the air is in the planet's shadow, which below −8° is all the air a ground camera
+// sees in those views, so at the strip's 72 views below −6° (truth se ~0.6 ΔE each) its mean
+// CIEDE2000 must be several times the full bake's (asserted: 3×). Both bakes read one truth: the
+// strip's walks depend on the atmosphere, not on how it was baked.
+TEST(Twilight, TheStripShowsTheBakeBesideTheTruth) {
+  const std::string job = "    preset: earth\n    previews: {size: 64}\n    scene: {sun_elevation_deg: [-12, 10]}\n";
+  AtmosphereSpec s = t::spec_of(job);
+  EXPECT_TRUE(wants_twilight_strip(s));
+  EXPECT_FALSE(wants_twilight_strip(t::spec_of("    preset: earth\n")));  // the default scene: sun down to −6°
+  EXPECT_FALSE(wants_twilight_strip(
+      t::spec_of("    preset: earth\n    previews: none\n    scene: {sun_elevation_deg: [-12, 10]}\n")));
+
+  AtmosphereSpec single = s;
+  single.orders = 1;
+  Memo keep;
+  const TwilightStrip now = twilight_strip(s, bake_luts(s, t::shared_device(), kQuiet, 0).luts, t::shared_device(), keep, kQuiet);
+  const TwilightStrip before =
+      twilight_strip(single, bake_luts(single, t::shared_device(), kQuiet, 0).luts, t::shared_device(), keep, kQuiet);
+  EXPECT_EQ(keep.items.size(), 1u);  // one truth for both
+
+  EXPECT_EQ(now.png.path, "preview/twilight_strip.png");
+  ASSERT_GE(now.png.bytes.size(), 8u);
+  EXPECT_EQ(now.png.bytes.substr(1, 3), "PNG");
+  ASSERT_EQ(now.png.shape.size(), 3u);
+  EXPECT_EQ(now.record["columns"], 23);  // −12 … +10 at 1°
+  ASSERT_EQ(now.record["bands"].size(), 3u);
+  const json& deep_now = now.record["bands"][0];
+  const json& deep_before = before.record["bands"][0];
+  EXPECT_EQ(deep_now["sun_elevation_deg"][0], -12.0);
+  const double m_now = deep_now["de2000"]["mean"], m_before = deep_before["de2000"]["mean"];
+  std::printf("strip, sun -12..-6: mean CIEDE2000 %.2f (4 orders) against %.2f (single scattering); truth se %.2f\n",
+              m_now, m_before, deep_now["truth_se_de2000"]["mean"].get<double>());
+  EXPECT_GT(m_before, 3.0 * m_now);
+  for (const json& b : now.record["bands"]) EXPECT_TRUE(std::isfinite(b["de2000"]["mean"].get<double>()));
 }

@@ -282,6 +282,14 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   r.accuracy.insert(r.accuracy.begin(), sc.record);  // the headline: the error the user sees
   r.files.push_back(std::move(sc.points_csv));
   r.manifest_blocks["atmosphere"]["scene_check_s"] = sc.seconds;
+  if (wants_twilight_strip(spec)) {
+    // the sunset beside the truth (a preview; its own walks, kept as the scene's)
+    Memo local;
+    TwilightStrip strip = twilight_strip(spec, b.luts, ctx.device, ctx.memo ? *ctx.memo : local,
+                                         [&](std::string_view, double) { ctx.progress("twilight strip", kSceneCheckEnd); });
+    r.files.push_back(std::move(strip.png));
+    r.manifest_blocks["atmosphere"]["twilight_strip"] = std::move(strip.record);
+  }
   for (std::string& w : sc.warnings) r.warnings.push_back(std::move(w));
   if (!sc.failure.empty()) {
     if (ctx.judge) throw BakeFailed(sc.failure, r.parameters, accuracy_json(r.accuracy), r.warnings);

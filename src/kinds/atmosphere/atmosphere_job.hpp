@@ -9,6 +9,7 @@
 #include "kinds/atmosphere/model/spec.hpp"
 #include "kinds/atmosphere/shader/render.hpp"
 #include "kinds/atmosphere/truth/scene_check.hpp"
+#include "kinds/atmosphere/truth/twilight_strip.hpp"
 
 namespace specbake::atmosphere {
 

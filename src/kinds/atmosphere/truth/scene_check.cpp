@@ -231,6 +231,11 @@ AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec) {
   return ss;
 }
 
+std::string truth_code_key(cl_util::Device& dev) {
+  return "/program " + sha256_hex(expanded_program(kTruthProgram)) + "/host " + kHostSources + "/device " +
+         device_identity(dev.info()).dump() + "/version " + kVersion;
+}
+
 double walk_events_estimate(const AtmosphereSpec& spec) {
   // f(τ) = 1.57 + 1.59 τ + 0.20 τ² (τ: the vertical scattering depth averaged over the bake's
   // wavelengths; ~τ² once light diffuses), saturating at ~450 (walks stop at 1000 events, and
@@ -299,9 +304,7 @@ struct SceneTraces {
 SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
                         int first, std::uint64_t seed, cl_util::Device& dev, const Progress& progress, Memo& keep,
                         bool bake_wavelengths = true) {
-  const std::string where = "/points " + sha256_hex(truth_points_csv(points)) + "/program " +
-                            sha256_hex(expanded_program(kTruthProgram)) + "/host " + kHostSources + "/device " +
-                            device_identity(dev.info()).dump() + "/version " + kVersion;
+  const std::string where = "/points " + sha256_hex(truth_points_csv(points)) + truth_code_key(dev);
   json scene = scene_json(spec.scene);  // the tolerances judge the truth; they do not change it
   if (scene.is_object()) {
     scene.erase("tolerance_de2000");

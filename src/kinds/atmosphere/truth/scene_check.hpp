@@ -77,6 +77,10 @@ long long scene_walk_cap(double relative_se);
 // The spectral reference of an rgb bake: the same atmosphere at 48 wavelengths over 360–830 nm.
 AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 
+// What a kept truth's key carries besides its inputs: the tracer's expanded program, the host
+// sources, the device and the tool's version.
+std::string truth_code_key(cl_util::Device& dev);
+
 // What the scene check of `spec` costs when its truth is traced (not kept): wall seconds on the
 // 2-core CPU through PoCL, a model like bake_seconds (docs/atmosphere.md, "The scene check",
 // "Cost"). Per point of the scene, the seconds its walks took on the default Earth in its sun
