@@ -46,7 +46,7 @@ double estimated_seconds(const AtmosphereSpec& spec) {
     // the truth is traced once and kept for every try, and once more at the held-out points
     return kTypicalTries * bake_seconds(bare) + (bake_seconds(start) - bake_seconds(bare)) + 2.0 * check_seconds(start);
   }
-  return bake_seconds(spec) + check_seconds(spec);
+  return bake_seconds(spec) + check_seconds(spec) + twilight_strip_seconds(spec);
 }
 
 std::optional<double> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx) {

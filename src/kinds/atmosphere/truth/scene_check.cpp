@@ -247,8 +247,8 @@ double walk_events_estimate(const AtmosphereSpec& spec) {
   return std::min(static_cast<double>(kTruthMaxEvents), 1.0 / (1.0 / f + 1.0 / 450.0));
 }
 
-double check_seconds(const AtmosphereSpec& spec) {
-  if (!spec.scene.check) return 0.0;
+double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,
+                     double walk_share) {
   // Measured on the 2-core CPU (PoCL), default Earth, rgb, relative_se 1 %, both traces (the
   // bake's wavelengths and the 48-wavelength reference; a 16-wavelength bake costs the same, as
   // its walks are shared out over its wavelengths), seconds per point by the point's sun: high
@@ -274,17 +274,22 @@ double check_seconds(const AtmosphereSpec& spec) {
     const double channels = traced.spectral ? static_cast<double>(spectrum_of(traced).lambda_nm.size()) : 3.0;
     return channels * std::max(64.0 * e, std::min(w * e, o.max_events_per_point)) * event_s;
   };
-  const AtmosphereSpec ss = spectral_reference_of(spec);
-  const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm);
-  const double bound = bounded(spec) + (reference ? bounded(ss) : 0.0);
-  const double traces = reference ? 1.0 : 0.5;  // the per-point figures above hold both
+  const double bound = walk_share * (bounded(spec) + (with_reference ? bounded(spectral_reference_of(spec)) : 0.0));
+  const double traces = (with_reference ? 1.0 : 0.5) * walk_share;  // the per-point figures above hold both traces
   double s = 0.0;
-  for (const TruthPoint& p : scene_points_of(spec)) {
+  for (const TruthPoint& p : points) {
     const double sun = 90.0 - p.sun_zenith_deg;
     const double walks = sun >= low_sun ? kHighSun : sun >= 0.0 ? kLowSun : kBelowHorizon;
     s += std::min(traces * walks * finer * std::pow(std::max(1.0, e / kEarthEvents), kLongerWalks), bound);
   }
   return s;
+}
+
+double check_seconds(const AtmosphereSpec& spec) {
+  if (!spec.scene.check) return 0.0;
+  const AtmosphereSpec ss = spectral_reference_of(spec);
+  const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm);
+  return truth_seconds(spec, scene_points_of(spec), reference, 1.0);
 }
 
 namespace {

@@ -88,6 +88,10 @@ std::string truth_code_key(cl_util::Device& dev);
 // more walks stop at the cap), times the events a walk takes in this atmosphere against the
 // Earth's (walks_events_per_walk), at most the events budget's seconds; 0 without a check.
 double check_seconds(const AtmosphereSpec& spec);
+// The same model for any points: the bake's wavelengths traced (and the spectral reference with
+// `with_reference`), with `walk_share` of the scene check's walks and caps.
+double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,
+                     double walk_share);
 // The truth's scattering events per walk, estimated from the atmosphere's vertical scattering
 // optical depth at the bake's wavelengths (a fit to measured walks: ~1.8 for the Earth, ~60 at
 // 100× its Rayleigh), at most the tracer's limit of 1000.

@@ -61,7 +61,25 @@ std::array<std::uint8_t, 3> error_colour(double de) {
   return {220, 0, 0};
 }
 
+// The strip's views, [row][column] with row 0 at the top, and its lowest sun.
+std::vector<TruthPoint> strip_points(const AtmosphereSpec& spec, double* lowest_out, int* columns_out) {
+  const double lowest = std::max(kLowestSunDeg, std::ceil(90.0 - spec.max_sun_zenith_deg));
+  const int columns = static_cast<int>(std::lround(kHighestSunDeg - lowest)) + 1;
+  std::vector<TruthPoint> points;
+  for (int j = 0; j < kRows; ++j)
+    for (int i = 0; i < columns; ++i)
+      points.push_back({spec.scene.camera_altitude_min_km, 90.0 - row_elevation_deg(j), 90.0 - (lowest + i), 0.0});
+  if (lowest_out) *lowest_out = lowest;
+  if (columns_out) *columns_out = columns;
+  return points;
+}
+
 }  // namespace
+
+double twilight_strip_seconds(const AtmosphereSpec& spec) {
+  if (!wants_twilight_strip(spec)) return 0.0;
+  return truth_seconds(spec, strip_points(spec, nullptr, nullptr), false, 1.0 / kStripCapDivisor);
+}
 
 bool wants_twilight_strip(const AtmosphereSpec& spec) {
   return spec.scene.check && spec.preview_size > 0 && spec.scene.sun_elevation_min_deg < kDeepTwilightSunDeg;
@@ -69,12 +87,10 @@ bool wants_twilight_strip(const AtmosphereSpec& spec) {
 
 TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_util::Device& dev, Memo& keep,
                              const Progress& progress) {
-  const double lowest = std::max(kLowestSunDeg, std::ceil(90.0 - spec.max_sun_zenith_deg));
-  const int columns = static_cast<int>(std::lround(kHighestSunDeg - lowest)) + 1;
+  double lowest = 0.0;
+  int columns = 0;
+  const std::vector<TruthPoint> points = strip_points(spec, &lowest, &columns);
   const double altitude = spec.scene.camera_altitude_min_km;
-  std::vector<TruthPoint> points;  // [row][column], row 0 at the top
-  for (int j = 0; j < kRows; ++j)
-    for (int i = 0; i < columns; ++i) points.push_back({altitude, 90.0 - row_elevation_deg(j), 90.0 - (lowest + i), 0.0});
 
   TruthOptions o = scene_truth_options(spec, spec.scene.seed + kStripSeedOffset);
   o.target_relative_se = std::max(o.target_relative_se, kStripRelativeSe);

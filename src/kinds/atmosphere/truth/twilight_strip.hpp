@@ -25,6 +25,8 @@ struct TwilightStrip {
 };
 
 bool wants_twilight_strip(const AtmosphereSpec& spec);
+// What its truth costs on the 2-core CPU (truth_seconds' model); 0 when the spec wants none.
+double twilight_strip_seconds(const AtmosphereSpec& spec);
 // The strip's truth is kept in `keep` (its store) as the scene's is.
 TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_util::Device& dev, Memo& keep,
                              const Progress& progress);
