@@ -49,4 +49,9 @@ Mat3 srgb_to_xyz() {
 
 Mat3 xyz_to_srgb() { return inverse(srgb_to_xyz()); }
 
+double srgb_luminance(const std::array<double, 3>& rgb) {
+  static const Mat3 M = srgb_to_xyz();
+  return M[3] * rgb[0] + M[4] * rgb[1] + M[5] * rgb[2];
+}
+
 }  // namespace specbake

@@ -14,5 +14,7 @@ Mat3 inverse(const Mat3& m);
 Mat3 multiply(const Mat3& a, const Mat3& b);
 // m·v for a 3-vector v (v[0], v[1], v[2]).
 std::array<double, 3> apply(const Mat3& m, const double* v);
+// The luminance Y of a linear sRGB colour (the middle row of srgb_to_xyz).
+double srgb_luminance(const std::array<double, 3>& rgb);
 
 }  // namespace specbake

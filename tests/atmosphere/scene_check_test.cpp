@@ -426,8 +426,16 @@ TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
     return c;
   };
   auto reused = [](const SceneCheck& c, const char* which) { return c.record.details.at(which).at("reused"); };
+  // what the job's progress shares ask before the check: the same keys as the check's traces
+  auto kept = [&](const AtmosphereSpec& spec, int orders) {
+    Memo memo;
+    memo.store = &store;
+    return scene_truth_kept(spec, orders, t::shared_device(), memo);
+  };
+  EXPECT_FALSE(kept(s, b.orders_used));
   std::set<std::string> used1, used2;
   const SceneCheck c1 = check(s, b.orders_used, &used1);
+  EXPECT_TRUE(kept(s, b.orders_used));
   EXPECT_TRUE(reused(c1, "truth").is_null());
   EXPECT_TRUE(reused(c1, "spectral_truth").is_null());
   ASSERT_EQ(used1.size(), 2u);
@@ -444,6 +452,7 @@ TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
 
   AtmosphereSpec other = s;
   other.scene.seed += 1;
+  EXPECT_FALSE(kept(other, b.orders_used));
   const SceneCheck c3 = check(other, b.orders_used);
   EXPECT_TRUE(reused(c3, "truth").is_null());
   EXPECT_TRUE(reused(c3, "spectral_truth").is_null());
@@ -455,7 +464,9 @@ TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
   EXPECT_TRUE(reused(c3b, "spectral_truth").is_null());
   AtmosphereSpec finer = s;  // other texture sizes: the same truth
   finer.scattering_mu = 64;
+  EXPECT_TRUE(kept(finer, b.orders_used));
   EXPECT_FALSE(reused(check(finer, b.orders_used), "truth").is_null());
+  EXPECT_FALSE(kept(s, b.orders_used - 1));
 
   const SceneCheck c4 = check(s, b.orders_used - 1);  // split at order 1: the rgb walks differ
   EXPECT_TRUE(reused(c4, "truth").is_null());
@@ -471,6 +482,42 @@ TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
   EXPECT_FALSE(reused(c5, "spectral_truth").is_null());
   EXPECT_EQ(c5.points_csv.bytes, c1.points_csv.bytes);
   EXPECT_FALSE(reused(check(s, b.orders_used), "truth").is_null());  // kept again, whole
+}
+
+// The job's progress shares come from the cost model: in a twilight scene, whose check costs
+// several times its bake, the compute ends early in the job's fraction; once the scene's truth is
+// kept, the check costs ~0 s and the compute takes nearly all of it. (Constant shares, 0.75 for
+// the compute whatever the check costs, would put both runs at the same fraction.)
+TEST(SceneCheck, TheJobsProgressSharesFollowTheCheckItsCost) {
+  t::TempDir dir;
+  const AtmosphereSpec s = spec_of(
+      "    orders: 2\n"
+      "    previews: none\n"
+      "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: 32, mu_s: 8, nu: 4}}\n"
+      "    scene: {points: 6, relative_se: 0.02, sun_elevation_deg: [-10, -2]}\n");
+  const ResultStore store(dir / "results");
+  // the job's fraction when its compute ends (the last one reported before the check step)
+  auto check_starts_at = [&] {
+    Memo memo;
+    memo.store = &store;
+    JobContext ctx{t::shared_device()};
+    ctx.memo = &memo;
+    double at = -1.0;
+    bool checking = false;
+    ctx.on_stage = [&](Stage stage) { checking = checking || stage == Stage::check; };
+    ctx.progress = [&](std::string_view, double f) {
+      if (!checking) at = f;
+    };
+    (void)specbake::atmosphere::bake(s, ctx);
+    return at;
+  };
+  const double first = check_starts_at(), again = check_starts_at();
+  std::printf("the scene check starts at %.3f of the job (truth traced), %.3f (truth kept)\n", first, again);
+  // The model at these sizes: compute ~0.13 s and files 1 s against the check's ~1.1 s a point
+  // below the horizon at relative_se 0.01, a quarter of it at 0.02: ~0.13 / 2.8 traced, ~0.13 /
+  // 1.13 kept.
+  EXPECT_LT(first, 0.08);
+  EXPECT_GT(again, 2.0 * first);
 }
 
 // ---- the hard cases ------------------------------------------------------------------------

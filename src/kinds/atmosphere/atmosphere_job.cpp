@@ -151,8 +151,25 @@ json plan(const AtmosphereSpec& spec, JobContext& ctx) {
 
 namespace {
 
-// Job fractions: the passes report 0..0.9 of their own; with a scene check they get 0..kComputeShare.
-constexpr double kComputeShare = 0.75, kSceneCheckEnd = 0.92;
+// The job's progress fractions: the compute ends at compute_end (the passes report 0..0.9 of
+// their own), the scene check and the twilight strip at check_end (the strip from strip_from),
+// the files and previews take the rest. From the cost model (bake_seconds, check_seconds,
+// twilight_strip_seconds) so that the progress line's rate-based ETA holds in a twilight scene,
+// whose check takes several times its bake, and after a run that kept the scene's truth, whose
+// check takes ~0 s.
+struct Shares {
+  double compute_end = 0.9, strip_from = 0.92, check_end = 0.92;
+};
+
+Shares job_shares(const AtmosphereSpec& spec, JobContext& ctx) {
+  // orders: auto splits the truth at the orders the bake ends with, unknown here: taken as not kept
+  const bool kept = ctx.memo && spec.orders && scene_truth_kept(spec, *spec.orders, ctx.device, *ctx.memo);
+  const double check = kept ? 0.0 : check_seconds(spec), strip = kept ? 0.0 : twilight_strip_seconds(spec);
+  constexpr double kFiles = 1.0;  // bake_seconds' fixed second: set-up, files and previews
+  const double compute = std::max(bake_seconds(spec) - kFiles, 0.1);
+  const double total = compute + check + strip + kFiles;
+  return {compute / total, (compute + check) / total, (compute + check + strip) / total};
+}
 
 // What the manifest says of the orders and passes of a bake.
 void record_orders(const AtmosphereSpec& spec, const Baked& b, BakeResult& r) {
@@ -172,19 +189,21 @@ void record_orders(const AtmosphereSpec& spec, const Baked& b, BakeResult& r) {
                          " orders before an order added less than the tolerance " + format_g(spec.tolerance));
 }
 
-void compute_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b) {
+void compute_step(const AtmosphereSpec& spec, const Shares& share, JobContext& ctx, BakeResult& r, Baked& b) {
   ctx.enter(Stage::compute);
-  const double scale = spec.scene.check ? kComputeShare / 0.9 : 1.0;
+  const double scale = share.compute_end / 0.9;
   b = bake_luts(spec, ctx.device, [&](std::string_view what, double f) { ctx.progress(what, f * scale); }, 24);
   record_orders(spec, b, r);
 }
 
 // sizes: auto / spectrum: auto: the search's bakes are the compute step; the chosen one is kept.
+// The search judges its choice itself: after it only the files are left (and the strip).
+constexpr double kSearchShare = 0.9;
 AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResult& r, Baked& b,
                            std::optional<SceneCheck>& checked, SceneCheck& held_out, int& held_out_first) {
   ctx.enter(Stage::compute);
   AutoSearch found = kept_search_settings(
-      spec, ctx.device, [&](std::string_view what, double f) { ctx.progress(what, f * kComputeShare); }, *ctx.memo);
+      spec, ctx.device, [&](std::string_view what, double f) { ctx.progress(what, f * kSearchShare); }, *ctx.memo);
   b = std::move(found.baked);
   checked = std::move(found.check);  // the search judged its choice already, and at held-out points
   held_out = std::move(found.held_out);
@@ -229,11 +248,12 @@ std::string interpolation_points() {
 // `store: radiance`: the interpolation between stored wavelengths measured against a bake at
 // wavelengths halfway between them (same model, sizes and orders; one more pass on the device),
 // recorded as reported accuracy (not judged: the wavelength count is the user's choice).
-void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
+void interpolation_step(const AtmosphereSpec& spec, const Shares& share, const Baked& b, JobContext& ctx,
+                        BakeResult& r) {
   ctx.enter(Stage::check);
   const std::vector<double> lambdas = interpolation_test_wavelengths(b.radiance.lambda_nm);
   if (lambdas.empty()) return;
-  ctx.progress("spectral interpolation check", 0.94);
+  ctx.progress("spectral interpolation check", share.check_end);
   const Model& m = b.luts.model;
   const Channels ch = channels_at(spec, lambdas);
   const int width = pass_width_for(lambdas.size());
@@ -269,7 +289,7 @@ void interpolation_step(const AtmosphereSpec& spec, const Baked& b, JobContext& 
 namespace {
 
 // `checked`: the scene check already made of these LUTs (an auto search's), not made again.
-void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r,
+void check_step(const AtmosphereSpec& spec, const Shares& share, const Baked& b, JobContext& ctx, BakeResult& r,
                 std::optional<SceneCheck> checked = std::nullopt) {
   ctx.enter(Stage::check);
   r.accuracy.push_back(judge_self_checks(b));
@@ -277,7 +297,7 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
   // the error in the user's scene: the LUTs against the path-traced truth at the scene's points
   SceneCheck sc = checked ? std::move(*checked)
                           : check_scene(spec, b.luts, b.orders_used, ctx.device, [&](std::string_view what, double f) {
-                              ctx.progress(what, kComputeShare + (kSceneCheckEnd - kComputeShare) * f);
+                              ctx.progress(what, share.compute_end + (share.strip_from - share.compute_end) * f);
                             }, ctx.memo);
   r.accuracy.insert(r.accuracy.begin(), sc.record);  // the headline: the error the user sees
   r.files.push_back(std::move(sc.points_csv));
@@ -286,7 +306,10 @@ void check_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
     // the sunset beside the truth (a preview; its own walks, kept as the scene's)
     Memo local;
     TwilightStrip strip = twilight_strip(spec, b.luts, ctx.device, ctx.memo ? *ctx.memo : local,
-                                         [&](std::string_view, double) { ctx.progress("twilight strip", kSceneCheckEnd); });
+                                         [&](std::string_view, double f) {
+                                           ctx.progress("twilight strip",
+                                                        share.strip_from + (share.check_end - share.strip_from) * f);
+                                         });
     r.files.push_back(std::move(strip.png));
     r.manifest_blocks["atmosphere"]["twilight_strip"] = std::move(strip.record);
   }
@@ -634,11 +657,11 @@ void record_timings(const Baked& b, double files_s, double previews_s, BakeResul
                   sec["device_s"].get<double>(), sec["host_s"].get<double>(), sec["wall_s"].get<double>());
 }
 
-void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, BakeResult& r) {
+void files_step(const AtmosphereSpec& spec, const Shares& share, const Baked& b, JobContext& ctx, BakeResult& r) {
   ctx.enter(Stage::files);
   const Luts& L = b.luts;
   const auto t_files = std::chrono::steady_clock::now();
-  ctx.progress("files", 0.92);
+  ctx.progress("files", share.check_end);
   const std::string units = b.spectrum.spectral ? "linear sRGB luminance / 683 (W m^-2 sr^-1 CIE-weighted)"
                                                 : "W m^-2 nm^-1 (radiance textures: per sr) at 680/550/440 nm";
   const std::string param = "Bruneton 2017 (r, mu, mu_s, nu) parameterisation, texel centres";
@@ -649,7 +672,7 @@ void files_step(const AtmosphereSpec& spec, const Baked& b, JobContext& ctx, Bak
                      sampling_glsl(L.model, L.rgb, spec.layout_3d, spec.layout_tiled2d, "Values: " + units + "."), "",
                      {}, "", "", "GLSL lookup functions for the shipped layouts"});
   const auto t_previews = std::chrono::steady_clock::now();
-  ctx.progress("previews", 0.95);
+  ctx.progress("previews", share.check_end + 0.4 * (1.0 - share.check_end));
   if (spec.preview_size > 0)
     for (auto& f : preview_files(L, b.spectrum.sky_radiance_to_luminance, b.spectrum.sun_radiance_to_luminance,
                                  spec.preview_size, spec.preview_tone))
@@ -679,16 +702,18 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx) {
     SceneCheck held_out;
     int held_out_first = 0;
     const AtmosphereSpec use = search_step(spec, ctx, r, b, checked, held_out, held_out_first);
-    check_step(use, b, ctx, r, std::move(checked));
+    const Shares share{kSearchShare, kSearchShare, 0.92};
+    check_step(use, share, b, ctx, r, std::move(checked));
     held_out_step(use, std::move(held_out), held_out_first, r);
-    if (use.store_radiance) interpolation_step(use, b, ctx, r);
-    files_step(use, b, ctx, r);
+    if (use.store_radiance) interpolation_step(use, share, b, ctx, r);
+    files_step(use, share, b, ctx, r);
   } else {
     r.parameters = parameters_json(spec);
-    compute_step(spec, ctx, r, b);
-    check_step(spec, b, ctx, r);
-    if (spec.store_radiance) interpolation_step(spec, b, ctx, r);
-    files_step(spec, b, ctx, r);
+    const Shares share = job_shares(spec, ctx);
+    compute_step(spec, share, ctx, r, b);
+    check_step(spec, share, b, ctx, r);
+    if (spec.store_radiance) interpolation_step(spec, share, b, ctx, r);
+    files_step(spec, share, b, ctx, r);
   }
   ctx.progress("done", 1.0);
   return r;

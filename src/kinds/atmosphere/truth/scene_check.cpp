@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <limits>
 #include <stdexcept>
 
@@ -18,6 +19,8 @@
 #include "kinds/atmosphere/model/model.hpp"
 
 namespace specbake::atmosphere {
+
+namespace fs = std::filesystem;
 
 using nlohmann::json;
 
@@ -56,10 +59,6 @@ Vec3 times(const Vec3& v, const std::array<double, 3>& k) { return {v[0] * k[0],
 const Mat3& to_xyz() {
   static const Mat3 M = srgb_to_xyz();
   return M;
-}
-double luminance_y(const Vec3& rgb) {
-  const Mat3& M = to_xyz();
-  return M[3] * rgb[0] + M[4] * rgb[1] + M[5] * rgb[2];
 }
 
 std::vector<Vec3> rows_of(const std::vector<double>& v) {
@@ -231,6 +230,17 @@ AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec) {
   return ss;
 }
 
+bool is_spectral_reference(const AtmosphereSpec& spec) {
+  return spec.spectral && spec.count == kReferenceWavelengths && spec.min_nm == 360.0 && spec.max_nm == 830.0;
+}
+
+std::string truth_key(const AtmosphereSpec& traced, const std::string& what, const TruthOptions& o,
+                      const std::vector<TruthPoint>& points, cl_util::Device& dev) {
+  const json p = parameters_json(traced);
+  return "atmosphere.truth/" + what + "/" + p["atmosphere"].dump() + p["channels"].dump() + "/walks " +
+         truth_options_json(o).dump() + "/points " + sha256_hex(truth_points_csv(points)) + truth_code_key(dev);
+}
+
 std::string truth_code_key(cl_util::Device& dev) {
   return "/program " + sha256_hex(expanded_program(kTruthProgram)) + "/host " + kHostSources + "/device " +
          device_identity(dev.info()).dump() + "/version " + kVersion;
@@ -287,49 +297,59 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
 
 double check_seconds(const AtmosphereSpec& spec) {
   if (!spec.scene.check) return 0.0;
-  const AtmosphereSpec ss = spectral_reference_of(spec);
-  const bool reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm);
-  return truth_seconds(spec, scene_points_of(spec), reference, 1.0);
+  return truth_seconds(spec, scene_points_of(spec), !is_spectral_reference(spec), 1.0);
 }
+
 
 namespace {
 
 // The traces a check judges by: the bake's wavelengths (all orders, split at the bake's) and,
-// unless the bake is it, the spectral reference (48 wavelengths over 360–830 nm).
-struct SceneTraces {
-  TruthOptions o, so;       // their walks
-  bool reference = false;   // the spectral reference was traced
-  double split = 0.9;       // the progress at which the bake's trace ends
-  std::shared_ptr<const TruthResult> bake, spectral = std::make_shared<const TruthResult>();
+// unless the bake is it, the spectral reference (48 wavelengths over 360–830 nm); their walks
+// and the keys they are kept under: the model and wavelengths, the scene (less its tolerances,
+// which judge the truth but do not change it) and its point set, the walks' options (the split
+// among them), the tracer's program and host code, the device and the tool.
+struct SceneTracePlan {
+  TruthOptions o, so;      // the bake's trace, the reference's
+  bool reference = false;  // the spectral reference is traced
+  std::string bake_key, reference_key;
 };
 
-// The scene's traces, each kept in `keep` under everything it depends on: the model and
-// wavelengths, the scene and its point set, the walks' options (the split among them), the
-// tracer's program and host code, the device and the tool.
-SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
-                        int first, std::uint64_t seed, cl_util::Device& dev, const Progress& progress, Memo& keep,
-                        bool bake_wavelengths = true) {
-  const std::string where = "/points " + sha256_hex(truth_points_csv(points)) + truth_code_key(dev);
-  json scene = scene_json(spec.scene);  // the tolerances judge the truth; they do not change it
+SceneTracePlan plan_traces(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
+                           int first, std::uint64_t seed, cl_util::Device& dev) {
+  json scene = scene_json(spec.scene);
   if (scene.is_object()) {
     scene.erase("tolerance_de2000");
     scene.erase("tolerance_relative");
   }
-  auto key = [&](const AtmosphereSpec& traced, const char* what, const TruthOptions& o) {
-    const json p = parameters_json(traced);
-    const json walks = {{"paths", o.paths},         {"orders", o.orders},
-                        {"seed", o.seed},           {"paths_per_batch", o.paths_per_batch},
-                        {"target", o.target_relative_se}, {"max_paths", o.max_paths},
-                        {"split", o.split_orders},  {"weights", o.target_weights},
-                        {"next_sun", static_cast<int>(o.next_sun)}};
-    return std::string("atmosphere.truth/") + what + "/" + p["atmosphere"].dump() + p["channels"].dump() +
-           scene.dump() + "/first " + std::to_string(first) + "/walks " + walks.dump() + where;
-  };
+  const std::string what = "/" + scene.dump() + "/first " + std::to_string(first);
+  SceneTracePlan t;
+  t.o = scene_truth_options(spec, seed);
+  t.o.split_orders = orders_used;
+  t.bake_key = truth_key(spec, "bake" + what, t.o, points, dev);
+  t.reference = !is_spectral_reference(spec);
+  // the same sky as the reference spectrum (independent streams: another seed)
+  const AtmosphereSpec ss = spectral_reference_of(spec);
+  t.so = scene_truth_options(ss, seed + kSpectralSeedOffset);
+  t.reference_key = truth_key(ss, "reference" + what, t.so, points, dev);
+  return t;
+}
+
+struct SceneTraces {
+  TruthOptions o, so;       // their walks
+  bool reference = false;   // the spectral reference was traced
+  std::shared_ptr<const TruthResult> bake, spectral = std::make_shared<const TruthResult>();
+};
+
+// The scene's traces, each kept in `keep` under its plan's key.
+SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
+                        int first, std::uint64_t seed, cl_util::Device& dev, const Progress& progress, Memo& keep,
+                        bool bake_wavelengths = true) {
+  const SceneTracePlan plan = plan_traces(spec, points, orders_used, first, seed, dev);
   auto report = [&](double from, double to) {
     return [&, from, to](std::string_view, double f) { progress("scene check", from + (to - from) * f); };
   };
-  auto trace = [&](const AtmosphereSpec& traced, const char* what, const TruthOptions& o, double from, double to) {
-    const std::string k = key(traced, what, o);
+  auto trace = [&](const AtmosphereSpec& traced, const std::string& k, const TruthOptions& o, double from,
+                   double to) {
     return keep.kept<TruthResult>(
         k, [&] { return trace_truth(traced, dev, points, o, report(from, to)); }, truth_result_bytes,
         [&](const std::string& bytes) {
@@ -343,20 +363,13 @@ SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint
   };
 
   SceneTraces t;
-  // The bake's wavelengths, all orders, split at the bake's orders.
-  t.o = scene_truth_options(spec, seed);
-  t.o.split_orders = orders_used;
-  // The spectral reference (48 wavelengths over 360–830 nm) is traced unless the bake is it.
-  const AtmosphereSpec ss = spectral_reference_of(spec);
-  t.reference = !(spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm);
-  t.split = t.reference ? 0.5 : 0.9;
-  if (bake_wavelengths)
-    t.bake = trace(spec, "bake", t.o, 0.0, t.split);
-  else
-    t.split = 0.0;  // judge_scene: the reference alone
-  // the same sky as the reference spectrum (independent streams: another seed)
-  t.so = scene_truth_options(ss, seed + kSpectralSeedOffset);
-  if (t.reference) t.spectral = trace(ss, "reference", t.so, t.split, 1.0);
+  t.o = plan.o;
+  t.so = plan.so;
+  t.reference = plan.reference;
+  // the progress at which the bake's trace ends (judge_scene traces the reference alone)
+  const double split = !bake_wavelengths ? 0.0 : t.reference ? 0.5 : 0.9;
+  if (bake_wavelengths) t.bake = trace(spec, plan.bake_key, t.o, 0.0, split);
+  if (t.reference) t.spectral = trace(spectral_reference_of(spec), plan.reference_key, t.so, split, 1.0);
   return t;
 }
 
@@ -402,7 +415,7 @@ SceneValues scene_values(const AtmosphereSpec& spec, const Luts& luts, const std
   }
   // Views whose reference is darker than kDarkLuminance are reported apart, with their own figures.
   v.dark.resize(n);
-  for (std::size_t p = 0; p < n; ++p) v.dark[p] = !(luminance_y(v.shown_ref[p]) >= kDarkLuminance);
+  for (std::size_t p = 0; p < n; ++p) v.dark[p] = !(srgb_luminance(v.shown_ref[p]) >= kDarkLuminance);
   v.n_dark = std::count(v.dark.begin(), v.dark.end(), 1);
   return v;
 }
@@ -474,7 +487,7 @@ json check_details(const AtmosphereSpec& spec, int orders_used, double exposure_
                       "orders: auto, the largest of the passes'; a pass that stopped earlier then counts its "
                       "missing orders as lut_discretisation)"},
       {"points_without_light", std::count_if(v.shown_ref.begin(), v.shown_ref.end(),
-                                             [](const Vec3& c) { return !(luminance_y(c) > 0.0); })},
+                                             [](const Vec3& c) { return !(srgb_luminance(c) > 0.0); })},
       {"exposure", sc.exposure_ev100
                        ? "fixed, EV100 " + format_g(*sc.exposure_ev100) + ": luminance " +
                              format_g(exposure_y) + " cd/m^2 brought to 0.18 in every view, both colours scaled alike, "
@@ -650,9 +663,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
 }
 
 bool judged_by_reference_alone(const AtmosphereSpec& spec) {
-  const AtmosphereSpec ss = spectral_reference_of(spec);
-  const bool is_reference = spec.spectral && spec.count == ss.count && spec.min_nm == ss.min_nm && spec.max_nm == ss.max_nm;
-  return !spec.scene.tolerance_relative && !is_reference;
+  return !spec.scene.tolerance_relative && !is_spectral_reference(spec);
 }
 
 SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::Device& dev, const Progress& progress,
@@ -678,7 +689,7 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
   for (std::size_t p = 0; p < n; ++p) {
     shown_lut[p] = times(lut[p], k);
     shown_ref[p] = times(s_all[p], k683);
-    dark[p] = !(luminance_y(shown_ref[p]) >= kDarkLuminance);
+    dark[p] = !(srgb_luminance(shown_ref[p]) >= kDarkLuminance);
     de_se[p] = se_de2000(shown_ref[p], s_se[p], k683, exposure_y);
   }
   const Part total = make_part("total", nullptr, nullptr, shown_lut, shown_ref, exposure_y, dark);
@@ -701,6 +712,15 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
   out.record.unit = "p99 CIEDE2000";
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return out;
+}
+
+bool scene_truth_kept(const AtmosphereSpec& spec, int orders_used, cl_util::Device& dev, const Memo& memo) {
+  if (!spec.scene.check) return false;
+  const SceneTracePlan plan = plan_traces(spec, scene_points_of(spec), orders_used, 0, spec.scene.seed, dev);
+  auto kept = [&](const std::string& key) {
+    return memo.items.count(key) > 0 || (memo.store && fs::exists(memo.store->dir() / ResultStore::name_of(key)));
+  };
+  return kept(plan.bake_key) && (!plan.reference || kept(plan.reference_key));
 }
 
 }  // namespace specbake::atmosphere

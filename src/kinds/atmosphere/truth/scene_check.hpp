@@ -80,6 +80,14 @@ AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 // What a kept truth's key carries besides its inputs: the tracer's expanded program, the host
 // sources, the device and the tool's version.
 std::string truth_code_key(cl_util::Device& dev);
+// The key a trace of `points` is kept under: `what` it is (and whatever else the caller's
+// result depends on), the model and wavelengths of `traced`, every walk option, the points and
+// truth_code_key.
+std::string truth_key(const AtmosphereSpec& traced, const std::string& what, const TruthOptions& o,
+                      const std::vector<TruthPoint>& points, cl_util::Device& dev);
+// Whether `spec` is the spectral reference itself (48 wavelengths over 360–830 nm): its check
+// traces no second spectrum.
+bool is_spectral_reference(const AtmosphereSpec& spec);
 
 // What the scene check of `spec` costs when its truth is traced (not kept): wall seconds on the
 // 2-core CPU through PoCL, a model like bake_seconds (docs/atmosphere.md, "The scene check",
@@ -88,6 +96,10 @@ std::string truth_code_key(cl_util::Device& dev);
 // more walks stop at the cap), times the events a walk takes in this atmosphere against the
 // Earth's (walks_events_per_walk), at most the events budget's seconds; 0 without a check.
 double check_seconds(const AtmosphereSpec& spec);
+// Whether the traces check_scene(spec, …, orders_used, …) judges by are kept in `memo` (this
+// process) or its store (an earlier run; by file name, not read): the check then costs ~0 s. For
+// the job's progress shares, not for correctness.
+bool scene_truth_kept(const AtmosphereSpec& spec, int orders_used, cl_util::Device& dev, const Memo& memo);
 // The same model for any points: the bake's wavelengths traced (and the spectral reference with
 // `with_reference`), with `walk_share` of the scene check's walks and caps.
 double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,

@@ -1068,6 +1068,20 @@ nlohmann::json TruthResult::summary() const {
           {"units", "W m^-2 sr^-1 nm^-1 per traced wavelength"}};
 }
 
+nlohmann::json truth_options_json(const TruthOptions& o) {
+  return {{"paths", o.paths},
+          {"orders", o.orders},
+          {"seed", o.seed},
+          {"paths_per_batch", o.paths_per_batch},
+          {"target", o.target_relative_se},
+          {"max_paths", o.max_paths},
+          {"split", o.split_orders},
+          {"weights", o.target_weights},
+          {"next_sun", static_cast<int>(o.next_sun)},
+          {"learn", o.learn},
+          {"max_events_per_point", o.max_events_per_point}};
+}
+
 TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const std::vector<TruthPoint>& points,
                         const TruthOptions& o, const Progress& progress) {
   check_options(points, o);

@@ -83,6 +83,9 @@ struct TruthOptions {
   double max_events_per_point = 0.0;
 };
 
+// Every option, as a kept trace's key carries them.
+nlohmann::json truth_options_json(const TruthOptions& o);
+
 // Radiance per point and traced channel, [point][channel] row-major.
 struct TruthResult {
   std::vector<double> lambda_nm;           // the traced wavelengths (the bake's: 680/550/440 for rgb)

@@ -39,11 +39,6 @@ double row_elevation_deg(int j) {
   return kTopViewDeg * u * u;
 }
 
-double luminance_of(const Vec3& rgb) {
-  const Mat3 m = srgb_to_xyz();
-  return m[3] * rgb[0] + m[4] * rgb[1] + m[5] * rgb[2];
-}
-
 // CIEDE2000 → colour: black at 0, green at 1, yellow at 2, red from 5; grey where undefined.
 std::array<std::uint8_t, 3> error_colour(double de) {
   if (!std::isfinite(de)) return {80, 80, 80};
@@ -97,12 +92,7 @@ TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_ut
   const long long cap = std::max(o.paths, o.max_paths / kStripCapDivisor);
   o.max_events_per_point *= static_cast<double>(cap) / static_cast<double>(o.max_paths);  // its events a walk
   o.max_paths = cap;
-  const json p = parameters_json(spec);
-  const json walks = {{"paths", o.paths}, {"seed", o.seed}, {"target", o.target_relative_se},
-                      {"max_paths", o.max_paths}, {"weights", o.target_weights}};
-  const std::string key = "atmosphere.truth/twilight-strip/" + p["atmosphere"].dump() + p["channels"].dump() +
-                          "/walks " + walks.dump() + "/points " + sha256_hex(truth_points_csv(points)) +
-                          truth_code_key(dev);
+  const std::string key = truth_key(spec, "twilight-strip", o, points, dev);
   const auto truth = keep.kept<TruthResult>(
       key, [&] { return trace_truth(spec, dev, points, o, progress); }, truth_result_bytes,
       [&](const std::string& bytes) { return truth_result_from_bytes(bytes); });
@@ -122,7 +112,7 @@ TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_ut
   // each column exposed at its truth's mean luminance
   std::vector<double> column_y(columns, 0.0);
   for (int i = 0; i < columns; ++i) {
-    for (int j = 0; j < kRows; ++j) column_y[i] += luminance_of(shown_truth[j * columns + i]) / kRows;
+    for (int j = 0; j < kRows; ++j) column_y[i] += srgb_luminance(shown_truth[j * columns + i]) / kRows;
   }
   std::vector<double> de(n), de_se(n);
   for (int j = 0; j < kRows; ++j)
