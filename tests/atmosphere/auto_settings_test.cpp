@@ -280,6 +280,52 @@ TEST(AutoSearch, ARoundWithinTheTruthsNoiseIsSearchedAgainWithAFinerTruth) {
   EXPECT_EQ(r[0].first, 64);
 }
 
+// sizes: auto also refines the scattering density's θ nodes (×2, from the scene's default: 16,
+// or 32 where the sun goes below −6°, up to 64), unless the config gives them; the choice's
+// record carries them and reads back.
+TEST(AutoSettings, TheDensitysThetaNodesAreASearchAxisUnlessTheConfigGivesThem) {
+  using specbake::AtmosphereSpec;
+  using specbake::atmosphere::search_refinements;
+  using specbake::atmosphere::search_start;
+  auto named = [](const AtmosphereSpec& spec, const std::string& name) -> const Refinement<AtmosphereSpec>* {
+    static std::vector<Refinement<AtmosphereSpec>> keep;
+    keep = search_refinements(spec);
+    for (const auto& r : keep)
+      if (r.name == name) return &r;
+    return nullptr;
+  };
+  const std::string scene = "    scene: {tolerance_de2000: 1}\n";
+  const AtmosphereSpec day = t::spec_of("    sizes: auto\n" + scene);
+  const auto* theta = named(day, "quadrature.density_theta");
+  ASSERT_NE(theta, nullptr);
+  AtmosphereSpec s = search_start(day);
+  EXPECT_EQ(s.density_theta, 16);
+  EXPECT_TRUE(theta->apply(s));
+  EXPECT_EQ(s.density_theta, 32);
+  EXPECT_TRUE(theta->apply(s));
+  EXPECT_EQ(s.density_theta, 64);
+  EXPECT_FALSE(theta->apply(s));  // 128: past the search's limit
+
+  const AtmosphereSpec deep =
+      t::spec_of("    sizes: auto\n    scene: {tolerance_de2000: 1, sun_elevation_deg: [-12, 0]}\n");
+  EXPECT_EQ(search_start(deep).density_theta, 32);
+  EXPECT_NE(named(deep, "quadrature.density_theta"), nullptr);
+
+  EXPECT_EQ(named(t::spec_of("    sizes: auto\n    quadrature: {density_theta: 24}\n" + scene),
+                  "quadrature.density_theta"),
+            nullptr);
+  EXPECT_EQ(named(t::spec_of("    spectrum: auto\n" + scene), "quadrature.density_theta"), nullptr);
+
+  AtmosphereSpec chosen = search_start(day);
+  chosen.density_theta = 64;
+  const json record = specbake::atmosphere::settings_json(chosen);
+  EXPECT_EQ(record["quadrature"]["density_theta"], 64);
+  EXPECT_EQ(specbake::atmosphere::with_settings(day, record).density_theta, 64);
+  json odd = record;
+  odd["quadrature"]["density_theta"] = 5;
+  EXPECT_THROW(specbake::atmosphere::with_settings(day, odd), std::runtime_error);
+}
+
 // The search's finer truth, on the device: a tolerance far below the truth's noise ends the first
 // round short of it; with the default relative_se that round is searched again at relative_se / 2
 // (no held-out check of its own), and the second, short again, ends the rounds with its held-out

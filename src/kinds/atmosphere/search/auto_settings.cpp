@@ -31,7 +31,9 @@ int finer(int v, bool even) {
   return std::max(f, v + (even ? 2 : 1));
 }
 
-std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) {
+}  // namespace
+
+std::vector<Refinement<AtmosphereSpec>> search_refinements(const AtmosphereSpec& spec) {
   std::vector<Refinement<AtmosphereSpec>> out;
   auto axis = [&](const char* name, std::vector<int AtmosphereSpec::*> fields, bool even) {
     out.push_back({name, [fields, even](AtmosphereSpec& s) {
@@ -46,6 +48,13 @@ std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) 
     axis("scattering.nu", {&AtmosphereSpec::scattering_nu}, false);
     axis("transmittance", {&AtmosphereSpec::transmittance_mu, &AtmosphereSpec::transmittance_r}, false);
     axis("irradiance", {&AtmosphereSpec::irradiance_mu_s, &AtmosphereSpec::irradiance_r}, false);
+    // the scattering density's sphere rule: twice the θ nodes (a quadrature, not a texture: it
+    // costs compute, no memory), unless the config fixed them
+    if (!spec.density_theta_given)
+      out.push_back({"quadrature.density_theta", [](AtmosphereSpec& s) {
+                       s.density_theta *= 2;
+                       return s.density_theta <= kMaxSearchDensityTheta;
+                     }});
   }
   if (spec.auto_spectrum)
     out.push_back({"spectrum", [](AtmosphereSpec& s) {
@@ -63,6 +72,7 @@ std::vector<Refinement<AtmosphereSpec>> refinements(const AtmosphereSpec& spec) 
   return out;
 }
 
+namespace {
 
 // The truth's own p99 standard error over the scene in `measure` ("de2000", "relative"); 0 without.
 double se_p99(const SceneCheck& c, const char* measure) {
@@ -118,7 +128,8 @@ json settings_json(const AtmosphereSpec& s) {
                      {"irradiance", {s.irradiance_mu_s, s.irradiance_r}},
                      {"scattering", {{"r", s.scattering_r}, {"mu", s.scattering_mu}, {"mu_s", s.scattering_mu_s},
                                      {"nu", s.scattering_nu}}}}},
-          {"spectrum", s.spectral ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}} : json("rgb")}};
+          {"spectrum", s.spectral ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}} : json("rgb")},
+          {"quadrature", {{"density_theta", s.density_theta}}}};
 }
 
 AtmosphereSpec with_settings(const AtmosphereSpec& spec, const json& settings) {
@@ -144,11 +155,13 @@ AtmosphereSpec with_settings(const AtmosphereSpec& spec, const json& settings) {
     } else if (sp != "rgb") {
       throw std::runtime_error("spectrum is neither \"rgb\" nor {min_nm, max_nm, count}");
     }
+    if (settings.contains("quadrature")) s.density_theta = settings["quadrature"].at("density_theta").get<int>();
   } catch (const json::exception& e) {
     throw std::runtime_error(std::string("settings record: ") + e.what());
   }
-  if (!sizes_within_limits(s) || s.scattering_mu % 2 != 0 || (s.spectral && s.count < 1))
-    throw std::runtime_error("settings record: sizes or spectrum out of range");
+  if (!sizes_within_limits(s) || s.scattering_mu % 2 != 0 || (s.spectral && s.count < 1) || s.density_theta < 4 ||
+      s.density_theta > DENSITY_THETA_MAX || s.density_theta % 2 != 0)
+    throw std::runtime_error("settings record: sizes, spectrum or density_theta out of range");
   return s;
 }
 
@@ -177,7 +190,7 @@ Progress progress_of_check(const Progress& progress, int tries) {
 // `tries` counts the evaluations of all rounds (progress and the log number them).
 AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start, int round, int& tries,
                         cl_util::Device& dev, const Progress& progress, Memo& memo) {
-  const std::vector<Refinement<AtmosphereSpec>> steps = refinements(spec);
+  const std::vector<Refinement<AtmosphereSpec>> steps = search_refinements(spec);
   const double tolerance = judged_tolerance(spec);
   const double cost_cap = kMaxCostFactor * predicted_bake_seconds(default_sizes_of(spec));
 
@@ -334,8 +347,9 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
       {"searched", searched},
       {"tolerance", tolerance},
       {"measure", out.check.record.unit},
-      {"rule", "greedy: from half the default sizes and rgb, bake refinements (one axis group x1.5, or the next "
-               "channel count of rgb, 8, 12, 16, 24, 32, 48) and keep the one that lowers the judged error most per "
+      {"rule", "greedy: from half the default sizes and rgb, bake refinements (one axis group x1.5, the "
+               "density's theta nodes x2 up to 64 unless the config gives them, or the next channel count of rgb, "
+               "8, 12, 16, 24, 32, 48) and keep the one that lowers the judged error most per "
                "second of predicted bake time (a gain under 1 % does not count; the first step bakes every "
                "refinement, later ones try them in the order of their last gain per second and stop once none "
                "untried can beat the best; on a plateau each refinement is tried applied twice, then three times; "

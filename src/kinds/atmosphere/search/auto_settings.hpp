@@ -46,6 +46,7 @@ namespace specbake::atmosphere {
 inline constexpr int kMaxSearchSteps = 16;
 inline constexpr double kMaxCostFactor = 16.0;     // × the predicted bake time of the default sizes
 inline constexpr double kRefineFactor = 1.5;       // one axis group per step
+inline constexpr int kMaxSearchDensityTheta = 64;  // the density's θ nodes: 16 or 32 → 64 at most
 inline constexpr int kMaxReach = 3;                // refinements applied up to 3 times on a plateau
 inline constexpr double kMinGain = 0.01;           // a refinement counts when it lowers the error by 1 %
 inline constexpr int kSpectrumLadder[] = {8, 12, 16, 24, 32, 48};  // wavelengths after rgb
@@ -227,10 +228,15 @@ inline constexpr double kTypicalTries = 20.0;
 // set). `memo` keeps the traces.
 AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo& memo);
 
-// The sizes and spectrum of a spec as the manifest reports them.
+// What the search may refine from `spec` (sizes: auto: each texture's axis group ×1.5 and,
+// unless the config gives `quadrature: {density_theta}`, the density's θ nodes ×2 up to
+// kMaxSearchDensityTheta; spectrum: auto: the next count of kSpectrumLadder).
+std::vector<Refinement<AtmosphereSpec>> search_refinements(const AtmosphereSpec& spec);
+
+// The sizes, spectrum and density θ nodes of a spec as the manifest reports them.
 nlohmann::json settings_json(const AtmosphereSpec& spec);
-// `spec` with the sizes and spectrum of a settings_json record (auto flags cleared); throws
-// std::runtime_error on a record it cannot read.
+// `spec` with the sizes, spectrum and density θ nodes of a settings_json record (auto flags
+// cleared); throws std::runtime_error on a record it cannot read.
 AtmosphereSpec with_settings(const AtmosphereSpec& spec, const nlohmann::json& settings);
 
 // A search's outcome as the result store keeps it: what `run` needs to bake the choice once and
