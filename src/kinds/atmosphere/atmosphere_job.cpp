@@ -165,9 +165,11 @@ Shares job_shares(const AtmosphereSpec& spec, JobContext& ctx) {
   // orders: auto splits the truth at the orders the bake ends with, unknown here: taken as not kept
   const bool kept = ctx.memo && spec.orders && scene_truth_kept(spec, *spec.orders, ctx.device, *ctx.memo);
   const double check = kept ? 0.0 : check_seconds(spec), strip = kept ? 0.0 : twilight_strip_seconds(spec);
-  constexpr double kFiles = 1.0;  // bake_seconds' fixed second: set-up, files and previews
-  const double compute = std::max(bake_seconds(spec) - kFiles, 0.1);
-  const double total = compute + check + strip + kFiles;
+  // bake_seconds' set-up, files and previews
+  const double files = 0.5 + 0.1 * double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s *
+                                 spec.scattering_nu / 1048576.0;
+  const double compute = std::max(bake_seconds(spec) - files, 0.1);
+  const double total = compute + check + strip + files;
   return {compute / total, (compute + check) / total, (compute + check + strip) / total};
 }
 
