@@ -148,6 +148,12 @@ struct MemoryEstimate {
   std::uint64_t host_bytes = 0;      // host memory at the peak (tables, reference paths, files)
 };
 
+// A job's modelled cost given what earlier runs kept (Kind::kept_cost_s).
+struct KeptCost {
+  double seconds = 0.0;  // on a 2-core CPU device, as cost_s
+  std::string basis;     // what it models, e.g. "2-core CPU model of the kept search's choice"
+};
+
 // A job kind: everything the runner and the config loader need, in one table entry.
 struct Kind {
   std::string name;     // the config's `kind:` value
@@ -161,8 +167,9 @@ struct Kind {
   // estimate of the job's wall time in seconds on a 2-core CPU device (for `plan`).
   std::function<double(const JobSpec& job)> cost_s;
   // Optional: cost_s when results kept in ctx.memo's store change what the job costs (an
-  // atmosphere's kept settings search: one bake instead of a search); nullopt when they do not.
-  std::function<std::optional<double>(const JobSpec& job, JobContext& ctx)> kept_cost_s;
+  // atmosphere's kept settings search: one bake instead of a search; its kept scene truth: no
+  // trace), with the estimate's basis in words; nullopt when they do not.
+  std::function<std::optional<KeptCost>(const JobSpec& job, JobContext& ctx)> kept_cost_s;
   std::function<MemoryEstimate(const JobSpec& job)> memory;
   // The OpenCL programs the kind builds (paths of embedded kernel files): their fully expanded
   // sources enter the bundle hash, so a change to any file they include makes a new bundle.

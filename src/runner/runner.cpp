@@ -282,11 +282,11 @@ void read_bundle_summary(const fs::path& bundle, JobReport& r) {
 void apply_kept_cost(const Kind& kind, const JobSpec& job, JobContext& ctx, json& estimate, const fs::path& latest,
                      const json& device) {
   if (!kind.kept_cost_s) return;
-  const std::optional<double> s = kind.kept_cost_s(job, ctx);
+  const std::optional<KeptCost> s = kind.kept_cost_s(job, ctx);
   if (!s) return;
-  estimate["seconds"] = *s;
-  estimate["seconds_2core_cpu"] = *s;
-  estimate["basis"] = "2-core CPU model of the kept search's choice";
+  estimate["seconds"] = s->seconds;
+  estimate["seconds_2core_cpu"] = s->seconds;
+  estimate["basis"] = s->basis;
   calibrate_estimate(estimate, latest, device);
 }
 
@@ -624,7 +624,11 @@ std::vector<JobReport> Runner::run() {
           if (!memo.store_used.empty()) manifest["results_kept"] = memo.store_used;
           for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
           for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
-          manifest["timings_s"] = {{"bake", bake_s}, {"model_2core_cpu_s", kind.cost_s(*it.job)}, {"steps", stage_s}};
+          // the model of what this run cost (results kept from earlier runs included), which a
+          // later run's calibrate_estimate scales by
+          manifest["timings_s"] = {{"bake", bake_s},
+                                   {"model_2core_cpu_s", estimate.value("seconds_2core_cpu", kind.cost_s(*it.job))},
+                                   {"steps", stage_s}};
           settle_publishing();
           r.status = "built";
           r.parameters = result.parameters;

@@ -432,9 +432,11 @@ TEST_F(CliUser, PlanShowsEstimates) {
   EXPECT_FALSE(fs::exists(tmp_ / "out"));
 }
 
-// After a bake, plan scales the cost model to the device by the job's last bake on it: for the
-// same settings the estimate is that bake's own seconds (model × bake / model, to rounding); a
-// bundle baked on another device does not calibrate it.
+// After a bake, plan scales the cost model to the device by the job's last bake on it: the
+// model of what the next run costs (here with the scene's truth kept by the first run: no trace,
+// so less than the first run's model) times that bake's seconds over the model it recorded; once
+// a run recorded the kept model, the same settings estimate that bake's own seconds. A bundle
+// baked on another device does not calibrate it.
 TEST_F(CliUser, PlanCalibratesOnTheLastBakeOnThisDevice) {
   const fs::path c = cfg(config(kSky));
   ASSERT_EQ(run({"run", c.string()}).exit_code, 0);
@@ -449,24 +451,44 @@ TEST_F(CliUser, PlanCalibratesOnTheLastBakeOnThisDevice) {
   auto r = run({"plan", c.string(), "--report", report.string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   json e = t::read_json(report)["jobs"][0]["estimate"];
-  EXPECT_DOUBLE_EQ(e["seconds_2core_cpu"].get<double>(), model_s);  // the same settings
-  EXPECT_NEAR(e["seconds"].get<double>(), bake_s, 1e-12 * bake_s);
+  const double kept_model_s = e["seconds_2core_cpu"].get<double>();
+  EXPECT_LT(kept_model_s, model_s);  // the scene's truth is kept: the check traces nothing
+  EXPECT_NEAR(e["seconds"].get<double>(), kept_model_s * bake_s / model_s, 1e-12 * bake_s);
   EXPECT_EQ(e["basis"], "last bake on this device");
   EXPECT_EQ(e["calibrated_on"].get<std::string>(), fs::canonical(latest).string());
   EXPECT_TRUE(std::regex_search(r.out, std::regex("sky +atmosphere +up to date; would be skipped +~[0-9.]+ s\\* ")))
       << r.out;
   EXPECT_NE(r.out.find("* est. time scaled to this device"), std::string::npos) << r.out;
 
-  json other = manifest;
+  // a rebake records the model it was estimated at (the truth kept); the same settings then
+  // estimate its own seconds
+  ASSERT_EQ(run({"run", c.string(), "--force"}).exit_code, 0);
+  const json again = t::read_json(latest / "manifest.json");
+  EXPECT_DOUBLE_EQ(again["timings_s"]["model_2core_cpu_s"].get<double>(), kept_model_s);
+  const double rebake_s = again["timings_s"]["bake"].get<double>();
+  r = run({"plan", c.string(), "--report", report.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  e = t::read_json(report)["jobs"][0]["estimate"];
+  EXPECT_NEAR(e["seconds"].get<double>(), rebake_s, 1e-12 * rebake_s);
+
+  json other = again;
   other["device"]["name"] = "another device";
   t::write_file(latest / "manifest.json", other.dump(2));
   r = run({"plan", c.string(), "--report", report.string()});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   e = t::read_json(report)["jobs"][0]["estimate"];
   EXPECT_FALSE(e.contains("calibrated_on"));
+  EXPECT_EQ(e["basis"], "2-core CPU model, the scene's truth kept");
+  EXPECT_DOUBLE_EQ(e["seconds"].get<double>(), kept_model_s);
+  EXPECT_EQ(r.out.find("* est. time"), std::string::npos) << r.out;
+
+  // without the kept truth, the whole job's model
+  fs::remove_all(tmp_ / "out" / ".results");
+  r = run({"plan", c.string(), "--report", report.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  e = t::read_json(report)["jobs"][0]["estimate"];
   EXPECT_EQ(e["basis"], "2-core CPU model");
   EXPECT_DOUBLE_EQ(e["seconds"].get<double>(), model_s);
-  EXPECT_EQ(r.out.find("* est. time"), std::string::npos) << r.out;
 }
 
 }  // namespace
@@ -641,13 +663,15 @@ TEST_F(CliUser, LiveProgressOnATerminal) {
 }
 
 // Before 5 % of a job is done the ETA comes from the estimate `plan` shows: the cost model
-// scaled by the job's last bake on this device. A last bake recorded as 5000 s (the model's
-// seconds kept) makes the first ETA of a --force rebake about 83 min; the uncalibrated model
-// of this small sky is under a second.
+// scaled by the job's last bake on this device. A last bake recorded as 5000 s for the model's
+// seconds of a rebake (a first run keeps the scene's truth; the rebake the model recorded)
+// makes the first ETA of the next --force rebake about 83 min; the uncalibrated model of this
+// small sky is under a second.
 TEST_F(CliUser, TheFirstEtaIsTheCalibratedEstimate) {
   if (std::system("command -v script > /dev/null 2>&1") != 0) GTEST_SKIP() << "no `script` to provide a terminal";
   const fs::path c = cfg(config(kSky));
   ASSERT_EQ(run({"run", c.string()}).exit_code, 0);
+  ASSERT_EQ(run({"run", c.string(), "--force"}).exit_code, 0);
   const fs::path manifest = tmp_ / "out" / "sky" / "latest" / "manifest.json";
   json m = t::read_json(manifest);
   ASSERT_LT(m["timings_s"]["model_2core_cpu_s"].get<double>(), 60.0);

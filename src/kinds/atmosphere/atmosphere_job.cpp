@@ -43,17 +43,25 @@ double estimated_seconds(const AtmosphereSpec& spec) {
     const AtmosphereSpec start = search_start(spec);
     AtmosphereSpec bare = start;  // what each try costs; the interpolation pass runs once
     bare.store_radiance = false;
-    // the truth is traced once and kept for every try, and once more at the held-out points
-    return kTypicalTries * bake_seconds(bare) + (bake_seconds(start) - bake_seconds(bare)) + 2.0 * check_seconds(start);
+    // the truth is traced once and kept for every try, and once more at the held-out points;
+    // the chosen bake's twilight strip once
+    return kTypicalTries * bake_seconds(bare) + (bake_seconds(start) - bake_seconds(bare)) + 2.0 * check_seconds(start) +
+           twilight_strip_seconds(start);
   }
   return bake_seconds(spec) + check_seconds(spec) + twilight_strip_seconds(spec);
 }
 
-std::optional<double> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx) {
-  if (!(spec.auto_sizes || spec.auto_spectrum) || !ctx.memo) return std::nullopt;
+std::optional<KeptCost> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx) {
+  if (!ctx.memo) return std::nullopt;
+  if (!(spec.auto_sizes || spec.auto_spectrum)) {
+    // orders: auto splits the truth at the orders the bake ends with: not known here
+    if (!spec.orders || !scene_truth_kept(spec, *spec.orders, ctx.device, *ctx.memo)) return std::nullopt;
+    return KeptCost{bake_seconds(spec), "2-core CPU model, the scene's truth kept"};
+  }
   const std::optional<KeptSearch> k = find_kept_search(spec, ctx.device, *ctx.memo);
   if (!k) return std::nullopt;
-  return bake_seconds(with_settings(spec, k->chosen));  // the choice's bake; its scene check reads kept truths
+  // the choice's bake; its scene check reads kept truths
+  return KeptCost{bake_seconds(with_settings(spec, k->chosen)), "2-core CPU model of the kept search's choice"};
 }
 
 std::vector<double> interpolation_test_wavelengths(const std::vector<double>& stored) {

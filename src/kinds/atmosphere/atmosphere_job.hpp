@@ -21,8 +21,10 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx);
 // the truth traced once and at the held-out points (and the interpolation pass).
 double estimated_seconds(const AtmosphereSpec& spec);
 // With a search kept in ctx.memo's store (`plan` keeps the search it runs): the kept choice's
-// bake_seconds, what `run` then costs; nullopt without one.
-std::optional<double> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx);
+// bake_seconds, what `run` then costs; with the scene's truth kept (an earlier run of the same
+// atmosphere, wavelengths and scene): the bake without tracing it (and the twilight strip's);
+// nullopt when nothing kept applies.
+std::optional<KeptCost> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx);
 
 // `spectrum: {store: radiance}`: what the linear interpolation between stored wavelengths of
 // sampling_spectral.glsl (GetSkyRadianceAtWavelength & co.) costs. Measured at wavelengths halfway
