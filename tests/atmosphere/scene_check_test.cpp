@@ -427,15 +427,17 @@ TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
   };
   auto reused = [](const SceneCheck& c, const char* which) { return c.record.details.at(which).at("reused"); };
   // what the job's progress shares ask before the check: the same keys as the check's traces
-  auto kept = [&](const AtmosphereSpec& spec, int orders) {
+  auto kept = [&](const AtmosphereSpec& spec, std::optional<int> orders) {
     Memo memo;
     memo.store = &store;
     return scene_truth_kept(spec, orders, t::shared_device(), memo);
   };
   EXPECT_FALSE(kept(s, b.orders_used));
+  EXPECT_FALSE(kept(s, std::nullopt));
   std::set<std::string> used1, used2;
   const SceneCheck c1 = check(s, b.orders_used, &used1);
   EXPECT_TRUE(kept(s, b.orders_used));
+  EXPECT_TRUE(kept(s, std::nullopt));  // orders: auto: kept at some order count
   EXPECT_TRUE(reused(c1, "truth").is_null());
   EXPECT_TRUE(reused(c1, "spectral_truth").is_null());
   ASSERT_EQ(used1.size(), 2u);

@@ -54,8 +54,7 @@ double estimated_seconds(const AtmosphereSpec& spec) {
 std::optional<KeptCost> kept_estimated_seconds(const AtmosphereSpec& spec, JobContext& ctx) {
   if (!ctx.memo) return std::nullopt;
   if (!(spec.auto_sizes || spec.auto_spectrum)) {
-    // orders: auto splits the truth at the orders the bake ends with: not known here
-    if (!spec.orders || !scene_truth_kept(spec, *spec.orders, ctx.device, *ctx.memo)) return std::nullopt;
+    if (!scene_truth_kept(spec, spec.orders, ctx.device, *ctx.memo)) return std::nullopt;
     return KeptCost{bake_seconds(spec), "2-core CPU model, the scene's truth kept"};
   }
   const std::optional<KeptSearch> k = find_kept_search(spec, ctx.device, *ctx.memo);
@@ -170,8 +169,7 @@ struct Shares {
 };
 
 Shares job_shares(const AtmosphereSpec& spec, JobContext& ctx) {
-  // orders: auto splits the truth at the orders the bake ends with, unknown here: taken as not kept
-  const bool kept = ctx.memo && spec.orders && scene_truth_kept(spec, *spec.orders, ctx.device, *ctx.memo);
+  const bool kept = ctx.memo && scene_truth_kept(spec, spec.orders, ctx.device, *ctx.memo);
   const double check = kept ? 0.0 : check_seconds(spec), strip = kept ? 0.0 : twilight_strip_seconds(spec);
   // bake_seconds' set-up, files and previews
   const double files = 0.5 + 0.1 * double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s *

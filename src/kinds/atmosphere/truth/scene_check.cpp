@@ -714,13 +714,21 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
   return out;
 }
 
-bool scene_truth_kept(const AtmosphereSpec& spec, int orders_used, cl_util::Device& dev, const Memo& memo) {
+bool scene_truth_kept(const AtmosphereSpec& spec, std::optional<int> orders_used, cl_util::Device& dev,
+                      const Memo& memo) {
   if (!spec.scene.check) return false;
-  const SceneTracePlan plan = plan_traces(spec, scene_points_of(spec), orders_used, 0, spec.scene.seed, dev);
   auto kept = [&](const std::string& key) {
     return memo.items.count(key) > 0 || (memo.store && fs::exists(memo.store->dir() / ResultStore::name_of(key)));
   };
-  return kept(plan.bake_key) && (!plan.reference || kept(plan.reference_key));
+  const std::vector<TruthPoint> points = scene_points_of(spec);
+  SceneTracePlan plan = plan_traces(spec, points, orders_used.value_or(1), 0, spec.scene.seed, dev);
+  if (plan.reference && !kept(plan.reference_key)) return false;
+  if (orders_used) return kept(plan.bake_key);
+  // orders: auto: the bake's trace is split at the orders the bake ends with, not known before
+  // it; a trace kept at any count is the one an unchanged bake reads again
+  for (int n = 1; n <= kMaxAutoOrders; ++n)
+    if (kept(plan_traces(spec, points, n, 0, spec.scene.seed, dev).bake_key)) return true;
+  return false;
 }
 
 }  // namespace specbake::atmosphere

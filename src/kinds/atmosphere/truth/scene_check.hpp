@@ -17,6 +17,7 @@
 // exposure), with the truth's own Monte Carlo standard error. docs/atmosphere.md, "The scene
 // check".
 #include <array>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -97,9 +98,11 @@ bool is_spectral_reference(const AtmosphereSpec& spec);
 // Earth's (walks_events_per_walk), at most the events budget's seconds; 0 without a check.
 double check_seconds(const AtmosphereSpec& spec);
 // Whether the traces check_scene(spec, …, orders_used, …) judges by are kept in `memo` (this
-// process) or its store (an earlier run; by file name, not read): the check then costs ~0 s. For
-// the job's progress shares, not for correctness.
-bool scene_truth_kept(const AtmosphereSpec& spec, int orders_used, cl_util::Device& dev, const Memo& memo);
+// process) or its store (an earlier run; by file name, not read): the check then costs ~0 s.
+// Without orders_used (orders: auto), whether such traces are kept at any order count. For the
+// job's progress shares and estimates, not for correctness.
+bool scene_truth_kept(const AtmosphereSpec& spec, std::optional<int> orders_used, cl_util::Device& dev,
+                      const Memo& memo);
 // The same model for any points: the bake's wavelengths traced (and the spectral reference with
 // `with_reference`), with `walk_share` of the scene check's walks and caps.
 double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,
