@@ -171,9 +171,7 @@ struct Shares {
 Shares job_shares(const AtmosphereSpec& spec, JobContext& ctx) {
   const bool kept = ctx.memo && scene_truth_kept(spec, spec.orders, ctx.device, *ctx.memo);
   const double check = kept ? 0.0 : check_seconds(spec), strip = kept ? 0.0 : twilight_strip_seconds(spec);
-  // bake_seconds' set-up, files and previews
-  const double files = 0.5 + 0.1 * double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s *
-                                 spec.scattering_nu / 1048576.0;
+  const double files = bake_files_seconds(spec);
   const double compute = std::max(bake_seconds(spec) - files, 0.1);
   const double total = compute + check + strip + files;
   return {compute / total, (compute + check) / total, (compute + check + strip) / total};

@@ -36,6 +36,8 @@ inline constexpr int kInterpolationTests = 8;
 // irradiance texels (from a default bake's stage times), and `store: radiance`'s interpolation
 // pass. `orders: auto` is costed at 10 orders.
 double bake_seconds(const AtmosphereSpec& spec);
+// The part of bake_seconds that is set-up, files and previews.
+double bake_files_seconds(const AtmosphereSpec& spec);
 
 // A stage whose outputs held values that are not finite (NaN or ±inf): the bake stops there.
 struct NonFiniteStage {
