@@ -96,8 +96,9 @@ TEST(Twilight, SecondOrderIsNeitherDarkNorBright) {
 }
 
 // A scene in deep twilight (sun below −6°) bakes the density with 32 θ nodes unless the config
-// gives the count; other scenes, `quadrature: reference` and an explicit count keep theirs.
-TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodes) {
+// gives the count, and 64 μ_s texels unless it gives sizes; other scenes, `quadrature: reference`
+// and an explicit count or sizes keep theirs.
+TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodesAndSixtyFourSunTexels) {
   EXPECT_EQ(t::spec_of("    preset: earth\n").density_theta, 16);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-6, 10]}\n").density_theta, 16);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n").density_theta, 32);
@@ -108,6 +109,17 @@ TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodes) {
                 .density_theta,
             16);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: none\n    max_sun_zenith_deg: 110\n").density_theta, 16);
+  // and 64 μ_s texels unless the config gives sizes (TwilightTruth.DeepTwilightScenesBakeEnoughSunTexels)
+  EXPECT_EQ(t::spec_of("    preset: earth\n").scattering_mu_s, 32);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-6, 10]}\n").scattering_mu_s, 32);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n").scattering_mu_s, 64);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n    sizes: 100%\n").scattering_mu_s,
+            32);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n"
+                       "    sizes: {scattering: {r: 32, mu: 128, mu_s: 48, nu: 8}}\n")
+                .scattering_mu_s,
+            48);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: none\n    max_sun_zenith_deg: 110\n").scattering_mu_s, 32);
 }
 
 // Why: at the twilight views above (orders ≤ 2, where the density's sphere rule is the whole

@@ -51,6 +51,7 @@ void scale_sizes_at(const At& at, double f, AtmosphereSpec& s) {
 }
 
 void parse_sizes(const At& at, AtmosphereSpec& s) {
+  s.sizes_given = true;
   if (at.node.IsScalar() && at.node.Scalar() == "auto") {  // searched against the scene (auto_settings.hpp)
     s.auto_sizes = true;
     return;
@@ -344,14 +345,17 @@ void parse_bake(const At& job, AtmosphereSpec& s) {
 // The scene, and the tolerance the searches judge by (after the bake's keys: the scene's lowest
 // sun defaults to what the textures hold). A scene in deep twilight (sun below −6°) gets the
 // density's horizon rule with 32 θ nodes unless the config gives the count: there the light of
-// orders ≥ 2 arrives within a few degrees of the horizontal, and 16 nodes leave it unconverged
-// (measured: docs/atmosphere.md, "Twilight"); other scenes keep 16, which they do not need more of.
+// orders ≥ 2 arrives within a few degrees of the horizontal, and 16 nodes leave it unconverged;
+// and, unless the config gives sizes, 64 μ_s texels: the default 32 lie 1.3–1.9° of sun elevation
+// apart below −8°, where the sky falls by about e per degree, and the orders ≥ 2 computed from
+// them come out up to 2.8× too bright there (measured against an independent quadrature:
+// docs/atmosphere.md, "Twilight"). Other scenes keep 16 and 32, which they do not need more of.
 void parse_checks(const At& job, AtmosphereSpec& s) {
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);
-  if (!s.density_theta_given && s.density_horizon && s.scene.check &&
-      s.scene.sun_elevation_min_deg < kDeepTwilightSunDeg)
-    s.density_theta = kDeepTwilightDensityTheta;
+  const bool deep_twilight = s.scene.check && s.scene.sun_elevation_min_deg < kDeepTwilightSunDeg;
+  if (!s.density_theta_given && s.density_horizon && deep_twilight) s.density_theta = kDeepTwilightDensityTheta;
+  if (!s.sizes_given && deep_twilight) s.scattering_mu_s = kDeepTwilightScatteringMuS;
   // the searches judge bakes by the scene's tolerance
   const char* no_tolerance = " searches for the cheapest bake that meets the scene's tolerance against the "
                              "path-traced truth; expected a scene with tolerance_de2000";

@@ -46,6 +46,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   double tolerance = 1e-3;
   int transmittance_mu = 256, transmittance_r = 64, irradiance_mu_s = 64, irradiance_r = 16;
   int scattering_r = 32, scattering_mu = 128, scattering_mu_s = 32, scattering_nu = 8;
+  bool sizes_given = false;  // a `sizes:` key (any form); else the scene decides the μ_s count (config.cpp)
   // `quadrature:` the scattering density's sphere rule: θ nodes (even), and whether they are
   // packed towards the horizon (default) or uniform as in the reference (docs/atmosphere.md).
   int density_theta = 16;
@@ -78,9 +79,11 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
 inline constexpr int kMaxAtmosphereAxis = 4096;
 inline constexpr long long kMaxScatteringTexels = 1LL << 26;
 // Scenes whose sun goes below this (deep twilight) get kDeepTwilightDensityTheta θ nodes in the
-// scattering density unless the config gives them (config.cpp, parse_checks).
+// scattering density unless the config gives them, and kDeepTwilightScatteringMuS μ_s texels
+// unless the config gives sizes (config.cpp, parse_checks).
 inline constexpr double kDeepTwilightSunDeg = -6.0;
 inline constexpr int kDeepTwilightDensityTheta = 32;
+inline constexpr int kDeepTwilightScatteringMuS = 64;
 
 namespace atmosphere {
 // Every texture axis of a spec: transmittance [mu, r], irradiance [mu_s, r], scattering r, mu,
