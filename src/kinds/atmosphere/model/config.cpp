@@ -232,6 +232,15 @@ void scale_sizes(AtmosphereSpec& s, double f) {
   }
 }
 
+bool reaches_deep_twilight(const AtmosphereSpec& s) {
+  return s.scene.check && s.scene.sun_elevation_min_deg < kDeepTwilightSunDeg;
+}
+
+void set_scene_default_sizes(AtmosphereSpec& s) {
+  for (auto axis : kSizeAxes) s.*axis = AtmosphereSpec{}.*axis;
+  if (reaches_deep_twilight(s)) s.scattering_mu_s = kDeepTwilightScatteringMuS;
+}
+
 bool sizes_within_limits(const AtmosphereSpec& s) {
   for (auto axis : kSizeAxes)
     if (s.*axis > kMaxAxis) return false;
@@ -353,9 +362,9 @@ void parse_bake(const At& job, AtmosphereSpec& s) {
 void parse_checks(const At& job, AtmosphereSpec& s) {
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);
-  const bool deep_twilight = s.scene.check && s.scene.sun_elevation_min_deg < kDeepTwilightSunDeg;
-  if (!s.density_theta_given && s.density_horizon && deep_twilight) s.density_theta = kDeepTwilightDensityTheta;
-  if (!s.sizes_given && deep_twilight) s.scattering_mu_s = kDeepTwilightScatteringMuS;
+  if (!s.density_theta_given && s.density_horizon && reaches_deep_twilight(s))
+    s.density_theta = kDeepTwilightDensityTheta;
+  if (!s.sizes_given) set_scene_default_sizes(s);
   // the searches judge bakes by the scene's tolerance
   const char* no_tolerance = " searches for the cheapest bake that meets the scene's tolerance against the "
                              "path-traced truth; expected a scene with tolerance_de2000";

@@ -94,6 +94,12 @@ inline constexpr int AtmosphereSpec::*const kSizeAxes[] = {
     &AtmosphereSpec::scattering_mu_s,  &AtmosphereSpec::scattering_nu};
 // Every axis times f, rounded (mu to an even count), at least 2; no limit checked.
 void scale_sizes(AtmosphereSpec& s, double f);
+// Whether the spec's scene reaches deep twilight (a scene check with its sun below kDeepTwilightSunDeg).
+bool reaches_deep_twilight(const AtmosphereSpec& s);
+// Every texture axis to the scene's default: AtmosphereSpec's, with kDeepTwilightScatteringMuS
+// μ_s texels where the scene reaches deep twilight (what a config without `sizes:` bakes; where
+// `sizes: auto` starts from, halved).
+void set_scene_default_sizes(AtmosphereSpec& s);
 // Each axis at most kMaxAtmosphereAxis, nu at most ATMOSPHERE_NU_LIMIT, the scattering texture at
 // most kMaxScatteringTexels.
 bool sizes_within_limits(const AtmosphereSpec& s);

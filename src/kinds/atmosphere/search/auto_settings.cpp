@@ -99,8 +99,7 @@ double judged_tolerance(const AtmosphereSpec& spec) {
 // record's comparison.
 AtmosphereSpec default_sizes_of(const AtmosphereSpec& spec) {
   AtmosphereSpec defaults = search_start(spec);
-  if (spec.auto_sizes)
-    for (auto axis : kSizeAxes) defaults.*axis = AtmosphereSpec{}.*axis;
+  if (spec.auto_sizes) set_scene_default_sizes(defaults);
   return defaults;
 }
 
@@ -168,8 +167,8 @@ AtmosphereSpec with_settings(const AtmosphereSpec& spec, const json& settings) {
 AtmosphereSpec search_start(const AtmosphereSpec& spec) {
   AtmosphereSpec start = spec;
   start.auto_sizes = start.auto_spectrum = false;
-  if (spec.auto_sizes) {  // half the default sizes
-    for (auto axis : kSizeAxes) start.*axis = AtmosphereSpec{}.*axis;
+  if (spec.auto_sizes) {  // half the scene's default sizes
+    set_scene_default_sizes(start);
     scale_sizes(start, 0.5);
   }
   if (spec.auto_spectrum) start.spectral = false;

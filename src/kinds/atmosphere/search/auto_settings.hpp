@@ -218,7 +218,8 @@ struct AutoSearch {
 // Predicted bake seconds of a spec without its scene check (2-core CPU scale).
 double predicted_bake_seconds(const AtmosphereSpec& spec);
 
-// Where the search starts: half the default sizes (sizes: auto), rgb (spectrum: auto).
+// Where the search starts: half the scene's default sizes (sizes: auto; set_scene_default_sizes),
+// rgb (spectrum: auto).
 AtmosphereSpec search_start(const AtmosphereSpec& spec);
 // A rough wall time of a search: kTypicalTries bakes of its start (`plan`'s estimate before the
 // search runs; the tries grow as the search refines, the start's scene check is traced once).
