@@ -559,7 +559,7 @@ OutputFile points_csv(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
 
 // What the truth cannot resolve, said in the record and the run summary.
 std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n, bool dark_scene, const Part& total,
-                                        const TruthNoise& noise, long long max_paths, long long n_dark) {
+                                        const TruthNoise& noise, const std::string& walk_cap, long long n_dark) {
   std::vector<std::string> out;
   if (!dark_scene && noise.se_de.p99 > kNoisyTruthShare * total.de_summary.p99)
     out.push_back("scene check: the truth's own p99 standard error (" + format_g(noise.se_de.p99) +
@@ -568,8 +568,8 @@ std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n
                   format_g(sc.relative_se) + ")");
   if (noise.below_target > 0)
     out.push_back("scene check: " + std::to_string(noise.below_target) + " of the " + std::to_string(n) +
-                  " points stopped at the truth's walk cap (" + std::to_string(max_paths) +
-                  " walks, fewer where walks are long: " + format_g(kEventsPerWalk) +
+                  " points stopped at the truth's walk cap (" + walk_cap +
+                  ", fewer where walks are long: " + format_g(kEventsPerWalk) +
                   " scattering events a walk on average), their standard error above the target relative_se " +
                   format_g(sc.relative_se) +
                   " (standard_error in the record says how far)");
@@ -650,7 +650,14 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       check_details(spec, orders_used, exposure_y, v, tr, parts, noise));
   out.record.unit = by_radiance ? "p99 relative" : "p99 CIEDE2000";
   out.points_csv = points_csv(spec, points, v, tr.reference, parts, noise);
-  out.warnings = check_warnings(sc, n, dark_scene, total, noise, tr.o.max_paths, v.n_dark);
+  // a spectral trace spreads the rgb cap's work over its wavelengths: say both
+  const std::size_t wavelengths = tr.bake->lambda_nm.size();
+  const std::string walk_cap =
+      std::to_string(tr.o.max_paths) +
+      (spec.spectral ? " walks per wavelength over " + std::to_string(wavelengths) + " wavelengths, the work of " +
+                           std::to_string(scene_walk_cap(sc.relative_se)) + " rgb walks"
+                     : " walks");
+  out.warnings = check_warnings(sc, n, dark_scene, total, noise, walk_cap, v.n_dark);
   out.record.details["warnings"] = out.warnings;
   if (dark_scene)
     out.failure = dark_scene_failure(sc, n);
