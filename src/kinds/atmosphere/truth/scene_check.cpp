@@ -234,11 +234,22 @@ bool is_spectral_reference(const AtmosphereSpec& spec) {
   return spec.spectral && spec.count == kReferenceWavelengths && spec.min_nm == 360.0 && spec.max_nm == 830.0;
 }
 
-std::string truth_key(const AtmosphereSpec& traced, const std::string& what, const TruthOptions& o,
-                      const std::vector<TruthPoint>& points, cl_util::Device& dev) {
+namespace {
+// The points' and the tracer's part of a truth key: the same for every trace at those points.
+std::string points_code_key(const std::vector<TruthPoint>& points, cl_util::Device& dev) {
+  return "/points " + sha256_hex(truth_points_csv(points)) + truth_code_key(dev);
+}
+std::string truth_key_at(const AtmosphereSpec& traced, const std::string& what, const TruthOptions& o,
+                         const std::string& points_code) {
   const json p = parameters_json(traced);
   return "atmosphere.truth/" + what + "/" + p["atmosphere"].dump() + p["channels"].dump() + "/walks " +
-         truth_options_json(o).dump() + "/points " + sha256_hex(truth_points_csv(points)) + truth_code_key(dev);
+         truth_options_json(o).dump() + points_code;
+}
+}  // namespace
+
+std::string truth_key(const AtmosphereSpec& traced, const std::string& what, const TruthOptions& o,
+                      const std::vector<TruthPoint>& points, cl_util::Device& dev) {
+  return truth_key_at(traced, what, o, points_code_key(points, dev));
 }
 
 std::string truth_code_key(cl_util::Device& dev) {
@@ -312,6 +323,7 @@ struct SceneTracePlan {
   TruthOptions o, so;      // the bake's trace, the reference's
   bool reference = false;  // the spectral reference is traced
   std::string bake_key, reference_key;
+  std::string bake_what, points_code;  // the bake key's parts besides the spec and o (truth_key_at)
 };
 
 SceneTracePlan plan_traces(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
@@ -325,12 +337,14 @@ SceneTracePlan plan_traces(const AtmosphereSpec& spec, const std::vector<TruthPo
   SceneTracePlan t;
   t.o = scene_truth_options(spec, seed);
   t.o.split_orders = orders_used;
-  t.bake_key = truth_key(spec, "bake" + what, t.o, points, dev);
+  t.bake_what = "bake" + what;
+  t.points_code = points_code_key(points, dev);
+  t.bake_key = truth_key_at(spec, t.bake_what, t.o, t.points_code);
   t.reference = !is_spectral_reference(spec);
   // the same sky as the reference spectrum (independent streams: another seed)
   const AtmosphereSpec ss = spectral_reference_of(spec);
   t.so = scene_truth_options(ss, seed + kSpectralSeedOffset);
-  t.reference_key = truth_key(ss, "reference" + what, t.so, points, dev);
+  t.reference_key = truth_key_at(ss, "reference" + what, t.so, t.points_code);
   return t;
 }
 
@@ -728,13 +742,17 @@ bool scene_truth_kept(const AtmosphereSpec& spec, std::optional<int> orders_used
     return memo.items.count(key) > 0 || (memo.store && fs::exists(memo.store->dir() / ResultStore::name_of(key)));
   };
   const std::vector<TruthPoint> points = scene_points_of(spec);
-  SceneTracePlan plan = plan_traces(spec, points, orders_used.value_or(1), 0, spec.scene.seed, dev);
+  const SceneTracePlan plan = plan_traces(spec, points, orders_used.value_or(1), 0, spec.scene.seed, dev);
   if (plan.reference && !kept(plan.reference_key)) return false;
   if (orders_used) return kept(plan.bake_key);
   // orders: auto: the bake's trace is split at the orders the bake ends with, not known before
   // it; a trace kept at any count is the one an unchanged bake reads again
-  for (int n = 1; n <= kMaxAutoOrders; ++n)
-    if (kept(plan_traces(spec, points, n, 0, spec.scene.seed, dev).bake_key)) return true;
+  // (the same key with only the split varied)
+  for (int n = 1; n <= kMaxAutoOrders; ++n) {
+    TruthOptions o = plan.o;
+    o.split_orders = n;
+    if (kept(truth_key_at(spec, plan.bake_what, o, plan.points_code))) return true;
+  }
   return false;
 }
 
