@@ -782,6 +782,55 @@ FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real
   }
 }
 
+/* ---- the sky-view table (lookup.cl, "The sky-view table") ----------------------------------
+ * Texel id of a table of n_az × n_view × (n_sun · n_h) texels over altitudes grid[0..1] (km) and
+ * sun elevations grid[2..3] (rad): its camera altitude h, view cosine mu, sun cosine mu_s, ν and
+ * whether the view meets the ground (the half of the view axis it is in). */
+FN real sky_view_node(int i, int n) { return n > 1 ? (real)i / (real)(n - 1) : R(0.0); }
+FN void sky_view_texel_params(const AtmosphereParameters* a, const real* grid, int n_h, int n_sun, int n_view,
+                              int n_az, int id, real* h, real* mu, real* mu_s, real* nu, int* ground) {
+  const int i_az = id % n_az, i_v = (id / n_az) % n_view, k = id / (n_az * n_view);
+  const int i_h = k % n_h, i_s = k / n_h, half_view = n_view / 2;
+  *h = clamp_altitude(a, grid[0] + (grid[1] - grid[0]) * sky_view_node(i_h, n_h));
+  const real e = grid[2] + (grid[3] - grid[2]) * sky_view_node(i_s, n_sun);
+  const real phi = ATM_PI * sky_view_node(i_az, n_az);
+  const real theta_h = sky_view_horizon_zenith(a->bottom_radius, *h);
+  real theta;
+  if (i_v < half_view) {
+    const real x = sky_view_node(half_view - 1 - i_v, half_view);
+    theta = theta_h + (ATM_PI - theta_h) * x * x;
+    *ground = 1;
+  } else {
+    const real x = sky_view_node(i_v - half_view, half_view);
+    theta = theta_h * (R(1.0) - x * x);
+    *ground = 0;
+  }
+  *mu = clamp_cosine(cos(theta));
+  *mu_s = clamp_cosine(sin(e));
+  *nu = clamp_cosine(*mu * *mu_s + sin(theta) * cos(e) * cos(phi));
+}
+/* Its values: out[c] = single Rayleigh × P_R(ν) + Σ_{n≥2} L_n, out[NCH + c] = single Mie (no
+ * phase), integrated along the texel's exact ray with the 4D texture's own rules
+ * (single_scattering_ray, multiple_scattering_ray); J_sum = Σ_{n≥2} J_n in the scattering
+ * texture's layout (L is linear in J: the sum of each order's integral). orders_above_one 0:
+ * single scattering only (J_sum unread). */
+FN void sky_view_texel(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
+                       int orders_above_one, const real* grid, int n_h, int n_sun, int n_view, int n_az, int id,
+                       real* out) {
+  real h, mu, mu_s, nu, ray[NCH], mie[NCH], ms[NCH];
+  int ground;
+  sky_view_texel_params(a, grid, n_h, n_sun, n_view, n_az, id, &h, &mu, &mu_s, &nu, &ground);
+  const real d = distance_to_nearest_boundary(a, h, mu, ground);
+  single_scattering_ray(a, T, h, mu, d, ground, mu_s, nu, ray, mie);
+  for (int c = 0; c < NCH; ++c) ms[c] = R(0.0);
+  if (orders_above_one != 0) multiple_scattering_ray(a, T, J_sum, h, mu, d, ground, mu_s, nu, ms);
+  const real p = rayleigh_phase(nu);
+  for (int c = 0; c < NCH; ++c) {
+    out[c] = ray[c] * p + ms[c];
+    out[NCH + c] = mie[c];
+  }
+}
+
 /* ---- scattering density J_n (paper Eq. 7's integrand, 16 × 32 midpoint rule) ---------- */
 /* Entry of the density-incidence table: what the 32 φ of incident direction θ_l share at
  * (h, mu_s): the ν-slices of the incoming radiance, and the ground seen along θ_l. */

@@ -201,6 +201,19 @@ __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const
   }
 }
 
+/* The sky-view table (atmosphere.cl, sky_view_texel): one work item per texel, 2·NCH values
+ * each (radiance without single Mie, then single Mie); grid = {h_min, h_max, e_min, e_max}. */
+__kernel void sky_view_texture(AtmosphereParameters a, __global const real* T, __global const real* J_sum,
+                               int orders_above_one, __global const real* grid, int n_h, int n_sun, int n_view,
+                               int n_az, __global real* out) {
+  const int id = get_global_id(0);
+  if (id >= n_h * n_sun * n_view * n_az) return;
+  real g[4], v[2 * NCH];
+  for (int k = 0; k < 4; ++k) g[k] = grid[k];
+  sky_view_texel(&a, T, J_sum, orders_above_one, g, n_h, n_sun, n_view, n_az, id, v);
+  for (int c = 0; c < 2 * NCH; ++c) out[(long)id * 2 * NCH + c] = v[c];
+}
+
 /* ---- a self-check's fetches: texels gathered, textures scanned --------------------------- */
 
 /* Texels ids[k] (k < n) of tex, NCH values each, into out[k·NCH + c]: what a self-check

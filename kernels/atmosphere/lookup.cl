@@ -200,3 +200,56 @@ FN real scattering_u_mu_s_at(real rb, real rt, real mu_s, real mu_s_min, real n_
   return coord_of_unit(fmax(R(1.0) - a_s / a_min, R(0.0)) / (R(1.0) + a_s), n_mu_s);
 }
 FN real scattering_u_nu_at(real nu) { return (nu + R(1.0)) * R(0.5); }
+
+/* ---- the sky-view table: the sky in the viewer's frame over a scene's range ----------------
+ * Bruneton's 4D scattering texture serves every viewer, but in twilight its texels lie far
+ * apart where the sky changes fastest, and each view's radiance is rebuilt from lookups of
+ * densities it filtered. The sky-view table holds, for the scene's cameras and suns only, the
+ * radiance of each view integrated along its exact ray by the bake (single scattering and every
+ * order ≥ 2 from the summed scattering density; atmosphere.cl, sky_view_texel):
+ *   sky_view      Rayleigh single × P_R(ν) + multiple scattering (no phase left to apply)
+ *   sky_view_mie  single Mie without its phase (× P_M(ν) at lookup, so the forward peak stays sharp)
+ * Axes, each corner-sampled (node i of n at the texel centre (i + 0.5)/n, i.e. coord_of_unit of
+ * i/(n − 1)):
+ *   altitude h ∈ [h_min, h_max] and sun elevation e ∈ [e_min, e_max] (rad), linear;
+ *   view–sun azimuth φ ∈ [0, π] (the sky is symmetric about the sun's vertical plane), linear;
+ *   view zenith θ in two halves split at the horizon's zenith angle θ_h = acos(−ρ/r) (π/2 at
+ *   the ground), like the scattering texture's u_mu: rays that meet the ground map below 0.5
+ *   (θ = θ_h + (π − θ_h) x², x = 0 at the horizon, 1 straight down), the others above
+ *   (θ = θ_h (1 − x²), x = 0 at the horizon, 1 at the zenith), n_view/2 texels each: the
+ *   nodes crowd at the horizon (spacing ∝ x), where the twilight sky changes fastest, and no
+ *   lookup blends across it.
+ * Layout: a 3D texture of width n_azimuth, height n_view and depth n_sun · n_altitude (sun
+ * outermost): the GPU filters azimuth, view and altitude; the lookup blends two sun slices
+ * itself, geometrically (mu_s_blend), as the sky falls by about e per degree of sun elevation. */
+FN real sky_view_horizon_zenith(real rb, real h) { return acos(clamp_cosine(-safe_sqrt(rho2_of(rb, h)) / (rb + h))); }
+/* Texture coordinate of the view zenith (from mu) at altitude h. */
+FN real sky_view_u_view_at(real rb, real h, real mu, int meets_ground, real n_view) {
+  real theta_h = sky_view_horizon_zenith(rb, h);
+  real theta = acos(clamp_cosine(mu));
+  if (meets_ground != 0) {
+    real x = safe_sqrt(clamp_real((theta - theta_h) / (R(3.14159265358979323846) - theta_h), R(0.0), R(1.0)));
+    return R(0.5) - R(0.5) * coord_of_unit(x, n_view * R(0.5));
+  }
+  real x = safe_sqrt(clamp_real((theta_h - theta) / theta_h, R(0.0), R(1.0)));
+  return R(0.5) + R(0.5) * coord_of_unit(x, n_view * R(0.5));
+}
+/* cos φ of the view–sun azimuth from μ, μ_s and ν (1 where the view or the sun is vertical). */
+FN real sky_view_cos_azimuth(real mu, real mu_s, real nu) {
+  real s = safe_sqrt((R(1.0) - mu * mu) * (R(1.0) - mu_s * mu_s));
+  return s > R(1e-6) ? clamp_cosine((nu - mu * mu_s) / s) : R(1.0);
+}
+FN real sky_view_u_azimuth_at(real cos_phi, real n_azimuth) {
+  return coord_of_unit(acos(clamp_cosine(cos_phi)) / R(3.14159265358979323846), n_azimuth);
+}
+/* Position of x on a corner-sampled axis of n nodes over [lo, hi]: in [0, n − 1], clamped. */
+FN real sky_view_node_position(real x, real lo, real hi, real n) {
+  return (n > R(1.0) && hi > lo) ? clamp_real((x - lo) / (hi - lo), R(0.0), R(1.0)) * (n - R(1.0)) : R(0.0);
+}
+/* 1 when the table holds (h, e): the camera's altitude and the sun's elevation within its range
+ * (a margin of 1e-4 of each for rounding). */
+FN int sky_view_covers(real h, real e, real h_min, real h_max, real e_min, real e_max) {
+  real dh = R(1e-4) * fmax(h_max - h_min, R(1e-3));
+  real de = R(1e-4) * fmax(e_max - e_min, R(1e-3));
+  return (h >= h_min - dh && h <= h_max + dh && e >= e_min - de && e <= e_max + de) ? 1 : 0;
+}

@@ -307,6 +307,66 @@ SpecbakeRadiance GetSkyRadiance(SpecbakeAtmosphere atm, SpecbakeSampler2D transm
   return s * rayleigh_phase(nu) + m * mie_phase(atm.mie_g, nu);
 }
 
+#ifndef SPECBAKE_SPECTRAL
+/* ---- the sky-view table (lookup.cl, "The sky-view table"; RGB bundles that have one) ---------
+ * Its range and node counts (sampling.glsl's SPECBAKE_SKY_VIEW). */
+struct SpecbakeSkyView {
+  real altitude_min;   /* km: the cameras it holds */
+  real altitude_max;
+  real sun_min;        /* rad: the sun elevations it holds */
+  real sun_max;
+  real altitude_size;  /* node counts */
+  real sun_size;
+  real view_size;
+  real azimuth_size;
+};
+/* Sun node s of a table at (u_az, u_view) and altitude position p ∈ [0, altitude_size − 1]: the
+ * depth coordinate stays inside the sun node's block of altitudes, so the filter blends
+ * altitudes, never two suns. */
+vec3 SpecbakeSkyViewSlice(SpecbakeSkyView sv, sampler3D table, real s, real u_az, real u_view, real p) {
+  real z = (s * sv.altitude_size + p + R(0.5)) / (sv.sun_size * sv.altitude_size);
+  return TEXTURE_RGB(table, vec3(u_az, u_view, z));
+}
+/* The table's sky radiance at altitude h (inside its range) along a ray with cosines mu, mu_s,
+ * nu: Rayleigh and multiple scattering as stored, single Mie times its phase; the two sun nodes
+ * around the sun blended geometrically (mu_s_blend). */
+vec3 GetSkyViewScattering(SpecbakeAtmosphere atm, SpecbakeSkyView sv, sampler3D sky_view_texture,
+                          sampler3D sky_view_mie_texture, real h, real mu, real mu_s, real nu, int ground) {
+  real u_view = sky_view_u_view_at(atm.bottom_radius, h, mu, ground, sv.view_size);
+  real u_az = sky_view_u_azimuth_at(sky_view_cos_azimuth(mu, mu_s, nu), sv.azimuth_size);
+  real p = sky_view_node_position(h, sv.altitude_min, sv.altitude_max, sv.altitude_size);
+  real q = sky_view_node_position(asin(mu_s), sv.sun_min, sv.sun_max, sv.sun_size);
+  real s0 = floor(q);
+  real s1 = fmin(s0 + R(1.0), sv.sun_size - R(1.0));
+  real g = q - s0;
+  vec3 l = SpecbakeMuSBlend(SpecbakeSkyViewSlice(sv, sky_view_texture, s0, u_az, u_view, p),
+                            SpecbakeSkyViewSlice(sv, sky_view_texture, s1, u_az, u_view, p), g);
+  vec3 m = SpecbakeMuSBlend(SpecbakeSkyViewSlice(sv, sky_view_mie_texture, s0, u_az, u_view, p),
+                            SpecbakeSkyViewSlice(sv, sky_view_mie_texture, s1, u_az, u_view, p), g);
+  return l + m * mie_phase(atm.mie_g, nu);
+}
+/* GetSkyRadiance (no light shafts) that reads the sky-view table where it holds the camera and
+ * the sun — a camera inside the atmosphere at an altitude and under a sun elevation of the
+ * scene's range — and the 4D textures elsewhere. */
+vec3 GetSkyRadianceWithSkyView(SpecbakeAtmosphere atm, SpecbakeSkyView sv, SpecbakeSampler2D transmittance_texture,
+                               SpecbakeScatteringSampler scattering_texture,
+                               SpecbakeScatteringSampler single_mie_scattering_texture, sampler3D sky_view_texture,
+                               sampler3D sky_view_mie_texture, vec3 up, real h, vec3 view, vec3 sun,
+                               OUT(vec3) transmittance) {
+  real mu_s = clamp_cosine(dot(up, sun));
+  if (h > atm.top_radius - atm.bottom_radius ||
+      sky_view_covers(h, asin(mu_s), sv.altitude_min, sv.altitude_max, sv.sun_min, sv.sun_max) == 0)
+    return GetSkyRadiance(atm, transmittance_texture, scattering_texture, single_mie_scattering_texture, up, h, view,
+                          R(0.0), sun, transmittance);
+  real hc = clamp_real(h, R(0.0), atm.top_radius - atm.bottom_radius);
+  real mu = clamp_cosine(dot(up, view));
+  real nu = clamp_cosine(dot(view, sun));
+  int ground = ray_meets_ground(atm.bottom_radius, hc, mu);
+  transmittance = ground != 0 ? vec3(R(0.0)) : GetTransmittanceToTopAtmosphereBoundary(atm, transmittance_texture, hc, mu);
+  return GetSkyViewScattering(atm, sv, sky_view_texture, sky_view_mie_texture, hc, mu, mu_s, nu, ground);
+}
+#endif
+
 /* Sky radiance between a camera at altitude h and a point `to_point` km away from it (both in
  * or on the atmosphere), and the transmittance between them. Single Mie fades out as the sun
  * sets, as in the reference, to hide its artefacts there. */

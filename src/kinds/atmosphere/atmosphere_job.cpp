@@ -409,7 +409,21 @@ void ktx2_files(const AtmosphereSpec& spec, const Luts& L, const std::string& un
        std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r", units},
       {spec.out_single_mie && !spec.ktx2_combined, "single_mie_scattering", &L.single_mie, wd, std::uint32_t(s.mu),
        std::uint32_t(s.r), "3D: x = nu_slice*MU_S + mu_s, y = mu, z = r", units}};
+  const SkyView& v = L.model.sky_view;
+  const std::uint32_t sv_w = std::uint32_t(v.azimuth), sv_h = std::uint32_t(v.view),
+                      sv_d = std::uint32_t(v.sun * v.altitude);
+  const char* sv_layout = "3D: x = azimuth, y = view, z = sun*ALTITUDE + altitude";
+  const Texture tables[] = {{v.on(), "sky_view", &L.sky_view, sv_w, sv_h, sv_d, sv_layout, units},
+                            {v.on(), "sky_view_single_mie", &L.sky_view_mie, sv_w, sv_h, sv_d, sv_layout, units}};
   const std::string sizes = sizes_key(s);
+  for (const Texture& t : tables) {
+    if (!t.wanted) continue;
+    const std::vector<float> f(t.data->begin(), t.data->end());
+    add_ktx2_file(spec.ktx2,
+                  {std::string(t.name) + ".ktx2", t.width, t.height, t.depth, 0, 3, f, t.layout, t.units,
+                   std::string(t.name) + " (KTX2 copy)", {{"specbake.parameterisation", "the sky-view table (sampling.glsl)"}}},
+                  ctx, r);
+  }
   for (const Texture& t : textures) {
     if (!t.wanted) continue;
     const std::vector<float> f(t.data->begin(), t.data->end());
@@ -591,6 +605,21 @@ class TextureFiles {
           [&, wd, tiled_of, a = attrs(lay, what)] { return exr_of(s_.r * wd, s_.mu, tiled_of(), a); });
   }
 
+  // The sky-view table (lookup.cl, "The sky-view table"): [sun][altitude][view][azimuth][RGB].
+  void sky_view(const std::string& name, const std::vector<double>* data, const char* what) {
+    const SkyView& v = L_.model.sky_view;
+    const std::string lay = "[sun=" + std::to_string(v.sun) + "][altitude=" + std::to_string(v.altitude) + "][view=" +
+                            std::to_string(v.view) + "][azimuth=" + std::to_string(v.azimuth) +
+                            "][RGB]; a 3D texture x = azimuth, y = view, z = sun*ALTITUDE + altitude";
+    later({name + ".bin", "", "float32", {v.sun, v.altitude, v.view, v.azimuth, 3}, kLe + "; " + lay, units_, what},
+          [&, data, name] { return float32_le(*data, name); });
+    later({name + ".exr", "", "", {v.sun, v.altitude, v.view, v.azimuth, 3},
+           "EXR float32, row = (sun*ALTITUDE + altitude)*VIEW + view", units_, what},
+          [&, data, a = attrs(lay + "; EXR rows = (sun*ALTITUDE + altitude)*VIEW + view", what)] {
+            return exr_of(v.azimuth, v.view * v.altitude * v.sun, *data, a);
+          });
+  }
+
   void encode_all() { parallel_for(static_cast<long long>(encode_.size()), [&](long long i) { encode_[i](); }); }
 
  private:
@@ -640,6 +669,11 @@ void texture_files(const AtmosphereSpec& spec, const Luts& L, const std::string&
     if (!t.wanted) continue;
     if (spec.layout_3d) files.scattering_3d(t.name, t.data, t.what);
     if (spec.layout_tiled2d) files.scattering_tiled2d(t.name, t.data, t.what);
+  }
+  if (L.model.sky_view.on()) {
+    files.sky_view("sky_view", &L.sky_view,
+                   "the sky-view table: single Rayleigh x P_R(nu) + orders n >= 2, along each view's exact ray");
+    files.sky_view("sky_view_single_mie", &L.sky_view_mie, "the sky-view table's single Mie (no phase function)");
   }
   files.encode_all();
 }

@@ -90,7 +90,23 @@ PassPlan pass_plan(const AtmosphereSpec& spec, const Spectrum& sp, int n, int fi
     for (int i = 0; i < count; ++i) plan.to_rgb[k * width + i] = sp.spectral ? sp.to_rgb[k * n + first + i] : (k == i);
   plan.keep_textures = spec.store_radiance;
   plan.last_pass = last_pass;
+  plan.sky_view = sky_view_of(spec).on();
   return plan;
+}
+
+// A pass's sky-view table ([texels][2 · width]: radiance without single Mie, then single Mie) in
+// R,G,B by W (3 × width), added into rgb and mie ([texels][3], sized on first use).
+void add_sky_view_rgb(const std::vector<double>& v, int width, const std::vector<double>& W, std::vector<double>& rgb,
+                      std::vector<double>& mie) {
+  const std::size_t n = v.size() / (2 * width);
+  if (rgb.empty()) rgb.assign(3 * n, 0.0);
+  if (mie.empty()) mie.assign(3 * n, 0.0);
+  for (std::size_t t = 0; t < n; ++t)
+    for (int k = 0; k < 3; ++k)
+      for (int c = 0; c < width; ++c) {
+        rgb[3 * t + k] += W[k * width + c] * v[(2 * t) * width + c];
+        mie[3 * t + k] += W[k * width + c] * v[(2 * t + 1) * width + c];
+      }
 }
 
 // What the manifest says of order o: the max and mean it adds to scattering and irradiance, and
@@ -154,6 +170,8 @@ class Baking {
     const double p0 = 0.9 * p / passes_, p1 = 0.9 * (p + 1) / passes_;
     const PassResult r = run_pass(*backend_, plan, progress, p0, p1, checker.get(), on_check);
     clock_.add(r.timings);
+    if (!r.sky_view.empty())
+      clock_.host("combine", [&] { add_sky_view_rgb(r.sky_view, width_, plan.to_rgb, out_.luts.sky_view, out_.luts.sky_view_mie); });
     for (const auto& o : r.orders) relative_[o.order] = std::max(relative_[o.order], o.relative);
     if (spec_.store_radiance)
       clock_.host("combine", [&] { keep_radiance(out_.radiance, m_.sizes, first, count, width_, r); });
@@ -283,8 +301,11 @@ double bake_seconds(const AtmosphereSpec& spec) {
   // the scattering density's share of an order grows with its θ nodes (rgb, default sizes: 5.8 /
   // 9.2 s of compute at 16 / 32 θ; 16 wavelengths: 7.5 / 11.4 / 19.5 s at 16 / 32 / 64)
   const double theta = 0.45 + 0.55 * spec.density_theta / 16.0;
+  // the sky-view table, once per pass: each texel integrates single and multiple scattering along
+  // its own ray (rgb, 5 × 45 × 64 × 32 texels: 3.35 s, 7.3 s per Mtexel), a per-channel part as the orders'
+  const double sky_view = passes * sky_view_of(spec).texels() / 1048576.0 * 7.3 * (1.45 + 0.015 * width) / 1.5;
   return bake_files_seconds(spec) + orders * passes * theta * per_order +
-         passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + interpolation;
+         passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + interpolation + sky_view;
 }
 
 json parameters_json(const AtmosphereSpec& spec) {
@@ -357,9 +378,21 @@ json parameters_json(const AtmosphereSpec& spec) {
   p["sizes"] = {{"transmittance", {{"mu", s.transmittance_w}, {"r", s.transmittance_h}}},
                 {"irradiance", {{"mu_s", s.irradiance_w}, {"r", s.irradiance_h}}},
                 {"scattering", {{"r", s.r}, {"mu", s.mu}, {"mu_s", s.mu_s}, {"nu", s.nu}}}};
-  // what an engine holds: transmittance, irradiance, scattering and single Mie as float32 R,G,B
+  // what an engine holds: transmittance, irradiance, scattering and single Mie (and the sky-view
+  // table's two textures where there is one) as float32 R,G,B
+  const SkyView& v = m.sky_view;
   p["texture_memory_bytes"] = 12LL * (1LL * s.transmittance_w * s.transmittance_h + 1LL * s.irradiance_w * s.irradiance_h +
-                                      2LL * s.scattering_texels());
+                                      2LL * s.scattering_texels() + 2LL * v.texels());
+  p["sky_view"] = v.on() ? json{{"altitude_km", {v.altitude_min_km, v.altitude_max_km}},
+                                {"sun_elevation_deg", {v.sun_min_deg, v.sun_max_deg}},
+                                {"nodes", {{"altitude", v.altitude}, {"sun", v.sun}, {"view", v.view}, {"azimuth", v.azimuth}}},
+                                {"files", {"sky_view", "sky_view_single_mie"}},
+                                {"meaning", "the sky in the viewer's frame over the scene's cameras and suns: sky_view = "
+                                            "single Rayleigh x P_R(nu) + orders >= 2, sky_view_single_mie = single Mie "
+                                            "without its phase, each integrated along the view's exact ray; "
+                                            "GetSkyRadianceWithSkyView (sampling.glsl) reads it where it holds the "
+                                            "camera and the sun, the 4D textures elsewhere"}}
+                         : json(false);
   json layouts = json::array();
   if (spec.layout_3d) layouts.push_back("3d");
   if (spec.layout_tiled2d) layouts.push_back("tiled2d");

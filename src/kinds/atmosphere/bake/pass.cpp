@@ -529,6 +529,30 @@ class DeviceBackend final : public PassBackend {
     });
     return s;
   }
+  void add_density_sum(int order) override {
+    const long long n = n_s_ * width_;
+    if (order == 2) {
+      if (J_sum_() == nullptr) J_sum_ = q_.alloc(n_s_);
+      q_.copy(tex_.J, J_sum_, n);
+    } else {
+      q_.launch("add_values", n, {&tex_.J, static_cast<int>(n), &J_sum_});
+    }
+  }
+  void sky_view(int orders_used, std::vector<double>& out) override {
+    const SkyView& v = model_.sky_view;
+    cl_util::checked("sky_view_texture", [&] {
+      cl::Buffer grid = cl_util::upload_real(q_.dev(),
+                                             {v.altitude_min_km, v.altitude_max_km, v.sun_min_deg * M_PI / 180.0,
+                                              v.sun_max_deg * M_PI / 180.0},
+                                             q_.dbl());
+      cl::Buffer values = q_.alloc(2 * v.texels());
+      cl::Buffer& J = orders_used > 1 ? J_sum_ : tex_.J;
+      q_.launch("sky_view_texture", v.texels(),
+                {&tex_.T, &J, orders_used > 1 ? 1 : 0, &grid, v.altitude, v.sun, v.view, v.azimuth, &values});
+      q_.read_reals(values, 2 * v.texels() * width_, out);
+      return 0;
+    });
+  }
   cl_util::Profiler* profiler() override { return &q_.dev().profiler(); }
   Sums& sums() override { return sums_; }
   void use_channels(const Channels& ch) override { q_.use_block(make_block(model_, ch, width_, q_.dbl())); }
@@ -599,7 +623,7 @@ class DeviceBackend final : public PassBackend {
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0;
   std::size_t row_group_ = 0;
   DeviceTextures tex_;
-  cl::Buffer rays_, incidence_;
+  cl::Buffer rays_, incidence_, J_sum_;
   DeviceSums sums_;
 };
 
@@ -1003,6 +1027,7 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
   r.converged = !plan.auto_orders;
   for (int n = 2; n <= cap; ++n) {
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
+    if (plan.sky_view) timeline.stage("sky_view", n, [&] { b.add_density_sum(n); });
     steps.step("order " + std::to_string(n) + ": scattering density", 0.55);
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
     const double rel_e = sums.add_irradiance(n - 1);
@@ -1017,6 +1042,9 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
       r.converged = true;
       break;
     }
+  }
+  if (plan.sky_view) {
+    timeline.stage("sky_view", 0, [&] { b.sky_view(r.orders_used, r.sky_view); });
   }
   sums.end_pass();
   if (plan.keep_textures) {

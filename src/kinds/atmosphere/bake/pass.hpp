@@ -115,6 +115,12 @@ class PassBackend {
   // The channels of the next pass (same count): a backend serves every pass of a bake, so that
   // its sums over passes stay where they are.
   virtual void use_channels(const Channels& ch) = 0;
+  // The sky-view table (Model::sky_view; atmosphere.cl, sky_view_texel): add_density_sum(n), called
+  // after scattering_density(n), keeps J_sum = Σ J_n over the pass's orders (n = 2 starts it);
+  // sky_view then computes the table of the pass's channels from T and J_sum into `out`,
+  // [texels][2 · channels()] (radiance without single Mie, then single Mie without its phase).
+  virtual void add_density_sum(int order) = 0;
+  virtual void sky_view(int orders_used, std::vector<double>& out) = 0;
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
   virtual cl_util::Profiler* profiler() { return nullptr; }
 };
@@ -142,6 +148,7 @@ struct PassResult {
   int width = 0;
   std::vector<StageTime> timings;  // in the order they ran
   std::vector<double> transmittance, direct_irradiance, irradiance, scattering, single_mie;
+  std::vector<double> sky_view;  // [texels][2 · width] where the model has one (PassBackend::sky_view)
   std::vector<OrderStats> orders;  // 1..orders_used (order 1: single scattering)
   int orders_used = 0;
   bool converged = true;  // auto: the tolerance was met before the order cap
@@ -154,6 +161,7 @@ struct PassPlan {
   std::vector<double> to_rgb;  // the pass's channels → R, G, B (Sums::begin_pass); empty: channel c → c
   bool last_pass = true;       // the bake's last pass (Sums::begin_pass)
   bool keep_textures = true;   // PassResult's textures read back at the end
+  bool sky_view = false;       // the model's sky-view table into PassResult::sky_view
 };
 inline constexpr int kMaxAutoOrders = 40;
 // Texels whose accumulated value is below this fraction of their channel's maximum do not

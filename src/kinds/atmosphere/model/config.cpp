@@ -375,6 +375,32 @@ void parse_checks(const At& job, AtmosphereSpec& s) {
                                " (the spectral part of the error is a colour difference)");
 }
 
+// `sky_view: auto | none | {altitude: N, sun: N, view: N, azimuth: N}` (node counts; view even).
+void parse_sky_view(const At& v, AtmosphereSpec& s) {
+  if (v.node.IsScalar()) {
+    s.sky_view = v.choice<AtmosphereSpec::SkyViewMode>(
+        {{"auto", AtmosphereSpec::SkyViewMode::automatic}, {"none", AtmosphereSpec::SkyViewMode::none}});
+    return;
+  }
+  v.expect_map("sky_view: auto, none, or {altitude: N, sun: N, view: N, azimuth: N} (node counts of the table in "
+               "the viewer's frame)");
+  v.allow_keys({"altitude", "sun", "view", "azimuth"});
+  s.sky_view = AtmosphereSpec::SkyViewMode::sized;
+  const auto count = [&](const char* key, int lo, int hi, int fallback, bool even) {
+    if (!v.has(key)) return fallback;
+    const At n = v.child(key);
+    const long long x = n.integer();
+    if (x < lo || x > hi || (even && x % 2))
+      n.fail("expected " + std::string(even ? "an even number" : "a number") + " of nodes in [" + std::to_string(lo) +
+             ", " + std::to_string(hi) + "], got " + n.shown());
+    return static_cast<int>(x);
+  };
+  s.sky_view_altitude = count("altitude", 1, 64, 4, false);
+  s.sky_view_sun = count("sun", 1, 1024, 33, false);
+  s.sky_view_view = count("view", 4, 1024, kSkyViewViews, true);
+  s.sky_view_azimuth = count("azimuth", 2, 1024, kSkyViewAzimuths, false);
+}
+
 // `previews: none` or `previews: {size: N, tone: aces | linear}`.
 void parse_previews(const At& p, AtmosphereSpec& s) {
   if (p.node.IsScalar() && p.node.Scalar() == "none") {
@@ -448,6 +474,10 @@ json normalised_json(const AtmosphereSpec& s) {
   if (s.auto_sizes) norm["sizes"] = "auto";
   if (s.store_radiance) norm["spectrum"]["store"] = "radiance";  // luminance, the default, stays implicit
   norm["scene"] = scene_json(s.scene);
+  if (s.sky_view == AtmosphereSpec::SkyViewMode::none) norm["sky_view"] = "none";  // auto stays implicit
+  if (s.sky_view == AtmosphereSpec::SkyViewMode::sized)
+    norm["sky_view"] = {{"altitude", s.sky_view_altitude}, {"sun", s.sky_view_sun}, {"view", s.sky_view_view},
+                        {"azimuth", s.sky_view_azimuth}};
   norm["previews"] = s.preview_size ? json{{"size", s.preview_size}, {"tone", name(s.preview_tone)}} : json("none");
   norm.update(media_json(s));
   return norm;
@@ -459,12 +489,14 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   allow_job_keys(job, {"preset", "bottom_radius_km", "top_radius_km", "sun_angular_radius_rad",
                   "max_sun_zenith_deg", "ground_albedo", "solar_irradiance_scale", "rayleigh", "mie", "ozone",
                   "spectrum", "orders", "tolerance", "sizes", "layout", "outputs", "precision", "formats",
-                  "ktx2", "scene", "previews", "quadrature"});
+                  "ktx2", "scene", "previews", "quadrature", "sky_view"});
   AtmosphereSpec s;  // the struct's defaults are the earth preset's scalars
+  s.sky_view = AtmosphereSpec::SkyViewMode::automatic;  // a config's default (`sky_view: auto`)
   parse_planet(job, s);
   parse_bake(job, s);
   parse_checks(job, s);
   if (job.has("previews")) parse_previews(job.child("previews"), s);
+  if (job.has("sky_view")) parse_sky_view(job.child("sky_view"), s);
   // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
   const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
   inputs.emplace_back(cmf.resource, sha256_hex(resource(cmf.resource)));

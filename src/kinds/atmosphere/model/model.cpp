@@ -1,5 +1,6 @@
 #include "kinds/atmosphere/model/model.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 
@@ -108,6 +109,36 @@ Sizes sizes_of(const AtmosphereSpec& s) {
   return z;
 }
 
+SkyView sky_view_of(const AtmosphereSpec& s) {
+  SkyView v;
+  const AtmosphereScene& sc = s.scene;
+  const double thickness = s.top_radius_km - s.bottom_radius_km;
+  if (s.sky_view == AtmosphereSpec::SkyViewMode::none || !sc.check || sc.sun_elevation_min_deg >= 0.0 ||
+      sc.camera_altitude_min_km > thickness)
+    return v;
+  v.altitude_min_km = sc.camera_altitude_min_km;
+  v.altitude_max_km = std::min(sc.camera_altitude_max_km, thickness);
+  v.sun_min_deg = sc.sun_elevation_min_deg;
+  v.sun_max_deg = std::max(std::min(sc.sun_elevation_max_deg, kSkyViewSunMaxDeg), v.sun_min_deg);
+  const auto nodes = [](double range, double step, int most) {
+    return range > 0.0 ? std::clamp(1 + static_cast<int>(std::ceil(range / step - 1e-9)), 2, most) : 1;
+  };
+  if (s.sky_view == AtmosphereSpec::SkyViewMode::sized) {
+    v.altitude = s.sky_view_altitude;
+    v.sun = s.sky_view_sun;
+    v.view = s.sky_view_view;
+    v.azimuth = s.sky_view_azimuth;
+  } else {
+    v.altitude = nodes(v.altitude_max_km - v.altitude_min_km, kSkyViewAltitudeStepKm, kSkyViewMaxAltitudes);
+    v.sun = nodes(v.sun_max_deg - v.sun_min_deg, kSkyViewSunStepDeg, 1 << 10);
+    v.view = kSkyViewViews;
+    v.azimuth = kSkyViewAzimuths;
+  }
+  if (v.altitude_max_km <= v.altitude_min_km) v.altitude = 1;
+  if (v.sun_max_deg <= v.sun_min_deg) v.sun = 1;
+  return v;
+}
+
 Model model_of(const AtmosphereSpec& s) {
   Model m;
   m.bottom_radius_km = s.bottom_radius_km;
@@ -130,6 +161,7 @@ Model model_of(const AtmosphereSpec& s) {
     m.ozone_peak_number_density_per_m3 = column_km > 0 ? s.ozone_column_du * kDobsonUnit / (column_km * 1000.0) : 0.0;
   }
   m.sizes = sizes_of(s);
+  m.sky_view = sky_view_of(s);
   return m;
 }
 

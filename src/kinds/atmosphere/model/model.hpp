@@ -23,6 +23,17 @@ struct Sizes {
 };
 Sizes sizes_of(const AtmosphereSpec& spec);
 
+// The sky-view table's range and node counts (lookup.cl, "The sky-view table"); altitude == 0: none.
+// Texels [sun][altitude][view][azimuth]: a 3D texture azimuth × view × (sun · altitude).
+struct SkyView {
+  double altitude_min_km = 0, altitude_max_km = 0, sun_min_deg = 0, sun_max_deg = 0;
+  int altitude = 0, sun = 0, view = 0, azimuth = 0;
+  bool on() const { return altitude > 0; }
+  long long texels() const { return 1LL * altitude * sun * view * azimuth; }
+};
+// The table a spec bakes (`sky_view:`; none for `sky_view: none`, no scene, or a scene in daylight).
+SkyView sky_view_of(const AtmosphereSpec& spec);
+
 // Per-channel coefficients (one entry per wavelength), lengths in km.
 struct Channels {
   std::vector<double> lambda_nm;
@@ -47,6 +58,7 @@ struct Model {
   DensityLayer rayleigh_density[2]{}, mie_density[2]{}, absorption_density[2]{};
   double ozone_peak_number_density_per_m3 = 0;
   Sizes sizes;
+  SkyView sky_view;
 };
 Model model_of(const AtmosphereSpec& spec);
 Channels channels_at(const AtmosphereSpec& spec, const std::vector<double>& lambda_nm);

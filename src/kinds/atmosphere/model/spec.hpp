@@ -73,6 +73,11 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   // `sizes: auto` / `spectrum: auto`: the cheapest sizes / channel count whose bake meets the
   // scene's tolerance against the path-traced truth (auto_settings.hpp).
   bool auto_sizes = false, auto_spectrum = false;
+  // `sky_view:` the table of the sky in the viewer's frame over the scene's range (lookup.cl,
+  // "The sky-view table"): auto (a scene whose sun sets; a config's default, set by parse_spec),
+  // none (a spec built in code, unless it asks), or its node counts.
+  enum class SkyViewMode { automatic, none, sized } sky_view = SkyViewMode::none;
+  int sky_view_altitude = 0, sky_view_sun = 0, sky_view_view = 0, sky_view_azimuth = 0;  // sized (else derived)
 };
 
 // Texture size limits (config errors name them; searches stay inside them).
@@ -84,6 +89,14 @@ inline constexpr long long kMaxScatteringTexels = 1LL << 26;
 inline constexpr double kDeepTwilightSunDeg = -6.0;
 inline constexpr int kDeepTwilightDensityTheta = 32;
 inline constexpr int kDeepTwilightScatteringMuS = 64;
+// The sky-view table (`sky_view: auto`): built for a scene whose sun goes below the horizon, over its
+// camera altitudes and its sun elevations up to kSkyViewSunMaxDeg (above, the sky changes slowly
+// with the sun and the 4D textures hold it well), with a node every kSkyViewSunStepDeg of sun
+// elevation and every kSkyViewAltitudeStepKm of altitude (2 to kSkyViewMaxAltitudes; 1 for a single
+// altitude), kSkyViewViews view zeniths (half above, half below the horizon) and kSkyViewAzimuths
+// view–sun azimuths over [0°, 180°].
+inline constexpr double kSkyViewSunMaxDeg = 10.0, kSkyViewSunStepDeg = 0.5, kSkyViewAltitudeStepKm = 0.5;
+inline constexpr int kSkyViewMaxAltitudes = 9, kSkyViewViews = 64, kSkyViewAzimuths = 32;
 
 namespace atmosphere {
 // Every texture axis of a spec: transmittance [mu, r], irradiance [mu_s, r], scattering r, mu,

@@ -21,6 +21,10 @@ struct Renderer::Impl {
   glsl::SpecbakeAtmosphere atm;
   glsl::sampler2D transmittance, irradiance;
   glsl::sampler3D scattering, single_mie;
+  // the sky-view table, where the bake has one (sky_view.on)
+  glsl::SpecbakeSkyView sky_view_grid{};
+  glsl::sampler3D sky_view, sky_view_mie;
+  bool has_sky_view = false;
 };
 
 Renderer::Renderer(const Luts& luts) : impl_(std::make_unique<Impl>()) {
@@ -30,6 +34,13 @@ Renderer::Renderer(const Luts& luts) : impl_(std::make_unique<Impl>()) {
   impl_->irradiance = {luts.irradiance.data(), s.irradiance_w, s.irradiance_h};
   impl_->scattering = {luts.scattering.data(), s.scattering_width(), s.mu, s.r};
   impl_->single_mie = {luts.single_mie.data(), s.scattering_width(), s.mu, s.r};
+  const SkyView& v = luts.model.sky_view;
+  if (v.on() && luts.sky_view.size() == 3ULL * v.texels() && luts.sky_view_mie.size() == luts.sky_view.size()) {
+    impl_->has_sky_view = true;
+    impl_->sky_view_grid = glsl::sky_view_of(luts.model);
+    impl_->sky_view = {luts.sky_view.data(), v.azimuth, v.view, v.sun * v.altitude};
+    impl_->sky_view_mie = {luts.sky_view_mie.data(), v.azimuth, v.view, v.sun * v.altitude};
+  }
 }
 Renderer::~Renderer() = default;
 
@@ -50,8 +61,12 @@ Vec3 Renderer::sky_radiance(const Vec3& camera, const Vec3& view, const Vec3& su
   glsl::vec3 up, t;
   double h;
   up_and_altitude(camera, i.atm.bottom_radius, up, h);
-  const glsl::vec3 l = glsl::GetSkyRadiance(i.atm, i.transmittance, i.scattering, i.single_mie, up, h, to_glm(view),
-                                            0.0, to_glm(sun), t);
+  const glsl::vec3 l =
+      i.has_sky_view
+          ? glsl::GetSkyRadianceWithSkyView(i.atm, i.sky_view_grid, i.transmittance, i.scattering, i.single_mie,
+                                            i.sky_view, i.sky_view_mie, up, h, to_glm(view), to_glm(sun), t)
+          : glsl::GetSkyRadiance(i.atm, i.transmittance, i.scattering, i.single_mie, up, h, to_glm(view), 0.0,
+                                 to_glm(sun), t);
   if (transmittance) *transmittance = to_array(t);
   return to_array(l);
 }
@@ -215,8 +230,20 @@ std::string sampling_glsl(const Model& m, const Channels& rgb, bool layout_3d, b
     << "    " << f(s.transmittance_w) << ", " << f(s.transmittance_h) << ", " << f(s.irradiance_w) << ", "
     << f(s.irradiance_h) << ",  // transmittance_w, _h, irradiance_w, _h\n"
     << "    " << f(s.r) << ", " << f(s.mu) << ", " << f(s.mu_s) << ", " << f(s.nu) << ",  // R, MU, MU_S, NU\n"
-    << "    " << f(m.mu_s_geometric ? 1.0 : 0.0) << ");  // mu_s_geometric: mu_s texels blended geometrically\n"
-    << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef TEXTURE_RGBA\n#undef OUT\n#undef INOUT\n"
+    << "    " << f(m.mu_s_geometric ? 1.0 : 0.0) << ");  // mu_s_geometric: mu_s texels blended geometrically\n";
+  if (const SkyView& v = m.sky_view; v.on())
+    o << "// The sky-view table (sky_view, sky_view_single_mie: 3D, width AZIMUTH = " << v.azimuth << ", height VIEW = "
+      << v.view << ", depth SUN*ALTITUDE = " << v.sun << "*" << v.altitude
+      << "): the sky of cameras at\n// " << f(v.altitude_min_km) << ".." << f(v.altitude_max_km)
+      << " km under suns at " << f(v.sun_min_deg) << ".." << f(v.sun_max_deg)
+      << " degrees elevation; GetSkyRadianceWithSkyView(SPECBAKE_ATMOSPHERE, SPECBAKE_SKY_VIEW, ...)\n"
+      << "// reads it there and the 4D textures elsewhere.\n"
+      << "const SpecbakeSkyView SPECBAKE_SKY_VIEW = SpecbakeSkyView(\n"
+      << "    " << f(v.altitude_min_km) << ", " << f(v.altitude_max_km) << ", " << f(v.sun_min_deg * M_PI / 180.0)
+      << ", " << f(v.sun_max_deg * M_PI / 180.0) << ",  // altitude_min, _max (km), sun_min, _max (rad)\n"
+      << "    " << f(v.altitude) << ", " << f(v.sun) << ", " << f(v.view) << ", " << f(v.azimuth)
+      << ");  // altitude_size, sun_size, view_size, azimuth_size\n";
+  o << glsl_subset_epilogue() << "#undef TEXTURE_RGB\n#undef TEXTURE_RGBA\n#undef OUT\n#undef INOUT\n"
     << "#endif\n";
   return o.str();
 }

@@ -23,6 +23,9 @@ struct Luts {
   std::vector<double> irradiance;     // [ih][iw][3], indirect only
   std::vector<double> scattering;     // [R][MU][NU·MU_S][3]
   std::vector<double> single_mie;     // same
+  // The sky-view table where model.sky_view is on (else empty), [sun][altitude][view][azimuth][3]:
+  // radiance without single Mie, and single Mie without its phase (lookup.cl, "The sky-view table").
+  std::vector<double> sky_view, sky_view_mie;
 };
 
 class Renderer {

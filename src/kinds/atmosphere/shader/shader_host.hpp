@@ -158,6 +158,14 @@ inline SpecbakeAtmosphere atmosphere_of(const Model& m, const Channels& rgb) {
   return a;
 }
 
+// The sky-view table's range and node counts (Model::sky_view) as the shader takes them.
+inline SpecbakeSkyView sky_view_of(const Model& m) {
+  const SkyView& v = m.sky_view;
+  constexpr double kRad = 3.14159265358979323846 / 180.0;
+  return SpecbakeSkyView{v.altitude_min_km, v.altitude_max_km, v.sun_min_deg * kRad, v.sun_max_deg * kRad,
+                         double(v.altitude), double(v.sun), double(v.view), double(v.azimuth)};
+}
+
 // The spectral build (`spectrum: {store: radiance}`, sampling_spectral.glsl): four stored
 // wavelengths per texel, wavelength sets as layers of 2D array textures, scattering tiled 2D.
 namespace spectral {

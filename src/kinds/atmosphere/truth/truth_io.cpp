@@ -286,6 +286,19 @@ Luts load_bundle_luts(const fs::path& dir) {
     // bundles from before `quadrature` blended μ_s linearly (their shader did)
     const auto q = m.at("parameters").find("quadrature");
     luts.model.mu_s_geometric = q != m.at("parameters").end() && q->value("mu_s_blend", "linear") == "geometric";
+    // the sky-view table, where the bundle has one (bundles from before it: none)
+    const auto sv = m.at("parameters").find("sky_view");
+    if (sv != m.at("parameters").end() && sv->is_object()) {
+      SkyView& v = luts.model.sky_view;
+      v.altitude_min_km = sv->at("altitude_km").at(0).get<double>();
+      v.altitude_max_km = sv->at("altitude_km").at(1).get<double>();
+      v.sun_min_deg = sv->at("sun_elevation_deg").at(0).get<double>();
+      v.sun_max_deg = sv->at("sun_elevation_deg").at(1).get<double>();
+      v.altitude = sv->at("nodes").at("altitude").get<int>();
+      v.sun = sv->at("nodes").at("sun").get<int>();
+      v.view = sv->at("nodes").at("view").get<int>();
+      v.azimuth = sv->at("nodes").at("azimuth").get<int>();
+    }
   } catch (const nlohmann::json::exception& e) {
     throw InputError(at, std::string("an atmosphere bundle manifest (") + e.what() + ")");
   }
@@ -308,6 +321,11 @@ Luts load_bundle_luts(const fs::path& dir) {
   luts.single_mie = load("single_mie_scattering", n_s, true);
   luts.transmittance = load("transmittance", 3ULL * s.transmittance_w * s.transmittance_h, false);
   luts.irradiance = load("irradiance", 3ULL * s.irradiance_w * s.irradiance_h, false);
+  if (luts.model.sky_view.on()) {
+    const std::size_t n_v = 3 * static_cast<std::size_t>(luts.model.sky_view.texels());
+    luts.sky_view = load("sky_view", n_v, true);
+    luts.sky_view_mie = load("sky_view_single_mie", n_v, true);
+  }
   return luts;
 }
 

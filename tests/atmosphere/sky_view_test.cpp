@@ -1,0 +1,141 @@
+// The sky-view table (lookup.cl, "The sky-view table"): its config keys, the float32 kernel
+// against the double reference, and its lookup (render.glsl, GetSkyViewScattering) returning
+// the table's own nodes. Its accuracy against the independent twilight quadrature is in
+// twilight_truth_test.cpp, its GLSL on a real GL in atmosphere_gl_test.cpp.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "atmosphere/sized.hpp"
+#include "atmosphere/spec_of.hpp"
+#include "core/errors.hpp"
+#include "kinds/atmosphere/bake/bake.hpp"
+// shader_host.hpp (GLM) before reference.hpp, whose kernel prelude defines R
+#include "kinds/atmosphere/shader/shader_host.hpp"
+#include "kinds/atmosphere/bake/reference.hpp"
+#include "support/testing.hpp"
+
+using namespace specbake;
+using namespace specbake::atmosphere;
+
+namespace {
+
+const Progress kQuiet = [](std::string_view, double) {};
+
+// A small Earth whose scene reaches twilight, with a small sized table (3 altitudes, 7 suns,
+// 16 views, 7 azimuths).
+AtmosphereSpec small_twilight() {
+  AtmosphereSpec s = specbake::testing::spec_of(
+      "    preset: earth\n    spectrum: rgb\n    orders: 3\n"
+      "    scene: {camera_altitude_km: [0, 2], sun_elevation_deg: [-9, 6]}\n"
+      "    sky_view: {altitude: 3, sun: 7, view: 16, azimuth: 7}\n");
+  return specbake::testing::sized(s, {32, 8}, {16, 4}, {5, 16, 8, 4});
+}
+
+// max over values of |a − b| / (|b| + floor · max |b| of its channel).
+double max_rel(const std::vector<double>& a, const std::vector<double>& b, double floor) {
+  EXPECT_EQ(a.size(), b.size());
+  double mx[3] = {0, 0, 0};
+  for (std::size_t i = 0; i < b.size(); ++i) mx[i % 3] = std::max(mx[i % 3], std::fabs(b[i]));
+  double e = 0.0;
+  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+    e = std::max(e, std::fabs(a[i] - b[i]) / (std::fabs(b[i]) + floor * mx[i % 3] + 1e-300));
+  return e;
+}
+
+}  // namespace
+
+// `sky_view:` auto (a config's default) builds the table for a scene whose sun goes below the
+// horizon, over its cameras and its suns up to 10°, with a node every 0.5° and 0.5 km; none,
+// daylight scenes and `scene: none` have none; node counts are checked.
+TEST(SkyView, ConfigKeysAndTheAutomaticRange) {
+  const SkyView twilight = model_of(specbake::testing::spec_of(
+                                        "    preset: earth\n    scene: {camera_altitude_km: [0, 2], "
+                                        "sun_elevation_deg: [-12, 20]}\n"))
+                               .sky_view;
+  ASSERT_TRUE(twilight.on());
+  EXPECT_EQ(twilight.sun_min_deg, -12.0);
+  EXPECT_EQ(twilight.sun_max_deg, kSkyViewSunMaxDeg);
+  EXPECT_EQ(twilight.sun, 45);       // 22° in 0.5° steps, both ends
+  EXPECT_EQ(twilight.altitude, 5);   // 2 km in 0.5 km steps
+  EXPECT_EQ(twilight.view, kSkyViewViews);
+  EXPECT_EQ(twilight.azimuth, kSkyViewAzimuths);
+  const SkyView ground = model_of(specbake::testing::spec_of("    preset: earth\n")).sky_view;  // sun −6…90°
+  ASSERT_TRUE(ground.on());
+  EXPECT_EQ(ground.sun, 33);
+  EXPECT_FALSE(model_of(specbake::testing::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [0, 60]}\n"))
+                   .sky_view.on());
+  EXPECT_FALSE(model_of(specbake::testing::spec_of("    preset: earth\n    scene: none\n")).sky_view.on());
+  EXPECT_FALSE(model_of(specbake::testing::spec_of("    preset: earth\n    sky_view: none\n")).sky_view.on());
+  const SkyView one_altitude = model_of(specbake::testing::spec_of(
+                                            "    preset: earth\n    scene: {camera_altitude_km: 1, "
+                                            "sun_elevation_deg: [-4, -2]}\n"))
+                                   .sky_view;
+  EXPECT_EQ(one_altitude.altitude, 1);
+  EXPECT_EQ(one_altitude.sun, 5);
+  const SkyView sized = model_of(small_twilight()).sky_view;
+  EXPECT_EQ(sized.texels(), 3LL * 7 * 16 * 7);
+  for (const char* bad : {"    sky_view: {view: 15}\n", "    sky_view: {azimuth: 1}\n", "    sky_view: {sun: 0}\n",
+                          "    sky_view: {altitudes: 3}\n", "    sky_view: sometimes\n"}) {
+    try {
+      specbake::testing::spec_of(std::string("    preset: earth\n") + bad);
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("sky_view"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// The float32 kernel against the double reference (same functions, same inputs): each texel is
+// single_scattering_ray + multiple_scattering_ray over the bake's transmittance and summed
+// density, the quadratures of the 4D texture's own texels, so the 4D textures' float32 chain
+// bound holds (atmosphere_device_test.cpp, kFloat32Chain: 3e-3 relative to |value| + 1e-3 × the
+// channel maximum).
+TEST(SkyView, DeviceMatchesTheDoubleReference) {
+  const AtmosphereSpec s = small_twilight();
+  const Baked host = bake_luts_reference(s);
+  const Baked dev = bake_luts(s, specbake::testing::shared_device(), kQuiet, 0);
+  ASSERT_EQ(host.luts.sky_view.size(), 3ULL * model_of(s).sky_view.texels());
+  const double e = max_rel(dev.luts.sky_view, host.luts.sky_view, 1e-3),
+               em = max_rel(dev.luts.sky_view_mie, host.luts.sky_view_mie, 1e-3);
+  std::printf("sky view float32 vs double: %.3g, single Mie %.3g\n", e, em);
+  EXPECT_LE(e, 3e-3);
+  EXPECT_LE(em, 3e-3);
+  double peak = 0.0;
+  for (double v : host.luts.sky_view) peak = std::max(peak, v);
+  EXPECT_GT(peak, 0.0);
+}
+
+// The lookup at a texel's own (h, μ, μ_s, ν) returns that texel: the shader's coordinates invert
+// the kernel's texel parameters exactly. What rounding leaves: the azimuth comes back through
+// acos of a cosine near ±1 (φ = 0 and π), which loses up to √(2 ε) ≈ 2e-8 rad, 1e-7 of a texel,
+// times a change between neighbouring texels of at most ~10×: 1e-6 relative (floor 1e-6 × max).
+// A half-texel slip anywhere would show as tens of percent.
+TEST(SkyView, TheLookupReturnsTheTablesNodes) {
+  const AtmosphereSpec s = small_twilight();
+  const Baked b = bake_luts_reference(s);
+  const Model& m = b.luts.model;
+  const SkyView& v = m.sky_view;
+  const auto a = ref3::make_parameters(m, Channels{});
+  const glsl::SpecbakeAtmosphere atm = glsl::atmosphere_of(m, b.luts.rgb);
+  const glsl::SpecbakeSkyView sv = glsl::sky_view_of(m);
+  const glsl::sampler3D L{b.luts.sky_view.data(), v.azimuth, v.view, v.sun * v.altitude};
+  const glsl::sampler3D M{b.luts.sky_view_mie.data(), v.azimuth, v.view, v.sun * v.altitude};
+  const double grid[4] = {v.altitude_min_km, v.altitude_max_km, v.sun_min_deg * M_PI / 180.0,
+                          v.sun_max_deg * M_PI / 180.0};
+  std::vector<double> looked, stored;
+  for (int id = 0; id < v.texels(); ++id) {
+    double h, mu, mu_s, nu;
+    int ground;
+    ref3::sky_view_texel_params(&a, grid, v.altitude, v.sun, v.view, v.azimuth, id, &h, &mu, &mu_s, &nu, &ground);
+    const glsl::vec3 l = glsl::GetSkyViewScattering(atm, sv, L, M, h, mu, mu_s, nu, ground);
+    for (int c = 0; c < 3; ++c) {
+      looked.push_back(l[c]);
+      stored.push_back(b.luts.sky_view[3 * id + c] + b.luts.sky_view_mie[3 * id + c] * ref3::mie_phase(m.mie_g, nu));
+    }
+  }
+  const double e = max_rel(looked, stored, 1e-6);
+  std::printf("lookup at the nodes against the nodes: %.3g\n", e);
+  EXPECT_LE(e, 1e-6);
+}
