@@ -573,6 +573,8 @@ class Corrupting final : public PassBackend {
   }
   Sums& sums() override { return *sums_; }  // the host's, reading through read_into (counted)
   void use_channels(const Channels& ch) override { b_.use_channels(ch); }
+  void add_density_sum(int order) override { b_.add_density_sum(order); }
+  void sky_view(int orders_used, std::vector<double>& out) override { b_.sky_view(orders_used, out); }
   int reads = 0;             // whole-texture reads, by anyone
   long long gathered = 0;    // texels gathered
   int scans = 0;             // whole-texture scans
@@ -680,6 +682,8 @@ class HostSummed final : public PassBackend {
   Scan scan(Tex t) override { return b_->scan(t); }
   Sums& sums() override { return *sums_; }
   void use_channels(const Channels& ch) override { b_->use_channels(ch); }
+  void add_density_sum(int order) override { b_->add_density_sum(order); }
+  void sky_view(int orders_used, std::vector<double>& out) override { b_->sky_view(orders_used, out); }
 
  private:
   std::unique_ptr<PassBackend> b_;

@@ -38,10 +38,17 @@ struct Host {
   glsl::SpecbakeAtmosphere atm;
   glsl::sampler2D transmittance, irradiance;
   glsl::sampler3D scattering, single_mie, combined;
+  // with a sky-view table, a sky ray's radiance comes from GetSkyRadianceWithSkyView
+  bool has_sky_view = false;
+  glsl::SpecbakeSkyView sky_view_grid{};
+  glsl::sampler3D sky_view{}, sky_view_mie{};
   Out eval(const dvec3& up, double h, const dvec3& sun, const Pixel& p) const {
     Out o;
     if (p.kind == 0) {
-      o.v[0] = glsl::GetSkyRadiance(atm, transmittance, scattering, single_mie, up, h, p.dir, 0.0, sun, o.v[1]);
+      o.v[0] = has_sky_view ? glsl::GetSkyRadianceWithSkyView(atm, sky_view_grid, transmittance, scattering, single_mie,
+                                                              sky_view, sky_view_mie, up, h, p.dir, sun, o.v[1])
+                            : glsl::GetSkyRadiance(atm, transmittance, scattering, single_mie, up, h, p.dir, 0.0, sun,
+                                                   o.v[1]);
       if (h < atm.top_radius - atm.bottom_radius) {  // the ray as GetSkyRadiance sees it from inside
         const double mu = glsl::clamp_cosine(glm::dot(up, p.dir));
         o.v[4] = glsl::GetCombinedScattering3D(atm, combined, h, mu, glsl::clamp_cosine(glm::dot(up, sun)),
@@ -57,6 +64,7 @@ struct Host {
   Host with(glsl::FilterProbe* probe) const {
     Host h = *this;
     h.transmittance.probe = h.irradiance.probe = h.scattering.probe = h.single_mie.probe = h.combined.probe = probe;
+    h.sky_view.probe = h.sky_view_mie.probe = probe;
     return h;
   }
 };
