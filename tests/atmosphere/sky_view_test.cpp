@@ -76,6 +76,18 @@ TEST(SkyView, ConfigKeysAndTheAutomaticRange) {
   EXPECT_EQ(one_altitude.sun, 5);
   const SkyView sized = model_of(small_twilight()).sky_view;
   EXPECT_EQ(sized.texels(), 3LL * 7 * 16 * 7);
+  // a deep-twilight scene with its table stores half the μ_s texels it bakes (the table holds its
+  // views); given sizes, no table or `store: radiance` store what they bake
+  const auto deep = [](const std::string& more) {
+    return specbake::testing::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 10]}\n" + more);
+  };
+  EXPECT_TRUE(deep("").store_half_mu_s);
+  EXPECT_EQ(stored_sizes(deep("")).mu_s, kDeepTwilightScatteringMuS / 2);
+  EXPECT_EQ(sizes_of(deep("")).mu_s, kDeepTwilightScatteringMuS);
+  EXPECT_FALSE(deep("    sky_view: none\n").store_half_mu_s);
+  EXPECT_FALSE(deep("    sizes: 100%\n").store_half_mu_s);
+  EXPECT_FALSE(deep("    spectrum: {min_nm: 360, max_nm: 830, count: 16, store: radiance}\n").store_half_mu_s);
+  EXPECT_FALSE(specbake::testing::spec_of("    preset: earth\n").store_half_mu_s);  // sun −6…90°: 32 baked
   for (const char* bad : {"    sky_view: {view: 15}\n", "    sky_view: {azimuth: 1}\n", "    sky_view: {sun: 0}\n",
                           "    sky_view: {altitudes: 3}\n", "    sky_view: sometimes\n"}) {
     try {

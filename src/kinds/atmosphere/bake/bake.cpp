@@ -143,6 +143,8 @@ class Baking {
     clock_.host("setup", [&] { backend_ = make_(all_.slice(0, std::min(width_, n_)), width_); });
     for (int p = 0; p < passes_; ++p) pass(p, progress);
     combine();
+    if (spec_.store_half_mu_s)
+      clock_.host("combine", [&] { store_mu_s(out_.luts, stored_sizes(spec_).mu_s); });
     if (sp_.spectral) transmittance_rgb();
     out_.timings = clock_.to_json();
     const Sizes& s = m_.sizes;
@@ -278,6 +280,40 @@ double bake_files_seconds(const AtmosphereSpec& spec) {
                    1048576.0;
 }
 
+Sizes stored_sizes(const AtmosphereSpec& spec) {
+  Sizes s = sizes_of(spec);
+  if (spec.store_half_mu_s) s.mu_s = std::max(2, s.mu_s / 2);
+  return s;
+}
+
+void store_mu_s(Luts& luts, int mu_s) {
+  const Sizes from = luts.model.sizes;
+  if (mu_s == from.mu_s) return;
+  Sizes to = from;
+  to.mu_s = mu_s;
+  // baked texel i sits at unit coordinate i / (n − 1) (coord_of_unit); stored texel j at j / (m − 1)
+  const auto resample = [&](const std::vector<double>& in) {
+    std::vector<double> out(3ULL * to.scattering_texels());
+    const long long rows = 1LL * from.r * from.mu * from.nu;  // (z, y, ν slice)
+    parallel_for(rows, [&](long long row) {
+      for (int j = 0; j < mu_s; ++j) {
+        const double x = static_cast<double>(j) / (mu_s - 1) * (from.mu_s - 1);
+        const int i0 = std::min(static_cast<int>(std::floor(x)), from.mu_s - 2);
+        const double g = x - i0;
+        for (int c = 0; c < 3; ++c) {
+          const double a = in[3 * (row * from.mu_s + i0) + c], b = in[3 * (row * from.mu_s + i0 + 1) + c];
+          out[3 * (row * mu_s + j) + c] =
+              luts.model.mu_s_geometric ? ref3::mu_s_blend(a, b, g) : a + (b - a) * g;
+        }
+      }
+    });
+    return out;
+  };
+  luts.scattering = resample(luts.scattering);
+  luts.single_mie = resample(luts.single_mie);
+  luts.model.sizes = to;
+}
+
 double bake_seconds(const AtmosphereSpec& spec) {
   const double mtexels =
       double(spec.scattering_r) * spec.scattering_mu * spec.scattering_mu_s * spec.scattering_nu / 1048576.0;
@@ -374,10 +410,16 @@ json parameters_json(const AtmosphereSpec& spec) {
   p["store"] = spec.store_radiance ? "luminance and radiance" : (sp.spectral ? "luminance" : "radiance");
   p["scene_check"] = spec.scene.check ? json{{"points", spec.scene.points}, {"relative_se", spec.scene.relative_se}}
                                       : json(false);
-  const Sizes& s = m.sizes;
+  const Sizes s = stored_sizes(spec);  // the files' sizes
   p["sizes"] = {{"transmittance", {{"mu", s.transmittance_w}, {"r", s.transmittance_h}}},
                 {"irradiance", {{"mu_s", s.irradiance_w}, {"r", s.irradiance_h}}},
                 {"scattering", {{"r", s.r}, {"mu", s.mu}, {"mu_s", s.mu_s}, {"nu", s.nu}}}};
+  if (s.mu_s != m.sizes.mu_s)
+    p["sizes"]["scattering"]["mu_s_baked"] = {
+        {"mu_s", m.sizes.mu_s},
+        {"meaning", "the bake's own mu_s texels (the densities of every order); the stored textures are resampled "
+                    "to mu_s (each stored texel the baked texture's lookup at its mu_s): the sky-view table holds "
+                    "the scene's views, the 4D textures the rest"}};
   // what an engine holds: transmittance, irradiance, scattering and single Mie (and the sky-view
   // table's two textures where there is one) as float32 R,G,B
   const SkyView& v = m.sky_view;

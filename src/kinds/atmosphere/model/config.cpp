@@ -9,6 +9,7 @@
 #include "core/spectral_data.hpp"
 #include "core/text.hpp"
 #include "atmosphere/limits.h"
+#include "kinds/atmosphere/model/model.hpp"
 #include "kinds/atmosphere/model/scene.hpp"
 #include "kinds/atmosphere/model/spec.hpp"
 
@@ -239,6 +240,7 @@ bool reaches_deep_twilight(const AtmosphereSpec& s) {
 void set_scene_default_sizes(AtmosphereSpec& s) {
   for (auto axis : kSizeAxes) s.*axis = AtmosphereSpec{}.*axis;
   if (reaches_deep_twilight(s)) s.scattering_mu_s = kDeepTwilightScatteringMuS;
+  s.store_half_mu_s = reaches_deep_twilight(s) && sky_view_of(s).on() && !s.store_radiance;
 }
 
 bool sizes_within_limits(const AtmosphereSpec& s) {
@@ -494,9 +496,9 @@ AtmosphereSpec parse_spec(const At& job, nlohmann::json& norm, Inputs& inputs) {
   s.sky_view = AtmosphereSpec::SkyViewMode::automatic;  // a config's default (`sky_view: auto`)
   parse_planet(job, s);
   parse_bake(job, s);
+  if (job.has("sky_view")) parse_sky_view(job.child("sky_view"), s);
   parse_checks(job, s);
   if (job.has("previews")) parse_previews(job.child("previews"), s);
-  if (job.has("sky_view")) parse_sky_view(job.child("sky_view"), s);
   // The CIE 1931 table converts spectra (and gives the render-time luminance factors).
   const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
   inputs.emplace_back(cmf.resource, sha256_hex(resource(cmf.resource)));

@@ -47,6 +47,10 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   int transmittance_mu = 256, transmittance_r = 64, irradiance_mu_s = 64, irradiance_r = 16;
   int scattering_r = 32, scattering_mu = 128, scattering_mu_s = 32, scattering_nu = 8;
   bool sizes_given = false;  // a `sizes:` key (any form); else the scene decides the μ_s count (config.cpp)
+  // The bundle stores half the baked μ_s texels (resampled): a deep-twilight scene whose sky-view
+  // table holds its views bakes kDeepTwilightScatteringMuS for its densities, but its 4D textures
+  // serve only the views outside the scene's range, which the default count holds (config.cpp).
+  bool store_half_mu_s = false;
   // `quadrature:` the scattering density's sphere rule: θ nodes (even), and whether they are
   // packed towards the horizon (default) or uniform as in the reference (docs/atmosphere.md).
   int density_theta = 16;
