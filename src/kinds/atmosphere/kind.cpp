@@ -78,6 +78,13 @@ Kind kind() {
       const auto& sc = p["sizes"]["scattering"];
       s += ", scattering " + std::to_string(sc.value("r", 0)) + "x" + std::to_string(sc.value("mu", 0)) + "x" +
            std::to_string(sc.value("mu_s", 0)) + "x" + std::to_string(sc.value("nu", 0));
+      if (sc.contains("mu_s_baked") && sc["mu_s_baked"].is_object())
+        s += " (mu_s " + std::to_string(sc["mu_s_baked"].value("mu_s", 0)) + " baked)";
+    }
+    if (p.contains("sky_view") && p["sky_view"].is_object()) {
+      const auto& n = p["sky_view"]["nodes"];
+      s += ", sky view " + std::to_string(n.value("altitude", 0)) + "x" + std::to_string(n.value("sun", 0)) + "x" +
+           std::to_string(n.value("view", 0)) + "x" + std::to_string(n.value("azimuth", 0));
     }
     s += ", " + p.value("precision", "float32");
     if (p.contains("auto") && p["auto"].is_object()) {
