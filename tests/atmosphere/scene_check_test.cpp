@@ -496,7 +496,8 @@ TEST(SceneCheck, TheJobsProgressSharesFollowTheCheckItsCost) {
       "    orders: 2\n"
       "    previews: none\n"
       "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: 32, mu_s: 8, nu: 4}}\n"
-      "    scene: {points: 6, relative_se: 0.02, sun_elevation_deg: [-10, -2]}\n");
+      "    scene: {points: 6, relative_se: 0.02, sun_elevation_deg: [-10, -2]}\n"
+      "    sky_view: none\n");  // the model's compute floor below (a table would add its own seconds)
   const ResultStore store(dir / "results");
   // the job's fraction when its compute ends (the last one reported before the check step)
   auto check_starts_at = [&] {
