@@ -787,13 +787,11 @@ FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real
  * sun elevations grid[2..3] (rad): its camera altitude h, view cosine mu, sun cosine mu_s, ν and
  * whether the view meets the ground (the half of the view axis it is in). */
 FN real sky_view_node(int i, int n) { return n > 1 ? (real)i / (real)(n - 1) : R(0.0); }
-FN void sky_view_texel_params(const AtmosphereParameters* a, const real* grid, int n_h, int n_sun, int n_view,
-                              int n_az, int id, real* h, real* mu, real* mu_s, real* nu, int* ground) {
-  const int i_az = id % n_az, i_v = (id / n_az) % n_view, k = id / (n_az * n_view);
-  const int i_h = k % n_h, i_s = k / n_h, half_view = n_view / 2;
+/* The ray of altitude node i_h and view node i_v: its altitude, cosine and half (meets the ground). */
+FN void sky_view_ray(const AtmosphereParameters* a, const real* grid, int n_h, int n_view, int i_h, int i_v, real* h,
+                     real* mu, int* ground) {
+  const int half_view = n_view / 2;
   *h = clamp_altitude(a, grid[0] + (grid[1] - grid[0]) * sky_view_node(i_h, n_h));
-  const real e = grid[2] + (grid[3] - grid[2]) * sky_view_node(i_s, n_sun);
-  const real phi = ATM_PI * sky_view_node(i_az, n_az);
   const real theta_h = sky_view_horizon_zenith(a->bottom_radius, *h);
   real theta;
   if (i_v < half_view) {
@@ -806,8 +804,19 @@ FN void sky_view_texel_params(const AtmosphereParameters* a, const real* grid, i
     *ground = 0;
   }
   *mu = clamp_cosine(cos(theta));
+}
+/* The sun of sun node i_s and azimuth node i_az seen along a ray of cosine mu: μ_s and ν. */
+FN void sky_view_sun(const real* grid, int n_sun, int n_az, int i_s, int i_az, real mu, real* mu_s, real* nu) {
+  const real e = grid[2] + (grid[3] - grid[2]) * sky_view_node(i_s, n_sun);
+  const real phi = ATM_PI * sky_view_node(i_az, n_az);
   *mu_s = clamp_cosine(sin(e));
-  *nu = clamp_cosine(*mu * *mu_s + sin(theta) * cos(e) * cos(phi));
+  *nu = clamp_cosine(mu * *mu_s + safe_sqrt(R(1.0) - mu * mu) * cos(e) * cos(phi));
+}
+FN void sky_view_texel_params(const AtmosphereParameters* a, const real* grid, int n_h, int n_sun, int n_view,
+                              int n_az, int id, real* h, real* mu, real* mu_s, real* nu, int* ground) {
+  const int i_az = id % n_az, i_v = (id / n_az) % n_view, k = id / (n_az * n_view);
+  sky_view_ray(a, grid, n_h, n_view, k % n_h, i_v, h, mu, ground);
+  sky_view_sun(grid, n_sun, n_az, k / n_h, i_az, *mu, mu_s, nu);
 }
 /* Its values: out[c] = single Rayleigh × P_R(ν) + Σ_{n≥2} L_n, out[NCH + c] = single Mie (no
  * phase), integrated along the texel's exact ray with the 4D texture's own rules
@@ -824,6 +833,25 @@ FN void sky_view_texel(const AtmosphereParameters* a, GLOBAL const real* T, GLOB
   single_scattering_ray(a, T, h, mu, d, ground, mu_s, nu, ray, mie);
   for (int c = 0; c < NCH; ++c) ms[c] = R(0.0);
   if (orders_above_one != 0) multiple_scattering_ray(a, T, J_sum, h, mu, d, ground, mu_s, nu, ms);
+  const real p = rayleigh_phase(nu);
+  for (int c = 0; c < NCH; ++c) {
+    out[c] = ray[c] * p + ms[c];
+    out[NCH + c] = mie[c];
+  }
+}
+
+/* sky_view_texel from its ray's samples (ray_sample of the texel's (altitude, view) ray, shared
+ * by every sun and azimuth of that ray; sample i at samples[i · RAY_STRIDE]): the same sums. */
+FN void sky_view_texel_from_samples(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
+                                    int orders_above_one, GLOBAL const real* samples, real mu_s, real nu, real* out) {
+  real sum_r[NCH], sum_m[NCH], ms[NCH], s[RAY_STRIDE], ray[NCH], mie[NCH];
+  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = ms[c] = R(0.0);
+  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+    for (int k = 0; k < RAY_STRIDE; ++k) s[k] = samples[i * RAY_STRIDE + k];
+    single_scattering_add(a, T, s, mu_s, nu, sum_r, sum_m);
+    if (orders_above_one != 0) multiple_scattering_add(a, J_sum, s, mu_s, nu, ms);
+  }
+  single_scattering_finish(a, sum_r, sum_m, ray, mie);
   const real p = rayleigh_phase(nu);
   for (int c = 0; c < NCH; ++c) {
     out[c] = ray[c] * p + ms[c];

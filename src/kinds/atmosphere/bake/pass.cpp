@@ -546,9 +546,13 @@ class DeviceBackend final : public PassBackend {
                                               v.sun_max_deg * M_PI / 180.0},
                                              q_.dbl());
       cl::Buffer values = q_.alloc(2 * v.texels());
+      cl::Buffer samples = q_.alloc_reals(1LL * v.altitude * v.view * (kScatteringSteps + 1) * (kRayFixed + width_));
       cl::Buffer& J = orders_used > 1 ? J_sum_ : tex_.J;
+      q_.launch("sky_view_ray_samples", 1LL * v.altitude * v.view * (kScatteringSteps + 1),
+                {&tex_.T, &grid, v.altitude, v.view, &samples});
       q_.launch("sky_view_texture", v.texels(),
-                {&tex_.T, &J, orders_used > 1 ? 1 : 0, &grid, v.altitude, v.sun, v.view, v.azimuth, &values});
+                {&tex_.T, &J, orders_used > 1 ? 1 : 0, &grid, &samples, v.altitude, v.sun, v.view, v.azimuth,
+                 &values});
       q_.read_reals(values, 2 * v.texels() * width_, out);
       return 0;
     });
