@@ -93,7 +93,9 @@ def run(cmd, **kw):
     wall = time.perf_counter() - t0
     if p.returncode != 0:
         sys.stderr.write(p.stdout[-4000:] + p.stderr[-4000:])
-        lines = [l for l in (p.stdout + p.stderr).splitlines() if "failed" in l or "error" in l]
+        out = (p.stdout + "\n" + p.stderr).splitlines()
+        # the job's own failure line first (warnings also say "standard error")
+        lines = [l for l in out if ": failed:" in l] or [l for l in out if "failed" in l or "error" in l]
         raise Failed(wall, f"exit {p.returncode}: " + (lines[-1][:300] if lines else "see its output"))
     return wall
 

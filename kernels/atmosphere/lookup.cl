@@ -223,15 +223,31 @@ FN real scattering_u_nu_at(real nu) { return (nu + R(1.0)) * R(0.5); }
  * outermost): the GPU filters azimuth, view and altitude; the lookup blends two sun slices
  * itself, geometrically (mu_s_blend), as the sky falls by about e per degree of sun elevation. */
 FN real sky_view_horizon_zenith(real rb, real h) { return acos(clamp_cosine(-safe_sqrt(rho2_of(rb, h)) / (rb + h))); }
+/* The angle θ_h − θ between the horizon and a view of cosine mu at altitude h (positive above the
+ * horizon), from its sine and cosine (sin θ_h = rb/r, cos θ_h = −ρ/r) rather than as a difference
+ * of two arc cosines: near the horizon, where the table's nodes crowd, that difference would carry
+ * the arc cosines' absolute rounding (float32: ~1e-7 rad, and GLSL leaves acos's precision to the
+ * implementation) into an angle of a few 1e-3 rad; here the rounding stays relative to the angle.
+ * Written with the one-argument atan that C, OpenCL and GLSL share. */
+FN real sky_view_above_horizon(real rb, real h, real mu) {
+  real r = rb + h;
+  real sin_h = rb / r;
+  real cos_h = -safe_sqrt(rho2_of(rb, h)) / r;
+  real sin_t = safe_sqrt(R(1.0) - mu * mu);
+  real s = sin_h * mu - cos_h * sin_t;  /* sin(θ_h − θ) */
+  real c = cos_h * mu + sin_h * sin_t;  /* cos(θ_h − θ) */
+  if (c > fabs(s)) return atan(s / c);
+  return (s > R(0.0) ? R(0.5) : R(-0.5)) * R(3.14159265358979323846) - atan(c / s);
+}
 /* Texture coordinate of the view zenith (from mu) at altitude h. */
 FN real sky_view_u_view_at(real rb, real h, real mu, int meets_ground, real n_view) {
   real theta_h = sky_view_horizon_zenith(rb, h);
-  real theta = acos(clamp_cosine(mu));
+  real delta = sky_view_above_horizon(rb, h, clamp_cosine(mu));
   if (meets_ground != 0) {
-    real x = safe_sqrt(clamp_real((theta - theta_h) / (R(3.14159265358979323846) - theta_h), R(0.0), R(1.0)));
+    real x = safe_sqrt(clamp_real(-delta / (R(3.14159265358979323846) - theta_h), R(0.0), R(1.0)));
     return R(0.5) - R(0.5) * coord_of_unit(x, n_view * R(0.5));
   }
-  real x = safe_sqrt(clamp_real((theta_h - theta) / theta_h, R(0.0), R(1.0)));
+  real x = safe_sqrt(clamp_real(delta / theta_h, R(0.0), R(1.0)));
   return R(0.5) + R(0.5) * coord_of_unit(x, n_view * R(0.5));
 }
 /* cos φ of the view–sun azimuth from μ, μ_s and ν (1 where the view or the sun is vertical). */

@@ -298,10 +298,13 @@ std::string live_data(const PageJob& j, const json& manifest, const std::string&
 // layout and a separate single-Mie texture (what sky.js binds).
 std::string live_sky_html(const PageJob& j, const json& manifest, std::size_t index) {
   json data;
-  const std::string why = live_data(j, manifest, "sampling.glsl",
-                                    {{"transmittance", "transmittance"}, {"scattering", "scattering"},
-                                     {"single_mie_scattering", "single_mie_scattering"}},
-                                    data);
+  std::vector<LiveTexture> textures = {{"transmittance", "transmittance"}, {"scattering", "scattering"},
+                                       {"single_mie_scattering", "single_mie_scattering"}};
+  const json params = manifest.value("parameters", json::object());
+  const bool table = params.is_object() && params.contains("sky_view") && params["sky_view"].is_object();
+  if (table)  // the sky-view table (GetSkyRadianceWithSkyView)
+    for (const char* t : {"sky_view", "sky_view_single_mie"}) textures.push_back({t, t});
+  const std::string why = live_data(j, manifest, "sampling.glsl", textures, data);
   if (!why.empty()) return no_live_view(why);
   if (data["glsl"].get<std::string>().find("this bundle has no 3D layout") != std::string::npos)
     return no_live_view("the live view binds the 3D scattering layout; this bundle has the tiled 2D one only");
@@ -311,7 +314,9 @@ std::string live_sky_html(const PageJob& j, const json& manifest, std::size_t in
        {"sun_azimuth_deg", "sun azimuth", -180, 180, 1, 0, "deg"},
        {"altitude_km", "altitude", 0, 50, 0.1, 0, "km"},
        {"exposure", "exposure", -4, 10, 0.25, 3, "stops"}},
-      "The bundle's own sampling.glsl (GetSkyRadiance, as shipped) in WebGL2 on its float32 textures: equidistant "
+      std::string("The bundle's own sampling.glsl (") +
+          (table ? "GetSkyRadianceWithSkyView: its sky-view table where it holds the camera and the sun" : "GetSkyRadiance") +
+          ", as shipped) in WebGL2 on its float32 textures: equidistant "
       "fisheye, zenith at the centre, sun azimuth 0 at the right; the sky's radiance (R, G, B at the bundle's "
       "wavelengths, no sun disc) times 2^exposure, then 1 − exp(−x) and the sRGB curve.",
       data);

@@ -6,6 +6,7 @@
 
 #include "atmosphere/limits.h"
 #include "kinds/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/model/model.hpp"
 #include "kinds/atmosphere/truth/truth.hpp"
 
 namespace specbake::atmosphere {
@@ -52,8 +53,16 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
     const TruthMemory a = truth_memory(points, s.spectral ? s.count : 3), b = truth_memory(points, 48);
     check = {std::max(a.host, b.host), std::max(a.device, b.device), std::max(a.largest_buffer, b.largest_buffer)};
   }
-  return MemoryEstimate{6 * texture + sums + rays + incidence + (std::uint64_t{1} << 24) + check.device,
-                        std::max({texture, rays, incidence, check.largest_buffer}), host + check.host};
+  // The sky-view table (where the scene has one): the density summed over orders (one more 4D
+  // texture), its values (2·w per texel), its rays' samples; on the host its R,G,B sums in double
+  // and the pass's values read back.
+  const SkyView v = sky_view_of(s);
+  const std::uint64_t table = std::uint64_t(v.texels()) * 2 * w * real,
+                      table_rays = std::uint64_t(v.altitude) * v.view * (SCATTERING_STEPS + 1) * (RAY_FIXED + w) * real,
+                      table_device = v.on() ? texture + table + table_rays : 0;
+  host += std::uint64_t(v.texels()) * 8 * (2 * 3 + 2 * w);
+  return MemoryEstimate{6 * texture + sums + rays + incidence + table_device + (std::uint64_t{1} << 24) + check.device,
+                        std::max({texture, rays, incidence, table, check.largest_buffer}), host + check.host};
 }
 
 }  // namespace

@@ -1,7 +1,8 @@
 // specbake report page: the live sky of an atmosphere bundle. Its own sampling.glsl (GLSL 4.50 /
 // ES 3.20 text without #version) compiled as GLSL ES 3.00 in WebGL2, on its float32 textures
-// (transmittance 2D, scattering and single Mie 3D; LINEAR, CLAMP_TO_EDGE, as sampling.glsl's
-// header asks), GetSkyRadiance per pixel of an equidistant fisheye. Where WebGL2 or linear
+// (transmittance 2D, scattering and single Mie 3D, the sky-view table's two 3D textures where the
+// bundle has them; LINEAR, CLAMP_TO_EDGE, as sampling.glsl's header asks), GetSkyRadiance (or
+// GetSkyRadianceWithSkyView) per pixel of an equidistant fisheye. Where WebGL2 or linear
 // filtering of float textures is missing, the page says so and keeps the static previews.
 // window.specbakeSky[job].radiance({sun_elevation_deg, sun_azimuth_deg, altitude_km}, n) renders
 // n x n pixels of linear radiance into a float framebuffer and returns them (the browser test
@@ -34,25 +35,34 @@
     return new Float32Array([Math.cos(e) * Math.cos(a), Math.cos(e) * Math.sin(a), Math.sin(e)]);
   }
 
-  var MAIN = [
-    'uniform highp sampler2D transmittance_texture;',
-    'uniform highp sampler3D scattering_texture;',
-    'uniform highp sampler3D single_mie_scattering_texture;',
-    'uniform highp sampler2D directions;',
-    'uniform vec3 sun;',
-    'uniform float altitude_km;',
-    'uniform float scale;',
-    'uniform int linear_out;',
-    'out vec4 color;',
-    L.SRGB,
-    'void main() {',
-    '  vec4 d = texelFetch(directions, ivec2(gl_FragCoord.xy), 0);',
-    '  if (d.w == 0.0) { color = vec4(0.0); return; }',
-    '  vec3 t;',
-    '  vec3 l = GetSkyRadiance(SPECBAKE_ATMOSPHERE, transmittance_texture, scattering_texture,',
-    '                          single_mie_scattering_texture, vec3(0.0, 0.0, 1.0), altitude_km, d.xyz, 0.0, sun, t);',
-    '  color = linear_out == 1 ? vec4(l, 1.0) : vec4(srgb(1.0 - exp(-max(l, 0.0) * scale)), 1.0);',
-    '}'].join('\n');
+  // The fragment shader: GetSkyRadiance, or with a sky-view table (bundles of scenes whose sun
+  // sets) GetSkyRadianceWithSkyView, which reads the table where it holds the camera and the sun.
+  function main(table) {
+    return [
+      'uniform highp sampler2D transmittance_texture;',
+      'uniform highp sampler3D scattering_texture;',
+      'uniform highp sampler3D single_mie_scattering_texture;',
+      table ? 'uniform highp sampler3D sky_view_texture;\nuniform highp sampler3D sky_view_mie_texture;' : '',
+      'uniform highp sampler2D directions;',
+      'uniform vec3 sun;',
+      'uniform float altitude_km;',
+      'uniform float scale;',
+      'uniform int linear_out;',
+      'out vec4 color;',
+      L.SRGB,
+      'void main() {',
+      '  vec4 d = texelFetch(directions, ivec2(gl_FragCoord.xy), 0);',
+      '  if (d.w == 0.0) { color = vec4(0.0); return; }',
+      '  vec3 t;',
+      table
+        ? '  vec3 l = GetSkyRadianceWithSkyView(SPECBAKE_ATMOSPHERE, SPECBAKE_SKY_VIEW, transmittance_texture,\n' +
+          '      scattering_texture, single_mie_scattering_texture, sky_view_texture, sky_view_mie_texture,\n' +
+          '      vec3(0.0, 0.0, 1.0), altitude_km, d.xyz, sun, t);'
+        : '  vec3 l = GetSkyRadiance(SPECBAKE_ATMOSPHERE, transmittance_texture, scattering_texture,\n' +
+          '      single_mie_scattering_texture, vec3(0.0, 0.0, 1.0), altitude_km, d.xyz, 0.0, sun, t);',
+      '  color = linear_out == 1 ? vec4(l, 1.0) : vec4(srgb(1.0 - exp(-max(l, 0.0) * scale)), 1.0);',
+      '}'].join('\n');
+  }
 
   function Sky(root, data) {
     var canvas = root.querySelector('canvas'), status = root.querySelector('.live-status');
@@ -60,10 +70,14 @@
     L.needFloatFiltering(gl, 'the sky');
     var floatTarget = gl.getExtension('EXT_color_buffer_float');
 
-    var program = L.program(gl, 'sampling.glsl', data.glsl, ['sampler2D', 'sampler3D'], MAIN);
+    var table = !!data.textures.sky_view;
+    var program = L.program(gl, 'sampling.glsl', data.glsl, ['sampler2D', 'sampler3D'], main(table));
 
-    function texture(unit, target, tex) {  // [rows][cols] or [depth][rows][cols], RGB
-      var s = tex.shape, dims = s.length === 2 ? [s[1], s[0]] : [s[2], s[1], s[0]];
+    // shapes as the .bin files have them, RGB last: [rows][cols][3] (2D), [depth][rows][cols][3]
+    // (3D), the sky-view table [sun][altitude][view][azimuth][3] (3D: azimuth, view, sun·altitude)
+    function texture(unit, target, tex) {
+      var s = tex.shape, dims = s.length === 3 ? [s[1], s[0]] : s.length === 4 ? [s[2], s[1], s[0]]
+                                                                          : [s[3], s[2], s[0] * s[1]];
       L.texture(gl, unit, target, gl.RGB32F, gl.RGB, dims, L.floats(tex.base64));
     }
     texture(0, gl.TEXTURE_2D, data.textures.transmittance);
@@ -73,6 +87,12 @@
     gl.uniform1i(gl.getUniformLocation(program, 'scattering_texture'), 1);
     gl.uniform1i(gl.getUniformLocation(program, 'single_mie_scattering_texture'), 2);
     gl.uniform1i(gl.getUniformLocation(program, 'directions'), 3);
+    if (table) {
+      texture(4, gl.TEXTURE_3D, data.textures.sky_view);
+      texture(5, gl.TEXTURE_3D, data.textures.sky_view_single_mie);
+      gl.uniform1i(gl.getUniformLocation(program, 'sky_view_texture'), 4);
+      gl.uniform1i(gl.getUniformLocation(program, 'sky_view_mie_texture'), 5);
+    }
     var dirTex = null, dirSize = 0;
     function useDirections(n) {
       if (n === dirSize) return;
