@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "atmosphere/npy.hpp"
+#include "atmosphere/max_rel.hpp"
 #include "atmosphere/sized.hpp"
 #include "io/exr.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
@@ -39,16 +40,7 @@ AtmosphereSpec sixteen_wavelengths(AtmosphereSpec s, int orders) {
   return s;
 }
 
-// max over texels of |a − b| / (|b| + floor · max_channel |b|), over 3 channels.
-double max_rel(const std::vector<double>& a, const std::vector<double>& b, double floor) {
-  EXPECT_EQ(a.size(), b.size());
-  double mx[3] = {0, 0, 0};
-  for (std::size_t i = 0; i < b.size(); ++i) mx[i % 3] = std::max(mx[i % 3], std::fabs(b[i]));
-  double e = 0.0;
-  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i)
-    e = std::max(e, std::fabs(a[i] - b[i]) / (std::fabs(b[i]) + floor * mx[i % 3] + 1e-300));
-  return e;
-}
+using specbake::testing::max_rel;
 // The same over a scattering texture, split into the two rows of exactly tangent rays (the
 // horizon: index 0 of the ground half and index MU − 1 of the sky half)
 // and all other rows.

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <string>
 
+#include "atmosphere/max_rel.hpp"
 #include "atmosphere/sized.hpp"
 #include "atmosphere/spec_of.hpp"
 #include "core/errors.hpp"
@@ -33,16 +34,7 @@ AtmosphereSpec small_twilight() {
   return specbake::testing::sized(s, {32, 8}, {16, 4}, {5, 16, 8, 4});
 }
 
-// max over values of |a − b| / (|b| + floor · max |b| of its channel).
-double max_rel(const std::vector<double>& a, const std::vector<double>& b, double floor) {
-  EXPECT_EQ(a.size(), b.size());
-  double mx[3] = {0, 0, 0};
-  for (std::size_t i = 0; i < b.size(); ++i) mx[i % 3] = std::max(mx[i % 3], std::fabs(b[i]));
-  double e = 0.0;
-  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i)
-    e = std::max(e, std::fabs(a[i] - b[i]) / (std::fabs(b[i]) + floor * mx[i % 3] + 1e-300));
-  return e;
-}
+using specbake::testing::max_rel;
 
 }  // namespace
 
