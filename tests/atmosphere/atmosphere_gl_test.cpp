@@ -422,10 +422,8 @@ TEST(AtmosphereGl, SkyViewTableMatchesTheHostOnLlvmpipe) {
   ASSERT_TRUE(sv.on());
   const std::vector<double> combined = combined_texture(luts);
   Host host = host_of(luts, combined);
-  host.has_sky_view = true;
-  host.sky_view_grid = glsl::sky_view_of(m);
-  host.sky_view = {luts.sky_view.data(), sv.azimuth, sv.view, sv.sun * sv.altitude};
-  host.sky_view_mie = {luts.sky_view_mie.data(), sv.azimuth, sv.view, sv.sun * sv.altitude};
+  host.sky_view = glsl::sky_view_samplers(luts);
+  ASSERT_TRUE(host.sky_view.on);
 
   const GLuint textures[] = {texture_2d(s.transmittance_w, s.transmittance_h, luts.transmittance, GL_LINEAR),
                              texture_3d(s.scattering_width(), s.mu, s.r, luts.scattering),
@@ -498,7 +496,7 @@ TEST(AtmosphereGl, SkyViewTableMatchesTheHostOnLlvmpipe) {
       bound[i] = bound_of(host, up, h, sun, pixels[i], value[i]);
       if (pixels[i].kind == 0 && sun_elevation < 0.0) {  // the table is read: it differs from the 4D textures
         Host plain = host;
-        plain.has_sky_view = false;
+        plain.sky_view.on = false;
         const Out v4 = plain.eval(up, h, sun, pixels[i]);
         for (int c = 0; c < 3; ++c)
           if (value[i].v[0][c] > 0.0)

@@ -38,15 +38,14 @@ struct Host {
   glsl::SpecbakeAtmosphere atm;
   glsl::sampler2D transmittance, irradiance;
   glsl::sampler3D scattering, single_mie, combined;
-  // with a sky-view table, a sky ray's radiance comes from GetSkyRadianceWithSkyView
-  bool has_sky_view = false;
-  glsl::SpecbakeSkyView sky_view_grid{};
-  glsl::sampler3D sky_view{}, sky_view_mie{};
+  // with a sky-view table (sky_view.on), a sky ray's radiance comes from GetSkyRadianceWithSkyView
+  glsl::SkyViewSamplers sky_view;
   Out eval(const dvec3& up, double h, const dvec3& sun, const Pixel& p) const {
     Out o;
     if (p.kind == 0) {
-      o.v[0] = has_sky_view ? glsl::GetSkyRadianceWithSkyView(atm, sky_view_grid, transmittance, scattering, single_mie,
-                                                              sky_view, sky_view_mie, up, h, p.dir, sun, o.v[1])
+      o.v[0] = sky_view.on ? glsl::GetSkyRadianceWithSkyView(atm, sky_view.grid, transmittance, scattering, single_mie,
+                                                             sky_view.radiance, sky_view.single_mie, up, h, p.dir,
+                                                             sun, o.v[1])
                             : glsl::GetSkyRadiance(atm, transmittance, scattering, single_mie, up, h, p.dir, 0.0, sun,
                                                    o.v[1]);
       if (h < atm.top_radius - atm.bottom_radius) {  // the ray as GetSkyRadiance sees it from inside
@@ -64,7 +63,7 @@ struct Host {
   Host with(glsl::FilterProbe* probe) const {
     Host h = *this;
     h.transmittance.probe = h.irradiance.probe = h.scattering.probe = h.single_mie.probe = h.combined.probe = probe;
-    h.sky_view.probe = h.sky_view_mie.probe = probe;
+    h.sky_view.radiance.probe = h.sky_view.single_mie.probe = probe;
     return h;
   }
 };

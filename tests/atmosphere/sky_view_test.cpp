@@ -123,9 +123,8 @@ TEST(SkyView, TheLookupReturnsTheTablesNodes) {
   const SkyView& v = m.sky_view;
   const auto a = ref3::make_parameters(m, Channels{});
   const glsl::SpecbakeAtmosphere atm = glsl::atmosphere_of(m, b.luts.rgb);
-  const glsl::SpecbakeSkyView sv = glsl::sky_view_of(m);
-  const glsl::sampler3D L{b.luts.sky_view.data(), v.azimuth, v.view, v.sun * v.altitude};
-  const glsl::sampler3D M{b.luts.sky_view_mie.data(), v.azimuth, v.view, v.sun * v.altitude};
+  const glsl::SkyViewSamplers sv = glsl::sky_view_samplers(b.luts);
+  ASSERT_TRUE(sv.on);
   const double grid[4] = {v.altitude_min_km, v.altitude_max_km, v.sun_min_deg * M_PI / 180.0,
                           v.sun_max_deg * M_PI / 180.0};
   std::vector<double> looked, stored;
@@ -133,7 +132,7 @@ TEST(SkyView, TheLookupReturnsTheTablesNodes) {
     double h, mu, mu_s, nu;
     int ground;
     ref3::sky_view_texel_params(&a, grid, v.altitude, v.sun, v.view, v.azimuth, id, &h, &mu, &mu_s, &nu, &ground);
-    const glsl::vec3 l = glsl::GetSkyViewScattering(atm, sv, L, M, h, mu, mu_s, nu, ground);
+    const glsl::vec3 l = glsl::GetSkyViewScattering(atm, sv.grid, sv.radiance, sv.single_mie, h, mu, mu_s, nu, ground);
     for (int c = 0; c < 3; ++c) {
       looked.push_back(l[c]);
       stored.push_back(b.luts.sky_view[3 * id + c] + b.luts.sky_view_mie[3 * id + c] * ref3::mie_phase(m.mie_g, nu));

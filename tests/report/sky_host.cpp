@@ -35,13 +35,7 @@ int main(int argc, char** argv) {
     const auto& s = m.sizes;
     const std::vector<double> combined = combined_texture(luts);
     Host host = host_of(luts, combined);
-    if (m.sky_view.on()) {  // the page reads the table as GetSkyRadianceWithSkyView does
-      const auto& v = m.sky_view;
-      host.has_sky_view = true;
-      host.sky_view_grid = atmosphere::glsl::sky_view_of(m);
-      host.sky_view = {luts.sky_view.data(), v.azimuth, v.view, v.sun * v.altitude};
-      host.sky_view_mie = {luts.sky_view_mie.data(), v.azimuth, v.view, v.sun * v.altitude};
-    }
+    host.sky_view = atmosphere::glsl::sky_view_samplers(luts);  // the page reads the table where there is one
     const dvec3 up{0, 0, 1};
     nlohmann::json kind = nlohmann::json::array(), value = nlohmann::json::array(), bound = nlohmann::json::array();
     for (int y = 0; y < n; ++y)

@@ -21,10 +21,7 @@ struct Renderer::Impl {
   glsl::SpecbakeAtmosphere atm;
   glsl::sampler2D transmittance, irradiance;
   glsl::sampler3D scattering, single_mie;
-  // the sky-view table, where the bake has one (sky_view.on)
-  glsl::SpecbakeSkyView sky_view_grid{};
-  glsl::sampler3D sky_view, sky_view_mie;
-  bool has_sky_view = false;
+  glsl::SkyViewSamplers sky_view;  // the sky-view table, where the bake has one
 };
 
 Renderer::Renderer(const Luts& luts) : impl_(std::make_unique<Impl>()) {
@@ -34,13 +31,7 @@ Renderer::Renderer(const Luts& luts) : impl_(std::make_unique<Impl>()) {
   impl_->irradiance = {luts.irradiance.data(), s.irradiance_w, s.irradiance_h};
   impl_->scattering = {luts.scattering.data(), s.scattering_width(), s.mu, s.r};
   impl_->single_mie = {luts.single_mie.data(), s.scattering_width(), s.mu, s.r};
-  const SkyView& v = luts.model.sky_view;
-  if (v.on() && luts.sky_view.size() == 3ULL * v.texels() && luts.sky_view_mie.size() == luts.sky_view.size()) {
-    impl_->has_sky_view = true;
-    impl_->sky_view_grid = glsl::sky_view_of(luts.model);
-    impl_->sky_view = {luts.sky_view.data(), v.azimuth, v.view, v.sun * v.altitude};
-    impl_->sky_view_mie = {luts.sky_view_mie.data(), v.azimuth, v.view, v.sun * v.altitude};
-  }
+  impl_->sky_view = glsl::sky_view_samplers(luts);
 }
 Renderer::~Renderer() = default;
 
@@ -62,9 +53,10 @@ Vec3 Renderer::sky_radiance(const Vec3& camera, const Vec3& view, const Vec3& su
   double h;
   up_and_altitude(camera, i.atm.bottom_radius, up, h);
   const glsl::vec3 l =
-      i.has_sky_view
-          ? glsl::GetSkyRadianceWithSkyView(i.atm, i.sky_view_grid, i.transmittance, i.scattering, i.single_mie,
-                                            i.sky_view, i.sky_view_mie, up, h, to_glm(view), to_glm(sun), t)
+      i.sky_view.on
+          ? glsl::GetSkyRadianceWithSkyView(i.atm, i.sky_view.grid, i.transmittance, i.scattering, i.single_mie,
+                                            i.sky_view.radiance, i.sky_view.single_mie, up, h, to_glm(view),
+                                            to_glm(sun), t)
           : glsl::GetSkyRadiance(i.atm, i.transmittance, i.scattering, i.single_mie, up, h, to_glm(view), 0.0,
                                  to_glm(sun), t);
   if (transmittance) *transmittance = to_array(t);

@@ -166,6 +166,22 @@ inline SpecbakeSkyView sky_view_of(const Model& m) {
                          double(v.altitude), double(v.sun), double(v.view), double(v.azimuth)};
 }
 
+// The sky-view table as GetSkyRadianceWithSkyView samples it: its grid and its two 3D textures
+// (azimuth × view × sun·altitude; R,G,B and single Mie). `on` is false where the bake has none
+// (or its textures are not the model's size), and the samplers are then empty.
+struct SkyViewSamplers {
+  bool on = false;
+  SpecbakeSkyView grid{};
+  sampler3D radiance{}, single_mie{};
+};
+inline SkyViewSamplers sky_view_samplers(const Luts& luts) {
+  const SkyView& v = luts.model.sky_view;
+  if (!v.on() || luts.sky_view.size() != 3ULL * v.texels() || luts.sky_view_mie.size() != luts.sky_view.size())
+    return {};
+  return {true, sky_view_of(luts.model), {luts.sky_view.data(), v.azimuth, v.view, v.sun * v.altitude},
+          {luts.sky_view_mie.data(), v.azimuth, v.view, v.sun * v.altitude}};
+}
+
 // The spectral build (`spectrum: {store: radiance}`, sampling_spectral.glsl): four stored
 // wavelengths per texel, wavelength sets as layers of 2D array textures, scattering tiled 2D.
 namespace spectral {
