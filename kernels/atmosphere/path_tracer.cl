@@ -69,9 +69,14 @@
 #define TRUTH_MAX_KINKS 32      /* kink altitudes of the profiles the medium table can hold */
 /* The medium table (host-built, one per channel group): [TRUTH_SHELLS][NCH] majorants, then
  * the number of kink altitudes of the density profiles and up to TRUTH_MAX_KINKS of them
- * (ascending, km): where a profile's layer changes or its clamp to [0, 1] sets in. */
+ * (ascending, km): where a profile's layer changes or its clamp to [0, 1] sets in; then the
+ * optical depth towards the sun [TRUTH_SUN_H][TRUTH_SUN_MU][NCH] at the nodes of
+ * truth_sun_node (truth_sun_depth_table: it only shapes a pdf). */
 #define TRUTH_KINKS_AT (TRUTH_SHELLS * NCH)
-#define TRUTH_MEDIUM_SIZE (TRUTH_KINKS_AT + 1 + TRUTH_MAX_KINKS)
+#define TRUTH_SUN_H 48
+#define TRUTH_SUN_MU 64
+#define TRUTH_SUN_AT (TRUTH_KINKS_AT + 1 + TRUTH_MAX_KINKS)
+#define TRUTH_MEDIUM_SIZE (TRUTH_SUN_AT + TRUTH_SUN_H * TRUTH_SUN_MU * NCH)
 /* Exact optical depths (truth_optical_depth): the ray is cut where it crosses an altitude
  * level, TRUTH_DEPTH_LEVELS equal levels over the atmosphere's thickness and every kink, so
  * that each piece changes altitude monotonically by at most (rt − rb)/TRUTH_DEPTH_LEVELS (Earth:
@@ -355,10 +360,15 @@ FN real sample_henyey_greenstein_cosine(real g, real u) {
  *   ∫_0^D T(0, s) [σ_R(s) P_R(ν) + σ_M,s(s) P_M(ν)] E_sun T_sun(s) V(s) ds
  *     + [the ray meets the ground] T(0, D) (a/π) E_sun T_sun(ground) cos_factor(ground),
  * ν = w·sun (the same all along the ray). One point s is drawn on the part of the ray that sees
- * the sun, with a pdf tabulated at TRUTH_LINE_SEGMENTS + 1 equal nodes: half ∝ σ_s T̂, half
- * ∝ σ_s T̂ T̂_sun (T̂ by the trapezoid rule, T̂_sun by truth_sun_depth_guess: they only shape the
- * pdf; the second half follows the light, the first keeps the pdf from trusting the guess);
- * T and T_sun are ratio-tracking estimates, so the estimate is unbiased whatever the table.
+ * the sun, with a pdf tabulated at TRUTH_LINE_SEGMENTS + 1 equal nodes, linear between them:
+ * TRUTH_LINE_F_SHARE ∝ σ_s T̂ and the rest ∝ σ_s T̂ T̂_sun V (T̂ by the trapezoid rule, T̂_sun from
+ * the medium table's sun depths, truth_sun_depth_table: they only shape the pdf; the second
+ * part follows the light, the first keeps the pdf from trusting it alone); T and T_sun are
+ * exact (twilight) or ratio-tracking estimates, so the estimate is unbiased whatever the table.
+ * At sun −4…−11° the pdf's mismatch was most of a twilight walk's variance: with an even split
+ * and a one-scale-height Chapman guess for T̂_sun, uniform inside segments, the line's
+ * variance (weighted over the directions drawn) was 4–10× what this pdf leaves
+ * (docs/atmosphere-method.md "Twilight").
  * A segment is left out only when V = 0 at both its ends: {V = 0} = {p·sun ≤ −√(r² − r_b²) −
  * r_b α} is convex (ρ² + 2 r_b α q ≤ r_b²(1 + α²), q = −p·sun ≥ r_b α, ρ the distance from the
  * shadow's axis), so such a segment is dark all along. In twilight most vertices lie in the planet's shadow and a free path rarely ends in
@@ -366,6 +376,7 @@ FN real sample_henyey_greenstein_cosine(real g, real u) {
  * had 5–20× the variance per walk at views with the sun 3°–6° below the horizon,
  * docs/atmosphere-method.md "Twilight"). */
 #define TRUTH_LINE_SEGMENTS 8
+#define TRUTH_LINE_F_SHARE R(0.1) /* the pdf's part that does not follow the sun (defensive) */
 /* Which estimate of the sun at vertices after the first (a walk argument): the expectation
  * along the ray (truth_next_sun_term), the sun at the free path's end (plain next-event
  * estimation), or the first where the planet's shadow can matter (AUTO). Both are unbiased;
@@ -381,21 +392,33 @@ FN real truth_shadow_reach_cosine(const AtmosphereParameters* a) {
   const real k = a->bottom_radius / a->top_radius, alpha = a->sun_angular_radius;
   return sqrt(fmax(R(1.0) - k * k, R(0.0))) * cos(alpha) + k * sin(alpha);
 }
-#define TRUTH_GUESS_SCALE_KM R(8.0) /* the guess's one scale height (only shapes a pdf) */
-/* A rough optical depth towards the sun from altitude h (sun cosine mu_s, along the horizon
- * when the disc centre is below it), only to shape a pdf: the extinction at the ray's lowest
- * point times a Chapman-like length for one exponential of scale H, L(μ) = H / √(μ² + 2H/(πr))
- * (H/μ for a high sun, √(πrH/2) along the horizon); a ray that first descends to its tangent
- * point counts both sides of it less the part behind the start. */
-FN real truth_sun_depth_guess(const AtmosphereParameters* a, int c, real h, real mu_s) {
-  const real H = TRUTH_GUESS_SCALE_KM;
-  const real r = radius_of(a, h);
-  const real mu = fmax(mu_s, -horizon_distance(a, h) / r);
-  const real up = truth_extinction(a, c, h) * H / sqrt(mu * mu + R(2.0) * H / (ATM_PI * r));
-  if (mu >= R(0.0)) return up;
-  const real h_t = truth_tangent_altitude(a, h, mu);
-  const real r_t = radius_of(a, h_t);
-  return fmax(R(2.0) * truth_extinction(a, c, h_t) * sqrt(ATM_PI * r_t * H / R(2.0)) - up, R(0.0));
+/* The sun-depth table's node (i, j): altitude h = (rt − rb) (i / (TRUTH_SUN_H − 1))², sun cosine
+ * μ = μ_h + (1 − μ_h) (j / (TRUTH_SUN_MU − 1))² with μ_h = −√(r² − r_b²)/r the horizon's (nodes
+ * crowd at the ground and at the grazing ray, where the depth changes fastest). */
+FN void truth_sun_node(const AtmosphereParameters* a, int i, int j, real* h, real* mu) {
+  const real x = (real)i / (real)(TRUTH_SUN_H - 1), y = (real)j / (real)(TRUTH_SUN_MU - 1);
+  *h = (a->top_radius - a->bottom_radius) * x * x;
+  const real mu_h = -horizon_distance(a, *h) / radius_of(a, *h);
+  *mu = mu_h + (R(1.0) - mu_h) * y * y;
+}
+/* The optical depth towards the sun from altitude h (sun cosine mu_s; along the horizon when
+ * the disc centre is below it, as truth_sun_transmittance), interpolated bilinearly in the
+ * nodes' coordinates from the table the host fills with truth_optical_depth. Only to shape a
+ * pdf: the walks' transmittances are never read from it. */
+FN real truth_sun_depth_table(const AtmosphereParameters* a, GLOBAL const real* medium, int c, real h, real mu_s) {
+  const real t = a->top_radius - a->bottom_radius;
+  const real hh = fmin(fmax(h, R(0.0)), t);
+  const real mu_h = -horizon_distance(a, hh) / radius_of(a, hh);
+  const real u = fmin(fmax((mu_s - mu_h) / (R(1.0) - mu_h), R(0.0)), R(1.0));
+  const real x = sqrt(hh / t) * (real)(TRUTH_SUN_H - 1), y = sqrt(u) * (real)(TRUTH_SUN_MU - 1);
+  const int i = (int)fmin(floor(x), (real)(TRUTH_SUN_H - 2)), j = (int)fmin(floor(y), (real)(TRUTH_SUN_MU - 2));
+  const real fx = x - (real)i, fy = y - (real)j;
+  GLOBAL const real* T = medium + TRUTH_SUN_AT;
+#define TRUTH_SUN_AT_NODE(ii, jj) T[((ii) * TRUTH_SUN_MU + (jj)) * NCH + c]
+  const real d = (R(1.0) - fx) * ((R(1.0) - fy) * TRUTH_SUN_AT_NODE(i, j) + fy * TRUTH_SUN_AT_NODE(i, j + 1)) +
+                 fx * ((R(1.0) - fy) * TRUTH_SUN_AT_NODE(i + 1, j) + fy * TRUTH_SUN_AT_NODE(i + 1, j + 1));
+#undef TRUTH_SUN_AT_NODE
+  return d;
 }
 FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, const real* z,
                             const real* w, const real* sun, int exact, PhiloxStream* rng, int* violations) {
@@ -423,7 +446,7 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     if (k > 0) tau += R(0.5) * (sigma_prev + s_t) * ds;
     sigma_prev = s_t;
     f[k] = (s_r + s_m) * exp(-tau);
-    g[k] = lit[k] ? f[k] * visible * exp(-truth_sun_depth_guess(a, c, h_k, mu_s_k)) : R(0.0);
+    g[k] = lit[k] ? f[k] * visible * exp(-truth_sun_depth_table(a, medium, c, h_k, mu_s_k)) : R(0.0);
   }
   real total_f = R(0.0), total_g = R(0.0);
   int lit_segments = 0;
@@ -439,13 +462,15 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     /* the two halves, each normalised, and a floor of 1e-3 / lit segments (~0.1–0.2 % of the
      * draws in all) so that no lit segment has probability 0 (T̂ may underflow far along a long
      * ray) */
-    real sum = R(0.0);
+    real sum = R(0.0), q[TRUTH_LINE_SEGMENTS + 1];
+    for (int k = 0; k <= TRUTH_LINE_SEGMENTS; ++k)
+      q[k] = (total_f > R(0.0) ? TRUTH_LINE_F_SHARE * f[k] / total_f : R(0.0)) +
+             (total_g > R(0.0) ? (R(1.0) - TRUTH_LINE_F_SHARE) * g[k] / total_g : R(0.0));
+    const real floor_k = R(1e-3) / (real)lit_segments;
     for (int k = 0; k < TRUTH_LINE_SEGMENTS; ++k) {
       mass[k] = R(0.0);
       if (!(lit[k] || lit[k + 1])) continue;
-      if (total_f > R(0.0)) mass[k] += R(0.5) * R(0.5) * (f[k] + f[k + 1]) / total_f;
-      if (total_g > R(0.0)) mass[k] += R(0.5) * R(0.5) * (g[k] + g[k + 1]) / total_g;
-      mass[k] += R(1e-3) / (real)lit_segments;
+      mass[k] = R(0.5) * (q[k] + q[k + 1]) + floor_k;
       sum += mass[k];
     }
     const real u = philox_uniform(rng) * sum;
@@ -455,8 +480,20 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
       below += mass[k];
       ++k;
     }
-    const real s = ds * ((real)k + philox_uniform(rng));
-    const real pdf = mass[k] / (sum * ds);
+    /* inside the segment: density floor + q_k (1 − x) + q_{k+1} x over x ∈ [0, 1] (the
+     * trapezoid's own shape), one uniform picking the part and the place */
+    const real qa = q[k], qb = q[k + 1];
+    const real v = philox_uniform(rng) * mass[k];
+    real x;
+    if (v < floor_k) {
+      x = v / floor_k;
+    } else {
+      const real uu = (v - floor_k) / (R(0.5) * (qa + qb)); /* CDF (qa x + (qb − qa) x²/2) / ((qa + qb)/2) */
+      x = uu * (qa + qb) / (qa + sqrt(fmax(qa * qa + (qb - qa) * uu * (qa + qb), R(0.0))));
+    }
+    x = fmin(fmax(x, R(0.0)), R(1.0));
+    const real s = ds * ((real)k + x);
+    const real pdf = (floor_k + qa * (R(1.0) - x) + qb * x) / (sum * ds);
     real h_s, mu_dummy, p[3];
     point_along(a, h, mu, s, ground, &h_s, &mu_dummy);
     for (int i = 0; i < 3; ++i) p[i] = r0 * z[i] + s * w[i];
@@ -491,8 +528,9 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
  * scattering event from the mixture (1 − β) phase + β guide (one-sample MIS, balance
  * heuristic: weight f / mixture pdf, unbiased since the phase part is positive everywhere it
  * is), the guide being a product, over the local frame (zenith z, azimuth 0 towards the sun),
- * of a wrapped Cauchy azimuth (concentration TRUTH_GUIDE_RHO) and a Cauchy elevation about the
- * horizontal (scale TRUTH_GUIDE_WIDTH) truncated to [−π/2, π/2]; pdf per sr p_φ p_e / cos e. */
+ * of a wrapped Cauchy azimuth (concentration TRUTH_GUIDE_RHO) and a Cauchy elevation about
+ * truth_guide_centre, just above the horizon's dip (scale TRUTH_GUIDE_WIDTH) truncated to
+ * [−π/2, π/2]; pdf per sr p_φ p_e / cos e. */
 #define TRUTH_GUIDE_SHARE R(0.5)
 #define TRUTH_GUIDE_RHO R(0.5)
 #define TRUTH_GUIDE_WIDTH R(0.05)
@@ -562,11 +600,12 @@ FN real truth_guide_pdf(const TruthGuide* g, const real* w) {
  * cells of (u_e, |2u_φ − 1|) (symmetric about the sun's azimuth), so the walk's first direction
  * has the pdf h(u(w)) g(w) on the guided share. h is stored as the cells' cumulative masses
  * (TRUTH_GUIDE_CELLS + 1 reals per point, the last 1), then a flag: 1 if the point learned
- * (TRUTH_GUIDE_STRIDE reals per point; a point that did not walks with the fixed guide). The
- * pilot's and the learned walks' first guide is centred above the vertex's horizon dip
- * (truth_guide_centre), so that both share one map. Every cell keeps a positive mass, so the
- * learned pdf is positive wherever g is, and the one-sample mixture with the phase function
- * stays unbiased whatever was learned. The view ray's segment table is learned likewise
+ * (TRUTH_GUIDE_STRIDE reals per point; a point that did not walks with the fixed guide). Every
+ * guide is centred above its vertex's horizon dip (truth_guide_centre), so that the pilot's
+ * and the learned walks' share one map (at later vertices, centring it there rather than on
+ * the horizontal cut the variance of all orders at sun −9…−12° views by ~1.3×). Every cell
+ * keeps a positive mass, so the learned pdf is positive wherever g is, and the one-sample
+ * mixture with the phase function stays unbiased whatever was learned. The view ray's segment table is learned likewise
  * (node_cdf, host side). Walks of a pilot launch write, per walk and channel,
  * TRUTH_PILOT_STRIDE reals: the view ray's segment, the first direction's cell coordinates
  * (u_e, |2u_φ − 1|; −1 when no direction was drawn), its mixture pdf over g, the walk's value
@@ -713,7 +752,7 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const int record = mode == TRUTH_MODE_PILOT && order == 1 && use_line;
       const real guide_share = learned ? TRUTH_GUIDE_LEARNED_SHARE : TRUTH_GUIDE_SHARE;
       TruthGuide guide;
-      if (use_line) truth_guide_at(z, sun, learned || record ? truth_guide_centre(a, h) : R(0.0), &guide);
+      if (use_line) truth_guide_at(z, sun, truth_guide_centre(a, h), &guide);
       if (use_line && philox_uniform(rng) < guide_share) {
         if (learned) {
           const real u1 = philox_uniform(rng), u2 = philox_uniform(rng);

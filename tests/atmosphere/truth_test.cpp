@@ -1023,3 +1023,37 @@ TEST(TruthTracking, ExactOpticalDepthMatchesAFineQuadrature) {
     }
   }
 }
+
+// The sun depths of the medium table (truth_sun_depth_table), which shape the twilight line's
+// pdf only: between the nodes, against the exact optical depth towards the sun (the horizon's
+// ray when the sun is below it), for the Earth and Mars, where the sun is not blocked beyond
+// any use (T > 1e-6). Its error only costs variance, never bias; asserted loosely (|Δτ| ≤
+// 0.05 + 0.02 τ: within ~5 % in T, where the pdf's other factors are coarser) so that an
+// indexing slip — axes, channels, the node map — fails (those are off by O(1) in τ).
+TEST(TruthTracking, SunDepthTableFollowsTheExactDepth) {
+  for (const AtmosphereSpec& s : {earth(), mars()}) {
+    const Medium M(s);
+    const auto a = ref3::make_parameters(model_of(s), M.ch);
+    const std::vector<double> medium = medium_table(model_of(s), M.ch);
+    const double t = a.top_radius - a.bottom_radius;
+    double worst = 0.0;
+    int n = 0;
+    for (int i = 0; i < 37; ++i)
+      for (int j = 0; j < 53; ++j) {
+        const double h = t * std::pow((i + 0.37) / 37.0, 2.0);
+        const double mu_h = -ref3::horizon_distance(&a, h) / ref3::radius_of(&a, h);
+        const double mu_s = mu_h - 0.05 + (1.05 - mu_h) * std::pow((j + 0.61) / 53.0, 2.0);
+        const double mu = std::max(mu_s, mu_h);
+        for (int c = 0; c < 3; ++c) {
+          const double exact = ref3::truth_optical_depth(&a, c, medium.data(), h, mu, ref3::distance_to_top(&a, h, mu));
+          if (!(exact < 13.8)) continue;
+          const double got = ref3::truth_sun_depth_table(&a, medium.data(), c, h, mu_s);
+          worst = std::max(worst, std::fabs(got - exact) / (0.05 + 0.02 * exact));
+          ++n;
+          EXPECT_NEAR(got, exact, 0.05 + 0.02 * exact) << "h " << h << " mu_s " << mu_s << " c " << c;
+        }
+      }
+    std::printf("sun depth table: %d points, worst |Δτ| %.3g of its bound\n", n, worst);
+    EXPECT_GT(n, 3000);
+  }
+}

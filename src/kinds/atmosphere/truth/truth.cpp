@@ -421,6 +421,18 @@ std::vector<double> medium_table(const Model& m, const Channels& group) {
                              group.absorption_extinction[c] * ma) *
                             (1.0 + kMajorantMargin);
   }
+  // the optical depth towards the sun at the sun table's nodes (exact quadrature; the kinks above
+  // are already in place, which truth_optical_depth reads)
+  const AtmosphereParameters ag = ref3::make_parameters(m, group);
+  for (int i = 0; i < TRUTH_SUN_H; ++i)
+    for (int j = 0; j < TRUTH_SUN_MU; ++j) {
+      double h, mu;
+      ref3::truth_sun_node(&ag, i, j, &h, &mu);
+      const double d = ref3::distance_to_top(&ag, h, mu);
+      for (std::size_t c = 0; c < group.size(); ++c)
+        out[ref3::kTruthSunAt + (i * TRUTH_SUN_MU + j) * kGroup + c] =
+            ref3::truth_optical_depth(&ag, static_cast<int>(c), out.data(), h, mu, d);
+    }
   return out;
 }
 

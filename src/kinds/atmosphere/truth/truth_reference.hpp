@@ -15,5 +15,6 @@ inline constexpr int kTruthOutStride = TRUTH_OUT_STRIDE;
 inline constexpr int kTruthChannels = NCH;
 inline constexpr int kTruthKinksAt = TRUTH_KINKS_AT;
 inline constexpr int kTruthMediumSize = TRUTH_MEDIUM_SIZE;
+inline constexpr int kTruthSunAt = TRUTH_SUN_AT;
 #undef NCH
 }  // namespace specbake::atmosphere::ref3
