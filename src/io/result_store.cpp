@@ -30,6 +30,11 @@ constexpr unsigned long long kMaxRatio = 4096;
 
 std::string ResultStore::name_of(std::string_view key) { return sha256_hex(key).substr(0, 32) + ".zst"; }
 
+bool ResultStore::has(std::string_view key) const {
+  std::error_code ec;
+  return fs::is_regular_file(dir_ / name_of(key), ec);
+}
+
 std::optional<std::string> ResultStore::get(std::string_view key) const {
   const fs::path file = dir_ / name_of(key);
   std::error_code ec;

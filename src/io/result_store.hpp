@@ -26,6 +26,8 @@ class ResultStore {
   static std::string name_of(std::string_view key);
   // The bytes kept under `key`, or nothing (absent, unreadable, damaged, or another key).
   std::optional<std::string> get(std::string_view key) const;
+  // Whether an entry for `key` is there (it may still turn out unreadable: get() says).
+  bool has(std::string_view key) const;
   // Keeps `bytes` under `key`. A failure to write is logged and returns false: the result is
   // only not kept for later runs.
   bool put(std::string_view key, std::string_view bytes) const;

@@ -409,6 +409,42 @@ TEST(SceneCheck, JudgeAloneGivesTheFullChecksValueFromTheReferenceTraceAlone) {
   EXPECT_FALSE(judged_by_reference_alone(ref));
 }
 
+// The settings search judges [0, 2n) after judging [0, n) and holding out [n, 2n): that check
+// is assembled from the two traces (nothing is traced again), and each point's row is the one its
+// own check gave, byte for byte; a fresh trace of [0, 2n) draws the second half's walks from
+// other streams (other values), so the rows tell an assembly from a new trace.
+TEST(SceneCheck, APointSetWhoseHalvesWereCheckedIsAssembledFromTheirTraces) {
+  const AtmosphereSpec s = spec_of(
+      "    orders: 2\n"
+      "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: 32, mu_s: 8, nu: 4}}\n"
+      "    scene: {points: 6, relative_se: 0.1, sun_elevation_deg: [-4, 60]}\n");
+  const Baked b = bake_luts(s, t::shared_device(), [](std::string_view, double) {}, 0);
+  auto rows = [](const SceneCheck& c) {
+    std::vector<std::string> out;
+    std::istringstream in(c.points_csv.bytes);
+    for (std::string line; std::getline(in, line);) out.push_back(line);
+    return std::vector<std::string>(out.begin() + 1, out.end());  // less the header
+  };
+  const auto none = [](std::string_view, double) {};
+  Memo memo;
+  const SceneCheck first = check_scene(s, b.luts, b.orders_used, t::shared_device(), none, &memo, 0);
+  const SceneCheck held = check_scene(s, b.luts, b.orders_used, t::shared_device(), none, &memo, 6);
+  ASSERT_EQ(memo.items.size(), 4u);  // each half: the bake's wavelengths and the reference
+  AtmosphereSpec both = s;
+  both.scene.points = 12;
+  const SceneCheck whole = check_scene(both, b.luts, b.orders_used, t::shared_device(), none, &memo, 0);
+  EXPECT_EQ(memo.items.size(), 4u) << "nothing traced again";
+  std::vector<std::string> want = rows(first);
+  for (const std::string& r : rows(held)) want.push_back(r);
+  EXPECT_EQ(rows(whole), want);
+  Memo fresh;
+  const SceneCheck traced = check_scene(both, b.luts, b.orders_used, t::shared_device(), none, &fresh, 0);
+  const std::vector<std::string> anew = rows(traced);
+  ASSERT_EQ(anew.size(), 12u);
+  EXPECT_EQ(std::vector<std::string>(anew.begin(), anew.begin() + 6), rows(first));  // the same streams
+  EXPECT_NE(std::vector<std::string>(anew.begin() + 6, anew.end()), rows(held));    // other streams
+}
+
 TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {
   t::TempDir dir;
   const AtmosphereSpec s = spec_of(

@@ -362,18 +362,56 @@ SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint
   auto report = [&](double from, double to) {
     return [&, from, to](std::string_view, double f) { progress("scene check", from + (to - from) * f); };
   };
-  auto trace = [&](const AtmosphereSpec& traced, const std::string& k, const TruthOptions& o, double from,
-                   double to) {
+  // the trace of `at` under key k, or the one an earlier run kept
+  auto trace_at = [&](const AtmosphereSpec& traced, const std::vector<TruthPoint>& at, const std::string& k,
+                      const TruthOptions& o, double from, double to) {
     return keep.kept<TruthResult>(
-        k, [&] { return trace_truth(traced, dev, points, o, report(from, to)); }, truth_result_bytes,
+        k, [&] { return trace_truth(traced, dev, at, o, report(from, to)); }, truth_result_bytes,
         [&](const std::string& bytes) {
           TruthResult r = truth_result_from_bytes(bytes);
           r.reused = ResultStore::name_of(k);
-          spdlog::info("atmosphere: scene check: the path-traced truth at {} reused from {} (kept by an earlier run)",
-                       traced.spectral ? std::to_string(traced.count) + " wavelengths" : std::string("rgb"),
+          spdlog::info("atmosphere: scene check: the path-traced truth at {} ({} points) reused from {} (kept by an "
+                       "earlier run)",
+                       traced.spectral ? std::to_string(traced.count) + " wavelengths" : std::string("rgb"), at.size(),
                        (keep.store->dir() / r.reused).string());
           return r;
         });
+  };
+
+  // A point set whose halves were each traced as a point set of their own — the settings search
+  // judges [0, 2n) after judging [0, n) and holding out [n, 2n) — is assembled from those traces
+  // (each half with its own seed, as check_scene gave it; where one half is not kept, that half
+  // alone is traced) rather than traced again.
+  const std::size_t n = points.size(), half = n / 2;
+  const bool halves_apply = n >= 2 && n % 2 == 0 && static_cast<int>(n) == spec.scene.points;
+  AtmosphereSpec half_spec = spec;
+  half_spec.scene.points = static_cast<int>(half);
+  const std::uint64_t base_seed = seed - static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
+  const auto half_plan = [&](int k) {
+    const int at = first + k * static_cast<int>(half);
+    const std::vector<TruthPoint> hp(points.begin() + k * half, points.begin() + (k + 1) * half);
+    return std::pair{hp, plan_traces(half_spec, hp, orders_used, at, base_seed + static_cast<std::uint64_t>(at) * kHeldOutSeedStride, dev)};
+  };
+  const auto kept_now = [&](const std::string& key) {
+    return keep.items.count(key) > 0 || (keep.store && keep.store->has(key));
+  };
+  const auto traced = [&](const AtmosphereSpec& traced_spec, bool reference, const std::string& key,
+                          const TruthOptions& o, double from, double to) -> std::shared_ptr<const TruthResult> {
+    if (halves_apply) {
+      const auto [p0, h0] = half_plan(0);
+      const auto [p1, h1] = half_plan(1);
+      const std::string& k0 = reference ? h0.reference_key : h0.bake_key;
+      const std::string& k1 = reference ? h1.reference_key : h1.bake_key;
+      if (kept_now(k0) || kept_now(k1)) {
+        const AtmosphereSpec half_traced = reference ? spectral_reference_of(half_spec) : half_spec;
+        const double mid = 0.5 * (from + to);
+        const auto a = trace_at(half_traced, p0, k0, reference ? h0.so : h0.o, from, mid);
+        const auto b = trace_at(half_traced, p1, k1, reference ? h1.so : h1.o, mid, to);
+        spdlog::debug("atmosphere: scene check: the truth at {} points assembled from the traces of its halves", n);
+        return std::make_shared<const TruthResult>(joined(*a, *b));
+      }
+    }
+    return trace_at(traced_spec, points, key, o, from, to);
   };
 
   SceneTraces t;
@@ -382,8 +420,8 @@ SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint
   t.reference = plan.reference;
   // the progress at which the bake's trace ends (judge_scene traces the reference alone)
   const double split = !bake_wavelengths ? 0.0 : t.reference ? 0.5 : 0.9;
-  if (bake_wavelengths) t.bake = trace(spec, plan.bake_key, t.o, 0.0, split);
-  if (t.reference) t.spectral = trace(spectral_reference_of(spec), plan.reference_key, t.so, split, 1.0);
+  if (bake_wavelengths) t.bake = traced(spec, false, plan.bake_key, t.o, 0.0, split);
+  if (t.reference) t.spectral = traced(spectral_reference_of(spec), true, plan.reference_key, t.so, split, 1.0);
   return t;
 }
 

@@ -1050,6 +1050,31 @@ TruthResult TruthResult::low_part() const {
   return r;
 }
 
+TruthResult joined(const TruthResult& a, const TruthResult& b) {
+  if (a.channels != b.channels || a.lambda_nm != b.lambda_nm || a.orders != b.orders ||
+      a.split_orders != b.split_orders)
+    throw std::invalid_argument("joining truths of other channels, orders or split");
+  TruthResult r = a;
+  r.points = a.points + b.points;
+  auto append = [](auto& to, const auto& from) { to.insert(to.end(), from.begin(), from.end()); };
+  append(r.radiance, b.radiance);
+  append(r.standard_error, b.standard_error);
+  append(r.paths, b.paths);
+  append(r.at_cap, b.at_cap);
+  append(r.radiance_low, b.radiance_low);
+  append(r.standard_error_low, b.standard_error_low);
+  append(r.radiance_high, b.radiance_high);
+  append(r.standard_error_high, b.standard_error_high);
+  double walks_a = 0.0, walks_b = 0.0;
+  for (long long n : a.paths) walks_a += static_cast<double>(n);
+  for (long long n : b.paths) walks_b += static_cast<double>(n);
+  if (walks_a + walks_b > 0.0) r.mean_events = (a.mean_events * walks_a + b.mean_events * walks_b) / (walks_a + walks_b);
+  r.truncated = a.truncated + b.truncated;
+  r.seconds = a.seconds + b.seconds;
+  r.reused = !a.reused.empty() && !b.reused.empty() ? a.reused + " + " + b.reused : "";
+  return r;
+}
+
 nlohmann::json TruthResult::summary() const {
   long long lo = paths.empty() ? 0 : paths[0], hi = lo, total = 0;
   for (long long n : paths) {

@@ -151,6 +151,10 @@ TruthBundleValues to_bundle_units(const AtmosphereSpec& spec, const TruthResult&
 
 // A result as bytes for a ResultStore (CBOR; every number exact; not `seconds`, so the bytes
 // are the same every run), and back (throws std::exception on bytes that are not such a result).
+// Two traces' results as one: a's points, then b's (the same channels, orders and split; throws
+// std::invalid_argument otherwise). Walk-weighted mean events; seconds and truncated walks
+// summed; seed and device are a's; `reused` names both where both were read from kept entries.
+TruthResult joined(const TruthResult& a, const TruthResult& b);
 std::string truth_result_bytes(const TruthResult& r);
 TruthResult truth_result_from_bytes(const std::string& bytes);
 
