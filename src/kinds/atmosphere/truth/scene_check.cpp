@@ -390,14 +390,15 @@ SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint
   const auto half_plan = [&](int k) {
     const int at = first + k * static_cast<int>(half);
     const std::vector<TruthPoint> hp(points.begin() + k * half, points.begin() + (k + 1) * half);
-    return std::pair{hp, plan_traces(half_spec, hp, orders_used, at, base_seed + static_cast<std::uint64_t>(at) * kHeldOutSeedStride, dev)};
+    const std::uint64_t at_seed = base_seed + static_cast<std::uint64_t>(at) * kHeldOutSeedStride;
+    return std::pair{hp, plan_traces(half_spec, hp, orders_used, at, at_seed, dev)};
   };
   const auto kept_now = [&](const std::string& key) {
     return keep.items.count(key) > 0 || (keep.store && keep.store->has(key));
   };
   const auto traced = [&](const AtmosphereSpec& traced_spec, bool reference, const std::string& key,
                           const TruthOptions& o, double from, double to) -> std::shared_ptr<const TruthResult> {
-    if (halves_apply) {
+    if (halves_apply && !kept_now(key)) {  // a whole trace kept earlier is read as it is
       const auto [p0, h0] = half_plan(0);
       const auto [p1, h1] = half_plan(1);
       const std::string& k0 = reference ? h0.reference_key : h0.bake_key;
