@@ -459,9 +459,9 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
   }
   real value = R(0.0);
   if (lit_segments > 0) {
-    /* the two halves, each normalised, and a floor of 1e-3 / lit segments (~0.1–0.2 % of the
-     * draws in all) so that no lit segment has probability 0 (T̂ may underflow far along a long
-     * ray) */
+    /* the pdf's two parts at the nodes (q, each part normalised over the lit segments), and a
+     * floor of 1e-3 / lit segments (~0.1–0.2 % of the draws in all) so that no lit segment has
+     * probability 0 (T̂ may underflow far along a long ray) */
     real sum = R(0.0), q[TRUTH_LINE_SEGMENTS + 1];
     for (int k = 0; k <= TRUTH_LINE_SEGMENTS; ++k)
       q[k] = (total_f > R(0.0) ? TRUTH_LINE_F_SHARE * f[k] / total_f : R(0.0)) +
