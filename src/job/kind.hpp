@@ -48,6 +48,8 @@ struct Memo {
   // `results_kept`, and `gc` keeps the entries some bundle lists.
   std::set<std::string> store_used;
 
+  // Whether a value is held under `key`, here or in `store` (which may still fail to read it).
+  bool has(const std::string& key) const { return items.count(key) > 0 || (store && store->has(key)); }
   template <class T, class Make>
   std::shared_ptr<const T> get(const std::string& key, Make make) {
     auto it = items.find(key);

@@ -6,7 +6,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <limits>
 #include <stdexcept>
 
@@ -20,7 +19,6 @@
 
 namespace specbake::atmosphere {
 
-namespace fs = std::filesystem;
 
 using nlohmann::json;
 
@@ -387,27 +385,33 @@ SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint
   AtmosphereSpec half_spec = spec;
   half_spec.scene.points = static_cast<int>(half);
   const std::uint64_t base_seed = seed - static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
-  const auto half_plan = [&](int k) {
-    const int at = first + k * static_cast<int>(half);
-    const std::vector<TruthPoint> hp(points.begin() + k * half, points.begin() + (k + 1) * half);
-    const std::uint64_t at_seed = base_seed + static_cast<std::uint64_t>(at) * kHeldOutSeedStride;
-    return std::pair{hp, plan_traces(half_spec, hp, orders_used, at, at_seed, dev)};
+  struct Half {
+    std::vector<TruthPoint> points;
+    SceneTracePlan plan;
   };
-  const auto kept_now = [&](const std::string& key) {
-    return keep.items.count(key) > 0 || (keep.store && keep.store->has(key));
+  std::vector<Half> halves;  // planned on first use, for both traces
+  const auto halves_of = [&]() -> const std::vector<Half>& {
+    for (int k = static_cast<int>(halves.size()); k < 2; ++k) {
+      const int at = first + k * static_cast<int>(half);
+      std::vector<TruthPoint> hp(points.begin() + k * half, points.begin() + (k + 1) * half);
+      const std::uint64_t at_seed = base_seed + static_cast<std::uint64_t>(at) * kHeldOutSeedStride;
+      SceneTracePlan hplan = plan_traces(half_spec, hp, orders_used, at, at_seed, dev);
+      halves.push_back({std::move(hp), std::move(hplan)});
+    }
+    return halves;
   };
   const auto traced = [&](const AtmosphereSpec& traced_spec, bool reference, const std::string& key,
                           const TruthOptions& o, double from, double to) -> std::shared_ptr<const TruthResult> {
-    if (halves_apply && !kept_now(key)) {  // a whole trace kept earlier is read as it is
-      const auto [p0, h0] = half_plan(0);
-      const auto [p1, h1] = half_plan(1);
+    if (halves_apply && !keep.has(key)) {  // a whole trace kept earlier is read as it is
+      const std::vector<Half>& hs = halves_of();
+      const SceneTracePlan &h0 = hs[0].plan, &h1 = hs[1].plan;
       const std::string& k0 = reference ? h0.reference_key : h0.bake_key;
       const std::string& k1 = reference ? h1.reference_key : h1.bake_key;
-      if (kept_now(k0) || kept_now(k1)) {
+      if (keep.has(k0) || keep.has(k1)) {
         const AtmosphereSpec half_traced = reference ? spectral_reference_of(half_spec) : half_spec;
         const double mid = 0.5 * (from + to);
-        const auto a = trace_at(half_traced, p0, k0, reference ? h0.so : h0.o, from, mid);
-        const auto b = trace_at(half_traced, p1, k1, reference ? h1.so : h1.o, mid, to);
+        const auto a = trace_at(half_traced, hs[0].points, k0, reference ? h0.so : h0.o, from, mid);
+        const auto b = trace_at(half_traced, hs[1].points, k1, reference ? h1.so : h1.o, mid, to);
         spdlog::debug("atmosphere: scene check: the truth at {} points assembled from the traces of its halves", n);
         return std::make_shared<const TruthResult>(joined(*a, *b));
       }
@@ -777,9 +781,7 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
 bool scene_truth_kept(const AtmosphereSpec& spec, std::optional<int> orders_used, cl_util::Device& dev,
                       const Memo& memo) {
   if (!spec.scene.check) return false;
-  auto kept = [&](const std::string& key) {
-    return memo.items.count(key) > 0 || (memo.store && fs::exists(memo.store->dir() / ResultStore::name_of(key)));
-  };
+  auto kept = [&](const std::string& key) { return memo.has(key); };
   const std::vector<TruthPoint> points = scene_points_of(spec);
   const SceneTracePlan plan = plan_traces(spec, points, orders_used.value_or(1), 0, spec.scene.seed, dev);
   if (plan.reference && !kept(plan.reference_key)) return false;
