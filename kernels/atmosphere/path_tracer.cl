@@ -840,18 +840,22 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
   return radiance;
 }
 
-/* ---- one work item: a batch of walks of one point, every channel ------------------------- */
-/* Point p (point point_base + p of the request, for the random streams) and batch b (walks
- * b·paths_per_batch ... (b + 1)·paths_per_batch − 1); channel c of this group is channel
- * channel_base + c of the request. Writes TRUTH_OUT_STRIDE reals at out_item: per channel
- * (mean, m2) of the whole walk, of orders 1..split_order and of the orders above it. Table
+/* ---- one work item: a batch of walks of one point, each channel that asks for one ---------- */
+/* Point p (point point_base + p of the request, for the random streams) and the launch's j-th
+ * batch of each of its channels: channel c of this group (channel channel_base + c of the
+ * request) traces its batch b = batch_base[c] + j (walks b·paths_per_batch ...
+ * (b + 1)·paths_per_batch − 1 of its stream) when j < batch_count[c], and nothing otherwise
+ * (its statistics written as 0): each channel walks as many batches as its own precision
+ * needs. Writes TRUTH_OUT_STRIDE reals at out_item: per channel (mean, m2) of the whole walk,
+ * of orders 1..split_order and of the orders above it. Table
  * layouts: node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], medium
  * as TRUTH_MEDIUM_SIZE describes it (majorants, then kinks), cells [P][TRUTH_GUIDE_STRIDE]
  * (read in TRUTH_MODE_LEARNED only). A pilot launch (TRUTH_MODE_PILOT) also writes each walk's
  * record at pilot_item [paths_per_batch][NCH][TRUTH_PILOT_STRIDE]. */
 FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* points, GLOBAL const real* node_t,
                          GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* medium,
-                         int nodes, int p, int point_base, int b, int paths_per_batch, int max_orders,
+                         int nodes, int p, int point_base, int j, GLOBAL const int* batch_base,
+                         GLOBAL const int* batch_count, int paths_per_batch, int max_orders,
                          int split_order, int next_sun, philox_u32 seed_lo, philox_u32 seed_hi, int channel_base,
                          int channels, GLOBAL const real* cells, int mode, GLOBAL real* out_item,
                          GLOBAL real* pilot_item) {
@@ -859,7 +863,8 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
   int events = 0, truncated = 0, violations = 0;
   for (int c = 0; c < NCH; ++c) {
     real mean[TRUTH_STATS] = {R(0.0), R(0.0), R(0.0)}, m2[TRUTH_STATS] = {R(0.0), R(0.0), R(0.0)};
-    if (c < channels) {
+    if (c < channels && j < batch_count[c]) {
+      const int b = batch_base[c] + j;
       for (int i = 0; i < paths_per_batch; ++i) {
         PhiloxStream rng;
         philox_stream_init(&rng, seed_lo, seed_hi, (philox_u32)b * (philox_u32)paths_per_batch + (philox_u32)i,

@@ -269,11 +269,13 @@ double walk_events_estimate(const AtmosphereSpec& spec) {
 double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,
                      double walk_share) {
   // Measured on the 2-core CPU (PoCL), default Earth, rgb, relative_se 1 %, both traces (the
-  // bake's wavelengths and the 48-wavelength reference; a 16-wavelength bake costs the same, as
-  // its walks are shared out over its wavelengths), seconds per point by the point's sun: high
-  // (0.061), low (0.51: below acos(r_b/r_t) + α, where each vertex's sun term is taken along its
-  // ray with exact optical depths) and below the horizon (1.1: learned tables, walks at the cap).
-  constexpr double kHighSun = 0.061, kLowSun = 0.51, kBelowHorizon = 1.1, kEarthEvents = 1.8;
+  // bake's wavelengths and the 48-wavelength reference; a 16-wavelength bake costs about the
+  // same, as its walks are shared out over its wavelengths), seconds per point by the point's
+  // sun: high (0.032), low (0.27: below acos(r_b/r_t) + α, where each vertex's sun term is taken
+  // along its ray with exact optical depths) and below the horizon (0.57: learned tables). Each
+  // channel walking its own share of the target halved them (0.061, 0.51, 1.1 before, measured
+  // as 0.050, 0.34, 1.26 → 0.027, 0.18, 0.66 on one machine).
+  constexpr double kHighSun = 0.032, kLowSun = 0.27, kBelowHorizon = 0.57, kEarthEvents = 1.8;
   // Longer walks also need more of them (their radiance is noisier): Rayleigh ×10, 4.3 events a
   // walk, took 1.23 s a point against the Earth's 0.164 over the same scene: (4.3/1.8)^2.3.
   constexpr double kLongerWalks = 2.3;
@@ -707,13 +709,13 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       check_details(spec, orders_used, exposure_y, v, tr, parts, noise));
   out.record.unit = by_radiance ? "p99 relative" : "p99 CIEDE2000";
   out.points_csv = points_csv(spec, points, v, tr.reference, parts, noise);
-  // a spectral trace spreads the rgb cap's work over its wavelengths: say both
+  // a spectral trace shares the rgb cap's work out over its wavelengths: say both
   const std::size_t wavelengths = tr.bake->lambda_nm.size();
   const std::string walk_cap =
-      std::to_string(tr.o.max_paths) +
-      (spec.spectral ? " walks per wavelength over " + std::to_string(wavelengths) + " wavelengths, the work of " +
-                           std::to_string(scene_walk_cap(sc.relative_se)) + " rgb walks"
-                     : " walks");
+      spec.spectral ? std::to_string(tr.o.max_paths * static_cast<long long>(wavelengths)) + " walks a point over " +
+                          std::to_string(wavelengths) + " wavelengths, the work of " +
+                          std::to_string(scene_walk_cap(sc.relative_se)) + " rgb walks"
+                    : std::to_string(tr.o.max_paths) + " walks a channel";
   out.warnings = check_warnings(sc, n, dark_scene, total, noise, walk_cap, v.n_dark);
   out.record.details["warnings"] = out.warnings;
   if (dark_scene)

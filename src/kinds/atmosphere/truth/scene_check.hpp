@@ -67,9 +67,10 @@ struct SceneCheck {
 
 // The walks of a check's trace of `traced` (the bake's spec, or the spectral reference of an
 // rgb bake): 1024 per point and channel first, then top-ups until the standard error is the
-// scene's relative_se of the radiance (every channel of an rgb trace; each of X, Y, Z of a
-// spectrum, whose n wavelengths then get 3/n of the walks each), at most scene_walk_cap per
-// point and channel (3 · cap / n per wavelength).
+// scene's relative_se of the radiance — each channel of an rgb trace on its own, at most
+// scene_walk_cap walks; each of X, Y, Z of a spectrum of n wavelengths, which start from 3/n of
+// the walks each and are topped up where the colour's variance is (truth.cpp, walks_needed),
+// at most 3 · cap walks a point over all of them.
 TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t seed);
 // The walk cap per point and channel for a scene's relative_se: 32768 at 1 % (and above), times
 // (1 %/relative_se)² below it — a walk noisier than ~1.8 relative standard deviation stops at

@@ -464,8 +464,8 @@ struct Stat {
   double se() const { return n > 1.0 ? std::sqrt(std::max(m2, 0.0) / (n - 1.0) / n) : 0.0; }
 };
 
-// Runs, for every point p, count[p] batches from batch base[p], of one channel group; returns
-// [P][stride][kStride]. A pilot launch (TRUTH_MODE_PILOT) also fills *pilot with
+// Runs, for every point p and channel c of one channel group, count[p][c] batches from batch
+// base[p][c] (both [P][kGroup]; stride ≥ every count); returns [P][stride][kStride]. A pilot launch (TRUTH_MODE_PILOT) also fills *pilot with
 // [P][stride][paths_per_batch][kGroup][TRUTH_PILOT_STRIDE]; learn() replaces the view-ray
 // tables and first-direction cells that later TRUTH_MODE_LEARNED launches read.
 class Engine {
@@ -519,9 +519,10 @@ class HostEngine final : public Engine {
     if (mode == TRUTH_MODE_PILOT) pilot->assign(pilot_size(P_.n_points, stride, o_.paths_per_batch), 0.0);
     parallel_for(static_cast<long long>(P_.n_points) * stride, [&](long long id) {
       const int p = static_cast<int>(id / stride), j = static_cast<int>(id % stride);
-      if (j >= count[p]) return;
+      if (std::none_of(&count[p * kGroup], &count[p * kGroup] + kGroup, [&](int n) { return j < n; })) return;
       ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.medium.data(),
-                             kNodes, p, static_cast<int>(P_.point_base), base[p] + j, o_.paths_per_batch, o_.orders,
+                             kNodes, p, static_cast<int>(P_.point_base), j, &base[p * kGroup], &count[p * kGroup],
+                             o_.paths_per_batch, o_.orders,
                              o_.split_orders, static_cast<int>(o_.next_sun), static_cast<philox_u32>(o_.seed & 0xffffffffu),
                              seed_high(o_, mode), static_cast<int>(g.first), static_cast<int>(g.count), cells_.data(),
                              mode, &out[id * kStride],
@@ -787,8 +788,9 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
   const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
   const int batches = std::max(1, static_cast<int>(std::ceil(kPilotWalks / static_cast<double>(P.n_channels) /
                                                              o.paths_per_batch)));
-  std::vector<int> base(P.n_points, 0), count(P.n_points, 0);
-  for (std::size_t p = 0; p < P.n_points; ++p) count[p] = P.twilight[p] ? batches : 0;
+  std::vector<int> base(P.n_points * kGroup, 0), count(P.n_points * kGroup, 0);
+  for (std::size_t p = 0; p < P.n_points; ++p)
+    if (P.twilight[p]) std::fill_n(&count[p * kGroup], kGroup, batches);
   std::vector<PilotWalks> walks(P.n_points);
   for (auto& w : walks) w.channel.resize(P.n_channels);
   std::vector<double> pilot;
@@ -796,7 +798,7 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
     const std::size_t first = g * kGroup, n_ch = std::min<std::size_t>(kGroup, P.n_channels - first);
     const std::vector<double> out = engine.run(g, base, count, batches, TRUTH_MODE_PILOT, &pilot);
     for (std::size_t p = 0; p < P.n_points; ++p)
-      for (int j = 0; j < count[p]; ++j) {
+      for (int j = 0; j < count[p * kGroup]; ++j) {
         const double* item = &out[(p * batches + j) * kStride];
         totals.events += item[2 * TRUTH_STATS * kGroup];
         totals.walks += o.paths_per_batch * static_cast<long long>(n_ch);
@@ -834,123 +836,201 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
   engine.learn(learned);
 }
 
-// After the first batch of every point (count[p] of them: 0 or 1): the batches per launch, from
-// the events a walk took (kLaunchEvents), and with an events budget each point's cap on batches
-// (want no more than it).
+// After the first batch of every (point, channel): the batches per launch, from the events a
+// walk took (kLaunchEvents), and with an events budget each point's cap on the batches of one
+// channel.
 void size_launches(const Prepared& P, const TruthOptions& o, const std::vector<double>& events,
-                   const std::vector<int>& count, long long& launch_batches, std::vector<long long>& cap,
-                   std::vector<long long>& want) {
+                   long long& launch_batches, std::vector<long long>& cap) {
   const double ppb = o.paths_per_batch;
   double per_batch = 0.0;  // events of one batch of every point, one channel group
   for (std::size_t p = 0; p < P.n_points; ++p) {
-    if (count[p] == 0) continue;
     const double per_walk = events[p] / (ppb * static_cast<double>(P.n_channels));
     per_batch += per_walk * ppb * std::min<std::size_t>(kGroup, P.n_channels);
     if (o.max_events_per_point > 0.0) {
       const auto budget = static_cast<long long>(o.max_events_per_point / (std::max(per_walk, 1.0) * ppb));
       cap[p] = std::max<long long>(1, std::min(cap[p], budget));
-      want[p] = std::min(want[p], cap[p]);
     }
   }
   if (per_batch > 0.0)
     launch_batches = std::max<long long>(1, std::min(launch_batches, static_cast<long long>(kLaunchEvents / per_batch)));
 }
 
-// Traces one chunk of points into r (rows point_base ... of radiance, se, paths).
+// The share of a weighted target's walks every weighted channel keeps at least (of the mean
+// over them), whatever its first walks said of its variance: a channel whose first batch
+// happened to see none of its rare paths still gets walks to show them.
+constexpr double kAllocationFloor = 0.1;
+
+// The walks (not batches) each channel of point p needs for its share of the precision target,
+// from the walks so far (stat n, mean, se per channel); 0 for channels that need no more.
+//  - no weights: every channel on its own, n (se / (target L))², the walks that bring its se to
+//    the target;
+//  - weights (rows Σ_c w_rc L_c, e.g. CIE X, Y, Z over a spectrum): for each row that misses the
+//    target, the allocation with the fewest walks whose weighted sum has the target's variance V
+//    (Neyman's: n_c = (Σ_k |w_rk| σ_k) |w_rc| σ_c / V, σ the per-walk standard deviation), each
+//    channel at least kAllocationFloor of the row's mean; the channel's need is the largest over
+//    the rows. Channels whose walks mean little to the colour (the spectrum's ends) then take a
+//    few of them instead of as many as the brightest.
+template <class StatOf>
+std::vector<double> walks_needed(const TruthOptions& o, std::size_t C, const StatOf& stat) {
+  std::vector<double> need(C, 0.0);
+  const double target = o.target_relative_se;
+  if (o.target_weights.empty()) {
+    for (std::size_t c = 0; c < C; ++c) {
+      const double L = std::fabs(stat(c).mean), se = stat(c).se();
+      if (L > 0.0 && se > target * L) need[c] = stat(c).n * (se / (target * L)) * (se / (target * L)) * kTopUpMargin;
+    }
+    return need;
+  }
+  const std::size_t rows = o.target_weights.size() / C;
+  for (std::size_t row = 0; row < rows; ++row) {
+    const double* w = &o.target_weights[row * C];
+    double L = 0.0, var = 0.0, sum = 0.0;  // the row's value, its variance, Σ |w| σ
+    std::size_t weighted = 0;
+    for (std::size_t c = 0; c < C; ++c) {
+      const Stat& s = stat(c);
+      const double sigma = s.se() * std::sqrt(s.n);
+      L += w[c] * s.mean;
+      var += w[c] * w[c] * s.se() * s.se();
+      sum += std::fabs(w[c]) * sigma;
+      weighted += w[c] != 0.0;
+    }
+    const double V = (target * L) * (target * L);
+    if (!(V > 0.0) || !(var > V) || !(sum > 0.0)) continue;
+    std::vector<double> n(C, 0.0);
+    double mean = 0.0;
+    for (std::size_t c = 0; c < C; ++c) {
+      n[c] = sum * std::fabs(w[c]) * stat(c).se() * std::sqrt(stat(c).n) / V * kTopUpMargin;
+      mean += n[c] / static_cast<double>(weighted);
+    }
+    for (std::size_t c = 0; c < C; ++c)
+      if (w[c] != 0.0) need[c] = std::max(need[c], std::max(n[c], kAllocationFloor * mean));
+  }
+  return need;
+}
+
+// Traces one chunk of points into r (rows point_base ... of radiance, se, paths). Every
+// (point, channel) walks its own number of batches: the first `paths`, then top-ups to its
+// share of the precision target (walks_needed), each channel at most the point's cap (no
+// weights), or all of them together at most cap × channels (weights: the budget the target's
+// allocation shares out).
 void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, TruthResult& r, Totals& totals,
                  const std::function<void(double)>& progress) {
-  const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
+  const std::size_t C = P.n_channels, n_groups = (C + kGroup - 1) / kGroup;
   const long long ppb = o.paths_per_batch;
   const long long max_walks = std::min<long long>(std::max(o.max_paths, o.paths), 1LL << 32);
   const long long max_batches = std::min<long long>((max_walks + ppb - 1) / ppb, std::numeric_limits<int>::max());
-  std::vector<long long> done(P.n_points, 0), want(P.n_points, std::min(max_batches, (o.paths + ppb - 1) / ppb));
+  const long long stream_batches = std::min<long long>((1LL << 32) / ppb, std::numeric_limits<int>::max());
+  const bool weighted = !o.target_weights.empty();
+  // per (point, channel): batches traced, batches wanted
+  std::vector<long long> done(P.n_points * C, 0), want(P.n_points * C, std::min(max_batches, (o.paths + ppb - 1) / ppb));
   constexpr int kStats = TRUTH_STATS;  // whole walk, orders 1..split, orders above split
-  std::vector<Stat> stats(P.n_points * P.n_channels * kStats);
-  auto stat = [&](std::size_t p, std::size_t c, int k = 0) -> Stat& { return stats[(p * P.n_channels + c) * kStats + k]; };
-  const std::size_t weight_rows = o.target_weights.size() / P.n_channels;
+  std::vector<Stat> stats(P.n_points * C * kStats);
+  auto stat = [&](std::size_t p, std::size_t c, int k = 0) -> Stat& { return stats[(p * C + c) * kStats + k]; };
   long long launch_batches =
       std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
-  std::vector<long long> cap(P.n_points, max_batches);  // per point: max_batches, or the events budget's
+  std::vector<long long> cap(P.n_points, max_batches);  // per point and channel: max_batches, or the events budget's
+  std::vector<char> clipped(P.n_points, 0);             // a top-up was cut by the cap
   std::vector<double> events(P.n_points, 0.0);          // per point, all its channels
-  bool probed = false;  // the first launch traces one batch per point: its events per walk
+  bool probed = false;  // the first launch traces one batch per (point, channel): its events per walk
   learn_tables(engine, P, o, totals);
   for (int round = 0; round < kMaxRounds; ++round) {
     for (;;) {
-      std::vector<int> base(P.n_points), count(P.n_points);
-      int stride = 0;
-      for (std::size_t p = 0; p < P.n_points; ++p) {
-        base[p] = static_cast<int>(done[p]);
-        count[p] = static_cast<int>(std::min(want[p] - done[p], probed ? launch_batches : 1LL));
-        stride = std::max(stride, count[p]);
+      std::vector<long long> count(P.n_points * C);
+      bool any = false;
+      for (std::size_t i = 0; i < count.size(); ++i) {
+        count[i] = std::max<long long>(0, std::min(want[i] - done[i], probed ? launch_batches : 1LL));
+        any = any || count[i] > 0;
       }
-      if (stride == 0) break;
+      if (!any) break;
       for (std::size_t g = 0; g < n_groups; ++g) {
-        const std::size_t first = g * kGroup, n_ch = std::min<std::size_t>(kGroup, P.n_channels - first);
-        const std::vector<double> out = engine.run(g, base, count, stride, TRUTH_MODE_LEARNED, nullptr);
+        const std::size_t first = g * kGroup, n_ch = std::min<std::size_t>(kGroup, C - first);
+        std::vector<int> base(P.n_points * kGroup, 0), n(P.n_points * kGroup, 0), most(P.n_points, 0);
+        int stride = 0;
         for (std::size_t p = 0; p < P.n_points; ++p)
-          for (int j = 0; j < count[p]; ++j) {
+          for (std::size_t c = 0; c < n_ch; ++c) {
+            base[p * kGroup + c] = static_cast<int>(done[p * C + first + c]);
+            n[p * kGroup + c] = static_cast<int>(count[p * C + first + c]);
+            most[p] = std::max(most[p], n[p * kGroup + c]);
+            stride = std::max(stride, most[p]);
+          }
+        if (stride == 0) continue;
+        const std::vector<double> out = engine.run(g, base, n, stride, TRUTH_MODE_LEARNED, nullptr);
+        for (std::size_t p = 0; p < P.n_points; ++p)
+          for (int j = 0; j < most[p]; ++j) {
             const double* item = &out[(p * stride + j) * kStride];
-            for (std::size_t c = 0; c < n_ch; ++c)
+            for (std::size_t c = 0; c < n_ch; ++c) {
+              if (j >= n[p * kGroup + c]) continue;
               for (int k = 0; k < kStats; ++k)
                 stat(p, first + c, k).merge(static_cast<double>(ppb), item[2 * (kStats * c + k)],
                                             item[2 * (kStats * c + k) + 1]);
+            }
             totals.events += item[2 * kStats * kGroup];
             events[p] += item[2 * kStats * kGroup];
             totals.truncated += static_cast<long long>(item[2 * kStats * kGroup + 1]);
             totals.violations += static_cast<long long>(item[2 * kStats * kGroup + 2]);
           }
       }
+      long long total_done = 0, total_want = 0;
+      for (std::size_t i = 0; i < done.size(); ++i) done[i] += count[i];
       if (!probed) {
         probed = true;
-        size_launches(P, o, events, count, launch_batches, cap, want);
+        size_launches(P, o, events, launch_batches, cap);
+        for (std::size_t i = 0; i < want.size(); ++i) want[i] = std::max(done[i], std::min(want[i], cap[i / C]));
       }
-      long long total_done = 0, total_want = 0;
-      for (std::size_t p = 0; p < P.n_points; ++p) {
-        done[p] += count[p];
-        total_done += done[p];
-        total_want += want[p];
+      for (std::size_t i = 0; i < done.size(); ++i) {
+        total_done += done[i];
+        total_want += want[i];
       }
       if (progress) progress(static_cast<double>(total_done) / static_cast<double>(total_want));
     }
     if (!(o.target_relative_se > 0.0)) break;
     bool more = false;
     for (std::size_t p = 0; p < P.n_points; ++p) {
-      double need = 0.0;  // walks for the target, from this point's worst channel (or weighted sum)
-      auto ask = [&](double n, double L, double se) {
-        L = std::fabs(L);
-        if (se > o.target_relative_se * L && L > 0.0) {
-          const double ratio = se / (o.target_relative_se * L);
-          need = std::max(need, n * ratio * ratio * kTopUpMargin);
-        }
-      };
-      if (weight_rows == 0) {
-        for (std::size_t c = 0; c < P.n_channels; ++c) ask(stat(p, c).n, stat(p, c).mean, stat(p, c).se());
-      } else {
-        for (std::size_t row = 0; row < weight_rows; ++row) {
-          double L = 0.0, var = 0.0;
-          for (std::size_t c = 0; c < P.n_channels; ++c) {
-            const double w = o.target_weights[row * P.n_channels + c];
-            L += w * stat(p, c).mean;
-            var += w * w * stat(p, c).se() * stat(p, c).se();
-          }
-          ask(stat(p, 0).n, L, std::sqrt(var));
-        }
+      const std::vector<double> need = walks_needed(o, C, [&](std::size_t c) -> const Stat& { return stat(p, c); });
+      std::vector<long long> w(C);
+      long long total = 0, traced = 0;
+      for (std::size_t c = 0; c < C; ++c) {
+        w[c] = std::max(done[p * C + c], static_cast<long long>(std::ceil(need[c] / static_cast<double>(ppb))));
+        total += w[c];
+        traced += done[p * C + c];
       }
-      const long long w = std::min(cap[p], static_cast<long long>(std::ceil(need / ppb)));
-      if (w > want[p]) {
-        want[p] = w;
-        more = true;
+      if (!weighted) {
+        for (std::size_t c = 0; c < C; ++c)
+          if (w[c] > cap[p]) {
+            w[c] = std::max(done[p * C + c], cap[p]);
+            clipped[p] = 1;
+          }
+      } else if (const long long budget = cap[p] * static_cast<long long>(C); total > budget) {
+        // the point's budget, shared in the allocation's proportions over what is still to trace
+        const double share = static_cast<double>(std::max<long long>(budget - traced, 0)) /
+                             static_cast<double>(total - traced);
+        for (std::size_t c = 0; c < C; ++c)
+          w[c] = done[p * C + c] + static_cast<long long>(std::floor(share * static_cast<double>(w[c] - done[p * C + c])));
+        clipped[p] = 1;
+      }
+      for (std::size_t c = 0; c < C; ++c) {
+        w[c] = std::min(w[c], stream_batches);
+        if (w[c] > want[p * C + c]) {
+          want[p * C + c] = w[c];
+          more = true;
+        }
       }
     }
     if (!more) break;
   }
   for (std::size_t p = 0; p < P.n_points; ++p) {
     const std::size_t row = P.point_base + p;
-    r.paths[row] = done[p] * ppb;
-    r.at_cap[row] = done[p] >= cap[p];
-    totals.walks += done[p] * ppb * static_cast<long long>(P.n_channels);
-    for (std::size_t c = 0; c < P.n_channels; ++c) {
-      const std::size_t i = row * P.n_channels + c;
+    long long most = 0, traced = 0;
+    for (std::size_t c = 0; c < C; ++c) {
+      most = std::max(most, done[p * C + c]);
+      traced += done[p * C + c];
+    }
+    r.paths[row] = most * ppb;
+    r.at_cap[row] = clipped[p] || (weighted ? traced >= cap[p] * static_cast<long long>(C) : most >= cap[p]);
+    totals.walks += traced * ppb;
+    for (std::size_t c = 0; c < C; ++c) {
+      const std::size_t i = row * C + c;
+      r.channel_paths[i] = done[p * C + c] * ppb;
       r.radiance[i] = stat(p, c).mean;
       r.standard_error[i] = stat(p, c).se();
       if (o.split_orders > 0) {
@@ -987,6 +1067,7 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
   r.radiance.assign(r.points * r.channels, 0.0);
   r.standard_error.assign(r.points * r.channels, 0.0);
   r.paths.assign(r.points, 0);
+  r.channel_paths.assign(r.points * r.channels, 0);
   r.at_cap.assign(r.points, 0);
   if (!o.target_weights.empty() && o.target_weights.size() % r.channels != 0)
     throw InputError(Location{{}, 0, 0, "target_weights"},
@@ -1060,14 +1141,15 @@ TruthResult joined(const TruthResult& a, const TruthResult& b) {
   append(r.radiance, b.radiance);
   append(r.standard_error, b.standard_error);
   append(r.paths, b.paths);
+  append(r.channel_paths, b.channel_paths);
   append(r.at_cap, b.at_cap);
   append(r.radiance_low, b.radiance_low);
   append(r.standard_error_low, b.standard_error_low);
   append(r.radiance_high, b.radiance_high);
   append(r.standard_error_high, b.standard_error_high);
   double walks_a = 0.0, walks_b = 0.0;
-  for (long long n : a.paths) walks_a += static_cast<double>(n);
-  for (long long n : b.paths) walks_b += static_cast<double>(n);
+  for (long long n : a.channel_paths) walks_a += static_cast<double>(n);
+  for (long long n : b.channel_paths) walks_b += static_cast<double>(n);
   if (walks_a + walks_b > 0.0) r.mean_events = (a.mean_events * walks_a + b.mean_events * walks_b) / (walks_a + walks_b);
   r.truncated = a.truncated + b.truncated;
   r.seconds = a.seconds + b.seconds;
@@ -1076,12 +1158,13 @@ TruthResult joined(const TruthResult& a, const TruthResult& b) {
 }
 
 nlohmann::json TruthResult::summary() const {
-  long long lo = paths.empty() ? 0 : paths[0], hi = lo, total = 0;
+  long long lo = paths.empty() ? 0 : paths[0], hi = lo, total = 0, walks = 0;
   for (long long n : paths) {
     lo = std::min(lo, n);
     hi = std::max(hi, n);
     total += n;
   }
+  for (long long n : channel_paths) walks += n;
   return {{"method", "Monte Carlo path tracing (kernels/atmosphere/path_tracer.cl): view-ray vertex from the "
                      "tabulated optical depth, delta tracking, sun by next-event estimation with ratio "
                      "tracking (at vertices after the first, for points whose sun is low enough for the "
@@ -1092,7 +1175,8 @@ nlohmann::json TruthResult::summary() const {
           {"wavelengths_nm", lambda_nm},
           {"channels", channel_names},
           {"points", points},
-          {"paths_per_point", {{"min", lo}, {"max", hi}, {"total", total}}},
+          {"paths_per_point", {{"min", lo}, {"max", hi}, {"total", total}}},  // of each point's most-walked channel
+          {"walks", walks},  // over every point and channel: each channel walks its own share of the target
           {"orders", orders == 0 ? nlohmann::json("all") : nlohmann::json(orders)},
           {"split_orders", split_orders == 0 ? nlohmann::json(nullptr) : nlohmann::json(split_orders)},
           {"seed", seed},

@@ -93,7 +93,8 @@ struct TruthResult {
   std::size_t points = 0, channels = 0;
   std::vector<double> radiance;        // W m^-2 sr^-1 nm^-1
   std::vector<double> standard_error;  // of radiance, from the per-walk sample variance
-  std::vector<long long> paths;        // walks per point (for each of its channels)
+  std::vector<long long> paths;        // walks per point: those of its most-walked channel
+  std::vector<long long> channel_paths;  // walks per point and channel (each walks its share of the target)
   std::vector<char> at_cap;            // per point: its walks stopped at max_paths or the events budget
   // With TruthOptions::split_orders = N: the same walks' orders 1..N (low) and orders > N
   // (high), low + high = radiance; empty otherwise.

@@ -120,6 +120,7 @@ std::string truth_result_bytes(const TruthResult& r) {
                             {"radiance", r.radiance},
                             {"standard_error", r.standard_error},
                             {"paths", r.paths},
+                            {"channel_paths", r.channel_paths},
                             {"at_cap", r.at_cap},
                             {"split_orders", r.split_orders},
                             {"radiance_low", r.radiance_low},
@@ -146,6 +147,11 @@ TruthResult truth_result_from_bytes(const std::string& bytes) {
   j.at("radiance").get_to(r.radiance);
   j.at("standard_error").get_to(r.standard_error);
   j.at("paths").get_to(r.paths);
+  if (j.contains("channel_paths")) {
+    j.at("channel_paths").get_to(r.channel_paths);
+  } else {  // kept before channels walked their own shares: every channel walked the point's walks
+    for (long long n : r.paths) r.channel_paths.insert(r.channel_paths.end(), r.channels, n);
+  }
   j.at("at_cap").get_to(r.at_cap);
   j.at("split_orders").get_to(r.split_orders);
   j.at("radiance_low").get_to(r.radiance_low);
@@ -161,7 +167,8 @@ TruthResult truth_result_from_bytes(const std::string& bytes) {
   const std::size_t cells = r.points * r.channels;
   const std::size_t split = r.split_orders > 0 ? cells : 0;
   if (r.channels != r.lambda_nm.size() || r.channels != r.channel_names.size() || r.radiance.size() != cells ||
-      r.standard_error.size() != cells || r.paths.size() != r.points || r.at_cap.size() != r.points ||
+      r.standard_error.size() != cells || r.paths.size() != r.points || r.channel_paths.size() != cells ||
+      r.at_cap.size() != r.points ||
       r.radiance_low.size() != split ||
       r.standard_error_low.size() != split || r.radiance_high.size() != split || r.standard_error_high.size() != split)
     throw std::runtime_error("a path-traced result whose arrays do not match its points and channels");
