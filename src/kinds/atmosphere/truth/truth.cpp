@@ -465,7 +465,8 @@ struct Stat {
 };
 
 // Runs, for every point p and channel c of one channel group, count[p][c] batches from batch
-// base[p][c] (both [P][kGroup]; stride ≥ every count); returns [P][stride][kStride]. A pilot launch (TRUTH_MODE_PILOT) also fills *pilot with
+// base[p][c] (both [P][kGroup]; stride ≥ every count); returns [P][stride][kStride]. A pilot
+// launch (TRUTH_MODE_PILOT) also fills *pilot with
 // [P][stride][paths_per_batch][kGroup][TRUTH_PILOT_STRIDE]; learn() replaces the view-ray
 // tables and first-direction cells that later TRUTH_MODE_LEARNED launches read.
 class Engine {
