@@ -882,6 +882,8 @@ std::vector<double> walks_needed(const TruthOptions& o, std::size_t C, const Sta
     }
     return need;
   }
+  std::vector<double> sigma(C);  // per-walk standard deviation of each channel
+  for (std::size_t c = 0; c < C; ++c) sigma[c] = stat(c).se() * std::sqrt(stat(c).n);
   const std::size_t rows = o.target_weights.size() / C;
   for (std::size_t row = 0; row < rows; ++row) {
     const double* w = &o.target_weights[row * C];
@@ -889,10 +891,9 @@ std::vector<double> walks_needed(const TruthOptions& o, std::size_t C, const Sta
     std::size_t weighted = 0;
     for (std::size_t c = 0; c < C; ++c) {
       const Stat& s = stat(c);
-      const double sigma = s.se() * std::sqrt(s.n);
       L += w[c] * s.mean;
       var += w[c] * w[c] * s.se() * s.se();
-      sum += std::fabs(w[c]) * sigma;
+      sum += std::fabs(w[c]) * sigma[c];
       weighted += w[c] != 0.0;
     }
     const double V = (target * L) * (target * L);
@@ -900,7 +901,7 @@ std::vector<double> walks_needed(const TruthOptions& o, std::size_t C, const Sta
     std::vector<double> n(C, 0.0);
     double mean = 0.0;
     for (std::size_t c = 0; c < C; ++c) {
-      n[c] = sum * std::fabs(w[c]) * stat(c).se() * std::sqrt(stat(c).n) / V * kTopUpMargin;
+      n[c] = sum * std::fabs(w[c]) * sigma[c] / V * kTopUpMargin;
       mean += n[c] / static_cast<double>(weighted);
     }
     for (std::size_t c = 0; c < C; ++c)
