@@ -268,14 +268,17 @@ double walk_events_estimate(const AtmosphereSpec& spec) {
 
 double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,
                      double walk_share) {
-  // Measured on the 2-core CPU (PoCL), default Earth, rgb, relative_se 1 %, both traces (the
-  // bake's wavelengths and the 48-wavelength reference; a 16-wavelength bake costs about the
-  // same, as its walks are shared out over its wavelengths), seconds per point by the point's
-  // sun: high (0.032), low (0.27: below acos(r_b/r_t) + α, where each vertex's sun term is taken
-  // along its ray with exact optical depths) and below the horizon (0.57: learned tables). Each
-  // channel walking its own share of the target halved them (0.061, 0.51, 1.1 before, measured
-  // as 0.050, 0.34, 1.26 → 0.027, 0.18, 0.66 on one machine).
-  constexpr double kHighSun = 0.032, kLowSun = 0.27, kBelowHorizon = 0.57, kEarthEvents = 1.8;
+  // Measured on the 2-core CPU (PoCL, an Intel Xeon), default Earth, relative_se 1 %, both
+  // traces (the bake's wavelengths and the 48-wavelength reference; rgb and 16-wavelength bakes
+  // cost about the same, as a spectrum's walks go where its colour's variance is), seconds per
+  // point by the point's sun: high (0.016), low (0.18: below acos(r_b/r_t) + α, where each
+  // vertex's sun term is taken along its ray with exact optical depths), below the horizon
+  // (0.46: learned tables) and below kDeepTwilightSunDeg (1.26: most points at the walk cap).
+  // Each band traced on its own gave 0.020, 0.23, 0.57 and 1.58 s a point; whole scenes, traced
+  // at once as the check does, 0.8 of that: the default scene 7.0 s (these constants: 7.7), the
+  // sun −12…0° scene of 128 points at 16 wavelengths 112 s (112), a sun −10…5° scene of 32
+  // points 21.2 s (21).
+  constexpr double kHighSun = 0.016, kLowSun = 0.18, kBelowHorizon = 0.46, kDeepTwilight = 1.26, kEarthEvents = 1.8;
   // Longer walks also need more of them (their radiance is noisier): Rayleigh ×10, 4.3 events a
   // walk, took 1.23 s a point against the Earth's 0.164 over the same scene: (4.3/1.8)^2.3.
   constexpr double kLongerWalks = 2.3;
@@ -286,9 +289,9 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   // What bounds a point: per channel its walk cap W, or the events budget kEventsPerWalk · W,
   // but at least one batch of 64 walks (which measures the events). An event's seconds grow with
   // the walk's length (delta tracking through denser air): 5.0 µs at 57 events a walk, 56 µs at
-  // 399 (Rayleigh ×100 and ×1000, every point at the budget); ~3 µs in the Earth's twilight walks
-  // (exact sun optical depths at every vertex; most points there at the cap: 1.1 s a point).
-  const double event_s = std::max(3.0e-6, 5.0e-6 * std::pow(e / 57.0, 1.26));
+  // 399 (Rayleigh ×100 and ×1000, every point at the budget); ~3.6 µs in the Earth's twilight walks
+  // (exact sun optical depths at every vertex; below −6° most points at the cap: 1.26 s a point).
+  const double event_s = std::max(3.6e-6, 5.0e-6 * std::pow(e / 57.0, 1.26));
   auto bounded = [&](const AtmosphereSpec& traced) {
     const TruthOptions o = scene_truth_options(traced, 0);
     const double w = static_cast<double>(o.max_paths);
@@ -300,7 +303,10 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   double s = 0.0;
   for (const TruthPoint& p : points) {
     const double sun = 90.0 - p.sun_zenith_deg;
-    const double walks = sun >= low_sun ? kHighSun : sun >= 0.0 ? kLowSun : kBelowHorizon;
+    const double walks = sun >= low_sun ? kHighSun
+                         : sun >= 0.0   ? kLowSun
+                         : sun >= kDeepTwilightSunDeg ? kBelowHorizon
+                                                      : kDeepTwilight;
     s += std::min(traces * walks * finer * std::pow(std::max(1.0, e / kEarthEvents), kLongerWalks), bound);
   }
   return s;
