@@ -7,8 +7,9 @@
 
 /* Work item id → point p = id / batch_stride (point point_base + p of the request) and the
  * j-th batch of this launch, j = id % batch_stride: channel c of the group walks its batch
- * batch_base[p][c] + j when j < batch_count[p][c] ([points][NCH] each); out holds [points][batch_stride][TRUTH_OUT_STRIDE],
- * pilot (a pilot launch) [points][batch_stride][paths_per_batch][NCH][TRUTH_PILOT_STRIDE]. */
+ * batch_base[p][c] + j when j < batch_count[p][c] ([points][NCH] each); out holds
+ * [points][batch_stride][TRUTH_OUT_STRIDE], pilot (a pilot launch)
+ * [points][batch_stride][paths_per_batch][NCH][TRUTH_PILOT_STRIDE]. */
 __kernel void truth_trace(AtmosphereParameters a, __global const real* points, __global const real* node_t,
                           __global const real* node_tau, __global const real* node_cdf,
                           __global const real* medium, int point_count, int point_base, int nodes,
@@ -20,7 +21,7 @@ __kernel void truth_trace(AtmosphereParameters a, __global const real* points, _
   if (id >= point_count * batch_stride) return;
   const int p = id / batch_stride, j = id % batch_stride;
   truth_trace_item(&a, points, node_t, node_tau, node_cdf, medium, nodes, p, point_base, j, batch_base + p * NCH,
-                   batch_count + p * NCH, paths_per_batch, max_orders, split_order, next_sun, seed_lo, seed_hi, channel_base, channels,
-                   cells, mode, out + (p * batch_stride + j) * TRUTH_OUT_STRIDE,
+                   batch_count + p * NCH, paths_per_batch, max_orders, split_order, next_sun, seed_lo, seed_hi,
+                   channel_base, channels, cells, mode, out + (p * batch_stride + j) * TRUTH_OUT_STRIDE,
                    pilot + (mode == TRUTH_MODE_PILOT ? (p * batch_stride + j) * paths_per_batch * NCH * TRUTH_PILOT_STRIDE : 0));
 }

@@ -12,6 +12,8 @@
 #include <memory>
 #include <random>
 
+#include <nlohmann/json.hpp>
+
 #include "atmosphere/npy.hpp"
 #include "atmosphere/single_scattering.hpp"
 #include "atmosphere/spec_of.hpp"
@@ -681,6 +683,27 @@ TEST(Truth, WeightedTargetWalksWhereTheColoursVarianceIs) {
     EXPECT_LE(4 * s.channel_paths[p * C], peak) << p;
     EXPECT_LE(4 * s.channel_paths[p * C + C - 1], peak) << p;
   }
+}
+
+// A kept truth reads back as it was traced, walks per channel included; one kept before the
+// channels walked their own shares (no `channel_paths`) reads with every channel at its point's
+// walks, which is what each of its channels walked.
+TEST(Truth, KeptResultsReadBackWithTheirWalksPerChannel) {
+  TruthOptions o;
+  o.paths = 256;
+  o.target_relative_se = 0.05;
+  const TruthResult r = trace_truth(earth(), device(), {{0, 30, 40, 0}, {1, 80, 60, 90}}, o);
+  const TruthResult back = truth_result_from_bytes(truth_result_bytes(r));
+  EXPECT_EQ(back.channel_paths, r.channel_paths);
+  EXPECT_EQ(back.paths, r.paths);
+  EXPECT_EQ(back.radiance, r.radiance);
+  nlohmann::json older = nlohmann::json::from_cbor(truth_result_bytes(r));
+  older.erase("channel_paths");
+  const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(older);
+  const TruthResult old = truth_result_from_bytes(std::string(cbor.begin(), cbor.end()));
+  ASSERT_EQ(old.channel_paths.size(), r.points * r.channels);
+  for (std::size_t p = 0; p < r.points; ++p)
+    for (std::size_t c = 0; c < r.channels; ++c) EXPECT_EQ(old.channel_paths[p * r.channels + c], r.paths[p]);
 }
 
 // The events budget (what bounds the scene check in an optically thick atmosphere): in a
