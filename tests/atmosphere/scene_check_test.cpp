@@ -400,20 +400,32 @@ TEST(SceneCheck, JudgeAloneGivesTheFullChecksValueFromTheReferenceTraceAlone) {
   EXPECT_EQ(judged.record.details.at("parts").at("total").at("de2000"),
             full.record.details.at("parts").at("total").at("de2000"));
   EXPECT_FALSE(judged.record.details.at("parts").contains("lut_discretisation"));
-  // judged by relative radiance, or a bake of the reference's own wavelengths: the full check only
+  // the colours it judged (what the model search adds up) score to its value, as the full check's
+  ASSERT_EQ(judged.colours.shown_lut.size(), 12u);
+  EXPECT_EQ(judged.colours.p99(judged.colours.shown_lut), judged.record.value);
+  EXPECT_EQ(full.colours.p99(full.colours.shown_lut), full.record.value);
+  EXPECT_EQ(judged.colours.shown_ref, full.colours.shown_ref);
+  // judged by relative radiance: the full check only
   AtmosphereSpec relative = s;
   relative.scene.tolerance_de2000.reset();
   relative.scene.tolerance_relative = 0.05;
   EXPECT_FALSE(judged_by_reference_alone(relative));
+  // a bake of the reference's own spectrum is judged against the same trace as every other bake
+  // of its atmosphere: the search's 48-wavelength try traces nothing of its own
   AtmosphereSpec ref = spectral_reference_of(s);
-  EXPECT_FALSE(judged_by_reference_alone(ref));
+  ASSERT_TRUE(judged_by_reference_alone(ref));
+  const Baked rb = bake_luts(ref, t::shared_device(), [](std::string_view, double) {}, 0);
+  const SceneCheck ref_judged = judge_scene(ref, rb.luts, t::shared_device(), [](std::string_view, double) {}, &memo);
+  EXPECT_EQ(memo.items.size(), 2u) << "no trace of its own";
+  EXPECT_EQ(ref_judged.colours.shown_ref, judged.colours.shown_ref);
+  EXPECT_TRUE(std::isfinite(ref_judged.record.value));
 }
 
-// The settings search judges [0, 2n) after judging [0, n) and holding out [n, 2n): that check
-// is assembled from the two traces (nothing is traced again), and each point's row is the one its
+// A point set judged after its parts were judged as sets of their own — [0, 2n) after [0, n) and
+// [n, 2n); [0, 3n) after [0, 2n) and [2n, 3n) — is assembled from their traces (nothing is traced again), and each point's row is the one its
 // own check gave, byte for byte; a fresh trace of [0, 2n) draws the second half's walks from
 // other streams (other values), so the rows tell an assembly from a new trace.
-TEST(SceneCheck, APointSetWhoseHalvesWereCheckedIsAssembledFromTheirTraces) {
+TEST(SceneCheck, APointSetWhosePartsWereCheckedIsAssembledFromTheirTraces) {
   const AtmosphereSpec s = spec_of(
       "    orders: 2\n"
       "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: 32, mu_s: 8, nu: 4}}\n"
@@ -443,6 +455,20 @@ TEST(SceneCheck, APointSetWhoseHalvesWereCheckedIsAssembledFromTheirTraces) {
   ASSERT_EQ(anew.size(), 12u);
   EXPECT_EQ(std::vector<std::string>(anew.begin(), anew.begin() + 6), rows(first));  // the same streams
   EXPECT_NE(std::vector<std::string>(anew.begin() + 6, anew.end()), rows(held));    // other streams
+
+  // a search's first round judges [0, 2n) as one set and holds out [2n, 3n); a second round's
+  // [0, 3n) is assembled from those two (a split at 2/3)
+  Memo rounds;
+  const SceneCheck judged12 = check_scene(both, b.luts, b.orders_used, t::shared_device(), none, &rounds, 0);
+  const SceneCheck held6 = check_scene(s, b.luts, b.orders_used, t::shared_device(), none, &rounds, 12);
+  ASSERT_EQ(rounds.items.size(), 4u);
+  AtmosphereSpec three = s;
+  three.scene.points = 18;
+  const SceneCheck all18 = check_scene(three, b.luts, b.orders_used, t::shared_device(), none, &rounds, 0);
+  EXPECT_EQ(rounds.items.size(), 4u) << "nothing traced again";
+  want = rows(judged12);
+  for (const std::string& r : rows(held6)) want.push_back(r);
+  EXPECT_EQ(rows(all18), want);
 }
 
 TEST(SceneCheck, TheTruthIsKeptBetweenRunsForTheSameSceneOnly) {

@@ -228,15 +228,16 @@ AtmosphereSpec search_step(const AtmosphereSpec& spec, JobContext& ctx, BakeResu
 
 // The chosen settings as the search judged them at an independent point set of the same scene
 // (the last round's held-out points).
-void held_out_step(const AtmosphereSpec& use, SceneCheck held, int first, BakeResult& r) {
+void held_out_step(SceneCheck held, int first, BakeResult& r) {
   Accuracy a = std::move(held.record);
   a.name = "vs_path_traced_held_out";
   a.metric += " (an independent point set of the same scene: the search did not see it)";
   a.details["first_point"] = first;
+  const std::size_t rounds = r.parameters.contains("auto") ? r.parameters["auto"].value("rounds", json::array()).size() : 1;
   if (!a.passed)
     r.warnings.push_back("auto settings: the held-out points' p99 " + format_g(a.value) +
                          " exceeds the tolerance " + format_g(*a.tolerance) + " (the search judged " +
-                         std::to_string(first) + " points in " + std::to_string(first / std::max(use.scene.points, 1)) +
+                         std::to_string(first) + " points in " + std::to_string(rounds) +
                          " round(s)): more scene.points pin the p99 better");
   // after the headline (vs_path_traced) and before the self-check
   r.accuracy.insert(r.accuracy.begin() + 1, a);
@@ -744,7 +745,7 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx) {
     const AtmosphereSpec use = search_step(spec, ctx, r, b, checked, held_out, held_out_first);
     const Shares share{kSearchShare, kSearchShare, 0.92};
     check_step(use, share, b, ctx, r, std::move(checked));
-    held_out_step(use, std::move(held_out), held_out_first, r);
+    held_out_step(std::move(held_out), held_out_first, r);
     if (use.store_radiance) interpolation_step(use, share, b, ctx, r);
     files_step(use, share, b, ctx, r);
   } else {

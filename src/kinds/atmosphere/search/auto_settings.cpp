@@ -51,10 +51,12 @@ std::vector<Refinement<AtmosphereSpec>> search_refinements(const AtmosphereSpec&
     // the scattering density's sphere rule: twice the θ nodes (a quadrature, not a texture: it
     // costs compute, no memory), unless the config fixed them
     if (!spec.density_theta_given)
-      out.push_back({"quadrature.density_theta", [](AtmosphereSpec& s) {
-                       s.density_theta *= 2;
-                       return s.density_theta <= kMaxSearchDensityTheta;
-                     }});
+      out.push_back({"quadrature.density_theta",
+                   [](AtmosphereSpec& s) {
+                     s.density_theta *= 2;
+                     return s.density_theta <= kMaxSearchDensityTheta;
+                   },
+                   2.0});
   }
   if (spec.auto_spectrum)
     out.push_back({"spectrum", [](AtmosphereSpec& s) {
@@ -68,11 +70,51 @@ std::vector<Refinement<AtmosphereSpec>> search_refinements(const AtmosphereSpec&
                          return true;
                        }
                      return false;
-                   }});
+                   },
+                   1.0, false});
   return out;
 }
 
 namespace {
+
+// The record's rule: what a search judged by CIEDE2000 does (model_search), and one judged by
+// relative radiance (greedy_search); the rounds' rule follows either.
+constexpr const char* kRounds =
+    " When a search ends short of the tolerance with the truth's own p99 standard error at least half the tolerance "
+    "and the config left scene.relative_se at its default, it searches on with relative_se halved (once). The choice "
+    "is then judged at the next n points of the scene (held out); when they miss the tolerance the round met, a "
+    "second round searches again judged at all the points so far (the model search from its start again, its probes "
+    "being cheap there; the greedy one on from the choice) and a fresh set of n points judges its choice";
+const std::string kModelRule =
+    std::string("model: from half the default sizes and rgb, bake the start and each refinement once (one axis group "
+                "x1.5, the density's theta nodes x2 up to 64 unless the config gives them; the spectrum's next count "
+                "of rgb, 8, 12, 16, 24, 32, 48 when the plan first reaches it) and model every point's displayed colour "
+                "as the start's plus each refinement's difference, a texture axis's or the density's scaled as a "
+                "second-order discretisation error (h^2), the spectrum's as measured; plan on the model (greedy: the "
+                "refinement that lowers the mean of the worst points' CIEDE2000 (the p99's and 2 more) most per "
+                "second of predicted bake time, each texture axis at most 2 levels past the last bake, until the "
+                "modelled p99 is at most 0.8 x the tolerance) and bake the plan to "
+                "verify it against the 48-wavelength reference; a plan that misses becomes the anchor of the next; "
+                "stop when a bake is within 0.8 x the tolerance (a p99 moves between point sets), when a bake "
+                "met the tolerance and the next plan would cost over 2x it, when a plan lowered the error by "
+                "under 1 %, when no plan lowers the modelled error, when the error is within "
+                "the truth's own p99 standard error, after 16 plans, or beyond 16x the default sizes' predicted "
+                "time. The choice: the cheapest bake within 0.8 x the tolerance, else the cheapest within it "
+                "(met), else the lowest error. A default relative_se whose reference's own p99 standard error is "
+                "over 0.4 x the tolerance is scaled down first (to at most 0.4 of it), and the first round judges "
+                "two point sets (2n points).") +
+    kRounds;
+const std::string kGreedyRule =
+    std::string("greedy: from half the default sizes and rgb, bake refinements (one axis group x1.5, the density's "
+                "theta nodes x2 up to 64 unless the config gives them, or the next channel count of rgb, 8, 12, 16, "
+                "24, 32, 48) and keep the one that lowers the judged error most per second of predicted bake time (a "
+                "gain under 1 % does not count; the first step bakes every refinement, later ones try them in the "
+                "order of their last gain per second and stop once none untried can beat the best; on a plateau each "
+                "refinement is tried applied twice, then three times; each try judged against the truth at its own "
+                "wavelengths); stop when the tolerance is met, when nothing lowers the error, when the error is "
+                "within the truth's own p99 standard error, after 16 steps, or beyond 16x the default sizes' "
+                "predicted time.") +
+    kRounds;
 
 // The truth's own p99 standard error over the scene in `measure` ("de2000", "relative"); 0 without.
 double se_p99(const SceneCheck& c, const char* measure) {
@@ -177,6 +219,15 @@ AtmosphereSpec search_start(const AtmosphereSpec& spec) {
 
 namespace {
 
+// The choice judged at the held-out points [first, first + n): by its judged value alone where
+// that is the reference's (what the hold-out decides; the truth at the choice's own wavelengths
+// would cost a trace of its own there), by the whole check otherwise.
+SceneCheck held_out_check(const AtmosphereSpec& probe, const Baked& baked, cl_util::Device& dev,
+                          const Progress& progress, Memo& memo, int first) {
+  return judged_by_reference_alone(probe) ? judge_scene(probe, baked.luts, dev, progress, &memo, first)
+                                          : check_scene(probe, baked.luts, baked.orders_used, dev, progress, &memo, first);
+}
+
 // Progress of a check after the tries (where the next try's would go).
 Progress progress_of_check(const Progress& progress, int tries) {
   return [&progress, tries](std::string_view, double frac) {
@@ -226,14 +277,46 @@ AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start,
         const double error = p.check.record.value;
         return std::pair<double, Payload>{error, std::move(p)};
       };
-  auto found = greedy_search<AtmosphereSpec, Payload>(
-      start, steps, [](const AtmosphereSpec& s) { return predicted_bake_seconds(s); }, evaluate,
-      [](const AtmosphereSpec& s) { return settings_json(s); }, tolerance, cost_cap,
-      [&](const Payload& p) { return truth_se_p99(p.check, spec); },
-      [&](int step, const Evaluated<AtmosphereSpec, Payload>& kept) {
-        spdlog::info("atmosphere: auto round {} step {}: refined {} -> error {} (predicted bake {:.1f} s)", round, step,
-                     kept.refined, format_g(kept.error), kept.cost);
-      });
+  const auto describe = [](const AtmosphereSpec& s) { return settings_json(s); };
+  const auto predicted_cost = [](const AtmosphereSpec& s) { return predicted_bake_seconds(s); };
+  const auto resolution = [&](const Payload& p) { return truth_se_p99(p.check, spec); };
+  const auto kept = [&](int step, const Evaluated<AtmosphereSpec, Payload>& k) {
+    spdlog::info("atmosphere: auto round {} step {}: {} -> error {} (predicted bake {:.1f} s)", round, step, k.refined,
+                 format_g(k.error), k.cost);
+  };
+  // Judged by CIEDE2000 against the reference alone: the model search over the points' displayed
+  // colours. Judged by relative radiance (the truth at each try's own wavelengths): the greedy one.
+  SearchOutcome<AtmosphereSpec, Payload> found;
+  if (judged_by_reference_alone(start)) {
+    JudgedColours judged_at;  // the reference's colours at the round's points (every try's the same)
+    const std::function<ModelEvaluation<Payload, Vec3>(const AtmosphereSpec&, const std::string&)>
+        model_evaluate = [&](const AtmosphereSpec& s, const std::string& refined) {
+          auto [error, p] = evaluate(s, refined);
+          if (judged_at.shown_ref.empty()) judged_at = p.check.colours;
+          std::vector<Vec3> values = p.check.colours.shown_lut;
+          return ModelEvaluation<Payload, Vec3>{std::move(values), error, std::move(p)};
+        };
+    // the texture axes are probed at kProbeWavelengths when the spectrum is searched from fewer
+    // (rgb's colours move otherwise than a spectrum's), at the start's spectrum otherwise
+    std::vector<int> probe_levels(steps.size(), 0);
+    for (std::size_t i = 0; i < steps.size(); ++i)
+      if (steps[i].name == "spectrum") {
+        AtmosphereSpec s = start;
+        for (int level = 1; steps[i].apply(s); ++level)
+          if (s.count >= kProbeWavelengths) {
+            if (!start.spectral || start.count < kProbeWavelengths) probe_levels[i] = level;
+            break;
+          }
+      }
+    found = model_search<AtmosphereSpec, Payload, Vec3>(
+        start, steps, predicted_cost, model_evaluate,
+        [&](const std::vector<Vec3>& v) { return judged_at.errors(v); },
+        [&](const std::vector<Vec3>& v) { return judged_at.p99(v); }, describe, tolerance, cost_cap, resolution, kept,
+        probe_levels);
+  } else {
+    found = greedy_search<AtmosphereSpec, Payload>(start, steps, predicted_cost, evaluate, describe, tolerance, cost_cap,
+                                                   resolution, kept);
+  }
   for (std::size_t i = 0; i < found.tries.size() && i < measured.size(); ++i) {
     found.tries[i].update(measured[i]);
     found.tries[i]["round"] = round;
@@ -279,10 +362,36 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
   // left relative_se at its default (kTruthSharpening)
   double relative_se = spec.scene.relative_se;
   bool sharpened = false;
+  // A search judged against the 48-wavelength reference alone compares every try with the same
+  // trace, so the reference's own noise sits in every judged p99: traced at the default
+  // relative_se its p99 se may be most of the tolerance (the default ground scene at ΔE ≤ 1:
+  // 0.85), and no bake could be seen to meet it. Before the first try, such a reference is traced
+  // finer, once: relative_se scaled by kSearchNoise·T / se (se ∝ relative_se), at most to
+  // kMaxUpfrontSharpening of it.
+  if (!spec.scene.relative_se_given && spec.scene.tolerance_de2000) {
+    AtmosphereSpec probe = search_start(spec);
+    if (judged_by_reference_alone(probe)) {
+      const double se = reference_se_p99(probe, dev, [&](std::string_view, double f) {
+        progress("auto: the truth's precision", 0.02 * f);
+      }, &memo);
+      const double tolerance = *spec.scene.tolerance_de2000;
+      if (se > kSearchNoise * tolerance) {
+        const double factor = std::max(kMaxUpfrontSharpening, kSearchNoise * tolerance / se);
+        relative_se = std::stod(format_g(relative_se * factor, 2));
+        sharpened = true;
+        spdlog::info("atmosphere: auto: the reference's own p99 standard error is {} CIEDE2000 at relative_se {} "
+                     "(over {} x the tolerance {}); searching with relative_se {}",
+                     format_g(se), format_g(spec.scene.relative_se), format_g(kSearchNoise), format_g(tolerance),
+                     format_g(relative_se));
+      }
+    }
+  }
   std::vector<AutoSearch> rounds = search_rounds<AutoSearch>(
       n,
       [&](int judged, const AutoSearch* previous) {
-        AtmosphereSpec start = previous ? previous->resolved : search_start(spec);
+        // the model search probes at the start's sizes in every round (cheap bakes; at the choice's
+        // sizes each probe would cost a bake of the choice), the greedy one goes on from the choice
+        AtmosphereSpec start = previous && !judged_by_reference_alone(spec) ? previous->resolved : search_start(spec);
         start.scene.points = judged;
         start.scene.relative_se = relative_se;
         AtmosphereSpec judged_spec = spec;
@@ -294,10 +403,10 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
       [&](AutoSearch& f, int first) {
         AtmosphereSpec probe = f.resolved;
         probe.scene.points = n;
-        f.held_out = check_scene(probe, f.baked.luts, f.baked.orders_used, dev, [&](std::string_view, double frac) {
+        f.held_out = held_out_check(probe, f.baked, dev, [&](std::string_view, double frac) {
           const double base = 1.0 - std::pow(0.9, tries), next = 1.0 - std::pow(0.9, tries + 1);
-          progress("auto: held-out check of round " + std::to_string(first / n), base + (next - base) * frac);
-        }, &memo, first);
+          progress("auto: held-out check of round " + std::to_string(round), base + (next - base) * frac);
+        }, memo, first);
         f.held_out_first = first;
         return f.held_out.record.passed;
       },
@@ -311,7 +420,8 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
                      format_g(relative_se * kTruthSharpening), format_g(relative_se),
                      format_g(kTruthSharpening * kTruthSharpening));
         return true;
-      });
+      },
+      judged_by_reference_alone(search_start(spec)) ? kFirstRoundSets : 1);
 
   const double tolerance = judged_tolerance(spec);
   const AtmosphereSpec defaults = default_sizes_of(spec);
@@ -346,20 +456,7 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
       {"searched", searched},
       {"tolerance", tolerance},
       {"measure", out.check.record.unit},
-      {"rule", "greedy: from half the default sizes and rgb, bake refinements (one axis group x1.5, the "
-               "density's theta nodes x2 up to 64 unless the config gives them, or the next channel count of rgb, "
-               "8, 12, 16, 24, 32, 48) and keep the one that lowers the judged error most per "
-               "second of predicted bake time (a gain under 1 % does not count; the first step bakes every "
-               "refinement, later ones try them in the order of their last gain per second and stop once none "
-               "untried can beat the best; on a plateau each refinement is tried applied twice, then three times; "
-               "a try judged by CIEDE2000 is judged against the 48-wavelength reference alone, its parts left out); stop when the tolerance is met, when nothing lowers the "
-               "error, when the error is within the truth's own p99 standard error, after 16 steps, or beyond 16x "
-               "the default sizes' predicted time. When a search ends short of the tolerance with the truth's own "
-               "p99 standard error at least half the tolerance and the config left scene.relative_se at its "
-               "default, it searches on with relative_se halved (once). The choice "
-               "is then judged at the next n points of the scene (held out); when they miss the tolerance the "
-               "round met, a second round searches on from the choice judged at all 2n points and a fresh set "
-               "of n points judges its choice"},
+      {"rule", judged_by_reference_alone(search_start(spec)) ? kModelRule : kGreedyRule},
       {"start", settings_json(search_start(spec))},
       {"tries", tries_j},
       {"rounds", rounds_j},
@@ -436,9 +533,9 @@ AutoSearch replay(const AtmosphereSpec& spec, const KeptSearch& k, cl_util::Devi
   }, &memo);
   out.held_out_first = k.held_out_first;
   if (k.held_out_first >= 0)
-    out.held_out = check_scene(out.resolved, out.baked.luts, out.baked.orders_used, dev,
-                               [&](std::string_view, double f) { progress("auto: held-out check", 0.95 + 0.05 * f); },
-                               &memo, k.held_out_first);
+    out.held_out = held_out_check(out.resolved, out.baked, dev,
+                                  [&](std::string_view, double f) { progress("auto: held-out check", 0.95 + 0.05 * f); },
+                                  memo, k.held_out_first);
   out.met = k.met;
   out.unresolved = k.unresolved;
   out.failure = k.failure;

@@ -3,10 +3,12 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <stdexcept>
 
 #include "core/colour_space.hpp"
@@ -384,46 +386,57 @@ SceneTraces trace_scene(const AtmosphereSpec& spec, const std::vector<TruthPoint
         });
   };
 
-  // A point set whose halves were each traced as a point set of their own — the settings search
-  // judges [0, 2n) after judging [0, n) and holding out [n, 2n) — is assembled from those traces
-  // (each half with its own seed, as check_scene gave it; where one half is not kept, that half
-  // alone is traced) rather than traced again.
-  const std::size_t n = points.size(), half = n / 2;
-  const bool halves_apply = n >= 2 && n % 2 == 0 && static_cast<int>(n) == spec.scene.points;
-  AtmosphereSpec half_spec = spec;
-  half_spec.scene.points = static_cast<int>(half);
+  // A point set whose parts were each traced as a point set of their own — the settings search
+  // judges [0, 2n) and then holds out [2n, 3n) as sets of their own, and a second round judges
+  // [0, 3n) — is assembled from those traces (each part with its own seed, as check_scene gave
+  // it; where one part is not kept, that part alone is traced) rather than traced again. The
+  // splits tried: halves, thirds (either way) and quarters (either way).
+  const std::size_t n = points.size();
   const std::uint64_t base_seed = seed - static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
-  struct Half {
+  const bool parts_apply = n >= 2 && static_cast<int>(n) == spec.scene.points;
+  struct Piece {
+    AtmosphereSpec spec;
     std::vector<TruthPoint> points;
     SceneTracePlan plan;
   };
-  std::vector<Half> halves;  // planned on first use, for both traces
-  const auto halves_of = [&]() -> const std::vector<Half>& {
-    for (int k = static_cast<int>(halves.size()); k < 2; ++k) {
-      const int at = first + k * static_cast<int>(half);
-      std::vector<TruthPoint> hp(points.begin() + k * half, points.begin() + (k + 1) * half);
+  // the two parts [first, first + j) and [first + j, first + n), planned on first use
+  std::map<std::size_t, std::array<Piece, 2>> splits;
+  const auto split_at = [&](std::size_t j) -> const std::array<Piece, 2>& {
+    auto it = splits.find(j);
+    if (it != splits.end()) return it->second;
+    auto part = [&](std::size_t from, std::size_t to) {
+      Piece pt;
+      pt.spec = spec;
+      pt.spec.scene.points = static_cast<int>(to - from);
+      pt.points.assign(points.begin() + from, points.begin() + to);
+      const int at = first + static_cast<int>(from);
       const std::uint64_t at_seed = base_seed + static_cast<std::uint64_t>(at) * kHeldOutSeedStride;
-      SceneTracePlan hplan = plan_traces(half_spec, hp, orders_used, at, at_seed, dev);
-      halves.push_back({std::move(hp), std::move(hplan)});
-    }
-    return halves;
+      pt.plan = plan_traces(pt.spec, pt.points, orders_used, at, at_seed, dev);
+      return pt;
+    };
+    return splits.emplace(j, std::array<Piece, 2>{part(0, j), part(j, n)}).first->second;
   };
+  std::vector<std::size_t> candidates;
+  for (const auto& [num, den] : {std::pair{1, 2}, {2, 3}, {1, 3}, {3, 4}, {1, 4}})
+    if (n % den == 0) candidates.push_back(n / den * num);
   const auto traced = [&](const AtmosphereSpec& traced_spec, bool reference, const std::string& key,
                           const TruthOptions& o, double from, double to) -> std::shared_ptr<const TruthResult> {
-    if (halves_apply && !keep.has(key)) {  // a whole trace kept earlier is read as it is
-      const std::vector<Half>& hs = halves_of();
-      const SceneTracePlan &h0 = hs[0].plan, &h1 = hs[1].plan;
-      const std::string& k0 = reference ? h0.reference_key : h0.bake_key;
-      const std::string& k1 = reference ? h1.reference_key : h1.bake_key;
-      if (keep.has(k0) || keep.has(k1)) {
-        const AtmosphereSpec half_traced = reference ? spectral_reference_of(half_spec) : half_spec;
-        const double mid = 0.5 * (from + to);
-        const auto a = trace_at(half_traced, hs[0].points, k0, reference ? h0.so : h0.o, from, mid);
-        const auto b = trace_at(half_traced, hs[1].points, k1, reference ? h1.so : h1.o, mid, to);
-        spdlog::debug("atmosphere: scene check: the truth at {} points assembled from the traces of its halves", n);
+    if (parts_apply && !keep.has(key))  // a whole trace kept earlier is read as it is
+      for (std::size_t j : candidates) {
+        const std::array<Piece, 2>& ps = split_at(j);
+        const SceneTracePlan &p0 = ps[0].plan, &p1 = ps[1].plan;
+        const std::string& k0 = reference ? p0.reference_key : p0.bake_key;
+        const std::string& k1 = reference ? p1.reference_key : p1.bake_key;
+        if (!keep.has(k0) && !keep.has(k1)) continue;
+        const double mid = from + (to - from) * static_cast<double>(j) / static_cast<double>(n);
+        const auto a = trace_at(reference ? spectral_reference_of(ps[0].spec) : ps[0].spec, ps[0].points, k0,
+                                reference ? p0.so : p0.o, from, mid);
+        const auto b = trace_at(reference ? spectral_reference_of(ps[1].spec) : ps[1].spec, ps[1].points, k1,
+                                reference ? p1.so : p1.o, mid, to);
+        spdlog::trace("atmosphere: scene check: the truth at {} points assembled from the traces of [{}, {}) and [{}, {})",
+                      n, first, first + j, first + j, first + n);
         return std::make_shared<const TruthResult>(joined(*a, *b));
       }
-    }
     return trace_at(traced_spec, points, key, o, from, to);
   };
 
@@ -715,6 +728,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       check_details(spec, orders_used, exposure_y, v, tr, parts, noise));
   out.record.unit = by_radiance ? "p99 relative" : "p99 CIEDE2000";
   out.points_csv = points_csv(spec, points, v, tr.reference, parts, noise);
+  out.colours = {v.shown_lut, v.shown_ref, v.dark, exposure_y};
   // a spectral trace shares the rgb cap's work out over its wavelengths: say both
   const std::size_t wavelengths = tr.bake->lambda_nm.size();
   const std::string walk_cap =
@@ -734,36 +748,86 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   return out;
 }
 
-bool judged_by_reference_alone(const AtmosphereSpec& spec) {
-  return !spec.scene.tolerance_relative && !is_spectral_reference(spec);
+std::vector<double> JudgedColours::errors(const std::vector<Vec3>& shown) const {
+  std::vector<double> e(shown.size(), std::numeric_limits<double>::quiet_NaN());
+  for (std::size_t p = 0; p < shown.size() && p < shown_ref.size(); ++p)
+    if (!dark[p]) e[p] = displayed_de2000(shown[p], shown_ref[p], exposure_y);
+  return e;
+}
+
+double JudgedColours::p99(const std::vector<Vec3>& shown) const {
+  return summarize_errors(select_points(errors(shown), dark, false)).p99;
+}
+
+bool judged_by_reference_alone(const AtmosphereSpec& spec) { return !spec.scene.tolerance_relative; }
+
+namespace {
+
+// The 48-wavelength reference traced at a point set (the same trace, under the same key, as
+// check_scene's reference: one kept result serves both), its displayed colours, the points
+// reported apart and its se in CIEDE2000 per point.
+struct ReferenceAt {
+  SceneTraces tr;
+  std::vector<Vec3> shown_ref;
+  std::vector<char> dark;
+  std::vector<double> de_se;
+  double exposure_y = 0.0;
+};
+ReferenceAt trace_reference(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, cl_util::Device& dev,
+                            const Progress& progress, Memo* memo, int first) {
+  const AtmosphereScene& sc = spec.scene;
+  const std::size_t n = points.size();
+  const std::uint64_t seed = sc.seed + static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
+  Memo local;
+  ReferenceAt r;
+  // the reference itself is judged against the trace every other bake of its atmosphere is
+  // (an rgb bake's reference: the same key)
+  AtmosphereSpec judged = spec;
+  if (is_spectral_reference(spec)) judged.spectral = false;
+  r.tr = trace_scene(judged, points, 0, first, seed, dev, progress, memo ? *memo : local, false);
+  const TruthBundleValues s = to_bundle_units(spectral_reference_of(spec), *r.tr.spectral);
+  const std::vector<Vec3> s_all = rows_of(s.radiance), s_se = rows_of(s.standard_error);
+  const std::array<double, 3> k683{kMaxLuminousEfficacy, kMaxLuminousEfficacy, kMaxLuminousEfficacy};
+  r.exposure_y = sc.exposure_ev100 ? exposure_luminance(*sc.exposure_ev100) : 0.0;
+  r.shown_ref.resize(n);
+  r.dark.resize(n);
+  r.de_se.resize(n);
+  for (std::size_t p = 0; p < n; ++p) {
+    r.shown_ref[p] = times(s_all[p], k683);
+    r.dark[p] = !(srgb_luminance(r.shown_ref[p]) >= kDarkLuminance);
+    r.de_se[p] = se_de2000(r.shown_ref[p], s_se[p], k683, r.exposure_y);
+  }
+  return r;
+}
+
+}  // namespace
+
+double reference_se_p99(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo* memo,
+                        int first) {
+  if (!judged_by_reference_alone(spec))
+    throw std::logic_error("reference_se_p99: a spec judged by relative radiance");
+  const ReferenceAt r = trace_reference(spec, scene_points_of(spec, first), dev, progress, memo, first);
+  return summarize_errors(select_points(r.de_se, r.dark, false)).p99;
 }
 
 SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::Device& dev, const Progress& progress,
                        Memo* memo, int first) {
   if (!judged_by_reference_alone(spec))
-    throw std::logic_error("judge_scene: a spec judged by relative radiance, or the spectral reference itself");
+    throw std::logic_error("judge_scene: a spec judged by relative radiance");
   const auto t0 = std::chrono::steady_clock::now();
   const AtmosphereScene& sc = spec.scene;
   const std::vector<TruthPoint> points = scene_points_of(spec, first);
   const std::size_t n = points.size();
-  const std::uint64_t seed = sc.seed + static_cast<std::uint64_t>(first) * kHeldOutSeedStride;
-  Memo local;
-  // the same trace (same key) as check_scene's reference: one kept result serves both
-  const SceneTraces tr = trace_scene(spec, points, 0, first, seed, dev, progress, memo ? *memo : local, false);
-  const TruthBundleValues s = to_bundle_units(spectral_reference_of(spec), *tr.spectral);
-  const std::vector<Vec3> s_all = rows_of(s.radiance), s_se = rows_of(s.standard_error), lut = lut_sky_radiance(luts, points);
+  ReferenceAt r = trace_reference(spec, points, dev, progress, memo, first);
+  const SceneTraces& tr = r.tr;
+  const std::vector<Vec3> lut = lut_sky_radiance(luts, points);
   const std::array<double, 3> k = spectrum_of(spec).sky_radiance_to_luminance;
-  const std::array<double, 3> k683{kMaxLuminousEfficacy, kMaxLuminousEfficacy, kMaxLuminousEfficacy};
-  const double exposure_y = sc.exposure_ev100 ? exposure_luminance(*sc.exposure_ev100) : 0.0;
-  std::vector<Vec3> shown_lut(n), shown_ref(n);
-  std::vector<char> dark(n);
-  std::vector<double> de_se(n);
-  for (std::size_t p = 0; p < n; ++p) {
-    shown_lut[p] = times(lut[p], k);
-    shown_ref[p] = times(s_all[p], k683);
-    dark[p] = !(srgb_luminance(shown_ref[p]) >= kDarkLuminance);
-    de_se[p] = se_de2000(shown_ref[p], s_se[p], k683, exposure_y);
-  }
+  const double exposure_y = r.exposure_y;
+  const std::vector<Vec3>& shown_ref = r.shown_ref;
+  const std::vector<char>& dark = r.dark;
+  const std::vector<double>& de_se = r.de_se;
+  std::vector<Vec3> shown_lut(n);
+  for (std::size_t p = 0; p < n; ++p) shown_lut[p] = times(lut[p], k);
   const Part total = make_part("total", nullptr, nullptr, shown_lut, shown_ref, exposure_y, dark);
   const bool dark_scene = total.de_summary.count == 0;
   const double value = dark_scene ? std::numeric_limits<double>::quiet_NaN() : total.de_summary.p99;
@@ -778,6 +842,7 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
                           {"points_at_max_paths", at_cap}}},
       {"dark_points", {{"threshold_cd_m2", kDarkLuminance}, {"count", std::count(dark.begin(), dark.end(), 1)}}}};
   SceneCheck out;
+  out.colours = {shown_lut, shown_ref, dark, exposure_y};
   out.record = Accuracy::judged("vs_path_traced", "p99 over the scene's points of the CIEDE2000 of the displayed colour",
                                 value, sc.tolerance_de2000, "Monte Carlo path tracing of the same model at the scene's "
                                 "points (all orders, the 48-wavelength reference)", details);

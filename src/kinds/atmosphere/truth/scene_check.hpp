@@ -55,11 +55,25 @@ nlohmann::json summary_json(const ErrorSummary& s);
 // (1 where that denominator is 0 and test is not: a channel the truth has no light in).
 std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::vector<Vec3>& ref, int channel);
 
+// The displayed colours (linear sRGB luminance) a judged check compared at each of its points,
+// the points reported apart (dark) and the exposure rule: what the settings search models.
+struct JudgedColours {
+  std::vector<Vec3> shown_lut, shown_ref;
+  std::vector<char> dark;
+  double exposure_y = 0.0;
+  // Per point, the CIEDE2000 of `shown` against shown_ref under the check's exposure (NaN at the
+  // dark points, which the judged value leaves out).
+  std::vector<double> errors(const std::vector<Vec3>& shown) const;
+  // The judged value of `shown`: the p99 of errors(shown) over the lit points, as the check's.
+  double p99(const std::vector<Vec3>& shown) const;
+};
+
 struct SceneCheck {
   Accuracy record;           // "vs_path_traced", judged against the scene's tolerance when it has one
   OutputFile points_csv;     // scene_check.csv: per point the truth, the LUT and every error
   std::string failure;       // non-empty when the tolerance is missed: what dominates, what to raise
   std::vector<std::string> warnings;  // what the truth cannot resolve (also in the record's details)
+  JudgedColours colours;     // the colours its value judged (total: the LUT against the reference)
   double seconds = 0.0;
 };
 
@@ -122,7 +136,8 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                        const Progress& progress, Memo* memo = nullptr, int first = 0);
 
 // Whether judge_scene can judge `spec`: a CIEDE2000 tolerance (the displayed colour against the
-// 48-wavelength reference) and a bake that is not that reference itself.
+// 48-wavelength reference; a bake of exactly that spectrum is judged against the same trace as
+// any other bake of its atmosphere).
 bool judged_by_reference_alone(const AtmosphereSpec& spec);
 // The check's judged value alone, for the settings search's tries: the p99 CIEDE2000 of the LUT
 // against the spectral reference — the same number check_scene reports as `total` — from the
@@ -131,5 +146,11 @@ bool judged_by_reference_alone(const AtmosphereSpec& spec);
 // points; no parts, no per-point file. Requires judged_by_reference_alone(spec).
 SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::Device& dev, const Progress& progress,
                        Memo* memo = nullptr, int first = 0);
+
+// The 48-wavelength reference's own p99 standard error in CIEDE2000 over the lit points of the
+// point set judge_scene(spec, …, first) judges (traced as judge_scene traces it, and kept in
+// `memo` for it): what a judged value cannot resolve. Requires judged_by_reference_alone(spec).
+double reference_se_p99(const AtmosphereSpec& spec, cl_util::Device& dev, const Progress& progress, Memo* memo = nullptr,
+                        int first = 0);
 
 }  // namespace specbake::atmosphere
