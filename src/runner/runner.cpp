@@ -362,16 +362,24 @@ std::vector<JobReport> Runner::plan() {
       r.reason = current ? (options_.force ? "up to date; --force rebuilds it" : "up to date; would be skipped")
                          : "would be built";
       // plan publishes nothing; what an auto search traces and chooses is kept for `run` (and
-      // what earlier runs kept is read)
+      // what earlier runs kept is read). A bundle `run` would skip is planned from its manifest:
+      // its settings are what it was baked with (a search kept under an older tool's key is not
+      // run again for a bundle that will not be rebuilt).
       const ResultStore results(results_dir(it.output));
       Memo memo;
       memo.store = &results;
       JobContext ctx{devices.get(info)};
       ctx.memo = &memo;
       ctx.judge = !it.job->tolerance_advisory;  // as `run` judges: a search `run` would fail with fails here
-      r.parameters = kind.plan(*it.job, ctx);
-      // what `run` then costs when the plan kept work for it (an atmosphere's settings search)
-      apply_kept_cost(kind, *it.job, ctx, r.estimate, store.job_dir(it.job->name) / "latest", r.device);
+      if (current && !options_.force) {
+        JobReport baked;
+        read_bundle_summary(r.bundle, baked);
+        r.parameters = std::move(baked.parameters);
+      } else {
+        r.parameters = kind.plan(*it.job, ctx);
+        // what `run` then costs when the plan kept work for it (an atmosphere's settings search)
+        apply_kept_cost(kind, *it.job, ctx, r.estimate, store.job_dir(it.job->name) / "latest", r.device);
+      }
       const MemoryEstimate need = kind.memory(*it.job);
       check_device_memory(*it.job, need, info);
       check_host_memory(*it.job, need);

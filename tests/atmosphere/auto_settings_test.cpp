@@ -648,6 +648,15 @@ TEST(AutoSettingsCli, RunBakesThePlansKeptSearchWithoutSearchingAgain) {
   ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
   EXPECT_EQ(t::read_json(tmp / "p.json")["jobs"][0]["parameters"]["auto"]["reused"], entry);
   EXPECT_EQ(p.err.find("auto try"), std::string::npos) << p.err;
+  // an up-to-date bundle is planned from its manifest: without the kept search (another tool's
+  // key, or removed), plan does not search again for a bundle run would skip
+  fs::remove_all(tmp / "out" / ".results");
+  p = t::run_cli({"plan", (tmp / "c.yaml").string(), "-v", "--report", (tmp / "p.json").string()}, tmp.path());
+  ASSERT_EQ(p.exit_code, 0) << p.out << p.err;
+  EXPECT_EQ(p.err.find("auto try"), std::string::npos) << p.err;
+  EXPECT_NE(p.out.find("up to date"), std::string::npos) << p.out;
+  EXPECT_EQ(t::read_json(tmp / "p.json")["jobs"][0]["parameters"]["auto"]["chosen"], planned["chosen"]);
+  EXPECT_FALSE(fs::exists(tmp / "out" / ".results" / entry));
 
   t::write_file(tmp / "c.yaml",
                 job + "    scene: {points: 8, relative_se: 0.1, sun_elevation_deg: [20, 60], tolerance_de2000: 90}\n");
