@@ -271,7 +271,10 @@ SearchOutcome<State, Payload> model_search(
     }
     return std::make_pair(std::move(e.values), e.error);
   };
-  const auto [v0, e0] = run(start, "start", 0, std::nan(""));
+  // (not a structured binding: the lambdas below capture v0, which C++17 and clang do not allow)
+  auto started = run(start, "start", 0, std::nan(""));
+  const Values v0 = std::move(started.first);
+  const double e0 = started.second;
   if (e0 <= kModelMargin * tolerance) {
     out.met = true;
     return out;
