@@ -288,8 +288,8 @@ SearchOutcome<State, Payload> model_search(
     const double q = std::pow(refinements[i].factor, -kModelOrder);
     return (1.0 - std::pow(q, l)) / (1.0 - q);
   };
-  // smooth axes: D[i] as the values one level moved (from D_base[i]) at phi's normalisation;
-  // ladders: the values at each level, measured at the start's other settings
+  // smooth axes: D[i], the values one level moved, at phi's normalisation; ladders: the values at
+  // each level, measured at the start's other settings
   std::vector<std::optional<Values>> D(R);
   std::vector<std::map<int, Values>> ladder(R);  // a map: the pointers ladder_at returns stay valid
   std::vector<bool> unusable(R, false);  // a limit or the cost cap at the probe
@@ -303,9 +303,8 @@ SearchOutcome<State, Payload> model_search(
   // the tolerance at its points often misses it at the held-out ones); met: within the tolerance
   const double aim = kModelMargin * tolerance;
   auto met_now = [&] { return out.best.error <= aim; };
-  // probe a smooth axis at the anchor: D from the difference of one level there
-  // probe a smooth axis one level past `at` (the anchor, or the first probes' base): D from the
-  // difference that level made there
+  // probe a smooth axis one level past `at` (the first probes' base): D from the difference that
+  // level made there
   auto probe_smooth = [&](std::size_t i, const Anchor& at) {
     std::vector<int> l = at.levels;
     ++l[i];
@@ -314,8 +313,8 @@ SearchOutcome<State, Payload> model_search(
       if (at.levels[i] == 0) unusable[i] = true;
       return;
     }
-    const bool first = at.levels == anchor.levels && anchor.levels == zero;
-    auto [v, e] = run(*s, first ? refinements[i].name : refinements[i].name + " (probed at " + label_of(at.levels) + ")",
+    auto [v, e] = run(*s, at.levels == zero ? refinements[i].name
+                                            : refinements[i].name + " (probed at " + label_of(at.levels) + ")",
                       step, std::nan(""));
     Values d(n, Value{});
     plus(d, v, at.values, 1.0 / (phi(i, l[i]) - phi(i, at.levels[i])));
