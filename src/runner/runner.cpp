@@ -377,9 +377,9 @@ std::vector<JobReport> Runner::plan() {
         r.parameters = std::move(baked.parameters);
       } else {
         r.parameters = kind.plan(*it.job, ctx);
-        // what `run` then costs when the plan kept work for it (an atmosphere's settings search)
-        apply_kept_cost(kind, *it.job, ctx, r.estimate, store.job_dir(it.job->name) / "latest", r.device);
       }
+      // what `run` then costs when work is kept for it (the scene's truth, a settings search)
+      apply_kept_cost(kind, *it.job, ctx, r.estimate, store.job_dir(it.job->name) / "latest", r.device);
       const MemoryEstimate need = kind.memory(*it.job);
       check_device_memory(*it.job, need, info);
       check_host_memory(*it.job, need);
