@@ -34,7 +34,12 @@
  *    is drawn from that table and t uniformly inside it. The weight uses the exact T: τ at the
  *    segment start plus a 4-point Gauss–Legendre integral of σ_t over [t_k, t] (no kink inside);
  *  - every other free path by delta tracking against a majorant (collision pdf σ_t T, weight
- *    1/σ_t), reaching the ground with probability T;
+ *    1/σ_t), reaching the ground with probability T; where the sun is below the camera's
+ *    horizon, half of them instead from a table along the ray ∝ σ_s T̂ S̄, S̄ the light
+ *    scattered once towards a point (a host table over altitude and sun angle), one-sample MIS
+ *    with delta tracking ("the light at a vertex" below): in the planet's shadow the light at
+ *    a vertex spans orders of magnitude with its altitude, and delta tracking seldom ends where
+ *    it is bright;
  *  - the sun: at the view ray's vertex, next-event estimation (T_sun by ratio tracking,
  *    unbiased); for every later vertex, its expectation over where the free path ends, drawn
  *    on the sunlit part of the new direction's ray by the vertex before it
@@ -71,12 +76,18 @@
  * the number of kink altitudes of the density profiles and up to TRUTH_MAX_KINKS of them
  * (ascending, km): where a profile's layer changes or its clamp to [0, 1] sets in; then the
  * optical depth towards the sun [TRUTH_SUN_H][TRUTH_SUN_MU][NCH] at the nodes of
- * truth_sun_node (truth_sun_depth_table: it only shapes a pdf). */
+ * truth_sun_node (truth_sun_depth_table: it only shapes a pdf); then the log of the light
+ * scattered once towards a point, [TRUTH_SKY_H][TRUTH_SKY_MU][NCH] at the nodes of
+ * truth_sky_node (truth_sky_light_table: it only shapes a pdf; all 0 where no walk of the
+ * trace reads it). */
 #define TRUTH_KINKS_AT (TRUTH_SHELLS * NCH)
 #define TRUTH_SUN_H 48
 #define TRUTH_SUN_MU 64
 #define TRUTH_SUN_AT (TRUTH_KINKS_AT + 1 + TRUTH_MAX_KINKS)
-#define TRUTH_MEDIUM_SIZE (TRUTH_SUN_AT + TRUTH_SUN_H * TRUTH_SUN_MU * NCH)
+#define TRUTH_SKY_H 16
+#define TRUTH_SKY_MU 32
+#define TRUTH_SKY_AT (TRUTH_SUN_AT + TRUTH_SUN_H * TRUTH_SUN_MU * NCH)
+#define TRUTH_MEDIUM_SIZE (TRUTH_SKY_AT + TRUTH_SKY_H * TRUTH_SKY_MU * NCH)
 /* Exact optical depths (truth_optical_depth): the ray is cut where it crosses an altitude
  * level, TRUTH_DEPTH_LEVELS equal levels over the atmosphere's thickness and every kink, so
  * that each piece changes altitude monotonically by at most (rt − rb)/TRUTH_DEPTH_LEVELS (Earth:
@@ -420,8 +431,60 @@ FN real truth_sun_depth_table(const AtmosphereParameters* a, GLOBAL const real* 
 #undef TRUTH_SUN_AT_NODE
   return d;
 }
+/* ---- the light at a vertex: where twilight free paths should end ---------------------------- */
+/* S̄(h, μ_s) = ∫_4π L₁(y, ω) dω, L₁(y, ω) = ∫ σ_s T T_sun V dt along ω: the light scattered once
+ * (isotropic phase: it only shapes a pdf) that reaches a point at altitude h whose sun cosine is
+ * μ_s. In the planet's shadow it spans orders of magnitude: a shadowed point 40 km up sees the
+ * sunlit air through thin air, one 5 km up through hundreds of km of dense air, and a point
+ * farther towards the terminator sees it nearer. A free path drawn by delta tracking (∝ σ_t T)
+ * seldom ends where S̄ is large, and those rare ends carried most of a deep-twilight walk's
+ * variance (ground camera, sun −11°, 440 nm: 0.1 % of the walks held 76 % of the second moment,
+ * each one a vertex 35–50 km up); truth_guided_free_path draws half of them ∝ σ_s T̂ S̄ instead,
+ * and the view ray's table of such points weights its segments by it too (truth.cpp). The host
+ * fills the table by a coarse quadrature (truth.cpp, sky_light_table: a factor of 2 only moves
+ * noise). Nodes: altitude (rt − rb) (i / (TRUTH_SKY_H − 1))², μ_s uniform on
+ * [TRUTH_SKY_MU_MIN, 1] (clamped below: S̄ is negligible there); stored as log S̄
+ * (TRUTH_SKY_NONE for none), interpolated bilinearly in the log (exact for exponential
+ * variation). */
+#define TRUTH_SKY_MU_MIN R(-0.5)
+#define TRUTH_SKY_NONE R(-700.0)
+FN void truth_sky_node(const AtmosphereParameters* a, int i, int j, real* h, real* mu_s) {
+  const real x = (real)i / (real)(TRUTH_SKY_H - 1);
+  *h = thickness(a) * x * x;
+  *mu_s = TRUTH_SKY_MU_MIN + (R(1.0) - TRUTH_SKY_MU_MIN) * (real)j / (real)(TRUTH_SKY_MU - 1);
+}
+/* S̄ at (h, μ_s) from the table (bilinear in log S̄; μ_s clamped to the table's range). */
+FN real truth_sky_light_table(const AtmosphereParameters* a, GLOBAL const real* medium, int c, real h, real mu_s) {
+  const real t = thickness(a);
+  const real x = sqrt(fmin(fmax(h, R(0.0)), t) / t) * (real)(TRUTH_SKY_H - 1);
+  const real y = fmin(fmax((mu_s - TRUTH_SKY_MU_MIN) / (R(1.0) - TRUTH_SKY_MU_MIN), R(0.0)), R(1.0)) *
+                 (real)(TRUTH_SKY_MU - 1);
+  const int i = (int)fmin(floor(x), (real)(TRUTH_SKY_H - 2)), j = (int)fmin(floor(y), (real)(TRUTH_SKY_MU - 2));
+  const real fx = x - (real)i, fy = y - (real)j;
+  GLOBAL const real* S = medium + TRUTH_SKY_AT;
+#define TRUTH_SKY_AT_NODE(ii, jj) S[((ii) * TRUTH_SKY_MU + (jj)) * NCH + c]
+  const real l = (R(1.0) - fx) * ((R(1.0) - fy) * TRUTH_SKY_AT_NODE(i, j) + fy * TRUTH_SKY_AT_NODE(i, j + 1)) +
+                 fx * ((R(1.0) - fy) * TRUTH_SKY_AT_NODE(i + 1, j) + fy * TRUTH_SKY_AT_NODE(i + 1, j + 1));
+#undef TRUTH_SKY_AT_NODE
+  return exp(l);
+}
+
+/* The table along a ray that truth_next_sun_term builds anyway, for the free path that follows on
+ * the same ray (truth_guided_free_path): TRUTH_LINE_SEGMENTS equal segments of [0, d], q at their
+ * nodes ∝ σ_s T̂ S̄, and Σ of the segments' trapezoid masses. */
+#ifndef TRUTH_FREE_PATH_GAIN
+#define TRUTH_FREE_PATH_GAIN R(4.0)
+#endif
+typedef struct {
+  real q[TRUTH_LINE_SEGMENTS + 1];
+  real sum, ds;
+} TruthRayTable;
+
+/* The sun term of the next vertex along the ray (h, w) in expectation (above); with guided != 0
+ * also fills *table for the free path on the same ray (S̄ read at the same nodes). */
 FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, const real* z,
-                            const real* w, const real* sun, int exact, PhiloxStream* rng, int* violations) {
+                            const real* w, const real* sun, int exact, int guided, TruthRayTable* table,
+                            PhiloxStream* rng, int* violations) {
   const real mu = clamp_cosine(dot3(w, z));
   const int ground = ray_hits_ground(a, h, mu);
   const real d = distance_to_nearest_boundary(a, h, mu, ground);
@@ -430,7 +493,7 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
   const real e_sun = a->solar_irradiance[c];
   const real ds = d / (real)TRUTH_LINE_SEGMENTS;
   /* the table: σ_s T̂ and V at the nodes, then the segments' masses */
-  real f[TRUTH_LINE_SEGMENTS + 1], g[TRUTH_LINE_SEGMENTS + 1], mass[TRUTH_LINE_SEGMENTS];
+  real f[TRUTH_LINE_SEGMENTS + 1], g[TRUTH_LINE_SEGMENTS + 1], mass[TRUTH_LINE_SEGMENTS], sky[TRUTH_LINE_SEGMENTS + 1];
   int lit[TRUTH_LINE_SEGMENTS + 1];
   real tau = R(0.0), sigma_prev = R(0.0);
   for (int k = 0; k <= TRUTH_LINE_SEGMENTS; ++k) {
@@ -447,6 +510,18 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     sigma_prev = s_t;
     f[k] = (s_r + s_m) * exp(-tau);
     g[k] = lit[k] ? f[k] * visible * exp(-truth_sun_depth_table(a, medium, c, h_k, mu_s_k)) : R(0.0);
+    if (guided) {
+      sky[k] = truth_sky_light_table(a, medium, c, h_k, mu_s_k);
+      table->q[k] = f[k] * sky[k];
+    }
+  }
+  if (guided) {
+    table->ds = ds;
+    table->sum = R(0.0);
+    real sky_max = R(0.0);
+    for (int k = 0; k < TRUTH_LINE_SEGMENTS; ++k) table->sum += R(0.5) * (table->q[k] + table->q[k + 1]);
+    for (int k = 1; k <= TRUTH_LINE_SEGMENTS; ++k) sky_max = fmax(sky_max, sky[k]);
+    if (!(sky_max > TRUTH_FREE_PATH_GAIN * sky[0])) table->sum = R(0.0);
   }
   real total_f = R(0.0), total_g = R(0.0);
   int lit_segments = 0;
@@ -519,6 +594,60 @@ FN real truth_next_sun_term(const AtmosphereParameters* a, int c, GLOBAL const r
     }
   }
   return value;
+}
+
+/* ---- free paths of twilight walks ---------------------------------------------------------- */
+/* A free path from the ray's start along (h, mu) drawn from the mixture (1 − β) delta tracking +
+ * β q, q the table of truth_next_sun_term along the same ray (∝ σ_s T̂ S̄, linear in each
+ * segment; β = TRUTH_FREE_PATH_SHARE): one-sample MIS with the balance heuristic. Returns what
+ * truth_free_path returns; *factor multiplies the walk's weight so that, with the 1/σ_t the
+ * walk applies at a collision as for delta tracking, the weight carries T(s)/pdf(s), pdf(s) =
+ * (1 − β) σ_t T + β q(s) (T exact, truth_optical_depth); at the ground, whose mass only delta
+ * tracking draws (T(d)), 1/(1 − β). Unbiased whatever q is: the delta-tracking part reaches
+ * every point and the ground. */
+#define TRUTH_FREE_PATH_SHARE R(0.5)
+FN int truth_guided_free_path(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
+                              const TruthRayTable* table, PhiloxStream* rng, real* s_out, real* h_s_out,
+                              real* factor, int* violations) {
+  if (!(table->sum > R(0.0))) {
+    *factor = R(1.0);
+    return truth_free_path(a, c, medium, h, mu, rng, s_out, h_s_out, violations);
+  }
+  const int ground = ray_hits_ground(a, h, mu);
+  const real beta = TRUTH_FREE_PATH_SHARE;
+  int what = 1;
+  if (philox_uniform(rng) >= beta) {
+    what = truth_free_path(a, c, medium, h, mu, rng, s_out, h_s_out, violations);
+    if (what != 1) {
+      *factor = R(1.0) / (R(1.0) - beta);
+      return what;
+    }
+  } else {
+    /* a segment by its trapezoid mass, then x ∈ [0, 1] from the density ∝ q_k (1 − x) + q_{k+1} x */
+    const real u = philox_uniform(rng) * table->sum;
+    int k = 0;
+    real below = R(0.0);
+    for (; k < TRUTH_LINE_SEGMENTS - 1; ++k) {
+      const real m = R(0.5) * (table->q[k] + table->q[k + 1]);
+      if (m > R(0.0) && below + m > u) break;
+      below += m;
+    }
+    const real qa = table->q[k], qb = table->q[k + 1], uu = philox_uniform(rng);
+    const real x = fmin(fmax(uu * (qa + qb) / (qa + sqrt(fmax(qa * qa + (qb - qa) * uu * (qa + qb), R(0.0)))), R(0.0)),
+                        R(1.0));
+    real mu_dummy;
+    *s_out = table->ds * ((real)k + x);
+    point_along(a, h, mu, *s_out, ground, h_s_out, &mu_dummy);
+  }
+  const real s = *s_out;
+  const int k = clamp_int((int)floor(s / table->ds), 0, TRUTH_LINE_SEGMENTS - 1);
+  const real x = fmin(fmax(s / table->ds - (real)k, R(0.0)), R(1.0));
+  const real q_s = beta > R(0.0) ? (table->q[k] * (R(1.0) - x) + table->q[k + 1] * x) / (table->sum * table->ds) : R(0.0);
+  const real T = exp(-truth_optical_depth(a, c, medium, h, mu, s));
+  const real sigma = truth_extinction(a, c, *h_s_out) * T;
+  const real pdf = (R(1.0) - beta) * sigma + beta * q_s;
+  *factor = pdf > R(0.0) ? sigma / pdf : R(0.0);
+  return what;
 }
 
 /* ---- guided directions (twilight walks) ------------------------------------------------------ */
@@ -674,6 +803,9 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
   }
   const int use_line = next_sun == TRUTH_NEXT_SUN_LINE ||
                        (next_sun == TRUTH_NEXT_SUN_AUTO && pt[PT_MU_S] < truth_shadow_reach_cosine(a));
+  /* free paths guided towards the light (truth_guided_free_path) where the sun is below the
+   * camera's horizon: there the light at a vertex varies by orders of magnitude */
+  const int guided_paths = use_line && pt[PT_MU_S] < R(0.0);
   const int n = (int)pt[PT_NODES];
   if (n < 2) return R(0.0);
   const real sun[3] = {pt[PT_S], pt[PT_S + 1], pt[PT_S + 2]};
@@ -793,9 +925,10 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
     }
     /* the next vertex's sun term, in expectation over where the free path ends */
     sun_done = use_line;
+    TruthRayTable ray_table;
     if (sun_done) {
-      const real add =
-          weight * truth_next_sun_term(a, c, medium, on_ground ? R(0.0) : h, z, w, sun, use_line, rng, violations);
+      const real add = weight * truth_next_sun_term(a, c, medium, on_ground ? R(0.0) : h, z, w, sun, use_line,
+                                                    guided_paths, &ray_table, rng, violations);
       radiance += add;
       if (order + 1 <= split_order) *radiance_low += add;
     }
@@ -816,8 +949,12 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
     const real mu = clamp_cosine(dot3(w, z));
     const real h_start = on_ground ? R(0.0) : h;
     real s, h_s;
-    const int what = truth_free_path(a, c, medium, h_start, mu, rng, &s, &h_s, violations);
+    real path_factor = R(1.0);
+    const int what = guided_paths ? truth_guided_free_path(a, c, medium, h_start, mu, &ray_table, rng, &s, &h_s,
+                                                           &path_factor, violations)
+                                  : truth_free_path(a, c, medium, h_start, mu, rng, &s, &h_s, violations);
     if (what == 0) break;
+    weight *= path_factor;
     real z1[3];
     truth_move_zenith(a, h_start, z, w, s, z1);
     for (int k = 0; k < 3; ++k) z[k] = z1[k];

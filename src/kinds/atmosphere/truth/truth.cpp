@@ -52,7 +52,7 @@ constexpr double kUniformMixPilot = 0.5;
 // ~3× in weight, so a region the pilot missed is not made rarer still — with 0.2 and 0.1 the
 // twilight scene's worst channels reached a relative se of 1.7).
 constexpr double kPilotWalks = 1024;
-constexpr double kLearnGain = 0.5;
+constexpr double kLearnGain = 1.0;
 constexpr int kLearnBins = 24;
 constexpr double kKeepFixed = 0.5;
 constexpr double kCellFloor = 0.3;
@@ -156,6 +156,8 @@ struct Prepared {
   std::vector<double> node_cdf;  // [P][C][kNodes]
   std::vector<char> twilight;    // [P]: may learn its tables (guided walks, the sun below the horizon)
   std::vector<double> cells;     // [P][TRUTH_GUIDE_STRIDE]: the learned first-direction cells, flag
+  bool guided_paths = false;     // some point's walks guide their free paths (the medium's sky table)
+  std::vector<std::vector<double>> medium;  // [group]: medium_table of channels 3g..3g+2
 };
 
 // The view ray of point p in the frame zenith = (0, 0, 1), view in the xz plane.
@@ -224,6 +226,7 @@ struct Sub {
   double t_mid, l_r, l_m;
   double visible;
   double sun_l[3];
+  double h_mid = 0.0, mu_s = 0.0;  // the middle's altitude and sun cosine
 };
 
 // The sun's visible fraction and the optical lengths of the ray towards it (along the horizon
@@ -239,6 +242,8 @@ void sunlit(const AtmosphereParameters& a, const double* row, double t_mid, doub
   for (int k = 0; k < 3; ++k) z[k] = r0 * zenith[k] + t_mid * view[k];
   const double zn = std::sqrt(ref3::dot3(z, z));
   const double mu_s = std::clamp(ref3::dot3(sun, z) / zn, -1.0, 1.0);
+  sub.h_mid = h_mid;
+  sub.mu_s = mu_s;
   sub.visible = ref3::sun_visible_fraction(&a, h_mid, mu_s);
   sub.sun_l[0] = sub.sun_l[1] = sub.sun_l[2] = 0.0;
   if (!(sub.visible > 0.0)) return;
@@ -303,11 +308,113 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
   return out;
 }
 
+// log S̄ (path_tracer.cl, "the light at a vertex") of every channel at the sky table's nodes,
+// [TRUTH_SKY_H · TRUTH_SKY_MU][C]: ∫_4π dω ∫ σ_s T T_sun V dt by a coarse quadrature (it only
+// shapes a pdf; a factor of 2 only moves noise) whose geometry every channel shares: directions at
+// kSkyOffsets about the horizon's dip (where a shadowed point sees the sunlit air) times
+// kSkyAzimuths azimuths over [0, π] (the integrand is symmetric about the sun's azimuth); along
+// each, kSkySteps equal steps, T by the trapezoid rule, T_sun from each profile's optical length
+// towards the sun (the sun table of a medium whose three channels are the three profiles, unit
+// coefficients), each step's integral as the logarithmic mean of its ends (exact for an
+// exponential).
+constexpr double kSkyOffsets[] = {-0.3, -0.03, 0.0, 0.02, 0.05, 0.1, 0.25, 0.6, 1.2};
+constexpr int kSkyAzimuths = 5;
+constexpr int kSkySteps = 16;
+std::vector<double> sky_light_table(const Model& m, const Channels& ch) {
+  const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
+  Channels unit;  // channel i: profile i's optical length (Rayleigh, Mie, absorption)
+  unit.lambda_nm = {0.0, 0.0, 0.0};
+  unit.solar_irradiance = unit.mie_scattering = unit.ground_albedo = {0.0, 0.0, 0.0};
+  unit.rayleigh_scattering = {1.0, 0.0, 0.0};
+  unit.mie_extinction = {0.0, 1.0, 0.0};
+  unit.absorption_extinction = {0.0, 0.0, 1.0};
+  const std::vector<double> lengths = medium_table(m, unit);
+  const std::size_t C = ch.size();
+  constexpr int E = static_cast<int>(std::size(kSkyOffsets));
+  std::vector<double> out(static_cast<std::size_t>(TRUTH_SKY_H) * TRUTH_SKY_MU * C, ref3::kTruthSkyNone);
+  parallel_for(static_cast<long long>(TRUTH_SKY_H) * TRUTH_SKY_MU, [&](long long node) {
+    double h, mu_s;
+    ref3::truth_sky_node(&a, static_cast<int>(node / TRUTH_SKY_MU), static_cast<int>(node % TRUTH_SKY_MU), &h, &mu_s);
+    const double dip = -std::acos(std::min(a.bottom_radius / (a.bottom_radius + h), 1.0));
+    std::array<double, E + 2> e{};
+    e[0] = -0.5 * M_PI;
+    for (int k = 0; k < E; ++k) e[k + 1] = std::clamp(dip + kSkyOffsets[k], -0.5 * M_PI, 0.5 * M_PI);
+    e[E + 1] = 0.5 * M_PI;
+    const double sun[3] = {std::sqrt(std::max(1.0 - mu_s * mu_s, 0.0)), 0.0, mu_s};
+    const double r0 = a.bottom_radius + h;
+    std::vector<double> total(C, 0.0), tau(C), sigma_prev(C), g_prev(C), lg_prev(C), line(C);
+    for (int ie = 1; ie <= E; ++ie) {
+      const double de = 0.5 * (e[ie + 1] - e[ie - 1]);  // trapezoid weight in elevation
+      if (!(de > 0.0)) continue;
+      const double ce = std::cos(e[ie]), se = std::sin(e[ie]);
+      for (int ia = 0; ia < kSkyAzimuths; ++ia) {
+        const double phi = M_PI * ia / (kSkyAzimuths - 1);
+        const double dphi = (ia == 0 || ia == kSkyAzimuths - 1 ? 0.5 : 1.0) * M_PI / (kSkyAzimuths - 1);
+        const double w[3] = {ce * std::cos(phi), ce * std::sin(phi), se};
+        const int ground = ref3::ray_hits_ground(&a, h, se);
+        const double ds = ref3::distance_to_nearest_boundary(&a, h, se, ground) / kSkySteps;
+        std::fill(tau.begin(), tau.end(), 0.0);
+        std::fill(line.begin(), line.end(), 0.0);
+        for (int k = 0; k <= kSkySteps; ++k) {
+          const double s = ds * k;
+          double h_k, mu_k;
+          ref3::point_along(&a, h, se, s, ground, &h_k, &mu_k);
+          const double p[3] = {s * w[0], s * w[1], r0 + s * w[2]};
+          const double mu_s_k = std::clamp(ref3::dot3(sun, p) / std::sqrt(ref3::dot3(p, p)), -1.0, 1.0);
+          const double visible = ref3::sun_visible_fraction(&a, h_k, mu_s_k);
+          const double rho_r = ref3::profile_density(&a.rayleigh_density, h_k);
+          const double rho_m = ref3::profile_density(&a.mie_density, h_k);
+          const double rho_a = ref3::profile_density(&a.absorption_density, h_k);
+          double l[3] = {0.0, 0.0, 0.0};
+          if (visible > 0.0)
+            for (int i = 0; i < 3; ++i) l[i] = ref3::truth_sun_depth_table(&a, lengths.data(), i, h_k, mu_s_k);
+          for (std::size_t c = 0; c < C; ++c) {
+            const double s_t = ch.rayleigh_scattering[c] * rho_r + ch.mie_extinction[c] * rho_m +
+                               ch.absorption_extinction[c] * rho_a;
+            if (k > 0) tau[c] += 0.5 * (sigma_prev[c] + s_t) * ds;
+            sigma_prev[c] = s_t;
+            const double s_s = (ch.rayleigh_scattering[c] * rho_r + ch.mie_scattering[c] * rho_m) * visible;
+            double g = 0.0, lg = 0.0;
+            if (s_s > 0.0) {
+              lg = std::log(s_s) - tau[c] -
+                   (ch.rayleigh_scattering[c] * l[0] + ch.mie_extinction[c] * l[1] + ch.absorption_extinction[c] * l[2]);
+              g = std::exp(lg);
+            }
+            if (k > 0) {
+              const bool both = g > 0.0 && g_prev[c] > 0.0 && std::abs(lg - lg_prev[c]) > 1e-6;
+              line[c] += (both ? (g - g_prev[c]) / (lg - lg_prev[c]) : 0.5 * (g + g_prev[c])) * ds;
+            }
+            g_prev[c] = g;
+            lg_prev[c] = lg;
+          }
+        }
+        for (std::size_t c = 0; c < C; ++c) total[c] += 2.0 * line[c] * ce * de * dphi;  // both sides
+      }
+    }
+    for (std::size_t c = 0; c < C; ++c)
+      if (total[c] > 0.0) out[node * C + c] = std::log(total[c]);
+  });
+  return out;
+}
+
+// S̄ of channel c at (h, μ_s) from the medium tables of a trace's channel groups (path_tracer.cl,
+// truth_sky_light_table), for the view-ray tables of points whose free paths are guided.
+struct SkyLight {
+  const AtmosphereParameters* a = nullptr;
+  const std::vector<std::vector<double>>* medium = nullptr;  // [group] medium tables with the sky table
+  double operator()(std::size_t c, double h, double mu_s) const {
+    return ref3::truth_sky_light_table(a, (*medium)[c / kGroup].data(), static_cast<int>(c % kGroup), h, mu_s);
+  }
+};
+
 // Channel c's optical depth at the nodes and its segment probabilities (a cdf): segment masses
-// ≈ ∫ β_s ρ T dt (and × V T_sun for the sunlit share), T at each sub-segment's middle with τ
-// linear between the nodes (only the pdf depends on them), mixed with a uniform share.
-void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg, double* tau,
-                   double* cdf) {
+// ≈ ∫ β_s ρ T dt and, for the light's share, ∫ β_s ρ T (V T_sun + S̄) dt — the sun scattered
+// here (order 1, isotropic phase) and the light scattered once towards here (what orders ≥ 2
+// start from: S̄ of truth_sky_light, for points whose walks guide their free paths; else V T_sun
+// alone), T at each sub-segment's middle with τ linear between the nodes (only the pdf depends
+// on them), mixed with a uniform share.
+void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg,
+                   const SkyLight* sky, double* tau, double* cdf) {
   const int n = static_cast<int>(t.size());
   const double D = t.back();
   tau[0] = 0.0;
@@ -326,6 +433,7 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
         lit[k] += m * sub.visible *
                   std::exp(-(ch.rayleigh_scattering[c] * sub.sun_l[0] + ch.mie_extinction[c] * sub.sun_l[1] +
                              ch.absorption_extinction[c] * sub.sun_l[2]));
+      if (sky) lit[k] += m * (*sky)(c, sub.h_mid, sub.mu_s);
     }
     total += mass[k];
     total_lit += lit[k];
@@ -351,8 +459,8 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
 
 // Nodes, optical depth at the nodes and segment probabilities of one point's view ray, for
 // every channel.
-void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, double* row,
-                double* node_t, double* node_tau, double* node_cdf) {
+void view_table(const AtmosphereParameters& a, const Channels& ch, const std::vector<double>& kinks, const SkyLight* sky,
+                double* row, double* node_t, double* node_tau, double* node_cdf) {
   const std::size_t C = ch.size();
   for (int k = 0; k < kNodes; ++k) node_t[k] = 0.0;
   for (std::size_t c = 0; c < C; ++c)
@@ -363,7 +471,7 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   row[PT_NODES] = n;
   for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
   const Segments seg = view_segments(a, row, t);
-  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, node_tau + c * kNodes, node_cdf + c * kNodes);
+  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, sky, node_tau + c * kNodes, node_cdf + c * kNodes);
 }
 
 Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base,
@@ -384,17 +492,36 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   P.twilight.assign(P.n_points, 0);
   P.cells.assign(P.n_points * TRUTH_GUIDE_STRIDE, 0.0);
   const double reach = ref3::truth_shadow_reach_cosine(&a);
-  parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
+  // the kernel's rules: walks guided towards the horizon under the sun (truth_walk's use_line),
+  // and, with the sun below the camera's horizon, guided free paths too (guided_paths)
+  std::vector<char> guided_paths(P.n_points, 0);
+  for (std::size_t i = 0; i < P.n_points; ++i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
     point_geometry(a, points[i], row);
-    view_table(a, P.channels, kinks, row, &P.node_t[i * kNodes], &P.node_tau[i * P.n_channels * kNodes],
-               &P.node_cdf[i * P.n_channels * kNodes]);
-    for (int j = 0; j <= TRUTH_GUIDE_CELLS; ++j)
-      P.cells[i * TRUTH_GUIDE_STRIDE + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
-    // the kernel's rule for guided walks (truth_walk's use_line), the sun below the horizon
     const bool guided = o.next_sun == TruthOptions::NextSun::along_ray ||
                         (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach);
-    P.twilight[i] = o.learn && guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < 0.0;
+    guided_paths[i] = guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < 0.0;
+    P.twilight[i] = o.learn && guided_paths[i];
+    P.guided_paths = P.guided_paths || guided_paths[i];
+  }
+  for (std::size_t first = 0; first < P.n_channels; first += kGroup)
+    P.medium.push_back(
+        medium_table(P.model, P.channels.slice(first, std::min<std::size_t>(kGroup, P.n_channels - first))));
+  if (P.guided_paths) {
+    const auto t_sky = std::chrono::steady_clock::now();
+    const std::vector<double> sky = sky_light_table(P.model, P.channels);
+    spdlog::debug("truth: sky table {:.3f} s", std::chrono::duration<double>(std::chrono::steady_clock::now() - t_sky).count());
+    for (std::size_t c = 0; c < P.n_channels; ++c)
+      for (int n = 0; n < TRUTH_SKY_H * TRUTH_SKY_MU; ++n)
+        P.medium[c / kGroup][ref3::kTruthSkyAt + n * kGroup + c % kGroup] = sky[n * P.n_channels + c];
+  }
+  const SkyLight sky{&a, &P.medium};
+  parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
+    double* row = &P.points[i * TRUTH_POINT_STRIDE];
+    view_table(a, P.channels, kinks, guided_paths[i] ? &sky : nullptr, row, &P.node_t[i * kNodes],
+               &P.node_tau[i * P.n_channels * kNodes], &P.node_cdf[i * P.n_channels * kNodes]);
+    for (int j = 0; j <= TRUTH_GUIDE_CELLS; ++j)
+      P.cells[i * TRUTH_GUIDE_STRIDE + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
   });
   return P;
 }
@@ -402,7 +529,8 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
 }  // namespace
 
 // The medium table of one channel group (path_tracer.cl): [TRUTH_SHELLS][kGroup] majorants,
-// then the kink altitudes' count and the kinks.
+// then the kink altitudes' count and the kinks, and the sun table (the sky table is left at 0:
+// prepare() fills it where walks read it).
 std::vector<double> medium_table(const Model& m, const Channels& group) {
   const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
   const double t = m.top_radius_km - m.bottom_radius_km, width = t / TRUTH_SHELLS;
@@ -493,7 +621,7 @@ std::vector<Group> groups_of(const Prepared& P) {
     g.a = ref3::make_parameters(P.model, g.channels);
     g.tau = group_slice(P.node_tau, P.n_points, P.n_channels, first, g.count);
     g.cdf = group_slice(P.node_cdf, P.n_points, P.n_channels, first, g.count);
-    g.medium = medium_table(P.model, g.channels);
+    g.medium = P.medium[first / kGroup];
     out.push_back(std::move(g));
   }
   return out;

@@ -16,5 +16,7 @@ inline constexpr int kTruthChannels = NCH;
 inline constexpr int kTruthKinksAt = TRUTH_KINKS_AT;
 inline constexpr int kTruthMediumSize = TRUTH_MEDIUM_SIZE;
 inline constexpr int kTruthSunAt = TRUTH_SUN_AT;
+inline constexpr int kTruthSkyAt = TRUTH_SKY_AT;
+inline constexpr double kTruthSkyNone = TRUTH_SKY_NONE;
 #undef NCH
 }  // namespace specbake::atmosphere::ref3
