@@ -46,13 +46,17 @@ constexpr double kUniformMixPilot = 0.5;
 // Learned tables (twilight points, path_tracer.cl "learned guides"): pilot walks per point, all
 // channels together (at least one batch per channel); a point keeps its learned tables only
 // where the pilot predicts they cut the view ray's second moment below kLearnGain of the fixed
-// table's (learned walks reach sunlit air more often, so each costs more); the view ray's
+// table's (learned walks reach sunlit air more often, so each costs more) — in deep twilight,
+// where free paths are guided too, wherever it predicts any gain (kLearnGainGuided: the twilight
+// scene's truth with 0.5 there learned at 4 of 128 points and took 1.1× the time for 1.1× the
+// variance); the view ray's
 // learned bins; the share of the pilot's table kept in the learned one and the floor of each
 // direction cell (defensive mixtures: a learned table starves no region by more than 2× and
 // ~3× in weight, so a region the pilot missed is not made rarer still — with 0.2 and 0.1 the
 // twilight scene's worst channels reached a relative se of 1.7).
 constexpr double kPilotWalks = 1024;
-constexpr double kLearnGain = 1.0;
+constexpr double kLearnGain = 0.5;
+constexpr double kLearnGainGuided = 1.0;
 constexpr int kLearnBins = 24;
 constexpr double kKeepFixed = 0.5;
 constexpr double kCellFloor = 0.3;
@@ -156,7 +160,7 @@ struct Prepared {
   std::vector<double> node_cdf;  // [P][C][kNodes]
   std::vector<char> twilight;    // [P]: may learn its tables (guided walks, the sun below the horizon)
   std::vector<double> cells;     // [P][TRUTH_GUIDE_STRIDE]: the learned first-direction cells, flag
-  bool guided_paths = false;     // some point's walks guide their free paths (the medium's sky table)
+  std::vector<char> guided_paths;  // [P]: its walks guide their free paths (truth_deep_shadow_cosine)
   std::vector<std::vector<double>> medium;  // [group]: medium_table of channels 3g..3g+2
 };
 
@@ -494,23 +498,23 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   const double reach = ref3::truth_shadow_reach_cosine(&a);
   // the kernel's rules: walks guided towards the horizon under the sun (truth_walk's use_line),
   // and, with the sun below the camera's horizon, guided free paths too (guided_paths)
-  std::vector<char> guided_paths(P.n_points, 0);
+  P.guided_paths.assign(P.n_points, 0);
+  const double deep = ref3::truth_deep_shadow_cosine(&a);
+  bool any_guided = false;
   for (std::size_t i = 0; i < P.n_points; ++i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
     point_geometry(a, points[i], row);
     const bool guided = o.next_sun == TruthOptions::NextSun::along_ray ||
                         (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach);
-    guided_paths[i] = guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < 0.0;
-    P.twilight[i] = o.learn && guided_paths[i];
-    P.guided_paths = P.guided_paths || guided_paths[i];
+    P.twilight[i] = o.learn && guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < 0.0;
+    P.guided_paths[i] = guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < deep;
+    any_guided = any_guided || P.guided_paths[i];
   }
   for (std::size_t first = 0; first < P.n_channels; first += kGroup)
     P.medium.push_back(
         medium_table(P.model, P.channels.slice(first, std::min<std::size_t>(kGroup, P.n_channels - first))));
-  if (P.guided_paths) {
-    const auto t_sky = std::chrono::steady_clock::now();
+  if (any_guided) {
     const std::vector<double> sky = sky_light_table(P.model, P.channels);
-    spdlog::debug("truth: sky table {:.3f} s", std::chrono::duration<double>(std::chrono::steady_clock::now() - t_sky).count());
     for (std::size_t c = 0; c < P.n_channels; ++c)
       for (int n = 0; n < TRUTH_SKY_H * TRUTH_SKY_MU; ++n)
         P.medium[c / kGroup][ref3::kTruthSkyAt + n * kGroup + c % kGroup] = sky[n * P.n_channels + c];
@@ -518,7 +522,7 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   const SkyLight sky{&a, &P.medium};
   parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
-    view_table(a, P.channels, kinks, guided_paths[i] ? &sky : nullptr, row, &P.node_t[i * kNodes],
+    view_table(a, P.channels, kinks, P.guided_paths[i] ? &sky : nullptr, row, &P.node_t[i * kNodes],
                &P.node_tau[i * P.n_channels * kNodes], &P.node_cdf[i * P.n_channels * kNodes]);
     for (int j = 0; j <= TRUTH_GUIDE_CELLS; ++j)
       P.cells[i * TRUTH_GUIDE_STRIDE + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
@@ -951,7 +955,8 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
       const PilotWalks& w = walks[p];
       const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
       learn_view_table(w, n, cdf, P.n_channels);
-      keep[p] = predicted_ratio(w, n, &tables.node_cdf[at], &P.node_cdf[at], cdf) < kLearnGain;
+      keep[p] = predicted_ratio(w, n, &tables.node_cdf[at], &P.node_cdf[at], cdf) <
+                (P.guided_paths[p] ? kLearnGainGuided : kLearnGain);
       if (keep[p]) {
         learn_cells(w, &learned.cells[p * TRUTH_GUIDE_STRIDE]);
         learned.cells[p * TRUTH_GUIDE_STRIDE + TRUTH_GUIDE_CELLS + 1] = 1.0;
