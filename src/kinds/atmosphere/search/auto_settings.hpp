@@ -56,6 +56,18 @@ inline constexpr double kMinGain = 0.01;           // a refinement counts when i
 inline constexpr int kSpectrumLadder[] = {8, 12, 16, 24, 32, 48};  // wavelengths after rgb
 inline constexpr int kProbeWavelengths = 16;  // the model search probes the texture axes at 16 wavelengths
 
+// Why a search stops before its next step (empty: it goes on): its step budget spent, or a best
+// error the measurement cannot resolve (below it, gains cannot be told from noise).
+template <class Payload>
+std::string search_stop(int step, double best_error, const Payload& best,
+                        const std::function<double(const Payload&)>& resolution) {
+  if (step > kMaxSearchSteps) return "the search reached its " + std::to_string(kMaxSearchSteps) + " steps";
+  if (resolution && best_error <= resolution(best))
+    return "the error is within the measurement's own uncertainty (" + format_g(resolution(best)) +
+           "): no gain can be measured";
+  return {};
+}
+
 // The greedy search on its own, over any settings type (tests drive it with synthetic errors).
 // `evaluate` bakes and judges a state (its error and a payload kept for the best state and the
 // step's best candidate only); `cost` predicts what a state costs; `describe` records a state;
@@ -111,16 +123,8 @@ SearchOutcome<State, Payload> greedy_search(
   };
   out.best = run(start, "start", 0);
   for (int step = 1; !(out.best.error <= tolerance); ++step) {
-    if (step > kMaxSearchSteps) {
-      out.stop = "the search reached its " + std::to_string(kMaxSearchSteps) + " steps";
-      break;
-    }
-    // below what the measurement resolves, gains cannot be told from noise
-    if (resolution && out.best.error <= resolution(out.best.payload)) {
-      out.stop = "the error is within the measurement's own uncertainty (" + format_g(resolution(out.best.payload)) +
-                 "): no gain can be measured";
-      break;
-    }
+    out.stop = search_stop(step, out.best.error, out.best.payload, resolution);
+    if (!out.stop.empty()) break;
     std::optional<Evaluated<State, Payload>> chosen;
     double chosen_rate = 0.0;
     std::size_t chosen_try = 0;
@@ -390,15 +394,8 @@ SearchOutcome<State, Payload> model_search(
     return s / static_cast<double>(m);
   };
   for (;; ++step) {
-    if (step > kMaxSearchSteps) {
-      out.stop = "the search reached its " + std::to_string(kMaxSearchSteps) + " steps";
-      break;
-    }
-    if (resolution && out.best.error <= resolution(out.best.payload)) {
-      out.stop = "the error is within the measurement's own uncertainty (" + format_g(resolution(out.best.payload)) +
-                 "): no gain can be measured";
-      break;
-    }
+    out.stop = search_stop(step, out.best.error, out.best.payload, resolution);
+    if (!out.stop.empty()) break;
     // plan: greedy on the model from the anchor
     std::vector<int> levels = anchor.levels;
     Values pv = anchor.values;

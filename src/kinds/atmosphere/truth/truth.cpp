@@ -47,9 +47,9 @@ constexpr double kUniformMixPilot = 0.5;
 // channels together (at least one batch per channel); a point keeps its learned tables only
 // where the pilot predicts they cut the view ray's second moment below kLearnGain of the fixed
 // table's (learned walks reach sunlit air more often, so each costs more) — in deep twilight,
-// where free paths are guided too, wherever it predicts any gain (kLearnGainGuided: the twilight
-// scene's truth with 0.5 there learned at 4 of 128 points and took 1.1× the time for 1.1× the
-// variance); the view ray's
+// where free paths are guided too, wherever it predicts any gain (kLearnGainGuided: with 0.5 there
+// the twilight scene's truth learned at 4 of 128 points and took 1.1× the time for a 10 % larger
+// mean se); the view ray's
 // learned bins; the share of the pilot's table kept in the learned one and the floor of each
 // direction cell (defensive mixtures: a learned table starves no region by more than 2× and
 // ~3× in weight, so a region the pilot missed is not made rarer still — with 0.2 and 0.1 the
