@@ -650,7 +650,7 @@ int main(int argc, char** argv) {
   // `run` and `plan` select jobs the same way.
   auto add_selection = [&](CLI::App* sub) {
     sub->add_option("configs", configs, "config files (YAML) or folders of them")->required();
-    sub->add_option("--out", out, "output folder for every job (default: each config's `output`, else ./assets)")
+    sub->add_option("-o,--out", out, "output folder for every job (default: each config's `output`, else ./assets)")
         ->allow_extra_args(false);
     sub->add_option("--device", device, "OpenCL device: auto | cpu | gpu | part of a device name (default: config's, else auto)")
         ->allow_extra_args(false);
@@ -702,7 +702,7 @@ int main(int argc, char** argv) {
   truth->add_option("--job", truth_args.job, "the atmosphere job to trace")->required();
   truth->add_option("--points", truth_args.points,
                     "POINTS.csv: altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg")->required();
-  truth->add_option("--out", truth_args.out, "RESULT.csv: the four columns, then L_<c>,se_<c> per channel")->required();
+  truth->add_option("-o,--out", truth_args.out, "RESULT.csv: the four columns, then L_<c>,se_<c> per channel")->required();
   truth->add_option("--paths", truth_args.paths, "random walks per point and channel");
   truth->add_option("--orders", truth_args.orders, "scattering orders traced: N (1..N) or all");
   truth->add_option("--seed", truth_args.seed, "seed of the counter-based random streams (same seed: same bytes)");
@@ -721,7 +721,7 @@ int main(int argc, char** argv) {
                     "P% for sizes")
       ->required()
       ->allow_extra_args(false);
-  sweep->add_option("--out", sweep_args.out, "folder for sweep.json, sweep.csv, sweep.png (default ./sweep-<job>)");
+  sweep->add_option("-o,--out", sweep_args.out, "folder for sweep.json, sweep.csv, sweep.png (default ./sweep-<job>)");
   sweep->add_option("--device", sweep_args.device, "OpenCL device (default: the config's, else auto)");
   sweep->add_option("--tolerance", sweep_args.tolerance,
                     "the tolerance drawn and judged (default: the job's own, where it has one)")
@@ -738,7 +738,7 @@ int main(int argc, char** argv) {
                          "--report JSON files or folders of them (merged into one table), output folders (holding "
                          "<job>/latest bundles) or sweep folders (on the page)")
       ->required();
-  report_cmd->add_option("--out", report_out, "the page's file, or a folder to write report.html into (default "
+  report_cmd->add_option("-o,--out", report_out, "the page's file, or a folder to write report.html into (default "
                                               "./report.html; written when a folder is given or with --out)")
       ->allow_extra_args(false);
   report_cmd->add_flag("--json", report_json, "print the merged night as JSON");

@@ -217,10 +217,11 @@ TEST_F(Cli, IncompleteBundleIsRebuilt) {
 
 TEST_F(Cli, SameInputsGiveIdenticalBytes) {
   const fs::path c = cfg(config(12));
-  // Two runs into different folders, from different working directories.
+  // Two runs into different folders, from different working directories (the second names its
+  // folder with the short -o).
   fs::create_directories(tmp_ / "elsewhere");
   auto r1 = t::run_cli({"run", c.string(), "--out", (tmp_ / "one").string()}, tmp_.path());
-  auto r2 = t::run_cli({"run", c.string(), "--out", (tmp_ / "two").string()}, tmp_ / "elsewhere");
+  auto r2 = t::run_cli({"run", c.string(), "-o", (tmp_ / "two").string()}, tmp_ / "elsewhere");
   ASSERT_EQ(r1.exit_code, 0) << r1.err;
   ASSERT_EQ(r2.exit_code, 0) << r2.err;
   const fs::path b1 = fs::canonical(tmp_ / "one" / "prism" / "latest"), b2 = fs::canonical(tmp_ / "two" / "prism" / "latest");
