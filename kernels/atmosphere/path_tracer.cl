@@ -412,6 +412,14 @@ FN void truth_sun_node(const AtmosphereParameters* a, int i, int j, real* h, rea
   const real mu_h = -horizon_distance(a, *h) / radius_of(a, *h);
   *mu = mu_h + (R(1.0) - mu_h) * y * y;
 }
+/* Channel c of a [rows][cols][NCH] node table at fractional node coordinates (x, y) ∈
+ * [0, rows − 1] × [0, cols − 1], bilinearly (the sun and sky tables of the medium). */
+FN real truth_table_bilinear(GLOBAL const real* T, int rows, int cols, int c, real x, real y) {
+  const int i = (int)fmin(floor(x), (real)(rows - 2)), j = (int)fmin(floor(y), (real)(cols - 2));
+  const real fx = x - (real)i, fy = y - (real)j;
+  GLOBAL const real* n = T + (i * cols + j) * NCH + c;
+  return (R(1.0) - fx) * ((R(1.0) - fy) * n[0] + fy * n[NCH]) + fx * ((R(1.0) - fy) * n[cols * NCH] + fy * n[(cols + 1) * NCH]);
+}
 /* The optical depth towards the sun from altitude h (sun cosine mu_s; along the horizon when
  * the disc centre is below it, as truth_sun_transmittance), interpolated bilinearly in the
  * nodes' coordinates from the table the host fills with truth_optical_depth. Only to shape a
@@ -422,14 +430,7 @@ FN real truth_sun_depth_table(const AtmosphereParameters* a, GLOBAL const real* 
   const real mu_h = -horizon_distance(a, hh) / radius_of(a, hh);
   const real u = fmin(fmax((mu_s - mu_h) / (R(1.0) - mu_h), R(0.0)), R(1.0));
   const real x = sqrt(hh / t) * (real)(TRUTH_SUN_H - 1), y = sqrt(u) * (real)(TRUTH_SUN_MU - 1);
-  const int i = (int)fmin(floor(x), (real)(TRUTH_SUN_H - 2)), j = (int)fmin(floor(y), (real)(TRUTH_SUN_MU - 2));
-  const real fx = x - (real)i, fy = y - (real)j;
-  GLOBAL const real* T = medium + TRUTH_SUN_AT;
-#define TRUTH_SUN_AT_NODE(ii, jj) T[((ii) * TRUTH_SUN_MU + (jj)) * NCH + c]
-  const real d = (R(1.0) - fx) * ((R(1.0) - fy) * TRUTH_SUN_AT_NODE(i, j) + fy * TRUTH_SUN_AT_NODE(i, j + 1)) +
-                 fx * ((R(1.0) - fy) * TRUTH_SUN_AT_NODE(i + 1, j) + fy * TRUTH_SUN_AT_NODE(i + 1, j + 1));
-#undef TRUTH_SUN_AT_NODE
-  return d;
+  return truth_table_bilinear(medium + TRUTH_SUN_AT, TRUTH_SUN_H, TRUTH_SUN_MU, c, x, y);
 }
 /* ---- the light at a vertex: where twilight free paths should end ---------------------------- */
 /* S̄(h, μ_s) = ∫_4π L₁(y, ω) dω, L₁(y, ω) = ∫ σ_s T T_sun V dt along ω: the light scattered once
@@ -459,14 +460,7 @@ FN real truth_sky_light_table(const AtmosphereParameters* a, GLOBAL const real* 
   const real x = sqrt(fmin(fmax(h, R(0.0)), t) / t) * (real)(TRUTH_SKY_H - 1);
   const real y = fmin(fmax((mu_s - TRUTH_SKY_MU_MIN) / (R(1.0) - TRUTH_SKY_MU_MIN), R(0.0)), R(1.0)) *
                  (real)(TRUTH_SKY_MU - 1);
-  const int i = (int)fmin(floor(x), (real)(TRUTH_SKY_H - 2)), j = (int)fmin(floor(y), (real)(TRUTH_SKY_MU - 2));
-  const real fx = x - (real)i, fy = y - (real)j;
-  GLOBAL const real* S = medium + TRUTH_SKY_AT;
-#define TRUTH_SKY_AT_NODE(ii, jj) S[((ii) * TRUTH_SKY_MU + (jj)) * NCH + c]
-  const real l = (R(1.0) - fx) * ((R(1.0) - fy) * TRUTH_SKY_AT_NODE(i, j) + fy * TRUTH_SKY_AT_NODE(i, j + 1)) +
-                 fx * ((R(1.0) - fy) * TRUTH_SKY_AT_NODE(i + 1, j) + fy * TRUTH_SKY_AT_NODE(i + 1, j + 1));
-#undef TRUTH_SKY_AT_NODE
-  return exp(l);
+  return exp(truth_table_bilinear(medium + TRUTH_SKY_AT, TRUTH_SKY_H, TRUTH_SKY_MU, c, x, y));
 }
 
 /* The table along a ray that truth_next_sun_term builds anyway, for the free path that follows on
