@@ -524,7 +524,8 @@ FN_HOT ScatteringColumns scattering_columns(const AtmosphereParameters* a, real 
 /* One channel of the lookup from its columns' values (s0.i0, s0.i1, s1.i0, s1.i1) and weights
  * (s0.fx, s1.fx, f), trilinear as the reference. (The shipped lookups can blend μ_s
  * geometrically, render.glsl; here a pow per blend in the multiple scattering's inner loop
- * made a bake ~5× slower on a CPU, docs/atmosphere-method.md "Twilight".) */
+ * made a bake ~5× slower on a CPU, docs/atmosphere-method.md "Twilight"; the sky-view table's
+ * reads of the summed densities blend so, scattering_lookup_mu_s_blend.) */
 FN_HOT real scattering_blend(real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
   const real v0 = (R(1.0) - fx0) * c00 + fx0 * c01;
   const real v1 = (R(1.0) - fx1) * c10 + fx1 * c11;
@@ -541,6 +542,33 @@ FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* 
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
   for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
+}
+/* mu_s_blend, linear where a and b lie within 2 % of each other: there the chord exceeds the
+ * geometric blend by at most g (1 − g) ε² / 2 ≤ 5e-5 of the value (ε = 0.02), below float's
+ * accumulation error over a ray, and no logarithm is spent (the sky-view table's lookups are
+ * dominated by these: ~3× the linear table's time with them, ~6× without the shortcut). */
+FN_HOT real mu_s_blend_near(real a, real b, real g) {
+  if (fabs(b - a) <= R(0.02) * fmin(a, b)) return a + (b - a) * g;
+  const int geo = a > R(0.0) && b > R(0.0) && fmin(a, b) > R(1e-3) * fmax(a, b);
+  return geo ? a * exp2(g * log2(b / a)) : a + (b - a) * g;
+}
+/* scattering_lookup with the μ_s texels joined by mu_s_blend_near: the two ν slices blended
+ * linearly at each of the two μ_s columns (their μ_s weights agree, x.s0.fx = x.s1.fx up to
+ * rounding: the slices' columns lie MU_S texels apart), then the two joined geometrically — one logarithm
+ * per channel instead of the shipped lookup's two (which joins each slice first; the same
+ * exactness for a value exponential in μ_s and linear in ν). */
+FN_HOT void scattering_lookup_mu_s_blend(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz,
+                                     real* out) {
+  const int wd = a->nu_size * a->mu_s_size;
+  const ScatteringColumns x = scattering_columns(a, uvwz[0], uvwz[1]);
+  const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
+  real c00[NCH], c01[NCH], c10[NCH], c11[NCH];
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i0, c00);
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i1, c01);
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
+  texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
+  for (int c = 0; c < NCH; ++c)
+    out[c] = mu_s_blend_near(c00[c] * (R(1.0) - x.f) + c10[c] * x.f, c01[c] * (R(1.0) - x.f) + c11[c] * x.f, x.s0.fx);
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -731,13 +759,16 @@ FN void single_scattering(const AtmosphereParameters* a, GLOBAL const real* T, r
 
 /* ---- multiple scattering of order n (paper Eq. 7, 50-interval trapezoid) --------------- */
 FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const real* J, const real* s, real mu_s, real nu,
-                                real* out) {
+                                int geometric, real* out) {
   real uvwz[4], j[NCH];
   uvwz[0] = scattering_u_nu_at(nu);
   uvwz[1] = scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s, nu));
   uvwz[2] = s[RAY_U_MU];
   uvwz[3] = s[RAY_U_R];
-  scattering_lookup(a, J, uvwz, j);
+  if (geometric)
+    scattering_lookup_mu_s_blend(a, J, uvwz, j);
+  else
+    scattering_lookup(a, J, uvwz, j);
   for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
 }
 /* multiple_scattering_add for LANES texels of one (μ, r) row (lane k: mu_s[k], nu[k];
@@ -772,13 +803,13 @@ FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL c
 }
 /* Multiple scattering along the ray (h, mu) of length d_b to its boundary. */
 FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J, real h,
-                                real mu, real d_b, int hits_ground, real mu_s, real nu, real* out) {
+                                real mu, real d_b, int hits_ground, real mu_s, real nu, int geometric, real* out) {
   real fixed[NCH], s[RAY_STRIDE];
   for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
   transmittance_fixed_end(a, T, h, mu, hits_ground, fixed);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     ray_sample(a, T, h, mu, hits_ground, d_b, fixed, i, s);
-    multiple_scattering_add(a, J, s, mu_s, nu, out);
+    multiple_scattering_add(a, J, s, mu_s, nu, geometric, out);
   }
 }
 
@@ -822,17 +853,22 @@ FN void sky_view_texel_params(const AtmosphereParameters* a, const real* grid, i
  * phase), integrated along the texel's exact ray with the 4D texture's own rules
  * (single_scattering_ray, multiple_scattering_ray); J_sum = Σ_{n≥2} J_n in the scattering
  * texture's layout (L is linear in J: the sum of each order's integral). orders_above_one 0:
- * single scattering only (J_sum unread). */
+ * single scattering only (J_sum unread). mu_s_geometric 1 (`quadrature: {mu_s_blend:
+ * geometric}`, the default): J_sum's two μ_s texels joined by mu_s_blend, as the shipped lookups
+ * join theirs (scattering_lookup_mu_s_blend): in deep twilight J falls by about e per degree of
+ * the local sun and the ray's far points see the sun lower than the camera does, so a linear
+ * blend reads the table's densities too bright (docs/atmosphere-method.md, "Deep twilight: the
+ * sky-view table's density reads"). */
 FN void sky_view_texel(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
-                       int orders_above_one, const real* grid, int n_h, int n_sun, int n_view, int n_az, int id,
-                       real* out) {
+                       int orders_above_one, int mu_s_geometric, const real* grid, int n_h, int n_sun, int n_view,
+                       int n_az, int id, real* out) {
   real h, mu, mu_s, nu, ray[NCH], mie[NCH], ms[NCH];
   int ground;
   sky_view_texel_params(a, grid, n_h, n_sun, n_view, n_az, id, &h, &mu, &mu_s, &nu, &ground);
   const real d = distance_to_nearest_boundary(a, h, mu, ground);
   single_scattering_ray(a, T, h, mu, d, ground, mu_s, nu, ray, mie);
   for (int c = 0; c < NCH; ++c) ms[c] = R(0.0);
-  if (orders_above_one != 0) multiple_scattering_ray(a, T, J_sum, h, mu, d, ground, mu_s, nu, ms);
+  if (orders_above_one != 0) multiple_scattering_ray(a, T, J_sum, h, mu, d, ground, mu_s, nu, mu_s_geometric, ms);
   const real p = rayleigh_phase(nu);
   for (int c = 0; c < NCH; ++c) {
     out[c] = ray[c] * p + ms[c];
@@ -843,13 +879,14 @@ FN void sky_view_texel(const AtmosphereParameters* a, GLOBAL const real* T, GLOB
 /* sky_view_texel from its ray's samples (ray_sample of the texel's (altitude, view) ray, shared
  * by every sun and azimuth of that ray; sample i at samples[i · RAY_STRIDE]): the same sums. */
 FN void sky_view_texel_from_samples(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
-                                    int orders_above_one, GLOBAL const real* samples, real mu_s, real nu, real* out) {
+                                    int orders_above_one, int mu_s_geometric, GLOBAL const real* samples, real mu_s,
+                                    real nu, real* out) {
   real sum_r[NCH], sum_m[NCH], ms[NCH], s[RAY_STRIDE], ray[NCH], mie[NCH];
   for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = ms[c] = R(0.0);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     for (int k = 0; k < RAY_STRIDE; ++k) s[k] = samples[i * RAY_STRIDE + k];
     single_scattering_add(a, T, s, mu_s, nu, sum_r, sum_m);
-    if (orders_above_one != 0) multiple_scattering_add(a, J_sum, s, mu_s, nu, ms);
+    if (orders_above_one != 0) multiple_scattering_add(a, J_sum, s, mu_s, nu, mu_s_geometric, ms);
   }
   single_scattering_finish(a, sum_r, sum_m, ray, mie);
   const real p = rayleigh_phase(nu);

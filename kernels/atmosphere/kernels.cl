@@ -155,7 +155,7 @@ __kernel void multiple_scattering_texels(AtmosphereParameters a, __global const 
   for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
-    multiple_scattering_add(&a, J, s, mu_s, nu, out);
+    multiple_scattering_add(&a, J, s, mu_s, nu, 0, out);
   }
   for (int c = 0; c < NCH; ++c) delta_S[id * NCH + c] = out[c];
 }
@@ -220,7 +220,8 @@ __kernel void sky_view_ray_samples(AtmosphereParameters a, __global const real* 
   for (int k = 0; k < RAY_STRIDE; ++k) samples[(long)id * RAY_STRIDE + k] = s[k];
 }
 __kernel void sky_view_texture(AtmosphereParameters a, __global const real* T, __global const real* J_sum,
-                               int orders_above_one, __global const real* grid, __global const real* samples, int n_h,
+                               int orders_above_one, int mu_s_geometric, __global const real* grid,
+                               __global const real* samples, int n_h,
                                int n_sun, int n_view, int n_az, __global real* out) {
   const int id = get_global_id(0);
   if (id >= n_h * n_sun * n_view * n_az) return;
@@ -231,7 +232,7 @@ __kernel void sky_view_texture(AtmosphereParameters a, __global const real* T, _
   sky_view_ray(&a, g, n_h, n_view, i_h, i_v, &h, &mu, &ground);
   sky_view_sun(g, n_sun, n_az, i_s, i_az, mu, &mu_s, &nu);
   __global const real* row = samples + (long)(i_h * n_view + i_v) * (SCATTERING_STEPS + 1) * RAY_STRIDE;
-  sky_view_texel_from_samples(&a, T, J_sum, orders_above_one, row, mu_s, nu, v);
+  sky_view_texel_from_samples(&a, T, J_sum, orders_above_one, mu_s_geometric, row, mu_s, nu, v);
   for (int c = 0; c < 2 * NCH; ++c) out[(long)id * 2 * NCH + c] = v[c];
 }
 

@@ -122,6 +122,28 @@ TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodesAndSixtyFourSunTexels) 
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: none\n    max_sun_zenith_deg: 110\n").scattering_mu_s, 32);
 }
 
+// A deep-twilight scene's textures hold the suns its view rays' points see: a point up to
+// scene_ray_reach_deg around the planet from the camera sees the sun that much lower (Earth:
+// 7.84° from the ground's horizon to the top of the atmosphere, plus 1.44° more from a camera at
+// 2 km, the default scene's highest). Unless the config gives max_sun_zenith_deg; other scenes keep
+// 102°.
+TEST(Twilight, DeepTwilightScenesWidenTheSunDomainToTheirRays) {
+  const double deg = 180.0 / M_PI;
+  const double top = std::acos(6360.0 / 6420.0) * deg;
+  EXPECT_NEAR(top, 7.8394, 1e-4);
+  EXPECT_EQ(t::spec_of("    preset: earth\n").max_sun_zenith_deg, 102.0);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-6, 10]}\n").max_sun_zenith_deg, 102.0);
+  EXPECT_NEAR(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n").max_sun_zenith_deg,
+              90.0 + 12.0 + top + std::acos(6360.0 / 6362.0) * deg, 1e-9);
+  EXPECT_NEAR(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-9, 0], camera_altitude_km: [0, 10]}\n")
+                  .max_sun_zenith_deg,
+              90.0 + 9.0 + top + std::acos(6360.0 / 6370.0) * deg, 1e-9);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    max_sun_zenith_deg: 104\n    scene: {sun_elevation_deg: [-12, 0]}\n")
+                .max_sun_zenith_deg,
+            104.0);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: none\n").max_sun_zenith_deg, 102.0);
+}
+
 // Why: at the twilight views above (orders ≤ 2, where the density's sphere rule is the whole
 // story of the second order), the bake with 16 horizon-packed θ nodes is not converged, 32 is.
 // A midpoint-type rule's error falls as n⁻² for a smooth integrand, so 32 nodes should sit ~4×

@@ -243,6 +243,12 @@ void set_scene_default_sizes(AtmosphereSpec& s) {
   s.store_half_mu_s = reaches_deep_twilight(s) && sky_view_of(s).on() && !s.store_radiance;
 }
 
+double scene_ray_reach_deg(const AtmosphereSpec& s) {
+  const double top = s.top_radius_km, bottom = s.bottom_radius_km;
+  const double camera = bottom + std::min(std::max(s.scene.camera_altitude_max_km, 0.0), top - bottom);
+  return (std::acos(bottom / top) + std::acos(bottom / camera)) * 180.0 / M_PI;
+}
+
 bool sizes_within_limits(const AtmosphereSpec& s) {
   for (auto axis : kSizeAxes)
     if (s.*axis > kMaxAxis) return false;
@@ -264,8 +270,10 @@ void parse_planet(const At& job, AtmosphereSpec& s) {
         .fail("expected top_radius_km > bottom_radius_km (" + format_g(s.bottom_radius_km, 6) + ")");
   if (job.has("sun_angular_radius_rad"))
     s.sun_angular_radius_rad = job.child("sun_angular_radius_rad").number_in(1e-6, 0.1, "in [1e-6, 0.1] rad");
-  if (job.has("max_sun_zenith_deg"))
+  if (job.has("max_sun_zenith_deg")) {
     s.max_sun_zenith_deg = job.child("max_sun_zenith_deg").number_in(90.5, 180.0, "in [90.5, 180] deg");
+    s.max_sun_zenith_given = true;
+  }
   if (job.has("ground_albedo")) s.ground_albedo = job.child("ground_albedo").number_in(0.0, 1.0, "in [0, 1]");
   if (job.has("solar_irradiance_scale"))
     s.solar_irradiance_scale = job.child("solar_irradiance_scale").number_in(0.0, 1e3, "in [0, 1000]");
@@ -361,9 +369,16 @@ void parse_bake(const At& job, AtmosphereSpec& s) {
 // apart below −8°, where the sky falls by about e per degree, and the orders ≥ 2 computed from
 // them come out up to 2.8× too bright there (measured against an independent quadrature:
 // docs/atmosphere.md, "Twilight"). Other scenes keep 16 and 32, which they do not need more of.
+// Such a scene's textures also hold the suns its view rays' points see (unless the config gives
+// max_sun_zenith_deg): a point up to scene_ray_reach_deg around the planet from the camera sees
+// the sun that much lower, and a lookup below the textures' lowest sun reads that sun's brighter
+// light (the camera at the ground, the sun 12° down: the textures go to 110° instead of 102°).
 void parse_checks(const At& job, AtmosphereSpec& s) {
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);
+  if (!s.max_sun_zenith_given && reaches_deep_twilight(s))
+    s.max_sun_zenith_deg = std::max(s.max_sun_zenith_deg,
+                                    std::min(180.0, 90.0 - s.scene.sun_elevation_min_deg + scene_ray_reach_deg(s)));
   if (!s.density_theta_given && s.density_horizon && reaches_deep_twilight(s))
     s.density_theta = kDeepTwilightDensityTheta;
   if (!s.sizes_given) set_scene_default_sizes(s);

@@ -34,6 +34,7 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   double bottom_radius_km = 6360.0, top_radius_km = 6420.0;
   double sun_angular_radius_rad = 0.004675;
   double max_sun_zenith_deg = 102.0;
+  bool max_sun_zenith_given = false;  // the config gave max_sun_zenith_deg (else a deep-twilight scene widens it)
   double ground_albedo = 0.1;
   double solar_irradiance_scale = 1.0;  // multiplies the ASTM G-173 spectrum (other planets' distance)
   bool spectral = false;                  // false: rgb (680, 550, 440 nm)
@@ -120,6 +121,11 @@ void set_scene_default_sizes(AtmosphereSpec& s);
 // Each axis at most kMaxAtmosphereAxis, nu at most ATMOSPHERE_NU_LIMIT, the scattering texture at
 // most kMaxScatteringTexels.
 bool sizes_within_limits(const AtmosphereSpec& s);
+
+// The widest angle around the planet's centre between a camera of the scene and a point of one of
+// its view rays inside the atmosphere: the camera's angle to its horizon plus the top of the
+// atmosphere's (deg). A ray's points see the sun up to that much lower than its camera does.
+double scene_ray_reach_deg(const AtmosphereSpec& s);
 
 // Reads a `kind: atmosphere` job entry: Bruneton's demo Earth with the entry's overrides.
 AtmosphereSpec parse_spec(const yaml::At& job, nlohmann::json& norm, Inputs& inputs);
