@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <set>
 #include <cmath>
 #include <string>
 
@@ -533,6 +534,39 @@ TEST(AutoSettingsDevice, AReferenceTooNoisyForTheToleranceIsTracedFinerBeforeThe
       t::spec_of(job + ", relative_se: 0.01}\n"), t::shared_device(), quiet, memo_given);
   ASSERT_EQ(given.record["rounds"].size(), 1u) << given.record["rounds"].dump();
   EXPECT_EQ(given.record["rounds"][0]["truth_relative_se"], 0.01);
+}
+
+// A later round does not bake again what an earlier one baked: a greedy search (judged by
+// relative radiance) that ends within its truth's noise searches on from its choice with a finer
+// truth, and that round's start is the first round's choice — judged again at the finer truth from
+// the kept bake (its try records bake_reused and no bake seconds), with the same error a fresh bake
+// of it would give where the truth is the same (the bake is deterministic on a device).
+TEST(AutoSettingsDevice, ALaterRoundJudgesTheBakesOfEarlierOnesWithoutBakingThemAgain) {
+  const std::string job =
+      "    orders: 2\n"
+      "    sizes: auto\n"
+      "    scene: {points: 6, sun_elevation_deg: [20, 60], tolerance_relative: 0.0001}\n";
+  const auto quiet = [](std::string_view, double) {};
+  specbake::Memo memo;
+  const specbake::atmosphere::AutoSearch a =
+      specbake::atmosphere::search_settings(t::spec_of(job), t::shared_device(), quiet, memo);
+  const json& rounds = a.record["rounds"];
+  ASSERT_EQ(rounds.size(), 2u) << rounds.dump();
+  ASSERT_TRUE(rounds[0].contains("searched_again")) << rounds[0].dump();
+  std::vector<json> first, second;
+  for (const json& tj : a.record["tries"]) (tj["round"] == 1 ? first : second).push_back(tj);
+  ASSERT_FALSE(first.empty());
+  ASSERT_FALSE(second.empty());
+  EXPECT_EQ(second.front()["settings"], rounds[0]["chosen"]);
+  EXPECT_EQ(second.front()["bake_reused"], true) << second.front().dump();
+  EXPECT_EQ(second.front()["bake_s"], 0.0);
+  // every try whose settings an earlier try baked reused that bake; the others baked
+  std::set<std::string> baked;
+  for (const json& tj : a.record["tries"]) {
+    const std::string settings = tj["settings"].dump();
+    EXPECT_EQ(tj.value("bake_reused", false), baked.count(settings) == 1) << tj.dump();
+    baked.insert(settings);
+  }
 }
 
 TEST(AutoSettingsCli, PlanReportsASearchThatFailsAsFailed) {

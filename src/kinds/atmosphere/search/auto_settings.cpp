@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -236,10 +237,37 @@ Progress progress_of_check(const Progress& progress, int tries) {
   };
 }
 
+// The bakes of a search's tries by their settings, kept across its rounds: a later round judges
+// more points but bakes the same probes (the model search starts each round from the same
+// start), and a bake does not depend on where it is judged. Kept while the tables held stay
+// within kKeptBakesBytes (the probes are small; a large plan's bake is kept when it fits).
+inline constexpr std::size_t kKeptBakesBytes = std::size_t(512) << 20;
+struct KeptBakes {
+  std::map<std::string, Baked> by_settings;
+  std::size_t bytes = 0;
+  static std::size_t size_of(const Baked& b) {
+    const Luts& l = b.luts;
+    const SpectralLuts& r = b.radiance;
+    return sizeof(double) * (l.transmittance.size() + l.irradiance.size() + l.scattering.size() + l.single_mie.size() +
+                             l.sky_view.size() + l.sky_view_mie.size()) +
+           sizeof(float) * (r.transmittance.size() + r.irradiance.size() + r.scattering.size() + r.single_mie.size());
+  }
+  const Baked* find(const std::string& key) const {
+    auto it = by_settings.find(key);
+    return it == by_settings.end() ? nullptr : &it->second;
+  }
+  void keep(const std::string& key, const Baked& b) {
+    const std::size_t n = size_of(b);
+    if (bytes + n > kKeptBakesBytes || by_settings.count(key)) return;
+    by_settings.emplace(key, b);
+    bytes += n;
+  }
+};
+
 // One round of the search: from `start`, every state judged at start.scene.points points.
 // `tries` counts the evaluations of all rounds (progress and the log number them).
 AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start, int round, int& tries,
-                        cl_util::Device& dev, const Progress& progress, Memo& memo) {
+                        cl_util::Device& dev, const Progress& progress, Memo& memo, KeptBakes& kept_bakes) {
   const std::vector<Refinement<AtmosphereSpec>> steps = search_refinements(spec);
   const double tolerance = judged_tolerance(spec);
   const double cost_cap = kMaxCostFactor * predicted_bake_seconds(default_sizes_of(spec));
@@ -260,7 +288,14 @@ AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start,
         };
         const auto t0 = std::chrono::steady_clock::now();
         Payload p;
-        p.baked = bake_luts(s, dev, part(0.0, 0.8), 24);
+        const std::string key = settings_json(s).dump();
+        const Baked* earlier = kept_bakes.find(key);
+        if (earlier) {
+          p.baked = *earlier;
+        } else {
+          p.baked = bake_luts(s, dev, part(0.0, 0.8), 24);
+          kept_bakes.keep(key, p.baked);
+        }
         const double bake_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         // a try needs only the judged value: against the spectral reference alone where that is the
         // judged measure (one trace per point set serves every try); the choice gets the full check
@@ -268,12 +303,14 @@ AutoSearch search_round(const AtmosphereSpec& spec, const AtmosphereSpec& start,
                       ? judge_scene(s, p.baked.luts, dev, part(0.8, 1.0), &memo)
                       : check_scene(s, p.baked.luts, p.baked.orders_used, dev, part(0.8, 1.0), &memo);
         ++tries;
-        spdlog::debug("atmosphere: auto try {} (round {}, {}): predicted {:.1f} s, baked in {:.1f} s, error {:.4g}",
-                      tries, round, refined, predicted_bake_seconds(s), bake_s, p.check.record.value);
+        spdlog::debug("atmosphere: auto try {} (round {}, {}): predicted {:.1f} s, {} {:.1f} s, error {:.4g}", tries, round,
+                      refined, predicted_bake_seconds(s), earlier ? "an earlier round's bake, judged in" : "baked in",
+                      bake_s, p.check.record.value);
         json parts = json::object();
         for (const char* name : {"lut_discretisation", "order_truncation", "spectral_sampling"})
           if (const double v = p99_of(p.check, name); std::isfinite(v)) parts[name] = v;
-        measured.push_back({{"bake_s", bake_s}, {"parts_p99_de2000", parts}});
+        measured.push_back({{"bake_s", earlier ? 0.0 : bake_s}, {"parts_p99_de2000", parts}});
+        if (earlier) measured.back()["bake_reused"] = true;
         const double error = p.check.record.value;
         return std::pair<double, Payload>{error, std::move(p)};
       };
@@ -386,6 +423,7 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
       }
     }
   }
+  KeptBakes kept_bakes;
   std::vector<AutoSearch> rounds = search_rounds<AutoSearch>(
       n,
       [&](int judged, const AutoSearch* previous) {
@@ -397,7 +435,7 @@ AutoSearch search_settings(const AtmosphereSpec& spec, cl_util::Device& dev, con
         AtmosphereSpec judged_spec = spec;
         judged_spec.scene.points = judged;
         judged_spec.scene.relative_se = relative_se;
-        return search_round(judged_spec, start, ++round, tries, dev, progress, memo);
+        return search_round(judged_spec, start, ++round, tries, dev, progress, memo, kept_bakes);
       },
       [](const AutoSearch& f) { return f.met; },
       [&](AutoSearch& f, int first) {
