@@ -85,7 +85,8 @@ constexpr const char* kRounds =
     "and the config left scene.relative_se at its default, it searches on with relative_se halved (once). The choice "
     "is then judged at the next n points of the scene (held out); when they miss the tolerance the round met, a "
     "second round searches again judged at all the points so far (the model search from its start again, its probes "
-    "being cheap there; the greedy one on from the choice) and a fresh set of n points judges its choice";
+    "being cheap there; the greedy one on from the choice) and a fresh set of n points judges its choice. A try whose "
+    "settings an earlier try baked is judged from that bake (bake_reused), not baked again";
 const std::string kModelRule =
     std::string("model: from half the default sizes and rgb, bake the start and each refinement once (one axis group "
                 "x1.5, the density's theta nodes x2 up to 64 unless the config gives them; the spectrum's next count "
