@@ -142,6 +142,15 @@ TEST(Twilight, DeepTwilightScenesWidenTheSunDomainToTheirRays) {
                 .max_sun_zenith_deg,
             104.0);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: none\n").max_sun_zenith_deg, 102.0);
+  // and its sky-view table reads the summed density's μ_s texels geometrically (the default ground
+  // scene's, sun −6…90°, linearly; `mu_s_blend: linear` everywhere linearly)
+  EXPECT_TRUE(model_of(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n")).sky_view.geometric_density);
+  const auto ground = model_of(t::spec_of("    preset: earth\n")).sky_view;
+  EXPECT_TRUE(ground.on());
+  EXPECT_FALSE(ground.geometric_density);
+  EXPECT_FALSE(model_of(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n"
+                                   "    quadrature: {mu_s_blend: linear}\n"))
+                   .sky_view.geometric_density);
 }
 
 // Why: at the twilight views above (orders ≤ 2, where the density's sphere rule is the whole

@@ -551,7 +551,7 @@ class DeviceBackend final : public PassBackend {
       q_.launch("sky_view_ray_samples", 1LL * v.altitude * v.view * (kScatteringSteps + 1),
                 {&tex_.T, &grid, v.altitude, v.view, &samples});
       q_.launch("sky_view_texture", v.texels(),
-                {&tex_.T, &J, orders_used > 1 ? 1 : 0, model_.mu_s_geometric ? 1 : 0, &grid, &samples, v.altitude, v.sun, v.view, v.azimuth,
+                {&tex_.T, &J, orders_used > 1 ? 1 : 0, v.geometric_density ? 1 : 0, &grid, &samples, v.altitude, v.sun, v.view, v.azimuth,
                  &values});
       q_.read_reals(values, 2 * v.texels() * width_, out);
       return 0;

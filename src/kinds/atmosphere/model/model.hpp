@@ -28,6 +28,9 @@ Sizes sizes_of(const AtmosphereSpec& spec);
 struct SkyView {
   double altitude_min_km = 0, altitude_max_km = 0, sun_min_deg = 0, sun_max_deg = 0;
   int altitude = 0, sun = 0, view = 0, azimuth = 0;
+  // the summed density's two μ_s texels joined by mu_s_blend along each ray (a scene in deep
+  // twilight with `mu_s_blend: geometric`), else linearly as the orders' own reads
+  bool geometric_density = false;
   bool on() const { return altitude > 0; }
   long long texels() const { return 1LL * altitude * sun * view * azimuth; }
 };
