@@ -372,7 +372,7 @@ void parse_bake(const At& job, AtmosphereSpec& s) {
 // Such a scene's textures also hold the suns its view rays' points see (unless the config gives
 // max_sun_zenith_deg): a point up to scene_ray_reach_deg around the planet from the camera sees
 // the sun that much lower, and a lookup below the textures' lowest sun reads that sun's brighter
-// light (the camera at the ground, the sun 12° down: the textures go to 110° instead of 102°).
+// light (cameras at 0–2 km, the sun 12° down: the textures go to 111.3° instead of 102°).
 void parse_checks(const At& job, AtmosphereSpec& s) {
   s.scene.sun_elevation_min_deg = std::max(s.scene.sun_elevation_min_deg, 90.0 - s.max_sun_zenith_deg);
   if (job.has("scene")) parse_scene(job.child("scene"), s);

@@ -121,7 +121,7 @@ SkyView sky_view_of(const AtmosphereSpec& s) {
   // where the density falls by e per degree of the local sun and the rays' far points see suns
   // below the camera's (docs/atmosphere-method.md, "Deep twilight: the sky-view table's density
   // reads"); above −6° the linear reads cost less and lose little (−6…0°: p99 1.36 → 1.22 ΔE of
-  // the textures' part, for 2.4× the table's time)
+  // the textures' part, for 1.6× (rgb) to 3.5× (16 wavelengths) the table's time)
   v.geometric_density = s.mu_s_geometric && reaches_deep_twilight(s);
   v.sun_min_deg = sc.sun_elevation_min_deg;
   v.sun_max_deg = std::max(std::min(sc.sun_elevation_max_deg, kSkyViewSunMaxDeg), v.sun_min_deg);
