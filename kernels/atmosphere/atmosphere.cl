@@ -525,23 +525,11 @@ FN_HOT ScatteringColumns scattering_columns(const AtmosphereParameters* a, real 
  * (s0.fx, s1.fx, f), trilinear as the reference. (The shipped lookups can blend μ_s
  * geometrically, render.glsl; here a pow per blend in the multiple scattering's inner loop
  * made a bake ~5× slower on a CPU, docs/atmosphere-method.md "Twilight"; the sky-view table's
- * reads of the summed densities blend so, scattering_lookup_mu_s_blend.) */
+ * reads of the summed densities blend so, scattering_lookup_blend.) */
 FN_HOT real scattering_blend(real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
   const real v0 = (R(1.0) - fx0) * c00 + fx0 * c01;
   const real v1 = (R(1.0) - fx1) * c10 + fx1 * c11;
   return v0 * (R(1.0) - f) + v1 * f;
-}
-/* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
-FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
-  const int wd = a->nu_size * a->mu_s_size;
-  const ScatteringColumns x = scattering_columns(a, uvwz[0], uvwz[1]);
-  const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
-  real c00[NCH], c01[NCH], c10[NCH], c11[NCH];
-  texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i0, c00);
-  texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i1, c01);
-  texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
-  texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
-  for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
 }
 /* mu_s_blend, linear where a and b lie within 2 % of each other: there the chord exceeds the
  * geometric blend by at most g (1 − g) ε² / 2 ≤ 5e-5 of the value (ε = 0.02), below float's
@@ -553,13 +541,14 @@ FN_HOT real mu_s_blend_near(real a, real b, real g) {
   const int geo = a > R(0.0) && b > R(0.0) && fmin(a, b) > R(1e-3) * fmax(a, b);
   return geo ? a * exp2(g * log2(b / a)) : a + (b - a) * g;
 }
-/* scattering_lookup with the μ_s texels joined by mu_s_blend_near: the two ν slices blended
- * linearly at each of the two μ_s columns (their μ_s weights agree, x.s0.fx = x.s1.fx up to
- * rounding: the slices' columns lie MU_S texels apart), then the two joined geometrically — one logarithm
- * per channel instead of the shipped lookup's two (which joins each slice first; the same
- * exactness for a value exponential in μ_s and linear in ν). */
-FN_HOT void scattering_lookup_mu_s_blend(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz,
-                                     real* out) {
+/* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu
+ * (geometric 0). geometric 1: the μ_s texels joined by mu_s_blend_near instead — the two ν
+ * slices blended linearly at each of the two μ_s columns (their μ_s weights agree, x.s0.fx =
+ * x.s1.fx up to rounding: the slices' columns lie MU_S texels apart), then the two joined
+ * geometrically: one logarithm per channel instead of the shipped lookup's two (which joins each
+ * slice first; the same exactness for a value exponential in μ_s and linear in ν). */
+FN_HOT void scattering_lookup_blend(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz,
+                                    int geometric, real* out) {
   const int wd = a->nu_size * a->mu_s_size;
   const ScatteringColumns x = scattering_columns(a, uvwz[0], uvwz[1]);
   const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
@@ -568,8 +557,14 @@ FN_HOT void scattering_lookup_mu_s_blend(const AtmosphereParameters* a, GLOBAL c
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i1, c01);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
-  for (int c = 0; c < NCH; ++c)
-    out[c] = mu_s_blend_near(c00[c] * (R(1.0) - x.f) + c10[c] * x.f, c01[c] * (R(1.0) - x.f) + c11[c] * x.f, x.s0.fx);
+  if (geometric)
+    for (int c = 0; c < NCH; ++c)
+      out[c] = mu_s_blend_near(c00[c] * (R(1.0) - x.f) + c10[c] * x.f, c01[c] * (R(1.0) - x.f) + c11[c] * x.f, x.s0.fx);
+  else
+    for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
+}
+FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
+  scattering_lookup_blend(a, tex, uvwz, 0, out);
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -766,10 +761,7 @@ FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const 
   uvwz[1] = scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s, nu));
   uvwz[2] = s[RAY_U_MU];
   uvwz[3] = s[RAY_U_R];
-  if (geometric)
-    scattering_lookup_mu_s_blend(a, J, uvwz, j);
-  else
-    scattering_lookup(a, J, uvwz, j);
+  scattering_lookup_blend(a, J, uvwz, geometric, j);
   for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
 }
 /* multiple_scattering_add for LANES texels of one (μ, r) row (lane k: mu_s[k], nu[k];
@@ -857,7 +849,7 @@ FN void sky_view_texel_params(const AtmosphereParameters* a, const real* grid, i
  * single scattering only (J_sum unread). mu_s_geometric 1 (SkyView::geometric_density: a scene
  * in deep twilight with `quadrature: {mu_s_blend: geometric}`, the default): J_sum's two μ_s
  * texels joined by mu_s_blend, as the shipped lookups join theirs
- * (scattering_lookup_mu_s_blend): in deep twilight J falls by about e per degree of
+ * (scattering_lookup_blend): in deep twilight J falls by about e per degree of
  * the local sun and the ray's far points see the sun lower than the camera does, so a linear
  * blend reads the table's densities too bright (docs/atmosphere-method.md, "Deep twilight: the
  * sky-view table's density reads"). */

@@ -342,9 +342,9 @@ double bake_seconds(const AtmosphereSpec& spec) {
   // per Mtexel), a per-channel part as the orders'; reading the density's μ_s texels geometrically
   // (mu_s_blend) adds a logarithm per channel and sample (measured: rgb 5 × 33 × 64 × 32 texels
   // 0.78 → 1.26 s, 16 wavelengths 5 × 45 × 64 × 32 1.5 → 5.3 s: 1.9 + 0.6 s per channel per Mtexel)
-  const double sky_view_per_mtexel =
-      sky_view_of(spec).geometric_density ? 1.9 + 0.6 * width : 4.4 * (1.45 + 0.015 * width) / 1.5;
-  const double sky_view = passes * sky_view_of(spec).texels() / 1048576.0 * sky_view_per_mtexel;
+  const SkyView table = sky_view_of(spec);
+  const double sky_view_per_mtexel = table.geometric_density ? 1.9 + 0.6 * width : 4.4 * (1.45 + 0.015 * width) / 1.5;
+  const double sky_view = passes * table.texels() / 1048576.0 * sky_view_per_mtexel;
   return bake_files_seconds(spec) + orders * passes * theta * per_order +
          passes * (1e-5 * transmittance + orders * 6e-5 * irradiance) + interpolation + sky_view;
 }
