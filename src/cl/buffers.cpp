@@ -55,10 +55,10 @@ void set_real_arg(Device& dev, cl::Kernel& k, cl_uint index, double value) {
   });
 }
 
-void run_1d(Device& dev, cl::Kernel& k, std::size_t count) {
+void run_1d(Device& dev, cl::Kernel& k, std::size_t count, std::size_t local) {
   checked("running a kernel", [&] {
     cl::Event ev;
-    dev.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(count), cl::NullRange, nullptr, &ev);
+    dev.queue().enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(count), local ? cl::NDRange(local) : cl::NullRange, nullptr, &ev);
     dev.profiler().record(ev);
     dev.profiler().wait([&] { dev.queue().finish(); });
     return 0;

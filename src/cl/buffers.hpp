@@ -17,6 +17,7 @@ cl::Buffer device_real(Device& dev, std::size_t count);  // uninitialised, read-
 std::vector<double> download_real(Device& dev, const cl::Buffer& buf, std::size_t count);
 void set_real_arg(Device& dev, cl::Kernel& k, cl_uint index, double value);
 // Enqueue + finish; the command and the wait are recorded in dev.profiler(), as are the reads.
-void run_1d(Device& dev, cl::Kernel& k, std::size_t count);
+// local: the work-group size (0: the driver chooses).
+void run_1d(Device& dev, cl::Kernel& k, std::size_t count, std::size_t local = 0);
 
 }  // namespace specbake::cl_util

@@ -731,7 +731,12 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, static_cast<cl_int>(mode));
       k.setArg(i++, out_buf);
       k.setArg(i++, pilot_buf);
-      cl_util::run_1d(dev_, k, P_.n_points * static_cast<std::size_t>(stride));
+      // On a CPU one work item a group: PoCL's own choice (the largest divisor of the launch) made
+      // a launch of a few hundred walks one group, run by one thread, and the walks' costs differ
+      // by orders of magnitude between points, so groups of one balance best (2 cores, the same
+      // bytes: twilight 24 points 14.7 -> 7.6 s, daylight 128 points 7.9 -> 6.9 s; groups of 4
+      // and 16: 7.1 and 7.2 s). On a GPU the driver chooses.
+      cl_util::run_1d(dev_, k, P_.n_points * static_cast<std::size_t>(stride), dev_.info().type == "cpu" ? 1 : 0);
       if (mode == TRUTH_MODE_PILOT) *pilot = cl_util::download_real(dev_, pilot_buf, n_pilot);
       return cl_util::download_real(dev_, out_buf, n_out);
     });
