@@ -75,6 +75,7 @@
 /* The medium table (host-built, one per channel group): [TRUTH_SHELLS][NCH] majorants, then
  * the number of kink altitudes of the density profiles and up to TRUTH_MAX_KINKS of them
  * (ascending, km): where a profile's layer changes or its clamp to [0, 1] sets in; then the
+ * spacing of the exact depths' altitude levels (truth_depth_level_spacing, km); then the
  * optical depth towards the sun [TRUTH_SUN_H][TRUTH_SUN_MU][NCH] at the nodes of
  * truth_sun_node (truth_sun_depth_table: it only shapes a pdf); then the log of the light
  * scattered once towards a point, [TRUTH_SKY_H][TRUTH_SKY_MU][NCH] at the nodes of
@@ -83,16 +84,21 @@
 #define TRUTH_KINKS_AT (TRUTH_SHELLS * NCH)
 #define TRUTH_SUN_H 48
 #define TRUTH_SUN_MU 64
-#define TRUTH_SUN_AT (TRUTH_KINKS_AT + 1 + TRUTH_MAX_KINKS)
+#define TRUTH_LEVELS_AT (TRUTH_KINKS_AT + 1 + TRUTH_MAX_KINKS)
+#define TRUTH_SUN_AT (TRUTH_LEVELS_AT + 1)
 #define TRUTH_SKY_H 16
 #define TRUTH_SKY_MU 32
 #define TRUTH_SKY_AT (TRUTH_SUN_AT + TRUTH_SUN_H * TRUTH_SUN_MU * NCH)
 #define TRUTH_MEDIUM_SIZE (TRUTH_SKY_AT + TRUTH_SKY_H * TRUTH_SKY_MU * NCH)
 /* Exact optical depths (truth_optical_depth): the ray is cut where it crosses an altitude
- * level, TRUTH_DEPTH_LEVELS equal levels over the atmosphere's thickness and every kink, so
- * that each piece changes altitude monotonically by at most (rt − rb)/TRUTH_DEPTH_LEVELS (Earth:
- * 5 km, ~4 Mie scale heights) and holds no kink; each piece by 6-point Gauss–Legendre. */
-#define TRUTH_DEPTH_LEVELS 12
+ * level and at every kink, so that each piece changes altitude monotonically by at most the
+ * levels' spacing and holds no kink; each piece by 8-point Gauss–Legendre. The spacing
+ * (truth_depth_level_spacing): equal levels, at least TRUTH_DEPTH_LEVELS of them over the
+ * atmosphere's thickness and close enough that a piece spans at most TRUTH_DEPTH_SCALES scale
+ * heights of the steepest exponential layer of the profiles (Earth: 7 levels of 8.6 km, 7.1 Mie
+ * scale heights; Mars: 4 of 20 km). */
+#define TRUTH_DEPTH_LEVELS 4
+#define TRUTH_DEPTH_SCALES R(8.0)
 #define TRUTH_MAX_EVENTS 1000   /* all-orders walks stop here (counted as truncated) */
 #define TRUTH_RATIO_BOOST R(2.0)
 
@@ -212,17 +218,28 @@ FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real m
  * distance from its point closest to the planet's centre, where r² − r_b² = ρ_t² + x² with
  * ρ_t² = ρ² − (r μ)² (altitude-based, as everywhere here). Altitude levels h_j cross the ray at
  * x = ±√(ρ_j² − ρ_t²); between consecutive crossings (and x = 0) the altitude is monotone and
- * changes by at most one level spacing, with no kink inside, so 6-point Gauss–Legendre in x is
- * accurate: the integrand is a few exponentials whose exponent changes by ≲ 4 over a piece, a
- * Gaussian in x at a tangent point (relative error ≤ 3e-8 against a fine Simpson rule,
- * tests/atmosphere/truth_test.cpp; 24 levels gave ≤ 1e-8 for twice the cost, 4 points 2e-5). Levels:
- * TRUTH_DEPTH_LEVELS equal ones and the medium table's kinks, merged in ascending order. */
+ * changes by at most one level spacing, with no kink inside, so 8-point Gauss–Legendre in x is
+ * accurate: the integrand is a few exponentials whose exponent changes by at most
+ * TRUTH_DEPTH_SCALES over a piece, a Gaussian in x at a tangent point. The rule's error for
+ * e^{−E u} on [0, 1], at most (8!)⁴ E¹⁷ / (17 (16!)³) relative, is ≤ 4e-8 for E ≤ 8 (seen
+ * ≤ 3e-9 against a fine Simpson rule, tests/atmosphere/truth_test.cpp, where the earlier 12
+ * levels of 5 km with 6 points gave 3e-8 for ~1.1× the time). Levels: equal ones
+ * (truth_depth_level_spacing) and the medium table's kinks, merged in ascending order. */
+FN real truth_depth_level_spacing(const AtmosphereParameters* a) {
+  real dh = thickness(a) / (real)TRUTH_DEPTH_LEVELS;
+  const DensityProfile* profiles[3] = {&a->rayleigh_density, &a->mie_density, &a->absorption_density};
+  for (int p = 0; p < 3; ++p)
+    for (int l = 0; l < 2; ++l)
+      if (profiles[p]->exp_term[l] != R(0.0) && profiles[p]->exp_scale[l] != R(0.0))
+        dh = fmin(dh, TRUTH_DEPTH_SCALES / fabs(profiles[p]->exp_scale[l]));
+  return thickness(a) / ceil(thickness(a) / dh * (R(1.0) - R(1e-12)));
+}
 FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, real x0, real x1) {
-  const real x[3] = {R(0.2386191860831969), R(0.6612093864662645), R(0.9324695142031521)};
-  const real w[3] = {R(0.4679139345726910), R(0.3607615730481386), R(0.1713244923791704)};
+  const real x[4] = {R(0.1834346424956498), R(0.5255324099163290), R(0.7966664774136268), R(0.9602898564975363)};
+  const real w[4] = {R(0.3626837833783620), R(0.3137066458778874), R(0.2223810344533745), R(0.1012285362903762)};
   const real mid = R(0.5) * (x0 + x1), half_len = R(0.5) * (x1 - x0);
   real sum = R(0.0);
-  for (int i = 0; i < 3; ++i)
+  for (int i = 0; i < 4; ++i)
     for (int side = 0; side < 2; ++side) {
       const real xx = side == 0 ? mid - half_len * x[i] : mid + half_len * x[i];
       sum += w[i] * truth_extinction(a, c, altitude_of_rho2(a, rho_t2 + xx * xx));
@@ -234,16 +251,17 @@ FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, rea
 FN real truth_monotone_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real rho_t2, real lo,
                              real hi) {
   if (!(hi > lo)) return R(0.0);
-  const real dh = thickness(a) / (real)TRUTH_DEPTH_LEVELS;
+  const real dh = medium[TRUTH_LEVELS_AT];
+  const int n_levels = (int)(thickness(a) / dh + R(0.5));
   const int n_kinks = (int)medium[TRUTH_KINKS_AT];
   int j = 1, k = 0;
   real depth = R(0.0), prev = lo;
   for (;;) {
-    /* the next level of the two ascending lists merged: j·dh (j ≤ TRUTH_DEPTH_LEVELS) or kink k */
+    /* the next level of the two ascending lists merged: j·dh (j ≤ n_levels) or kink k */
     real level;
-    if (k < n_kinks && (j > TRUTH_DEPTH_LEVELS || medium[TRUTH_KINKS_AT + 1 + k] < (real)j * dh))
+    if (k < n_kinks && (j > n_levels || medium[TRUTH_KINKS_AT + 1 + k] < (real)j * dh))
       level = medium[TRUTH_KINKS_AT + 1 + k++];
-    else if (j <= TRUTH_DEPTH_LEVELS)
+    else if (j <= n_levels)
       level = (real)j++ * dh;
     else
       break;

@@ -14,6 +14,7 @@ using std::cbrt, std::fabs, std::log;
 inline constexpr int kTruthOutStride = TRUTH_OUT_STRIDE;
 inline constexpr int kTruthChannels = NCH;
 inline constexpr int kTruthKinksAt = TRUTH_KINKS_AT;
+inline constexpr int kTruthLevelsAt = TRUTH_LEVELS_AT;
 inline constexpr int kTruthMediumSize = TRUTH_MEDIUM_SIZE;
 inline constexpr int kTruthSunAt = TRUTH_SUN_AT;
 inline constexpr int kTruthSkyAt = TRUTH_SKY_AT;
