@@ -96,8 +96,11 @@
  * (truth_depth_level_spacing): equal levels, at least TRUTH_DEPTH_LEVELS of them over the
  * atmosphere's thickness and close enough that a piece spans at most TRUTH_DEPTH_SCALES scale
  * heights of the steepest exponential layer of the profiles (Earth: 7 levels of 8.6 km, 7.1 Mie
- * scale heights; Mars: 4 of 20 km). */
+ * scale heights; Mars: 4 of 20 km; a 10 m scale height, the least `scale_height_km` takes, 750
+ * levels on Earth), at most TRUTH_DEPTH_MAX_LEVELS (a cost bound for raw exp_scale_per_km
+ * layers steeper than that, where the pieces span more scale heights and the error grows). */
 #define TRUTH_DEPTH_LEVELS 4
+#define TRUTH_DEPTH_MAX_LEVELS 1024
 #define TRUTH_DEPTH_SCALES R(8.0)
 #define TRUTH_MAX_EVENTS 1000   /* all-orders walks stop here (counted as truncated) */
 #define TRUTH_RATIO_BOOST R(2.0)
@@ -222,8 +225,9 @@ FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real m
  * accurate: the integrand is a few exponentials whose exponent changes by at most
  * TRUTH_DEPTH_SCALES over a piece, a Gaussian in x at a tangent point. The rule's error for
  * e^{−E u} on [0, 1], at most (8!)⁴ E¹⁷ / (17 (16!)³) relative, is ≤ 4e-8 for E ≤ 8 (seen
- * ≤ 3e-9 against a fine Simpson rule, tests/atmosphere/truth_test.cpp, where the earlier 12
- * levels of 5 km with 6 points gave 3e-8 for ~1.1× the time). Levels: equal ones
+ * ≤ 5e-9 against a fine Simpson rule, tests/atmosphere/truth_test.cpp, where the earlier 12
+ * fixed levels with 6 points gave 3e-8 on Earth, in about the same time, and 8e-7 on a 0.3 km
+ * haze). Levels: equal ones
  * (truth_depth_level_spacing) and the medium table's kinks, merged in ascending order. */
 FN real truth_depth_level_spacing(const AtmosphereParameters* a) {
   real dh = thickness(a) / (real)TRUTH_DEPTH_LEVELS;
@@ -232,7 +236,7 @@ FN real truth_depth_level_spacing(const AtmosphereParameters* a) {
     for (int l = 0; l < 2; ++l)
       if (profiles[p]->exp_term[l] != R(0.0) && profiles[p]->exp_scale[l] != R(0.0))
         dh = fmin(dh, TRUTH_DEPTH_SCALES / fabs(profiles[p]->exp_scale[l]));
-  return thickness(a) / ceil(thickness(a) / dh * (R(1.0) - R(1e-12)));
+  return thickness(a) / fmin(ceil(thickness(a) / dh * (R(1.0) - R(1e-12))), (real)TRUTH_DEPTH_MAX_LEVELS);
 }
 FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, real x0, real x1) {
   const real x[4] = {R(0.1834346424956498), R(0.5255324099163290), R(0.7966664774136268), R(0.9602898564975363)};

@@ -533,8 +533,8 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
 }  // namespace
 
 // The medium table of one channel group (path_tracer.cl): [TRUTH_SHELLS][kGroup] majorants,
-// then the kink altitudes' count and the kinks, the exact depths' level spacing, and the sun table (the sky table is left at 0:
-// prepare() fills it where walks read it).
+// then the kink altitudes' count and the kinks, the exact depths' level spacing, and the sun
+// table (the sky table is left at 0: prepare() fills it where walks read it).
 std::vector<double> medium_table(const Model& m, const Channels& group) {
   const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
   const double t = m.top_radius_km - m.bottom_radius_km, width = t / TRUTH_SHELLS;
