@@ -75,7 +75,7 @@
 /* The medium table (host-built, one per channel group): [TRUTH_SHELLS][NCH] majorants, then
  * the number of kink altitudes of the density profiles and up to TRUTH_MAX_KINKS of them
  * (ascending, km): where a profile's layer changes or its clamp to [0, 1] sets in; then the
- * spacing of the exact depths' altitude levels (truth_depth_level_spacing, km); then the
+ * number of the exact depths' equal altitude levels (truth_depth_level_count); then the
  * optical depth towards the sun [TRUTH_SUN_H][TRUTH_SUN_MU][NCH] at the nodes of
  * truth_sun_node (truth_sun_depth_table: it only shapes a pdf); then the log of the light
  * scattered once towards a point, [TRUTH_SKY_H][TRUTH_SKY_MU][NCH] at the nodes of
@@ -92,8 +92,8 @@
 #define TRUTH_MEDIUM_SIZE (TRUTH_SKY_AT + TRUTH_SKY_H * TRUTH_SKY_MU * NCH)
 /* Exact optical depths (truth_optical_depth): the ray is cut where it crosses an altitude
  * level and at every kink, so that each piece changes altitude monotonically by at most the
- * levels' spacing and holds no kink; each piece by 8-point Gauss–Legendre. The spacing
- * (truth_depth_level_spacing): equal levels, at least TRUTH_DEPTH_LEVELS of them over the
+ * levels' spacing and holds no kink; each piece by 8-point Gauss–Legendre. The levels
+ * (truth_depth_level_count): equal ones, at least TRUTH_DEPTH_LEVELS of them over the
  * atmosphere's thickness and close enough that a piece spans at most TRUTH_DEPTH_SCALES scale
  * heights of the steepest exponential layer of the profiles (Earth: 7 levels of 8.6 km, 7.1 Mie
  * scale heights; Mars: 4 of 20 km; a 10 m scale height, the least `scale_height_km` takes, 750
@@ -227,16 +227,16 @@ FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real m
  * e^{−E u} on [0, 1], at most (8!)⁴ E¹⁷ / (17 (16!)³) relative, is ≤ 4e-8 for E ≤ 8 (seen
  * ≤ 5e-9 against a fine Simpson rule, tests/atmosphere/truth_test.cpp, where the earlier 12
  * fixed levels with 6 points gave 3e-8 on Earth, in about the same time, and 8e-7 on a 0.3 km
- * haze). Levels: equal ones
- * (truth_depth_level_spacing) and the medium table's kinks, merged in ascending order. */
-FN real truth_depth_level_spacing(const AtmosphereParameters* a) {
+ * haze). Levels: equal ones (truth_depth_level_count) and the medium table's kinks, merged in
+ * ascending order. */
+FN int truth_depth_level_count(const AtmosphereParameters* a) {
   real dh = thickness(a) / (real)TRUTH_DEPTH_LEVELS;
   const DensityProfile* profiles[3] = {&a->rayleigh_density, &a->mie_density, &a->absorption_density};
   for (int p = 0; p < 3; ++p)
     for (int l = 0; l < 2; ++l)
       if (profiles[p]->exp_term[l] != R(0.0) && profiles[p]->exp_scale[l] != R(0.0))
         dh = fmin(dh, TRUTH_DEPTH_SCALES / fabs(profiles[p]->exp_scale[l]));
-  return thickness(a) / fmin(ceil(thickness(a) / dh * (R(1.0) - R(1e-12))), (real)TRUTH_DEPTH_MAX_LEVELS);
+  return (int)fmin(ceil(thickness(a) / dh * (R(1.0) - R(1e-12))), (real)TRUTH_DEPTH_MAX_LEVELS);
 }
 FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, real x0, real x1) {
   const real x[4] = {R(0.1834346424956498), R(0.5255324099163290), R(0.7966664774136268), R(0.9602898564975363)};
@@ -255,8 +255,8 @@ FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, rea
 FN real truth_monotone_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real rho_t2, real lo,
                              real hi) {
   if (!(hi > lo)) return R(0.0);
-  const real dh = medium[TRUTH_LEVELS_AT];
-  const int n_levels = (int)(thickness(a) / dh + R(0.5));
+  const int n_levels = (int)medium[TRUTH_LEVELS_AT];
+  const real dh = thickness(a) / (real)n_levels;
   const int n_kinks = (int)medium[TRUTH_KINKS_AT];
   int j = 1, k = 0;
   real depth = R(0.0), prev = lo;

@@ -1176,7 +1176,7 @@ TEST(TruthTracking, ExactOpticalDepthMatchesAFineQuadrature) {
           worst = std::max(worst, std::fabs(got - want) / want);
         }
     }
-    std::printf("exact optical depth (bottom radius %.1f km, level spacing %.3g km): worst relative error %.2g\n",
+    std::printf("exact optical depth (bottom radius %.1f km, %g levels): worst relative error %.2g\n",
                 s.bottom_radius_km, medium[ref3::kTruthLevelsAt], worst);
   }
 }

@@ -533,7 +533,7 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
 }  // namespace
 
 // The medium table of one channel group (path_tracer.cl): [TRUTH_SHELLS][kGroup] majorants,
-// then the kink altitudes' count and the kinks, the exact depths' level spacing, and the sun
+// then the kink altitudes' count and the kinks, the exact depths' level count, and the sun
 // table (the sky table is left at 0: prepare() fills it where walks read it).
 std::vector<double> medium_table(const Model& m, const Channels& group) {
   const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
@@ -542,7 +542,7 @@ std::vector<double> medium_table(const Model& m, const Channels& group) {
   const std::vector<double> kinks = kink_altitudes(a);
   out[ref3::kTruthKinksAt] = static_cast<double>(kinks.size());
   std::copy(kinks.begin(), kinks.end(), out.begin() + ref3::kTruthKinksAt + 1);
-  out[ref3::kTruthLevelsAt] = ref3::truth_depth_level_spacing(&a);
+  out[ref3::kTruthLevelsAt] = static_cast<double>(ref3::truth_depth_level_count(&a));
   for (int j = 0; j < TRUTH_SHELLS; ++j) {
     const double lo = std::max(0.0, (j - kShellOverlap) * width);
     const double hi = t * (1.0 + 1e-9);
