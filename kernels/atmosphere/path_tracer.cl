@@ -71,37 +71,35 @@
 #endif
 
 #define TRUTH_SHELLS 256        /* the medium table's majorants: shells of thickness (rt − rb)/TRUTH_SHELLS */
-#define TRUTH_MAX_KINKS 32      /* kink altitudes of the profiles the medium table can hold */
+#define TRUTH_MAX_KINKS 32      /* kink altitudes of the profiles the host splits tables at */
 /* The medium table (host-built, one per channel group): [TRUTH_SHELLS][NCH] majorants, then
- * the number of kink altitudes of the density profiles and up to TRUTH_MAX_KINKS of them
- * (ascending, km): where a profile's layer changes or its clamp to [0, 1] sets in; then the
- * number of the exact depths' equal altitude levels (truth_depth_level_count); then the
- * optical depth towards the sun [TRUTH_SUN_H][TRUTH_SUN_MU][NCH] at the nodes of
- * truth_sun_node (truth_sun_depth_table: it only shapes a pdf); then the log of the light
+ * the number of the exact depths' cut altitudes, TRUTH_MAX_CUTS of them (ascending, km, the
+ * top of the atmosphere last; truth_depth_piece_error below says how the host places them) and
+ * TRUTH_MAX_CUTS Gauss–Legendre orders (5 or 8), one per piece below a cut; then the optical depth towards the sun [TRUTH_SUN_H][TRUTH_SUN_MU][NCH] at the nodes
+ * of truth_sun_node (truth_sun_depth_table: it only shapes a pdf); then the log of the light
  * scattered once towards a point, [TRUTH_SKY_H][TRUTH_SKY_MU][NCH] at the nodes of
  * truth_sky_node (truth_sky_light_table: it only shapes a pdf; all 0 where no walk of the
  * trace reads it). */
-#define TRUTH_KINKS_AT (TRUTH_SHELLS * NCH)
+#define TRUTH_DEPTH_LEVELS 4
+#define TRUTH_DEPTH_MAX_LEVELS 1024
+#define TRUTH_MAX_CUTS (TRUTH_DEPTH_MAX_LEVELS + TRUTH_MAX_KINKS + 1)
+#define TRUTH_CUTS_AT (TRUTH_SHELLS * NCH)
 #define TRUTH_SUN_H 48
 #define TRUTH_SUN_MU 64
-#define TRUTH_LEVELS_AT (TRUTH_KINKS_AT + 1 + TRUTH_MAX_KINKS)
-#define TRUTH_SUN_AT (TRUTH_LEVELS_AT + 1)
+#define TRUTH_SUN_AT (TRUTH_CUTS_AT + 1 + 2 * TRUTH_MAX_CUTS)
 #define TRUTH_SKY_H 16
 #define TRUTH_SKY_MU 32
 #define TRUTH_SKY_AT (TRUTH_SUN_AT + TRUTH_SUN_H * TRUTH_SUN_MU * NCH)
 #define TRUTH_MEDIUM_SIZE (TRUTH_SKY_AT + TRUTH_SKY_H * TRUTH_SKY_MU * NCH)
-/* Exact optical depths (truth_optical_depth): the ray is cut where it crosses an altitude
- * level and at every kink, so that each piece changes altitude monotonically by at most the
- * levels' spacing and holds no kink; each piece by 8-point Gauss–Legendre. The levels
- * (truth_depth_level_count): equal ones, at least TRUTH_DEPTH_LEVELS of them over the
- * atmosphere's thickness and close enough that a piece spans at most TRUTH_DEPTH_SCALES scale
- * heights of the steepest exponential layer of the profiles (Earth: 7 levels of 8.6 km, 7.1 Mie
- * scale heights; Mars: 4 of 20 km; a 10 m scale height, the least `scale_height_km` takes, 750
- * levels on Earth), at most TRUTH_DEPTH_MAX_LEVELS (a cost bound for raw exp_scale_per_km
- * layers steeper than that, where the pieces span more scale heights and the error grows). */
-#define TRUTH_DEPTH_LEVELS 4
-#define TRUTH_DEPTH_MAX_LEVELS 1024
-#define TRUTH_DEPTH_SCALES R(8.0)
+/* Exact optical depths (truth_optical_depth): the ray is cut where it crosses a cut altitude
+ * (every kink of the profiles, and levels between them), so that each piece changes altitude
+ * monotonically, holds no kink and is integrated by 5- or 8-point Gauss–Legendre to the
+ * relative error TRUTH_DEPTH_ERROR. The host places the levels (medium_table, truth.cpp) from
+ * the bottom up, each piece as long as truth_depth_piece_error allows with 8 points, at most the atmosphere's
+ * thickness / TRUTH_DEPTH_LEVELS, then gives each piece 5 points where they suffice; more than TRUTH_DEPTH_MAX_LEVELS of them (raw
+ * exp_scale_per_km layers much steeper than scale_height_km's least 10 m) fall back to that
+ * many equal levels, a cost bound beyond which the stated error does not hold. */
+#define TRUTH_DEPTH_ERROR R(4e-8)
 #define TRUTH_MAX_EVENTS 1000   /* all-orders walks stop here (counted as truncated) */
 #define TRUTH_RATIO_BOOST R(2.0)
 
@@ -219,65 +217,119 @@ FN real truth_segment_depth(const AtmosphereParameters* a, int c, real h, real m
  * ratio tracking, for the long grazing rays of twilight whose ratio-tracking variance,
  * e^{τ/boost} − 1, is what limits the truth there. Along the ray x = s + r μ is the signed
  * distance from its point closest to the planet's centre, where r² − r_b² = ρ_t² + x² with
- * ρ_t² = ρ² − (r μ)² (altitude-based, as everywhere here). Altitude levels h_j cross the ray at
- * x = ±√(ρ_j² − ρ_t²); between consecutive crossings (and x = 0) the altitude is monotone and
- * changes by at most one level spacing, with no kink inside, so 8-point Gauss–Legendre in x is
- * accurate: the integrand is a few exponentials whose exponent changes by at most
- * TRUTH_DEPTH_SCALES over a piece, a Gaussian in x at a tangent point. The rule's error for
- * e^{−E u} on [0, 1], at most (8!)⁴ E¹⁷ / (17 (16!)³) relative, is ≤ 4e-8 for E ≤ 8 (seen
- * ≤ 5e-9 against a fine Simpson rule, tests/atmosphere/truth_test.cpp, where the earlier 12
- * fixed levels with 6 points gave 3e-8 on Earth, in about the same time, and 8e-7 on a 0.3 km
- * haze). Levels: equal ones (truth_depth_level_count) and the medium table's kinks, merged in
- * ascending order. */
-FN int truth_depth_level_count(const AtmosphereParameters* a) {
-  real dh = thickness(a) / (real)TRUTH_DEPTH_LEVELS;
-  const DensityProfile* profiles[3] = {&a->rayleigh_density, &a->mie_density, &a->absorption_density};
-  for (int p = 0; p < 3; ++p)
-    for (int l = 0; l < 2; ++l)
-      if (profiles[p]->exp_term[l] != R(0.0) && profiles[p]->exp_scale[l] != R(0.0))
-        dh = fmin(dh, TRUTH_DEPTH_SCALES / fabs(profiles[p]->exp_scale[l]));
-  return (int)fmin(ceil(thickness(a) / dh * (R(1.0) - R(1e-12))), (real)TRUTH_DEPTH_MAX_LEVELS);
+ * ρ_t² = ρ² − (r μ)² (altitude-based, as everywhere here). A cut altitude h_j crosses the ray
+ * at x = ±√(ρ_j² − ρ_t²); between consecutive crossings (and x = 0) the altitude is monotone
+ * between two consecutive cuts, with no kink inside, so Gauss–Legendre in x is accurate: the
+ * integrand is a sum of exponentials in the altitude (a Gaussian in x at a tangent point) plus
+ * linear and constant terms, which the rule integrates exactly.
+ *
+ * The error of one piece. For e^{−E u} on [0, 1] the n-point rule's relative error is at most
+ * (n!)⁴ E^{2n} / ((2n+1) ((2n)!)³) · E / (1 − e^{−E}) (the rule's remainder with the 2n-th
+ * derivative bounded by E^{2n}): 3.8e-8 at E = 8 for n = 8, growing as E¹⁷; 4e-8 at E = 3.3
+ * for n = 5, which Earth's pieces above the aerosols meet (Rayleigh's E ≤ 1.9). Over a piece
+ * between the altitudes h0 < h1 an exponential layer a e^{b h} has E = |b| (h1 − h0), and
+ * its error counts in the piece's depth only by its share of σ_t there, at most its largest
+ * value over the piece over the least σ_t over the piece. truth_depth_piece_error adds those
+ * up for channel c: a steep layer that is a small part of σ_t (Earth's Mie aerosols above
+ * ~10 km, 1e-3 of σ_t at 10 km and 1e-8 at 25 km) then spans more of its scale heights a piece
+ * than one that dominates (there E ≤ 8 for 8 points, the rule every piece met when the levels
+ * were equal ones 8 scale heights of the steepest layer apart). Earth: 7 pieces from the ground
+ * to the top, 4 of them of 5 points (equal levels: 10 of 8); a 0.3 km haze 8 (28); errors seen
+ * ≤ 4e-9 on Earth, 3e-8 on Mars (tests/atmosphere/truth_test.cpp); a 24-point twilight trace
+ * 1.47× faster. */
+FN real truth_gauss_relative_error(int n, real E) {
+  if (!(E > R(1e-6))) return R(0.0);
+  const real e2 = E * E, e4 = e2 * e2, e8 = e4 * e4;
+  /* (n!)⁴ / ((2n+1) ((2n)!)³): 3.94497e-13 (n = 5), 1.69736e-23 (n = 8) */
+  const real tail = n == 5 ? R(3.94497e-13) * e8 * e2 : R(1.69736e-23) * e8 * e8;
+  return tail * E / (R(1.0) - exp(-E));
 }
-FN real truth_piece_depth(const AtmosphereParameters* a, int c, real rho_t2, real x0, real x1) {
-  const real x[4] = {R(0.1834346424956498), R(0.5255324099163290), R(0.7966664774136268), R(0.9602898564975363)};
-  const real w[4] = {R(0.3626837833783620), R(0.3137066458778874), R(0.2223810344533745), R(0.1012285362903762)};
+/* The least of one layer a·exp(b·h) + c·h + d over [lo, hi] (no kink inside, so no clamp
+ * sets in): at an end, or for a > 0 (convex) possibly where a·b·exp(b·h) + c = 0. */
+FN real layer_min_over(const DensityProfile* p, int layer, real lo, real hi) {
+  real m = fmin(layer_density(p, layer, lo), layer_density(p, layer, hi));
+  const real ea = p->exp_term[layer], eb = p->exp_scale[layer], lc = p->linear_term[layer];
+  if (ea > R(0.0) && eb != R(0.0) && lc != R(0.0)) {
+    const real arg = -lc / (ea * eb);
+    if (arg > R(0.0)) {
+      const real h_star = log(arg) / eb;
+      if (h_star > lo && h_star < hi) m = fmin(m, layer_density(p, layer, h_star));
+    }
+  }
+  return m;
+}
+/* The layer of profile p that holds the piece [h0, h1] (no kink inside: one layer). */
+FN int piece_layer(const DensityProfile* p, real h0, real h1) { return R(0.5) * (h0 + h1) < p->width[0] ? 0 : 1; }
+/* The estimated relative error of the n-point rule (n = 5 or 8) over a piece between the
+ * altitudes h0 < h1 (no kink inside) for channel c (see above). */
+FN real truth_depth_piece_error(const AtmosphereParameters* a, int c, int n, real h0, real h1) {
+  const DensityProfile* profiles[3] = {&a->rayleigh_density, &a->mie_density, &a->absorption_density};
+  const real beta[3] = {a->rayleigh_scattering[c], a->mie_extinction[c], a->absorption_extinction[c]};
+  real sigma_min = R(0.0);
+  for (int p = 0; p < 3; ++p) {
+    const int l = piece_layer(profiles[p], h0, h1);
+    sigma_min += beta[p] * layer_min_over(profiles[p], l, h0, h1);
+  }
+  real error = R(0.0);
+  for (int p = 0; p < 3; ++p) {
+    const DensityProfile* q = profiles[p];
+    const int l = piece_layer(q, h0, h1);
+    const real ea = q->exp_term[l], eb = q->exp_scale[l];
+    if (ea == R(0.0) || eb == R(0.0) || beta[p] == R(0.0)) continue;
+    /* a layer clamped to 0 or 1 over the piece is a constant there (the clamp's state is the
+     * same all over a piece without a kink) */
+    const real mid = R(0.5) * (h0 + h1);
+    const real y = ea * exp(eb * mid) + q->linear_term[l] * mid + q->constant_term[l];
+    if (y <= R(0.0) || y >= R(1.0)) continue;
+    const real term_max = fabs(ea) * exp(eb * (eb > R(0.0) ? h1 : h0));
+    const real share = sigma_min > R(0.0) ? fmin(beta[p] * term_max / sigma_min, R(1.0)) : R(1.0);
+    error += share * truth_gauss_relative_error(n, fabs(eb) * (h1 - h0));
+  }
+  return error;
+}
+/* σ_t at the point x of the ray whose tangent point is at ρ_t². */
+FN real truth_extinction_at_x(const AtmosphereParameters* a, int c, real rho_t2, real x) {
+  return truth_extinction(a, c, altitude_of_rho2(a, rho_t2 + x * x));
+}
+/* ∫ σ_t dx over [x0, x1] of that ray, by n-point Gauss–Legendre (n = 5 or 8). */
+FN real truth_piece_depth(const AtmosphereParameters* a, int c, int n, real rho_t2, real x0, real x1) {
   const real mid = R(0.5) * (x0 + x1), half_len = R(0.5) * (x1 - x0);
   real sum = R(0.0);
-  for (int i = 0; i < 4; ++i)
-    for (int side = 0; side < 2; ++side) {
-      const real xx = side == 0 ? mid - half_len * x[i] : mid + half_len * x[i];
-      sum += w[i] * truth_extinction(a, c, altitude_of_rho2(a, rho_t2 + xx * xx));
-    }
+  if (n == 5) {
+    const real x[2] = {R(0.5384693101056831), R(0.9061798459386640)};
+    const real w[2] = {R(0.4786286704993665), R(0.2369268850561891)};
+    sum = R(0.5688888888888889) * truth_extinction_at_x(a, c, rho_t2, mid);
+    for (int i = 0; i < 2; ++i)
+      sum += w[i] * (truth_extinction_at_x(a, c, rho_t2, mid - half_len * x[i]) +
+                     truth_extinction_at_x(a, c, rho_t2, mid + half_len * x[i]));
+  } else {
+    const real x[4] = {R(0.1834346424956498), R(0.5255324099163290), R(0.7966664774136268), R(0.9602898564975363)};
+    const real w[4] = {R(0.3626837833783620), R(0.3137066458778874), R(0.2223810344533745), R(0.1012285362903762)};
+    for (int i = 0; i < 4; ++i)
+      sum += w[i] * (truth_extinction_at_x(a, c, rho_t2, mid - half_len * x[i]) +
+                     truth_extinction_at_x(a, c, rho_t2, mid + half_len * x[i]));
+  }
   return sum * half_len;
 }
-/* Adds the pieces of |x| ∈ [lo, hi] cut at the level crossings √(ρ_j² − ρ_t²) (the integrand
- * depends on x² only, so the descending side is integrated in |x| too). */
+/* Adds the pieces of |x| ∈ [lo, hi] cut at the crossings √(ρ_j² − ρ_t²) of the cut altitudes
+ * (the integrand depends on x² only, so the descending side is integrated in |x| too). */
 FN real truth_monotone_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real rho_t2, real lo,
                              real hi) {
   if (!(hi > lo)) return R(0.0);
-  const int n_levels = (int)medium[TRUTH_LEVELS_AT];
-  const real dh = thickness(a) / (real)n_levels;
-  const int n_kinks = (int)medium[TRUTH_KINKS_AT];
-  int j = 1, k = 0;
+  const int n_cuts = (int)medium[TRUTH_CUTS_AT];
   real depth = R(0.0), prev = lo;
-  for (;;) {
-    /* the next level of the two ascending lists merged: j·dh (j ≤ n_levels) or kink k */
-    real level;
-    if (k < n_kinks && (j > n_levels || medium[TRUTH_KINKS_AT + 1 + k] < (real)j * dh))
-      level = medium[TRUTH_KINKS_AT + 1 + k++];
-    else if (j <= n_levels)
-      level = (real)j++ * dh;
-    else
-      break;
-    const real x2 = horizon_distance2(a, level) - rho_t2;
+  int order = 8; /* the rule of the piece below the next cut crossed */
+  for (int k = 0; k < n_cuts; ++k) {
+    const real x2 = horizon_distance2(a, medium[TRUTH_CUTS_AT + 1 + k]) - rho_t2;
     if (!(x2 > R(0.0))) continue;
     const real x = sqrt(x2);
     if (x <= prev) continue;
+    order = (int)medium[TRUTH_CUTS_AT + 1 + TRUTH_MAX_CUTS + k];
     if (x >= hi) break;
-    depth += truth_piece_depth(a, c, rho_t2, prev, x);
+    depth += truth_piece_depth(a, c, order, rho_t2, prev, x);
     prev = x;
   }
-  return depth + truth_piece_depth(a, c, rho_t2, prev, hi);
+  return depth + truth_piece_depth(a, c, order, rho_t2, prev, hi);
 }
 FN real truth_optical_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
                             real s_end) {

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -1142,27 +1143,28 @@ TEST(TruthTracking, GuidedFreePathsKeepTheExpectationWhateverTheirTable) {
   EXPECT_GE(tabled, 6);  // the rising and grazing rays draw from their tables
 }
 
-// The exact optical depth twilight walks use (truth_optical_depth: pieces between altitude
-// levels and kinks, 8-point Gauss–Legendre) against the independent composite Simpson of the
-// tests' Medium in 3D vectors with 200 000 intervals (its error, ~(Δ/H)⁴/180 with Δ ≤ 5 m, H ≥
-// 0.3 km, is below 1e-9 relative). Rays that rise, descend to the ground, pass a tangent point
-// low and high, graze the ground and run along the horizon from 40 km, over the whole ray and
-// part of it, for the Earth (ozone's tent: three kinks), Mars and a thin haze. The rule: the
-// exponent changes by at most 8 over a piece (near a tangent point a Gaussian in x), where the
-// 8-point rule's relative error is ≤ 4e-8 (path_tracer.cl); asserted at 1e-7 relative (seen
-// ≤ 5e-9; fixed 5 km levels fail it on the haze, 8e-7).
+// The exact optical depth twilight walks use (truth_optical_depth: pieces between cut
+// altitudes, 8-point Gauss–Legendre) against the independent composite Simpson of the tests'
+// Medium in 3D vectors with 200 000 intervals (its error, ~(Δ/H)⁴/180 with Δ ≤ 5 m, H ≥ 0.3
+// km, is below 1e-9 relative). Rays that rise, descend to the ground, pass a tangent point low
+// and high, graze the ground and run along the horizon from 40 km, over the whole ray and part
+// of it, for the Earth (ozone's tent: three kinks), Mars, a thin haze (Mie scale height 0.3
+// km: the steep layer dominates near the ground) and a high one (Mie scale height 3 km, with
+// 10× Earth's aerosols: a steep layer that stays a large share of σ_t up high), so that the
+// cut rule meets pieces where a steep layer is all of σ_t, a part of it and a trace of it.
+// The rule places cuts so that its error estimate (truth_depth_piece_error) stays within
+// TRUTH_DEPTH_ERROR = 4e-8 relative; asserted at 1e-7 relative (seen ≤ 5e-9).
 TEST(TruthTracking, ExactOpticalDepthMatchesAFineQuadrature) {
-  // and a thin haze (Mie scale height 0.3 km): the levels follow the steepest profile (25 of
-  // 2.4 km), where fixed 5 km levels would span 17 scale heights a piece
   const AtmosphereSpec haze = spec_of("    preset: earth\n    mie: {scale_height_km: 0.3}\n");
-  for (const AtmosphereSpec& s : {earth(), mars(), haze}) {
+  const AtmosphereSpec high = spec_of("    preset: earth\n    mie: {scale_height_km: 3.0, extinction_per_m: 4.4e-5}\n");
+  for (const AtmosphereSpec& s : {earth(), mars(), haze, high}) {
     const Medium M(s);
     const auto a = ref3::make_parameters(model_of(s), M.ch);
     const std::vector<double> medium = medium_table(model_of(s), M.ch);
     double worst = 0.0;
     const double rays[][2] = {{0.0, 1.0},    {0.0, 0.05},   {3.0, -0.2},  {8.0, -0.04}, {20.0, -0.05},
                               {0.5, 0.0},    {12.0, 0.3},   {0.0, 0.0},   {40.0, -0.11}, {1.0, -0.017},
-                              {10.0, -0.056}, {0.2, 0.002}};
+                              {10.0, -0.056}, {0.2, 0.002}, {25.0, -0.09}, {15.0, -0.068}};
     for (const auto& ray : rays) {
       const double h = ray[0], mu = ray[1];
       const int ground = ref3::ray_hits_ground(&a, h, mu);
@@ -1176,9 +1178,49 @@ TEST(TruthTracking, ExactOpticalDepthMatchesAFineQuadrature) {
           worst = std::max(worst, std::fabs(got - want) / want);
         }
     }
-    std::printf("exact optical depth (bottom radius %.1f km, %g levels): worst relative error %.2g\n",
-                s.bottom_radius_km, medium[ref3::kTruthLevelsAt], worst);
+    std::string cuts;  // each cut, with the points of the piece below it
+    for (int k = 0; k < medium[ref3::kTruthCutsAt]; ++k)
+      cuts += (k ? " " : "") + std::to_string(medium[ref3::kTruthCutsAt + 1 + k]).substr(0, 5) + "(" +
+              std::to_string(static_cast<int>(medium[ref3::kTruthCutsAt + 1 + ref3::kTruthMaxCuts + k])) + ")";
+    std::printf("exact optical depth (bottom radius %.1f km, cuts at %s km): worst relative error %.2g\n",
+                s.bottom_radius_km, cuts.c_str(), worst);
   }
+}
+
+// The cut rule's error estimate is a bound: for e^{−E u} on [0, 1] the n-point rule's relative
+// error (n = 5 and 8, computed here in long double against the exact (1 − e^{−E})/E) never
+// exceeds truth_gauss_relative_error(n, E), and the estimate is no more than 1e3× pessimistic
+// where the rule is used (the levels are not needlessly dense).
+TEST(TruthTracking, DepthPieceErrorBoundsTheGaussRule) {
+  struct Rule {
+    int n;
+    std::vector<long double> x, w;  // nodes and weights on [−1, 1]
+  };
+  const Rule rules[] = {
+      {5,
+       {-0.9061798459386639927976269L, -0.5384693101056830910363144L, 0.0L, 0.5384693101056830910363144L,
+        0.9061798459386639927976269L},
+       {0.2369268850561890875142640L, 0.4786286704993664680412915L, 0.5688888888888888888888889L,
+        0.4786286704993664680412915L, 0.2369268850561890875142640L}},
+      {8,
+       {-0.9602898564975362316835609L, -0.7966664774136267395915539L, -0.5255324099163289858177390L,
+        -0.1834346424956498049394761L, 0.1834346424956498049394761L, 0.5255324099163289858177390L,
+        0.7966664774136267395915539L, 0.9602898564975362316835609L},
+       {0.1012285362903762591525314L, 0.2223810344533744705443560L, 0.3137066458778872873379622L,
+        0.3626837833783619829651504L, 0.3626837833783619829651504L, 0.3137066458778872873379622L,
+        0.2223810344533744705443560L, 0.1012285362903762591525314L}}};
+  for (const Rule& r : rules)
+    for (double E = 0.25; E <= (r.n == 5 ? 6.0 : 14.0); E += 0.25) {
+      long double sum = 0.0L;
+      for (std::size_t i = 0; i < r.x.size(); ++i)
+        sum += r.w[i] * std::exp(-static_cast<long double>(E) * (0.5L + 0.5L * r.x[i]));
+      const long double exact = (1.0L - std::exp(-static_cast<long double>(E))) / E;
+      const double seen = static_cast<double>(std::fabs(0.5L * sum - exact) / exact);
+      const double bound = ref3::truth_gauss_relative_error(r.n, E);
+      // the long-double sums' own rounding: ≤ 8 terms of ≤ 1, 64 ulps
+      EXPECT_LE(seen, bound + 64.0 * static_cast<double>(LDBL_EPSILON)) << " n " << r.n << " E " << E;
+      if (bound > 1e-15) EXPECT_GT(seen, 1e-3 * bound) << " n " << r.n << " E " << E;
+    }
 }
 
 // The sun depths of the medium table (truth_sun_depth_table), which shape the twilight line's

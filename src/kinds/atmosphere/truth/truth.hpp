@@ -127,7 +127,7 @@ TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const 
 struct Model;
 struct Channels;
 // The tracer's medium table for one group of up to three channels (path_tracer.cl): the
-// majorants per altitude shell, the profiles' kink altitudes (for its exact optical depths) and
+// majorants per altitude shell, the cut altitudes of its exact optical depths (depth_cuts) and
 // the optical depth towards the sun (the light scattered once towards a point, which twilight
 // walks read, is filled in by the trace).
 std::vector<double> medium_table(const Model& m, const Channels& group);

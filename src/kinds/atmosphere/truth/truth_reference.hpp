@@ -13,8 +13,9 @@ using std::cbrt, std::fabs, std::log;
 #include "atmosphere/path_tracer.cl"
 inline constexpr int kTruthOutStride = TRUTH_OUT_STRIDE;
 inline constexpr int kTruthChannels = NCH;
-inline constexpr int kTruthKinksAt = TRUTH_KINKS_AT;
-inline constexpr int kTruthLevelsAt = TRUTH_LEVELS_AT;
+inline constexpr int kTruthCutsAt = TRUTH_CUTS_AT;
+inline constexpr int kTruthMaxCuts = TRUTH_MAX_CUTS;
+inline constexpr double kTruthDepthError = TRUTH_DEPTH_ERROR;
 inline constexpr int kTruthMediumSize = TRUTH_MEDIUM_SIZE;
 inline constexpr int kTruthSunAt = TRUTH_SUN_AT;
 inline constexpr int kTruthSkyAt = TRUTH_SKY_AT;
