@@ -273,16 +273,17 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   // Measured on the 2-core CPU (PoCL, an Intel Xeon), default Earth, relative_se 1 %, both
   // traces (the bake's wavelengths and the 48-wavelength reference; rgb and 16-wavelength bakes
   // cost about the same, as a spectrum's walks go where its colour's variance is), seconds per
-  // point by the point's sun: high (0.016), low (0.049: below acos(r_b/r_t) + α, where each
+  // point by the point's sun: high (0.016), low (0.035: below acos(r_b/r_t) + α, where each
   // vertex's sun term is taken along its ray with exact optical depths), below the horizon
-  // (0.196: learned tables) and below kDeepTwilightSunDeg (0.82: most points at the walk cap, whose
+  // (0.148: learned tables) and below kDeepTwilightSunDeg (0.70: most points at the walk cap, whose
   // walks guide their free paths, path_tracer.cl truth_guided_free_path). Each band traced on its
-  // own (32 points, cameras 0–2 km, sky views; sun 20…60°, 2…8°, −6…0°, −12…−6°) gave 0.018,
-  // 0.061, 0.245 and 0.82 s a point (b66eac5, the exact depths' cuts by each layer's share);
-  // whole scenes, traced at once as the check does, ~0.8 of that below the horizon's band: the
-  // default scene's job 11.5 s cold (these constants: 12), the sun −12…0° scene of 128 points at
-  // 16 wavelengths 75 s (60); the bands' jobs within 0.9–1.3 of the measured.
-  constexpr double kHighSun = 0.016, kLowSun = 0.049, kBelowHorizon = 0.196, kDeepTwilight = 0.82, kEarthEvents = 1.8;
+  // own (32 points, cameras 0–2 km, sky views; sun 20…60°, 2…8°, −6…0°, −12…−6°) gave 0.019,
+  // 0.044, 0.185 and 0.70 s a point (e70933c: the exact depths' cuts by each layer's share, the
+  // sun's transmittance from its table with an exact correction); whole scenes, traced at once as
+  // the check does, ~0.8 of that below the horizon's band: the default scene's job 10.3 s cold
+  // (these constants: 12), the sun −12…0° scene of 128 points at 16 wavelengths 64 s (59); the
+  // bands' jobs within 0.9–1.25 of the measured.
+  constexpr double kHighSun = 0.016, kLowSun = 0.035, kBelowHorizon = 0.148, kDeepTwilight = 0.70, kEarthEvents = 1.8;
   // Longer walks also need more of them (their radiance is noisier): Rayleigh ×10, 4.3 events a
   // walk, took 1.23 s a point against the Earth's 0.164 over the same scene: (4.3/1.8)^2.3.
   constexpr double kLongerWalks = 2.3;
@@ -293,9 +294,9 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   // What bounds a point: per channel its walk cap W, or the events budget kEventsPerWalk · W,
   // but at least one batch of 64 walks (which measures the events). An event's seconds grow with
   // the walk's length (delta tracking through denser air): 5.0 µs at 57 events a walk, 56 µs at
-  // 399 (Rayleigh ×100 and ×1000, every point at the budget); ~2.4 µs in the Earth's twilight walks
-  // (exact sun optical depths at every vertex; below −6° most points at the cap: 0.82 s a point).
-  const double event_s = std::max(2.4e-6, 5.0e-6 * std::pow(e / 57.0, 1.26));
+  // 399 (Rayleigh ×100 and ×1000, every point at the budget); ~2.0 µs in the Earth's twilight walks
+  // (exact sun optical depths at every vertex; below −6° most points at the cap: 0.70 s a point).
+  const double event_s = std::max(2.0e-6, 5.0e-6 * std::pow(e / 57.0, 1.26));
   auto bounded = [&](const AtmosphereSpec& traced) {
     const TruthOptions o = scene_truth_options(traced, 0);
     const double w = static_cast<double>(o.max_paths);
