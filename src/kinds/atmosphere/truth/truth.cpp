@@ -61,9 +61,10 @@ constexpr int kLearnBins = 24;
 constexpr double kKeepFixed = 0.5;
 constexpr double kCellFloor = 0.3;
 // The rest is an even mixture of two densities: ∝ β_s ρ T (what scattering of any order at the
-// vertex is weighted by) and ∝ β_s ρ T × V T_sun (single scattering: in twilight only the part
-// of the ray above the Earth's shadow is lit, and the first density alone would put most
-// vertices in the dark).
+// vertex is weighted by) and ∝ (β_R ρ_R P_R(ν) + β_M ρ_M P_M(ν)) T × V T_sun, single scattering
+// itself (in twilight only the part of the ray above the Earth's shadow is lit, and the first
+// density alone would put most vertices in the dark; towards the sun Mie's forward peak makes
+// the light come from the aerosols near the ground, where β_s ρ alone draws too few vertices).
 constexpr double kSunlitShare = 0.5;
 // Majorants: the exact maxima of the profiles over [h_j − δ, top] (δ = 1e-3 shell) times
 // 1 + 1e-5, far above float32 rounding of the densities (6e-8 relative).
@@ -418,7 +419,7 @@ struct SkyLight {
 // alone), T at each sub-segment's middle with τ linear between the nodes (only the pdf depends
 // on them), mixed with a uniform share.
 void channel_table(const Channels& ch, std::size_t c, const std::vector<double>& t, const Segments& seg,
-                   const SkyLight* sky, double* tau, double* cdf) {
+                   const SkyLight* sky, double p_r, double p_m, double* tau, double* cdf) {
   const int n = static_cast<int>(t.size());
   const double D = t.back();
   tau[0] = 0.0;
@@ -431,10 +432,11 @@ void channel_table(const Channels& ch, std::size_t c, const std::vector<double>&
     const double dt = t[k + 1] - t[k];
     for (const Sub& sub : seg.subs[k]) {
       const double tau_s = tau[k] + (tau[k + 1] - tau[k]) * (sub.t_mid - t[k]) / dt;
-      const double m = (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * std::exp(-tau_s);
+      const double T = std::exp(-tau_s);
+      const double m = (ch.rayleigh_scattering[c] * sub.l_r + ch.mie_scattering[c] * sub.l_m) * T;
       mass[k] += m;
       if (sub.visible > 0.0)
-        lit[k] += m * sub.visible *
+        lit[k] += (ch.rayleigh_scattering[c] * sub.l_r * p_r + ch.mie_scattering[c] * sub.l_m * p_m) * T * sub.visible *
                   std::exp(-(ch.rayleigh_scattering[c] * sub.sun_l[0] + ch.mie_extinction[c] * sub.sun_l[1] +
                              ch.absorption_extinction[c] * sub.sun_l[2]));
       if (sky) lit[k] += m * (*sky)(c, sub.h_mid, sub.mu_s);
@@ -475,7 +477,11 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   row[PT_NODES] = n;
   for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
   const Segments seg = view_segments(a, row, t);
-  for (std::size_t c = 0; c < C; ++c) channel_table(ch, c, t, seg, sky, node_tau + c * kNodes, node_cdf + c * kNodes);
+  // the phase functions at the point's view–sun angle (the same all along the view ray)
+  const double p_r = ref3::rayleigh_phase(row[PT_NU]), p_m = ref3::mie_phase(a.mie_g, row[PT_NU]);
+  for (std::size_t c = 0; c < C; ++c)
+    channel_table(ch, c, t, seg, sky, p_r, p_m, node_tau + c * kNodes,
+                  node_cdf + c * kNodes);
 }
 
 Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base,
