@@ -244,18 +244,22 @@ FN real truth_gauss_relative_error(int n, real E) {
   const real tail = n == 5 ? R(3.94497e-13) * e8 * e2 : R(1.69736e-23) * e8 * e8;
   return tail * E / (R(1.0) - exp(-E));
 }
-/* The least of one layer a·exp(b·h) + c·h + d over [lo, hi] (no kink inside, so no clamp
- * sets in): at an end, or for a > 0 (convex) possibly where a·b·exp(b·h) + c = 0. */
+/* Where one layer a·exp(b·h) + c·h + d is stationary, a·b·exp(b·h) + c = 0, when that lies
+ * inside (lo, hi) (a maximum for a < 0, a minimum for a > 0); −1 otherwise. */
+FN real layer_stationary_altitude(const DensityProfile* p, int layer, real lo, real hi) {
+  const real ea = p->exp_term[layer], eb = p->exp_scale[layer], lc = p->linear_term[layer];
+  if (ea == R(0.0) || eb == R(0.0) || lc == R(0.0)) return R(-1.0);
+  const real arg = -lc / (ea * eb);
+  if (!(arg > R(0.0))) return R(-1.0);
+  const real h_star = log(arg) / eb;
+  return h_star > lo && h_star < hi ? h_star : R(-1.0);
+}
+/* The least of one layer over [lo, hi] (no kink inside, so no clamp sets in): at an end, or for
+ * a > 0 (convex) possibly at its stationary altitude. */
 FN real layer_min_over(const DensityProfile* p, int layer, real lo, real hi) {
   real m = fmin(layer_density(p, layer, lo), layer_density(p, layer, hi));
-  const real ea = p->exp_term[layer], eb = p->exp_scale[layer], lc = p->linear_term[layer];
-  if (ea > R(0.0) && eb != R(0.0) && lc != R(0.0)) {
-    const real arg = -lc / (ea * eb);
-    if (arg > R(0.0)) {
-      const real h_star = log(arg) / eb;
-      if (h_star > lo && h_star < hi) m = fmin(m, layer_density(p, layer, h_star));
-    }
-  }
+  const real h_star = layer_stationary_altitude(p, layer, lo, hi);
+  if (p->exp_term[layer] > R(0.0) && h_star >= R(0.0)) m = fmin(m, layer_density(p, layer, h_star));
   return m;
 }
 /* The layer of profile p that holds the piece [h0, h1] (no kink inside: one layer). */
@@ -278,8 +282,7 @@ FN real truth_depth_piece_error(const AtmosphereParameters* a, int c, int n, rea
     if (ea == R(0.0) || eb == R(0.0) || beta[p] == R(0.0)) continue;
     /* a layer clamped to 0 or 1 over the piece is a constant there (the clamp's state is the
      * same all over a piece without a kink) */
-    const real mid = R(0.5) * (h0 + h1);
-    const real y = ea * exp(eb * mid) + q->linear_term[l] * mid + q->constant_term[l];
+    const real y = layer_density(q, l, R(0.5) * (h0 + h1));
     if (y <= R(0.0) || y >= R(1.0)) continue;
     const real term_max = fabs(ea) * exp(eb * (eb > R(0.0) ? h1 : h0));
     const real share = sigma_min > R(0.0) ? fmin(beta[p] * term_max / sigma_min, R(1.0)) : R(1.0);
@@ -1126,14 +1129,8 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
  * (concave) possibly where a·b·exp(b·h) + c = 0. */
 FN real layer_max_over(const DensityProfile* p, int layer, real lo, real hi) {
   real m = fmax(layer_density(p, layer, lo), layer_density(p, layer, hi));
-  const real ea = p->exp_term[layer], eb = p->exp_scale[layer], lc = p->linear_term[layer];
-  if (ea < R(0.0) && eb != R(0.0) && lc != R(0.0)) {
-    const real arg = -lc / (ea * eb);
-    if (arg > R(0.0)) {
-      const real h_star = log(arg) / eb;
-      if (h_star > lo && h_star < hi) m = fmax(m, layer_density(p, layer, h_star));
-    }
-  }
+  const real h_star = layer_stationary_altitude(p, layer, lo, hi);
+  if (p->exp_term[layer] < R(0.0) && h_star >= R(0.0)) m = fmax(m, layer_density(p, layer, h_star));
   return m;
 }
 /* max of profile_density() over [lo, hi] (layer 0 below width[0], layer 1 from it). */

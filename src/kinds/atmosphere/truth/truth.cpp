@@ -543,46 +543,48 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
 // its length, by bisection) whose estimated 8-point error truth_depth_piece_error is within
 // TRUTH_DEPTH_ERROR for every channel, at most thickness / TRUTH_DEPTH_LEVELS; the top last.
 // Then the rule of each piece (below its cut): 5 points where their estimate is within the
-// bound too, else 8. Returned as the n cuts followed by their n rules. More than
-// TRUTH_DEPTH_MAX_LEVELS levels fall back to that many equal ones, 8 points each.
-static std::vector<double> depth_cuts(const AtmosphereParameters& a, std::size_t channels,
-                                      const std::vector<double>& kinks) {
+// bound too, else 8. More than TRUTH_DEPTH_MAX_LEVELS levels fall back to that many equal ones,
+// 8 points each.
+struct DepthCuts {
+  std::vector<double> altitudes, points;  // ascending km; Gauss–Legendre points of the piece below
+};
+static DepthCuts depth_cuts(const AtmosphereParameters& a, std::size_t channels, const std::vector<double>& kinks) {
   const double t = a.top_radius - a.bottom_radius, longest = t / TRUTH_DEPTH_LEVELS;
-  auto error = [&](double h0, double h1, int n) {
-    double e = 0.0;
+  auto within = [&](double h0, double h1, int n) {
     for (std::size_t c = 0; c < channels; ++c)
-      e = std::max(e, ref3::truth_depth_piece_error(&a, static_cast<int>(c), n, h0, h1));
-    return e;
+      if (ref3::truth_depth_piece_error(&a, static_cast<int>(c), n, h0, h1) > ref3::kTruthDepthError) return false;
+    return true;
   };
   std::vector<double> ends = kinks;  // where a piece must end: each kink, then the top
   ends.push_back(t);
-  std::vector<double> cuts;
+  DepthCuts out;
   double h = 0.0;
   for (double end : ends) {
     while (end - h > 1e-9 * t) {
       double step = std::min(longest, end - h);
-      if (error(h, h + step, 8) > ref3::kTruthDepthError) {
-        double lo = 0.0, hi = step;  // error(lo) within the bound, error(hi) not
-        while (hi - lo > 1e-4 * hi)
-          (error(h, h + 0.5 * (lo + hi), 8) > ref3::kTruthDepthError ? hi : lo) = 0.5 * (lo + hi);
+      if (!within(h, h + step, 8)) {
+        double lo = 0.0, hi = step;  // a piece of length lo is within the bound, one of hi not
+        while (hi - lo > 1e-4 * hi) {
+          const double mid = 0.5 * (lo + hi);
+          if (within(h, h + mid, 8)) lo = mid;
+          else hi = mid;
+        }
         step = std::max(lo, 1e-9 * t);
       }
       h = step >= end - h - 1e-9 * t ? end : h + step;
-      cuts.push_back(h);
-      if (cuts.size() > kinks.size() + TRUTH_DEPTH_MAX_LEVELS) {  // equal levels, 8 points each
-        cuts = kinks;
-        for (int j = 1; j <= TRUTH_DEPTH_MAX_LEVELS; ++j) cuts.push_back(t * j / TRUTH_DEPTH_MAX_LEVELS);
-        std::sort(cuts.begin(), cuts.end());
-        cuts.resize(2 * cuts.size(), 8.0);
-        return cuts;
+      out.altitudes.push_back(h);
+      if (out.altitudes.size() > kinks.size() + TRUTH_DEPTH_MAX_LEVELS) {
+        out.altitudes = kinks;
+        for (int j = 1; j <= TRUTH_DEPTH_MAX_LEVELS; ++j) out.altitudes.push_back(t * j / TRUTH_DEPTH_MAX_LEVELS);
+        std::sort(out.altitudes.begin(), out.altitudes.end());
+        out.points.assign(out.altitudes.size(), 8.0);
+        return out;
       }
     }
   }
-  const std::size_t n = cuts.size();
-  cuts.resize(2 * n);
-  for (std::size_t k = 0; k < n; ++k)
-    cuts[n + k] = error(k ? cuts[k - 1] : 0.0, cuts[k], 5) <= ref3::kTruthDepthError ? 5.0 : 8.0;
-  return cuts;
+  for (std::size_t k = 0; k < out.altitudes.size(); ++k)
+    out.points.push_back(within(k ? out.altitudes[k - 1] : 0.0, out.altitudes[k], 5) ? 5.0 : 8.0);
+  return out;
 }
 
 // The medium table of one channel group (path_tracer.cl): [TRUTH_SHELLS][kGroup] majorants,
@@ -593,11 +595,10 @@ std::vector<double> medium_table(const Model& m, const Channels& group) {
   const double t = m.top_radius_km - m.bottom_radius_km, width = t / TRUTH_SHELLS;
   std::vector<double> out(ref3::kTruthMediumSize, 0.0);
   const AtmosphereParameters ag = ref3::make_parameters(m, group);
-  const std::vector<double> cuts = depth_cuts(ag, group.size(), kink_altitudes(a));
-  const std::size_t n_cuts = cuts.size() / 2;
-  out[ref3::kTruthCutsAt] = static_cast<double>(n_cuts);
-  std::copy_n(cuts.begin(), n_cuts, out.begin() + ref3::kTruthCutsAt + 1);
-  std::copy_n(cuts.begin() + n_cuts, n_cuts, out.begin() + ref3::kTruthCutsAt + 1 + ref3::kTruthMaxCuts);
+  const DepthCuts cuts = depth_cuts(ag, group.size(), kink_altitudes(a));
+  out[ref3::kTruthCutsAt] = static_cast<double>(cuts.altitudes.size());
+  std::copy(cuts.altitudes.begin(), cuts.altitudes.end(), out.begin() + ref3::kTruthCutsAt + 1);
+  std::copy(cuts.points.begin(), cuts.points.end(), out.begin() + ref3::kTruthCutsAt + 1 + ref3::kTruthMaxCuts);
   for (int j = 0; j < TRUTH_SHELLS; ++j) {
     const double lo = std::max(0.0, (j - kShellOverlap) * width);
     const double hi = t * (1.0 + 1e-9);
