@@ -133,6 +133,9 @@ def bake_facts(m, process_wall):
         facts["truth_reused"] = any(x.get("reused") for x in truths if x)
         se = d.get("standard_error", {})
         facts["truth_se_relative_p99"] = se.get("relative", {}).get("p99")
+        # per point and channel of what relative_se targets (X, Y, Z of a spectrum), both traces
+        facts["truth_se_target_p99"] = se.get("target_channels", {}).get("p99")
+        facts["reference_se_xyz_p99"] = se.get("reference_xyz_relative", {}).get("p99")
         facts["truth_se_de2000_p99"] = se.get("de2000", {}).get("p99")
         facts["points_at_walk_cap"] = se.get("points_at_max_paths")
         facts["vs_path_traced"] = check.get("value")
@@ -281,7 +284,12 @@ def extra_of(rec):
     if cold.get("held_out") is not None:
         bits.append(f"held out {cold['held_out']:.3g}")
     if rec["target"] == "twilight-truth" and cold.get("truth_se_relative_p99") is not None:
-        bits.append(f"truth se p99 {100 * cold['truth_se_relative_p99']:.2g} %, {cold.get('points_at_walk_cap')} at cap")
+        bits.append(f"truth se p99 {100 * cold['truth_se_relative_p99']:.2g} % (sRGB)")
+        if cold.get("truth_se_target_p99") is not None:
+            bits.append(f"XYZ {100 * cold['truth_se_target_p99']:.2g} %")
+        if cold.get("reference_se_xyz_p99") is not None:
+            bits.append(f"the 48-wavelength reference's XYZ {100 * cold['reference_se_xyz_p99']:.2g} %")
+        bits.append(f"{cold.get('points_at_walk_cap')} at cap")
     if cold.get("bundles") is not None:
         bits.append(f"{cold['bundles']} bundles")
     if rec.get("failed"):

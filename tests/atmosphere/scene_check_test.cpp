@@ -354,6 +354,34 @@ TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
     EXPECT_FALSE(c48.record.details["parts"].contains("spectral_sampling"));
   }
   EXPECT_EQ(c.record.details["truth"]["channels"].size(), 6u);
+  {
+    // What relative_se targets for a spectrum: each point's CIE X, Y, Z (Σ CMF Δλ L over the
+    // wavelengths), their se from the channels' (independent walks: var = Σ (CMF Δλ)² se²). The
+    // record's summary is that of the check's own trace (the same walks again: same seed, same
+    // bytes); at every point not stopped by the cap each of X, Y, Z meets the target (the
+    // allocation stops only when its rows do).
+    const TruthResult own = trace_truth(s, t::shared_device(), scene_points_of(s), scene_truth_options(s, s.scene.seed));
+    const Spectrum sp = spectrum_of(s);
+    const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
+    std::vector<double> rel;
+    for (std::size_t p = 0; p < own.points; ++p)
+      for (int row = 0; row < 3; ++row) {
+        double l = 0.0, var = 0.0;
+        for (std::size_t i = 0; i < own.channels; ++i) {
+          const double w = cmf.at(sp.lambda_nm[i])[row] * sp.bin_nm;
+          l += w * own.L(p, i);
+          var += w * w * own.se(p, i) * own.se(p, i);
+        }
+        ASSERT_GT(l, 0.0);
+        rel.push_back(std::sqrt(var) / l);
+        if (!own.at_cap[p]) EXPECT_LE(rel.back(), s.scene.relative_se) << "point " << p << " row " << row;
+      }
+    const auto& target = c.record.details["standard_error"]["target_channels"];
+    EXPECT_EQ(target["count"].get<std::size_t>(), rel.size());
+    EXPECT_NEAR(target["mean"].get<double>(), mean_of(rel), 1e-12 * mean_of(rel));
+    EXPECT_NEAR(target["max"].get<double>(), *std::max_element(rel.begin(), rel.end()), 1e-12);
+    EXPECT_TRUE(c.record.details["standard_error"].contains("reference_xyz_relative"));
+  }
   // the truth in the bundle's units: an independent trace (another seed) of three points,
   // converted by to_bundle_units, within 4 combined se of the check's L columns
   const auto L = csv_rgb(c.points_csv.bytes, "L_"), se = csv_rgb(c.points_csv.bytes, "se_"),

@@ -196,6 +196,44 @@ long long scene_walk_cap(double relative_se) {
   return static_cast<long long>(std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * k)));
 }
 
+// [3][wavelengths]: CIE 1931 X, Y, Z of a spectrum's radiances (the CMF at each wavelength times
+// its bin).
+std::vector<double> xyz_weights(const Spectrum& sp) {
+  const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
+  const std::size_t n = sp.lambda_nm.size();
+  std::vector<double> w(3 * n, 0.0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto x = cmf.at(sp.lambda_nm[i]);
+    for (int row = 0; row < 3; ++row) w[row * n + i] = x[row] * sp.bin_nm;
+  }
+  return w;
+}
+
+// The relative standard errors a trace's precision target is set on, per point and channel of
+// that target: a spectral trace's X, Y and Z (its channels independent: var = Σ w² se²), an rgb
+// trace's three channels.
+std::vector<double> target_relative_se(const AtmosphereSpec& traced, const TruthResult& r) {
+  std::vector<double> out;
+  if (!traced.spectral) {
+    for (std::size_t p = 0; p < r.points; ++p)
+      for (std::size_t c = 0; c < r.channels; ++c)
+        if (r.L(p, c) > 0.0) out.push_back(r.se(p, c) / r.L(p, c));
+    return out;
+  }
+  const std::vector<double> w = xyz_weights(spectrum_of(traced));
+  const std::size_t n = r.channels;
+  for (std::size_t p = 0; p < r.points; ++p)
+    for (int row = 0; row < 3; ++row) {
+      double l = 0.0, var = 0.0;
+      for (std::size_t i = 0; i < n; ++i) {
+        l += w[row * n + i] * r.L(p, i);
+        var += w[row * n + i] * w[row * n + i] * r.se(p, i) * r.se(p, i);
+      }
+      if (l > 0.0) out.push_back(std::sqrt(var) / l);
+    }
+  return out;
+}
+
 TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t seed) {
   TruthOptions o;
   const long long cap = scene_walk_cap(traced.scene.relative_se);
@@ -210,13 +248,7 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
     o.paths = std::max<long long>(64, kFirstPaths * 3 / n);
     o.max_paths = std::max<long long>(o.paths, cap * 3 / n);
     o.max_events_per_point = kEventsPerWalk * static_cast<double>(o.max_paths);
-    // X, Y, Z rows over the wavelengths: the precision target
-    const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
-    o.target_weights.assign(3 * sp.lambda_nm.size(), 0.0);
-    for (std::size_t i = 0; i < sp.lambda_nm.size(); ++i) {
-      const auto x = cmf.at(sp.lambda_nm[i]);
-      for (int row = 0; row < 3; ++row) o.target_weights[row * sp.lambda_nm.size() + i] = x[row] * sp.bin_nm;
-    }
+    o.target_weights = xyz_weights(sp);  // the precision target: X, Y, Z
   }
   return o;
 }
@@ -530,11 +562,12 @@ double se_de2000(const Vec3& shown, const Vec3& se, const std::array<double, 3>&
 // in each channel in turn, combined in quadrature; the points that stopped at the walk cap.
 struct TruthNoise {
   std::vector<double> se_rel, de_se;  // de_se: every point
+  std::vector<double> se_target, se_target_reference;  // target_relative_se of the traces
   long long below_target = 0;
   ErrorSummary se_de, se_rel_summary;  // se_de over the lit points
 };
 
-TruthNoise truth_noise(const SceneValues& v, const SceneTraces& tr, double exposure_y) {
+TruthNoise truth_noise(const AtmosphereSpec& spec, const SceneValues& v, const SceneTraces& tr, double exposure_y) {
   TruthNoise t;
   const std::size_t n = v.t_all.size();
   t.de_se.resize(n);
@@ -550,6 +583,8 @@ TruthNoise truth_noise(const SceneValues& v, const SceneTraces& tr, double expos
       ++t.below_target;
   t.se_de = summarize_errors(select_points(t.de_se, v.dark, false));
   t.se_rel_summary = summarize_errors(t.se_rel);
+  t.se_target = target_relative_se(spec, *tr.bake);
+  if (tr.reference) t.se_target_reference = target_relative_se(spectral_reference_of(spec), *tr.spectral);
   return t;
 }
 
@@ -587,6 +622,10 @@ json check_details(const AtmosphereSpec& spec, int orders_used, double exposure_
                          "per channel in the bundle's units"},
       {"parts", json::object()},
       {"standard_error", {{"relative", summary_json(summarize_errors(noise.se_rel))},
+                          {"target_channels", summary_json(summarize_errors(noise.se_target))},
+                          {"target_channels_note",
+                           spec.spectral ? "relative se of the trace's CIE X, Y, Z (what relative_se targets)"
+                                         : "relative se of the trace's three channels (what relative_se targets)"},
                           {"de2000", summary_json(noise.se_de)},
                           {"target_relative", sc.relative_se},
                           {"points_at_max_paths", noise.below_target}}},  // reached the cap, met or not
@@ -600,7 +639,10 @@ json check_details(const AtmosphereSpec& spec, int orders_used, double exposure_
                                                      "looks like)"
                                                    : "the LUT against the all-orders truth at the bake's wavelengths "
                                                      "(the bake's are the 48 of the spectral reference)";
-  if (tr.reference) details["spectral_truth"] = tr.spectral->summary();
+  if (tr.reference) {
+    details["spectral_truth"] = tr.spectral->summary();
+    details["standard_error"]["reference_xyz_relative"] = summary_json(summarize_errors(noise.se_target_reference));
+  }
   return details;
 }
 
@@ -713,7 +755,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   // One exposure rule for every part and for the truth's se: per view, or the config's fixed one.
   const double exposure_y = sc.exposure_ev100 ? exposure_luminance(*sc.exposure_ev100) : 0.0;
   const std::vector<Part> parts = scene_parts(v, tr.reference, exposure_y);
-  const TruthNoise noise = truth_noise(v, tr, exposure_y);
+  const TruthNoise noise = truth_noise(spec, v, tr, exposure_y);
 
   const Part& total = parts[0];
   const bool by_radiance = sc.tolerance_relative.has_value();
