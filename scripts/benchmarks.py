@@ -286,9 +286,9 @@ def extra_of(rec):
     if rec["target"] == "twilight-truth" and cold.get("truth_se_relative_p99") is not None:
         bits.append(f"truth se p99 {100 * cold['truth_se_relative_p99']:.2g} % (sRGB)")
         if cold.get("truth_se_target_p99") is not None:
-            bits.append(f"XYZ {100 * cold['truth_se_target_p99']:.2g} %")
+            bits.append(f"XYZ {100 * cold['truth_se_target_p99']:.3g} %")
         if cold.get("reference_se_xyz_p99") is not None:
-            bits.append(f"the 48-wavelength reference's XYZ {100 * cold['reference_se_xyz_p99']:.2g} %")
+            bits.append(f"the 48-wavelength reference's XYZ {100 * cold['reference_se_xyz_p99']:.3g} %")
         bits.append(f"{cold.get('points_at_walk_cap')} at cap")
     if cold.get("bundles") is not None:
         bits.append(f"{cold['bundles']} bundles")
