@@ -381,6 +381,19 @@ TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
     EXPECT_NEAR(target["mean"].get<double>(), mean_of(rel), 1e-12 * mean_of(rel));
     EXPECT_NEAR(target["max"].get<double>(), *std::max_element(rel.begin(), rel.end()), 1e-12);
     EXPECT_TRUE(c.record.details["standard_error"].contains("reference_xyz_relative"));
+    // the per-point file's coordinates are the points traced, to 9 digits (a point read back
+    // from it traces the same sky: in deep twilight it falls by e per degree of sun)
+    const std::vector<TruthPoint> traced = scene_points_of(s);
+    const auto alt = csv_column(c.points_csv.bytes, "altitude_km"), vz = csv_column(c.points_csv.bytes, "view_zenith_deg"),
+               sz = csv_column(c.points_csv.bytes, "sun_zenith_deg"),
+               az = csv_column(c.points_csv.bytes, "view_sun_azimuth_deg");
+    ASSERT_EQ(sz.size(), traced.size());
+    for (std::size_t p = 0; p < traced.size(); ++p) {
+      EXPECT_NEAR(alt[p], traced[p].altitude_km, 1e-8 * std::max(1.0, traced[p].altitude_km)) << p;
+      EXPECT_NEAR(vz[p], traced[p].view_zenith_deg, 1e-6) << p;
+      EXPECT_NEAR(sz[p], traced[p].sun_zenith_deg, 1e-6) << p;
+      EXPECT_NEAR(az[p], traced[p].view_sun_azimuth_deg, 1e-6) << p;
+    }
   }
   // the truth in the bundle's units: an independent trace (another seed) of three points,
   // converted by to_bundle_units, within 4 combined se of the check's L columns
