@@ -359,7 +359,7 @@ TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
     // wavelengths), their se from the channels' (independent walks: var = Σ (CMF Δλ)² se²). The
     // record's summary is that of the check's own trace (the same walks again: same seed, same
     // bytes); at every point not stopped by the cap each of X, Y, Z meets the target (the
-    // allocation stops only when its rows do).
+    // allocation tops up until its rows do, within its rounds; these points meet it).
     const TruthResult own = trace_truth(s, t::shared_device(), scene_points_of(s), scene_truth_options(s, s.scene.seed));
     const Spectrum sp = spectrum_of(s);
     const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
