@@ -381,6 +381,20 @@ TEST(SceneCheck, SpectralBakesAreJudgedAtTheirOwnWavelengths) {
     EXPECT_NEAR(target["mean"].get<double>(), mean_of(rel), 1e-12 * mean_of(rel));
     EXPECT_NEAR(target["max"].get<double>(), *std::max_element(rel.begin(), rel.end()), 1e-12);
     EXPECT_TRUE(c.record.details["standard_error"].contains("reference_xyz_relative"));
+    // and by sun band (below −6°, from −6° up): the same values split by each point's sun
+    {
+      const std::vector<TruthPoint> pts = scene_points_of(s);
+      std::vector<double> below, above;
+      for (std::size_t p = 0; p < pts.size(); ++p)
+        for (int row = 0; row < 3; ++row) (90.0 - pts[p].sun_zenith_deg < -6.0 ? below : above).push_back(rel[3 * p + row]);
+      const auto& bands = c.record.details["standard_error"]["target_channels_by_sun"];
+      for (const auto& [key, v] : {std::pair{"sun_below_-6_deg", below}, std::pair{"sun_from_-6_deg", above}}) {
+        ASSERT_EQ(bands.contains(key), !v.empty()) << key;
+        if (v.empty()) continue;
+        EXPECT_EQ(bands[key]["count"].get<std::size_t>(), v.size()) << key;
+        EXPECT_NEAR(bands[key]["max"].get<double>(), *std::max_element(v.begin(), v.end()), 1e-12) << key;
+      }
+    }
     // the per-point file's coordinates are the points traced, to 9 digits (a point read back
     // from it traces the same sky: in deep twilight it falls by e per degree of sun)
     const std::vector<TruthPoint> traced = scene_points_of(s);

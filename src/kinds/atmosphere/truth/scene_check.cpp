@@ -209,15 +209,15 @@ std::vector<double> xyz_weights(const Spectrum& sp) {
   return w;
 }
 
-// The relative standard errors a trace's precision target is set on, per point and channel of
-// that target: a spectral trace's X, Y and Z (its channels independent: var = Σ w² se²), an rgb
-// trace's three channels.
+// The relative standard errors a trace's precision target is set on, [point][3]: a spectral
+// trace's X, Y and Z (its channels independent: var = Σ w² se²), an rgb trace's three channels;
+// NaN where the value is not positive (summaries leave those out).
 std::vector<double> target_relative_se(const AtmosphereSpec& traced, const TruthResult& r) {
   std::vector<double> out;
+  const double none = std::numeric_limits<double>::quiet_NaN();
   if (!traced.spectral) {
     for (std::size_t p = 0; p < r.points; ++p)
-      for (std::size_t c = 0; c < r.channels; ++c)
-        if (r.L(p, c) > 0.0) out.push_back(r.se(p, c) / r.L(p, c));
+      for (std::size_t c = 0; c < r.channels; ++c) out.push_back(r.L(p, c) > 0.0 ? r.se(p, c) / r.L(p, c) : none);
     return out;
   }
   const std::vector<double> w = xyz_weights(spectrum_of(traced));
@@ -229,9 +229,23 @@ std::vector<double> target_relative_se(const AtmosphereSpec& traced, const Truth
         l += w[row * n + i] * r.L(p, i);
         var += w[row * n + i] * w[row * n + i] * r.se(p, i) * r.se(p, i);
       }
-      if (l > 0.0) out.push_back(std::sqrt(var) / l);
+      out.push_back(l > 0.0 ? std::sqrt(var) / l : none);
     }
   return out;
+}
+
+// Summaries of [point][3] values by the points' sun elevation: below kDeepTwilightSunDeg (−6°)
+// and from it up (the bands the truth's precision is asked for apart); a band without points is
+// left out.
+json by_sun_band(const std::vector<double>& per_point_rows, const std::vector<TruthPoint>& points) {
+  std::vector<double> below, above;
+  for (std::size_t p = 0; p < points.size() && 3 * p + 2 < per_point_rows.size(); ++p)
+    for (int row = 0; row < 3; ++row)
+      (90.0 - points[p].sun_zenith_deg < kDeepTwilightSunDeg ? below : above).push_back(per_point_rows[3 * p + row]);
+  json j = json::object();
+  if (!below.empty()) j["sun_below_-6_deg"] = summary_json(summarize_errors(below));
+  if (!above.empty()) j["sun_from_-6_deg"] = summary_json(summarize_errors(above));
+  return j;
 }
 
 TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t seed) {
@@ -590,7 +604,8 @@ TruthNoise truth_noise(const AtmosphereSpec& spec, const SceneValues& v, const S
 
 // The record's details: the scene, its point set, the exposure, the parts (lit and dark points),
 // the truth's standard error and summaries.
-json check_details(const AtmosphereSpec& spec, int orders_used, double exposure_y, const SceneValues& v,
+json check_details(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, int orders_used,
+                   double exposure_y, const SceneValues& v,
                    const SceneTraces& tr, const std::vector<Part>& parts, const TruthNoise& noise) {
   const AtmosphereScene& sc = spec.scene;
   json details = {
@@ -623,6 +638,7 @@ json check_details(const AtmosphereSpec& spec, int orders_used, double exposure_
       {"parts", json::object()},
       {"standard_error", {{"relative", summary_json(summarize_errors(noise.se_rel))},
                           {"target_channels", summary_json(summarize_errors(noise.se_target))},
+                          {"target_channels_by_sun", by_sun_band(noise.se_target, points)},
                           {"target_channels_note",
                            spec.spectral ? "relative se of the trace's CIE X, Y, Z (what relative_se targets)"
                                          : "relative se of the trace's three channels (what relative_se targets)"},
@@ -642,6 +658,7 @@ json check_details(const AtmosphereSpec& spec, int orders_used, double exposure_
   if (tr.reference) {
     details["spectral_truth"] = tr.spectral->summary();
     details["standard_error"]["reference_xyz_relative"] = summary_json(summarize_errors(noise.se_target_reference));
+    details["standard_error"]["reference_xyz_relative_by_sun"] = by_sun_band(noise.se_target_reference, points);
   }
   return details;
 }
@@ -773,7 +790,7 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
       by_radiance ? "p99 over the scene's points of the relative radiance error, worst channel"
                   : "p99 over the scene's points of the CIEDE2000 of the displayed colour",
       value, tolerance, "Monte Carlo path tracing of the same model at the scene's points (all orders)",
-      check_details(spec, orders_used, exposure_y, v, tr, parts, noise));
+      check_details(spec, points, orders_used, exposure_y, v, tr, parts, noise));
   out.record.unit = by_radiance ? "p99 relative" : "p99 CIEDE2000";
   out.points_csv = points_csv(spec, points, v, tr.reference, parts, noise);
   out.colours = {v.shown_lut, v.shown_ref, v.dark, exposure_y};
