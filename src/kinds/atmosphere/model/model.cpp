@@ -223,12 +223,15 @@ Spectrum spectrum_of(const AtmosphereSpec& s) {
   const Mat3 M = xyz_to_srgb();
   const int n = s.count;
   sp.to_rgb.assign(3 * n, 0.0);
+  sp.to_xyz.assign(3 * n, 0.0);
   for (int i = 0; i < n; ++i) {
     const double l = s.min_nm + (i + 0.5) * sp.bin_nm;
     sp.lambda_nm.push_back(l);
     const auto xyz = cmf.at(l);
-    for (int c = 0; c < 3; ++c)
+    for (int c = 0; c < 3; ++c) {
+      sp.to_xyz[c * n + i] = xyz[c] * sp.bin_nm;
       sp.to_rgb[c * n + i] = (M[3 * c] * xyz[0] + M[3 * c + 1] * xyz[1] + M[3 * c + 2] * xyz[2]) * sp.bin_nm;
+    }
   }
   return sp;
 }

@@ -83,6 +83,9 @@ struct Spectrum {
   // spectral: to_rgb[c * n + i] = (M_XYZ→sRGB · CMF(λ_i))_c · Δλ, the precomputed-luminance
   // weights (textures then hold luminance / 683); rgb: empty (identity).
   std::vector<double> to_rgb;
+  // spectral: to_xyz[c * n + i] = CMF(λ_i)_c · Δλ, CIE 1931 X, Y, Z (to_rgb is M_XYZ→sRGB of it);
+  // rgb: empty.
+  std::vector<double> to_xyz;
   // Render-time factors (lm/W) from spectral radiance at 680/550/440 nm to luminance:
   // sky (λ^-3 weighted; 683 in spectral mode) and sun (λ^0).
   std::array<double, 3> sky_radiance_to_luminance{}, sun_radiance_to_luminance{};

@@ -196,19 +196,6 @@ long long scene_walk_cap(double relative_se) {
   return static_cast<long long>(std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * k)));
 }
 
-// [3][wavelengths]: CIE 1931 X, Y, Z of a spectrum's radiances (the CMF at each wavelength times
-// its bin).
-std::vector<double> xyz_weights(const Spectrum& sp) {
-  const CmfTable& cmf = cmf_table(CmfSet::cie1931_2deg);
-  const std::size_t n = sp.lambda_nm.size();
-  std::vector<double> w(3 * n, 0.0);
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto x = cmf.at(sp.lambda_nm[i]);
-    for (int row = 0; row < 3; ++row) w[row * n + i] = x[row] * sp.bin_nm;
-  }
-  return w;
-}
-
 // The relative standard errors a trace's precision target is set on, [point][3]: a spectral
 // trace's X, Y and Z (its channels independent: var = Σ w² se²), an rgb trace's three channels;
 // NaN where the value is not positive (summaries leave those out).
@@ -220,17 +207,9 @@ std::vector<double> target_relative_se(const AtmosphereSpec& traced, const Truth
       for (std::size_t c = 0; c < r.channels; ++c) out.push_back(r.L(p, c) > 0.0 ? r.se(p, c) / r.L(p, c) : none);
     return out;
   }
-  const std::vector<double> w = xyz_weights(spectrum_of(traced));
-  const std::size_t n = r.channels;
-  for (std::size_t p = 0; p < r.points; ++p)
-    for (int row = 0; row < 3; ++row) {
-      double l = 0.0, var = 0.0;
-      for (std::size_t i = 0; i < n; ++i) {
-        l += w[row * n + i] * r.L(p, i);
-        var += w[row * n + i] * w[row * n + i] * r.se(p, i) * r.se(p, i);
-      }
-      out.push_back(l > 0.0 ? std::sqrt(var) / l : none);
-    }
+  const TruthBundleValues xyz = weighted_sums(r, spectrum_of(traced).to_xyz);
+  for (std::size_t i = 0; i < xyz.radiance.size(); ++i)
+    out.push_back(xyz.radiance[i] > 0.0 ? xyz.standard_error[i] / xyz.radiance[i] : none);
   return out;
 }
 
@@ -262,7 +241,7 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
     o.paths = std::max<long long>(64, kFirstPaths * 3 / n);
     o.max_paths = std::max<long long>(o.paths, cap * 3 / n);
     o.max_events_per_point = kEventsPerWalk * static_cast<double>(o.max_paths);
-    o.target_weights = xyz_weights(sp);  // the precision target: X, Y, Z
+    o.target_weights = sp.to_xyz;  // the precision target: X, Y, Z
   }
   return o;
 }

@@ -151,6 +151,9 @@ struct TruthBundleValues {
   std::string units;
 };
 TruthBundleValues to_bundle_units(const AtmosphereSpec& spec, const TruthResult& r);
+// Three rows Σ_i w[c·n + i] L_i per point over the result's n channels, their se from the
+// channels' (independent walks: var = Σ w² se²); `units` left empty.
+TruthBundleValues weighted_sums(const TruthResult& r, const std::vector<double>& weights);
 
 // A result as bytes for a ResultStore (CBOR; every number exact; not `seconds`, so the bytes
 // are the same every run), and back (throws std::exception on bytes that are not such a result).

@@ -188,8 +188,6 @@ std::string truth_points_csv(const std::vector<TruthPoint>& points) {
 
 TruthBundleValues to_bundle_units(const AtmosphereSpec& spec, const TruthResult& r) {
   TruthBundleValues v;
-  v.radiance.assign(r.points * 3, 0.0);
-  v.standard_error.assign(r.points * 3, 0.0);
   if (!spec.spectral) {
     if (r.channels != 3) throw JobError("truth: an rgb result needs 3 channels");
     v.radiance = r.radiance;
@@ -198,20 +196,29 @@ TruthBundleValues to_bundle_units(const AtmosphereSpec& spec, const TruthResult&
     return v;
   }
   const Spectrum sp = spectrum_of(spec);
-  const std::size_t n = sp.lambda_nm.size();
-  if (n != r.channels) throw JobError("truth: the result's wavelengths are not the spec's");
+  if (sp.lambda_nm.size() != r.channels) throw JobError("truth: the result's wavelengths are not the spec's");
+  v = weighted_sums(r, sp.to_rgb);
+  v.units = "linear sRGB luminance / 683 (the bundle's precomputed-luminance values)";
+  return v;
+}
+
+TruthBundleValues weighted_sums(const TruthResult& r, const std::vector<double>& weights) {
+  const std::size_t n = r.channels;
+  if (weights.size() != 3 * n) throw JobError("truth: 3 rows of weights over the result's channels expected");
+  TruthBundleValues v;
+  v.radiance.assign(r.points * 3, 0.0);
+  v.standard_error.assign(r.points * 3, 0.0);
   for (std::size_t p = 0; p < r.points; ++p)
     for (int c = 0; c < 3; ++c) {
       double l = 0.0, var = 0.0;
       for (std::size_t i = 0; i < n; ++i) {
-        const double k = sp.to_rgb[c * n + i];
+        const double k = weights[c * n + i];
         l += k * r.L(p, i);
         var += k * k * r.se(p, i) * r.se(p, i);
       }
       v.radiance[p * 3 + c] = l;
       v.standard_error[p * 3 + c] = std::sqrt(var);
     }
-  v.units = "linear sRGB luminance / 683 (the bundle's precomputed-luminance values)";
   return v;
 }
 
