@@ -224,6 +224,24 @@ def measure_clone(args):
     return device, {"clone_s": wall, "bundles": len(manifests)}
 
 
+def measure_run(spec, args):
+    """Every config in a folder in one `specbake run`: a cold run into an empty output folder (the
+    scene truths traced), then `repeats` warm runs with --force (the truths kept). The figure is
+    the warm runs' wall time; beside it the jobs' own seconds summed (manifest `timings_s.bake`,
+    whichever thread did the work): a run's wall time below that sum is work overlapped."""
+    repeats = spec.get("repeats", args.repeats)
+    with tempfile.TemporaryDirectory(prefix="specbake-run-") as out:
+        cmd = [str(Path(args.specbake)), "-q", "run", str(ROOT / spec["configs"]), "--out", out]
+        if args.device:
+            cmd += ["--device", args.device]
+        cold = run(cmd)
+        warm = [run(cmd + ["--force"]) for _ in range(max(repeats, 1))]
+        manifests = [json.loads(m.read_text()) for m in sorted(Path(out).glob("*/latest/manifest.json"))]
+    jobs_s = sum(m.get("timings_s", {}).get("bake", 0.0) for m in manifests)
+    device = next((m.get("device", {}) for m in manifests if m.get("device", {}).get("type")), {})
+    return device, {"cold_s": cold, "warm_s": warm, "bundles": len(manifests), "jobs_s": jobs_s}
+
+
 def measure(args):
     targets = load_targets()
     if args.only:
@@ -233,7 +251,7 @@ def measure(args):
     unknown = set(args.only or []) - {t["id"] for t in targets}
     if unknown:
         sys.exit(f"unknown target(s) {', '.join(sorted(unknown))}; `scripts/benchmarks.py list` shows them")
-    ver = version()
+    ver = args.version or version()
     for t in chosen:
         load = os.getloadavg()[0]
         print(f"{t['id']}: measuring ({t['measure']['kind']}), load {load:.1f} ...", flush=True)
@@ -248,6 +266,10 @@ def measure(args):
                 failed = e.why
                 device, fig, spread, n, details = {"type": "cpu" if args.device in (None, "cpu", "auto") else "gpu",
                                                    "name": "?"}, e.wall, [e.wall, e.wall], 1, {"failed": e.why}
+        elif kind == "run":
+            device, facts = measure_run(t["measure"], args)
+            runs = facts["warm_s"]
+            fig, spread, n, details = statistics.median(runs), [min(runs), max(runs)], len(runs), facts
         elif kind == "clone":
             device, facts = measure_clone(args)
             fig, spread, n, details = facts["clone_s"], [facts["clone_s"]] * 2, 1, facts
@@ -297,6 +319,8 @@ def extra_of(rec):
         bits.append(f"{cold.get('points_at_walk_cap')} at cap")
     if cold.get("bundles") is not None:
         bits.append(f"{cold['bundles']} bundles")
+    if cold.get("jobs_s") is not None:
+        bits.append(f"the jobs' own seconds {cold['jobs_s']:.3g} s (last run)")
     if rec.get("failed"):
         bits.append("the job failed after this time: " + rec["failed"])
     if rec.get("source"):
@@ -411,6 +435,8 @@ def main():
     m.add_argument("--slow", action="store_true", help="also the slow targets (settings search, fresh clone)")
     m.add_argument("--device", help="OpenCL device, as `specbake run --device`")
     m.add_argument("--specbake", default=str(ROOT / "build" / "specbake"), help="the binary (default build/specbake)")
+    m.add_argument("--version", help="the version measured, when --specbake is a build of another commit "
+                                     "(default: this tree's)")
     m.set_defaults(fn=measure)
     r = sub.add_parser("render", help="write docs/benchmarks.md from the records")
     r.add_argument("--check", action="store_true", help="only check that the page is up to date (exit 1 if not)")

@@ -1,5 +1,6 @@
 #include "job/kind.hpp"
 
+#include <chrono>
 #include <cmath>
 #include <map>
 
@@ -17,6 +18,15 @@ const char* to_string(Stage s) {
     case Stage::files: return "files";
   }
   return "?";
+}
+
+double finish_files(BakeResult& result) {
+  if (!result.finish) return 0.0;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto finish = std::move(result.finish);
+  result.finish = nullptr;
+  finish(result.files, result.manifest_blocks);
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
 Accuracy Accuracy::judged(std::string name, std::string metric, double value, std::optional<double> tolerance,

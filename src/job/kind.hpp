@@ -141,7 +141,15 @@ struct BakeResult {
   std::vector<OutputFile> files;
   // Kind-specific top-level manifest blocks named in a kind's contract (e.g. "diffraction").
   nlohmann::json manifest_blocks = nlohmann::json::object();
+  // Host-only work the bundle still needs once the bake is judged: the bytes of files already
+  // listed in `files` (texture encodings) and files it adds (previews), and what it records of
+  // its own cost in manifest_blocks. No device work and no accuracy records: it cannot change
+  // whether the job passes. Empty when there is none; run it through finish_files (`run` does so
+  // on the thread that publishes the bundle, while the next job bakes).
+  std::function<void(std::vector<OutputFile>& files, nlohmann::json& manifest_blocks)> finish;
 };
+// Runs and clears result.finish (when set); its seconds on the calling thread.
+double finish_files(BakeResult& result);
 
 // Device memory a job will need, estimated from its spec before anything is allocated.
 struct MemoryEstimate {

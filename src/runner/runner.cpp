@@ -407,7 +407,7 @@ void check_host_memory(const JobSpec& job, const MemoryEstimate& need) {
 
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
                      const RunProgress& progress, bool judge, Memo* memo, const std::string& bundle_hash,
-                     double estimate_s) {
+                     double estimate_s, bool defer_files) {
   if (estimate_s < 0.0) estimate_s = kind.cost_s(job);
   const auto tb = Clock::now();
   JobContext ctx{dev};
@@ -436,6 +436,7 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
     if (progress) progress(ev);
   };
   TimedBake out{kind.bake(job, ctx), 0.0, {}};
+  if (!defer_files) finish_files(out.result);  // in the step the bake ended in: files
   steps.push_back(step->close());  // the last step
   step.reset();
   dev.profiler().settle();
@@ -515,15 +516,26 @@ std::vector<JobReport> Runner::run() {
     r.timings["total_s"] = std::chrono::duration<double>(end - t0).count();
     if (done_) done_(r);
   };
-  // A built job's bundle is written and published on a thread of its own while the next job
-  // bakes (the job's lock held until it is in place); at most one is in flight, and its report
-  // is finished before the next job's report or publish, and at the end of the run.
+  // A built job's bundle is finished (BakeResult::finish: encodings, previews), written and
+  // published on a thread of its own while the next job bakes (the job's lock held until it is
+  // in place); at most one is in flight, and its report is finished before the next job's report
+  // or publish, and at the end of the run.
+  struct Written {
+    fs::path bundle;
+    Clock::time_point at;
+    double finish_s = 0.0;  // BakeResult::finish's seconds, part of the files step
+  };
   struct Publishing {
     std::size_t report = 0;  // its index in `reports`
     std::unique_ptr<JobLock> lock;
-    std::future<std::pair<fs::path, Clock::time_point>> written;
+    std::future<Written> written;
     Clock::time_point t0, start;
     fs::path job_dir;
+  };
+  // A step's seconds with `host_s` more host work in it (the files step and its finish).
+  const auto add_host_seconds = [](json& step, double host_s) {
+    if (!step.is_object()) step = {{"device_s", 0.0}, {"host_s", 0.0}, {"wall_s", 0.0}};
+    for (const char* k : {"host_s", "wall_s"}) step[k] = step.value(k, 0.0) + host_s;
   };
   std::optional<Publishing> publishing;
   const auto settle_publishing = [&] {
@@ -531,10 +543,14 @@ std::vector<JobReport> Runner::run() {
     JobReport& r = reports[publishing->report];
     Clock::time_point end = Clock::now();
     try {
-      const auto [bundle, at] = publishing->written.get();
-      end = at;
-      r.bundle = bundle;
-      r.timings["write_s"] = std::chrono::duration<double>(at - publishing->start).count();
+      const Written w = publishing->written.get();
+      end = w.at;
+      r.bundle = w.bundle;
+      r.timings["write_s"] = std::chrono::duration<double>(w.at - publishing->start).count();
+      if (w.finish_s > 0.0) {
+        add_host_seconds(r.timings["steps_s"]["files"], w.finish_s);
+        r.timings["bake_s"] = r.timings.value("bake_s", 0.0) + w.finish_s;
+      }
     } catch (const std::exception& e) {
       record_failure(e, r);
     }
@@ -600,7 +616,7 @@ std::vector<JobReport> Runner::run() {
             apply_kept_cost(kind, *it.job, probe, estimate, store.job_dir(name) / "latest", r.device);
           }
           TimedBake baked = bake_timed(kind, *it.job, dev, ev, progress_, true, &memo, r.hash,
-                                       estimate.value("seconds", -1.0));
+                                       estimate.value("seconds", -1.0), /*defer_files=*/true);
           BakeResult& result = baked.result;
           const double bake_s = baked.bake_s;
           for (const auto& [step_name, sec] : baked.steps) stage_s[step_name] = cl_util::seconds_json(sec);
@@ -625,10 +641,6 @@ std::vector<JobReport> Runner::run() {
               {"warnings", result.warnings},
               {"created_utc", utc_now()},
           };
-          for (auto b = result.manifest_blocks.begin(); b != result.manifest_blocks.end(); ++b) {
-            if (manifest.contains(b.key())) throw JobError("manifest block '" + b.key() + "' clashes with a standard key");
-            manifest[b.key()] = b.value();
-          }
           if (!memo.store_used.empty()) manifest["results_kept"] = memo.store_used;
           for (const auto& [label, sha] : it.job->inputs) manifest["inputs"][label] = sha;
           for (const auto& k : kind.programs) manifest["kernels"][k] = sha256_hex(expanded_program(k));
@@ -644,15 +656,29 @@ std::vector<JobReport> Runner::run() {
           r.warnings = result.warnings;
           r.timings = {{"bake_s", bake_s}, {"steps_s", stage_s}};
           const auto start = Clock::now();
-          publishing = Publishing{reports.size(), std::move(lock),
-                                  std::async(std::launch::async,
-                                             [store, name, hash12, manifest = std::move(manifest),
-                                              files = std::move(result.files)] {
-                                               fs::path bundle = store.publish(name, hash12, manifest, files);
-                                               spdlog::info("{}: wrote {}", name, bundle.string());  // as it happens
-                                               return std::make_pair(std::move(bundle), Clock::now());
-                                             }),
-                                  t0, start, store.job_dir(name)};
+          publishing = Publishing{
+              reports.size(), std::move(lock),
+              std::async(std::launch::async,
+                         [store, name, hash12, add_host_seconds, manifest = std::move(manifest),
+                          result = std::move(result)]() mutable {
+                           Written w;
+                           w.finish_s = finish_files(result);
+                           // the job's seconds are its work's, on whichever thread it ran
+                           if (w.finish_s > 0.0) {
+                             add_host_seconds(manifest["timings_s"]["steps"]["files"], w.finish_s);
+                             manifest["timings_s"]["bake"] = manifest["timings_s"].value("bake", 0.0) + w.finish_s;
+                           }
+                           for (auto b = result.manifest_blocks.begin(); b != result.manifest_blocks.end(); ++b) {
+                             if (manifest.contains(b.key()))
+                               throw JobError("manifest block '" + b.key() + "' clashes with a standard key");
+                             manifest[b.key()] = b.value();
+                           }
+                           w.bundle = store.publish(name, hash12, manifest, result.files);
+                           spdlog::info("{}: wrote {}", name, w.bundle.string());  // as it happens
+                           w.at = Clock::now();
+                           return w;
+                         }),
+              t0, start, store.job_dir(name)};
           deferred = true;
         }
       }

@@ -80,8 +80,9 @@ std::vector<Config> load_configs(const std::vector<fs::path>& paths, std::vector
 // A bake through the kind's table entry, timed per step (plan, compute, check, files) with the
 // device's profiler: what `run` publishes and `sweep` measures. `ev` names the job for progress
 // events; `judge` and `memo` as in JobContext; `estimate_s` is the progress line's ETA until 5 %
-// of the job is done (< 0: the kind's 2-core CPU model). Throws what the bake throws, Interrupted
-// on a stop request.
+// of the job is done (< 0: the kind's 2-core CPU model). The bake's host-only file work
+// (BakeResult::finish) runs in its files step, unless `defer_files` leaves it to the caller.
+// Throws what the bake throws, Interrupted on a stop request.
 struct TimedBake {
   BakeResult result;
   double bake_s = 0.0;
@@ -89,7 +90,7 @@ struct TimedBake {
 };
 TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev, ProgressEvent ev,
                      const RunProgress& progress, bool judge = true, Memo* memo = nullptr,
-                     const std::string& bundle_hash = {}, double estimate_s = -1.0);
+                     const std::string& bundle_hash = {}, double estimate_s = -1.0, bool defer_files = false);
 // The job's accuracy records that miss their tolerance: BakeFailed (what it measured, its
 // parameters and warnings), or under `tolerance_advisory: true` a warning each (a failed
 // self_check is never advisory). bake_timed calls it when it judges.

@@ -536,14 +536,15 @@ void spectral_files(const AtmosphereSpec& spec, const SpectralLuts& L, const Mod
                         "error: the spectral_interpolation accuracy record"}};
 }
 
-// The R,G,B textures' .bin and .exr files. They are listed in their bundle order with their bytes
-// encoded later (encode_all), all at once on the host's threads (each task fills its own files'
-// bytes: the same bundle whatever the thread count). The textures and the strings the tasks read
-// outlive the tasks.
+// The R,G,B textures' .bin and .exr files. They are listed in `listed` in their bundle order
+// with their bytes encoded later (encode_all, given the same list), all at once on the host's
+// threads (each task fills its own files' bytes: the same bundle whatever the thread count).
+// The textures and the strings the tasks read outlive the tasks, and so does this object.
 class TextureFiles {
  public:
-  TextureFiles(const Luts& L, const std::string& units, const std::string& param, bool bin, bool exr, BakeResult& r)
-      : L_(L), s_(L.model.sizes), units_(units), param_(param), bin_(bin), exr_(exr), r_(r) {}
+  TextureFiles(const Luts& L, const std::string& units, const std::string& param, bool bin, bool exr,
+               std::vector<OutputFile>& listed)
+      : L_(L), s_(L.model.sizes), units_(units), param_(param), bin_(bin), exr_(exr), listed_(listed) {}
 
   void transmittance() {
     const std::string lay = "[r=" + std::to_string(s_.transmittance_h) + "][mu=" + std::to_string(s_.transmittance_w) +
@@ -621,7 +622,10 @@ class TextureFiles {
           });
   }
 
-  void encode_all() { parallel_for(static_cast<long long>(encode_.size()), [&](long long i) { encode_[i](); }); }
+  // The listed files' bytes, into `files`: the list they were listed in (moved or not).
+  void encode_all(std::vector<OutputFile>& files) {
+    parallel_for(static_cast<long long>(encode_.size()), [&](long long i) { encode_[i](files); });
+  }
 
  private:
   inline static const std::string kLe = "little-endian float32, C order, channels R,G,B innermost";
@@ -630,9 +634,9 @@ class TextureFiles {
   void later(OutputFile f, std::function<std::string()> bytes) {
     const bool is_exr = f.path.size() > 4 && f.path.compare(f.path.size() - 4, 4, ".exr") == 0;
     if (is_exr ? !exr_ : !bin_) return;
-    const std::size_t at = r_.files.size();
-    r_.files.push_back(std::move(f));
-    encode_.push_back([&r = r_, at, bytes = std::move(bytes)] { r.files[at].bytes = bytes(); });
+    const std::size_t at = listed_.size();
+    listed_.push_back(std::move(f));
+    encode_.push_back([at, bytes = std::move(bytes)](std::vector<OutputFile>& files) { files[at].bytes = bytes(); });
   }
   std::map<std::string, std::string> attrs(const std::string& layout, const std::string& content,
                                            const std::string& of = "") const {
@@ -647,14 +651,12 @@ class TextureFiles {
   const std::string& units_;
   const std::string& param_;
   const bool bin_, exr_;
-  BakeResult& r_;
-  std::vector<std::function<void()>> encode_;
+  std::vector<OutputFile>& listed_;  // only while listing
+  std::vector<std::function<void(std::vector<OutputFile>&)>> encode_;
 };
 
-// The R,G,B textures the spec asks for, in their layouts.
-void texture_files(const AtmosphereSpec& spec, const Luts& L, const std::string& units, const std::string& param,
-                   BakeResult& r) {
-  TextureFiles files(L, units, param, spec.write_bin, spec.write_exr, r);
+// Lists the R,G,B textures the spec asks for, in their layouts (`files` encodes them).
+void texture_files(const AtmosphereSpec& spec, const Luts& L, TextureFiles& files) {
   if (spec.out_transmittance) files.transmittance();
   if (spec.out_irradiance) files.irradiance();
   struct Tex3 {
@@ -676,11 +678,10 @@ void texture_files(const AtmosphereSpec& spec, const Luts& L, const std::string&
                    "the sky-view table: single Rayleigh x P_R(nu) + orders n >= 2, along each view's exact ray");
     files.sky_view("sky_view_single_mie", &L.sky_view_mie, "the sky-view table's single Mie (no phase function)");
   }
-  files.encode_all();
 }
 
 // The manifest's timings: the bake's stages, then the files' and previews' seconds.
-void record_timings(const Baked& b, double files_s, double previews_s, BakeResult& r) {
+void record_timings(const Baked& b, double files_s, double previews_s, json& manifest_blocks) {
   json timings = b.timings;
   const auto host_only = [](double s) { return json{{"device_s", 0.0}, {"host_s", s}, {"wall_s", s}}; };
   timings["total"]["files"] = host_only(files_s);
@@ -691,36 +692,58 @@ void record_timings(const Baked& b, double files_s, double previews_s, BakeResul
                     "stages; in total only: 'setup' = each pass's program build, allocations and layout "
                     "check, 'combine' = adding each pass into the bundle's textures; per_order[0] = "
                     "transmittance and direct irradiance, per_order[n] = the stages of order n "
-                    "(indirect_irradiance of order n is computed during order n + 1)";
-  r.manifest_blocks["atmosphere"]["timings_s"] = timings;
+                    "(indirect_irradiance of order n is computed during order n + 1); 'files' and "
+                    "'previews' (host only): `run` encodes the textures and draws the previews while the "
+                    "next job bakes";
+  manifest_blocks["atmosphere"]["timings_s"] = timings;
   for (const auto& [stage, sec] : timings["total"].items())
     spdlog::debug("atmosphere: {} total: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", stage,
                   sec["device_s"].get<double>(), sec["host_s"].get<double>(), sec["wall_s"].get<double>());
 }
 
-void files_step(const AtmosphereSpec& spec, const Shares& share, const Baked& b, JobContext& ctx, BakeResult& r) {
+// The files: listed here (texture files, KTX2 copies with their half-precision records, the
+// spectral files, sampling.glsl); the .bin/.exr textures' bytes and the previews — host work
+// that cannot change the job's verdict — are left to BakeResult::finish, which owns the tables.
+void files_step(const AtmosphereSpec& spec, const Shares& share, Baked&& baked, JobContext& ctx, BakeResult& r) {
   ctx.enter(Stage::files);
-  const Luts& L = b.luts;
   const auto t_files = std::chrono::steady_clock::now();
   ctx.progress("files", share.check_end);
-  const std::string units = b.spectrum.spectral ? "linear sRGB luminance / 683 (W m^-2 sr^-1 CIE-weighted)"
-                                                : "W m^-2 nm^-1 (radiance textures: per sr) at 680/550/440 nm";
-  const std::string param = "Bruneton 2017 (r, mu, mu_s, nu) parameterisation, texel centres";
-  texture_files(spec, L, units, param, r);
+  struct Later {
+    Baked b;
+    std::string units, param;
+    std::optional<TextureFiles> textures;
+  };
+  auto later = std::make_shared<Later>();
+  later->b = std::move(baked);
+  const Baked& b = later->b;
+  const Luts& L = b.luts;
+  later->units = b.spectrum.spectral ? "linear sRGB luminance / 683 (W m^-2 sr^-1 CIE-weighted)"
+                                     : "W m^-2 nm^-1 (radiance textures: per sr) at 680/550/440 nm";
+  later->param = "Bruneton 2017 (r, mu, mu_s, nu) parameterisation, texel centres";
+  const std::string& units = later->units;
+  const std::string& param = later->param;
+  later->textures.emplace(L, units, param, spec.write_bin, spec.write_exr, r.files);
+  texture_files(spec, L, *later->textures);
   if (spec.ktx2.enabled) ktx2_files(spec, L, units, param, ctx, r);
   if (!b.radiance.lambda_nm.empty()) spectral_files(spec, b.radiance, L.model, ctx, r);
   r.files.push_back({"sampling.glsl",
                      sampling_glsl(L.model, L.rgb, spec.layout_3d, spec.layout_tiled2d, "Values: " + units + "."), "",
                      {}, "", "", "GLSL lookup functions for the shipped layouts"});
-  const auto t_previews = std::chrono::steady_clock::now();
-  ctx.progress("previews", share.check_end + 0.4 * (1.0 - share.check_end));
-  if (spec.preview_size > 0)
-    for (auto& f : preview_files(L, b.spectrum.sky_radiance_to_luminance, b.spectrum.sun_radiance_to_luminance,
-                                 spec.preview_size, spec.preview_tone))
-      r.files.push_back(std::move(f));
-  const auto t_done = std::chrono::steady_clock::now();
-  record_timings(b, std::chrono::duration<double>(t_previews - t_files).count(),
-                 std::chrono::duration<double>(t_done - t_previews).count(), r);
+  const double listed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_files).count();
+  r.finish = [later, listed_s, preview_size = spec.preview_size, tone = spec.preview_tone](
+                 std::vector<OutputFile>& files, json& manifest_blocks) {
+    const Baked& b = later->b;
+    const auto t_encode = std::chrono::steady_clock::now();
+    later->textures->encode_all(files);
+    const auto t_previews = std::chrono::steady_clock::now();
+    if (preview_size > 0)
+      for (auto& f : preview_files(b.luts, b.spectrum.sky_radiance_to_luminance, b.spectrum.sun_radiance_to_luminance,
+                                   preview_size, tone))
+        files.push_back(std::move(f));
+    const auto t_done = std::chrono::steady_clock::now();
+    record_timings(b, listed_s + std::chrono::duration<double>(t_previews - t_encode).count(),
+                   std::chrono::duration<double>(t_done - t_previews).count(), manifest_blocks);
+  };
 }
 
 }  // namespace
@@ -747,14 +770,14 @@ BakeResult bake(const AtmosphereSpec& spec, JobContext& ctx) {
     check_step(use, share, b, ctx, r, std::move(checked));
     held_out_step(std::move(held_out), held_out_first, r);
     if (use.store_radiance) interpolation_step(use, share, b, ctx, r);
-    files_step(use, share, b, ctx, r);
+    files_step(use, share, std::move(b), ctx, r);
   } else {
     r.parameters = parameters_json(spec);
     const Shares share = job_shares(spec, ctx);
     compute_step(spec, share, ctx, r, b);
     check_step(spec, share, b, ctx, r);
     if (spec.store_radiance) interpolation_step(spec, share, b, ctx, r);
-    files_step(spec, share, b, ctx, r);
+    files_step(spec, share, std::move(b), ctx, r);
   }
   ctx.progress("done", 1.0);
   return r;
