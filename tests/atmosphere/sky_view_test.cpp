@@ -4,6 +4,7 @@
 // twilight_truth_test.cpp, its GLSL on a real GL in atmosphere_gl_test.cpp.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -73,13 +74,17 @@ TEST(SkyView, ConfigKeysAndTheAutomaticRange) {
   const auto deep = [](const std::string& more) {
     return specbake::testing::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 10]}\n" + more);
   };
-  EXPECT_TRUE(deep("").store_half_mu_s);
+  EXPECT_TRUE(deep("").store_half_sun_axes);
   EXPECT_EQ(stored_sizes(deep("")).mu_s, kDeepTwilightScatteringMuS / 2);
   EXPECT_EQ(sizes_of(deep("")).mu_s, kDeepTwilightScatteringMuS);
-  EXPECT_FALSE(deep("    sky_view: none\n").store_half_mu_s);
-  EXPECT_FALSE(deep("    sizes: 100%\n").store_half_mu_s);
-  EXPECT_FALSE(deep("    spectrum: {min_nm: 360, max_nm: 830, count: 16, store: radiance}\n").store_half_mu_s);
-  EXPECT_FALSE(specbake::testing::spec_of("    preset: earth\n").store_half_mu_s);  // sun −6…90°: 32 baked
+  // ν: 15 slices baked, the default 8 stored (every other one) — the 4D textures' memory unchanged
+  EXPECT_EQ(sizes_of(deep("")).nu, kDeepTwilightScatteringNu);
+  EXPECT_EQ(stored_sizes(deep("")).nu, AtmosphereSpec{}.scattering_nu);
+  EXPECT_EQ(stored_sizes(deep("")).scattering_texels(), sizes_of(specbake::testing::spec_of("    preset: earth\n")).scattering_texels());
+  EXPECT_FALSE(deep("    sky_view: none\n").store_half_sun_axes);
+  EXPECT_FALSE(deep("    sizes: 100%\n").store_half_sun_axes);
+  EXPECT_FALSE(deep("    spectrum: {min_nm: 360, max_nm: 830, count: 16, store: radiance}\n").store_half_sun_axes);
+  EXPECT_FALSE(specbake::testing::spec_of("    preset: earth\n").store_half_sun_axes);  // sun −6…90°: 32 baked
   for (const char* bad : {"    sky_view: {view: 15}\n", "    sky_view: {azimuth: 1}\n", "    sky_view: {sun: 0}\n",
                           "    sky_view: {altitudes: 3}\n", "    sky_view: sometimes\n"}) {
     try {
@@ -141,4 +146,48 @@ TEST(SkyView, TheLookupReturnsTheTablesNodes) {
   const double e = max_rel(looked, stored, 1e-6);
   std::printf("lookup at the nodes against the nodes: %.3g\n", e);
   EXPECT_LE(e, 1e-6);
+}
+
+// The stored 4D textures of a bake that bakes more μ_s texels and ν slices than it stores: each
+// stored texel is the baked texture's own value where a baked slice lies at its ν coordinate
+// (every other one of an odd count), else the linear blend of the two around it — the lookup
+// along ν (slice k at unit coordinate k / (NU − 1)). μ_s untouched here (its counts equal).
+TEST(SkyView, StoredNuSlicesAreTheBakedTexturesLookups) {
+  for (const auto& [baked, stored] : {std::pair{5, 3}, {15, 8}, {6, 3}}) {
+    Luts luts;
+    luts.model.sizes.r = 2;
+    luts.model.sizes.mu = 3;
+    luts.model.sizes.mu_s = 4;
+    luts.model.sizes.nu = baked;
+    const Sizes from = luts.model.sizes;
+    const auto value = [&](long long row, int nu, int mu_s, int c) {
+      return 1.0 + row + 10.0 * nu * nu + 0.1 * mu_s + 0.01 * c;  // curved in ν: a blend is not a slice
+    };
+    luts.scattering.resize(3ULL * from.scattering_texels());
+    for (long long row = 0; row < 1LL * from.r * from.mu; ++row)
+      for (int nu = 0; nu < baked; ++nu)
+        for (int mu_s = 0; mu_s < from.mu_s; ++mu_s)
+          for (int c = 0; c < 3; ++c)
+            luts.scattering[3 * ((row * baked + nu) * from.mu_s + mu_s) + c] = value(row, nu, mu_s, c);
+    luts.single_mie = luts.scattering;
+    store_sun_axes(luts, from.mu_s, stored);
+    ASSERT_EQ(luts.model.sizes.nu, stored);
+    ASSERT_EQ(luts.scattering.size(), 3ULL * from.r * from.mu * stored * from.mu_s);
+    for (long long row = 0; row < 1LL * from.r * from.mu; ++row)
+      for (int j = 0; j < stored; ++j) {
+        const double x = static_cast<double>(j * (baked - 1)) / (stored - 1);
+        const int i0 = std::min(static_cast<int>(x), baked - 2);
+        const double g = x - i0;  // 0 or 1 at a baked slice
+        for (int mu_s = 0; mu_s < from.mu_s; ++mu_s)
+          for (int c = 0; c < 3; ++c) {
+            const double want = (1.0 - g) * value(row, i0, mu_s, c) + g * value(row, i0 + 1, mu_s, c);
+            const double got = luts.scattering[3 * ((row * stored + j) * from.mu_s + mu_s) + c];
+            if (g == 0.0 || g == 1.0)  // a baked slice: its own value, unresampled
+              EXPECT_EQ(got, value(row, g == 0.0 ? i0 : i0 + 1, mu_s, c)) << baked << "→" << stored << " slice " << j;
+            else  // the blend: a few roundings of values ~1e3
+              EXPECT_NEAR(got, want, 1e-15 * std::fabs(want)) << baked << "→" << stored << " slice " << j;
+            EXPECT_EQ(luts.single_mie[3 * ((row * stored + j) * from.mu_s + mu_s) + c], got);
+          }
+      }
+  }
 }

@@ -87,8 +87,11 @@ Kind kind() {
       const auto& sc = p["sizes"]["scattering"];
       s += ", scattering " + std::to_string(sc.value("r", 0)) + "x" + std::to_string(sc.value("mu", 0)) + "x" +
            std::to_string(sc.value("mu_s", 0)) + "x" + std::to_string(sc.value("nu", 0));
-      if (sc.contains("mu_s_baked") && sc["mu_s_baked"].is_object())
-        s += " (mu_s " + std::to_string(sc["mu_s_baked"].value("mu_s", 0)) + " baked)";
+      std::string baked;
+      for (const char* axis : {"mu_s", "nu"})
+        if (const std::string key = std::string(axis) + "_baked"; sc.contains(key) && sc[key].is_object())
+          baked += (baked.empty() ? "" : ", ") + std::string(axis) + " " + std::to_string(sc[key].value(axis, 0));
+      if (!baked.empty()) s += " (" + baked + " baked)";
     }
     if (p.contains("sky_view") && p["sky_view"].is_object()) {
       const auto& n = p["sky_view"]["nodes"];

@@ -143,8 +143,11 @@ class Baking {
     clock_.host("setup", [&] { backend_ = make_(all_.slice(0, std::min(width_, n_)), width_); });
     for (int p = 0; p < passes_; ++p) pass(p, progress);
     combine();
-    if (spec_.store_half_mu_s)
-      clock_.host("combine", [&] { store_mu_s(out_.luts, stored_sizes(spec_).mu_s); });
+    if (spec_.store_half_sun_axes)
+      clock_.host("combine", [&] {
+        const Sizes stored = stored_sizes(spec_);
+        store_sun_axes(out_.luts, stored.mu_s, stored.nu);
+      });
     if (sp_.spectral) transmittance_rgb();
     out_.timings = clock_.to_json();
     const Sizes& s = m_.sizes;
@@ -282,9 +285,14 @@ double bake_files_seconds(const AtmosphereSpec& spec) {
 
 Sizes stored_sizes(const AtmosphereSpec& spec) {
   Sizes s = sizes_of(spec);
-  if (spec.store_half_mu_s) s.mu_s = std::max(2, s.mu_s / 2);
+  if (spec.store_half_sun_axes) {
+    s.mu_s = std::max(2, s.mu_s / 2);
+    s.nu = std::max(2, (s.nu + 1) / 2);
+  }
   return s;
 }
+
+namespace {
 
 void store_mu_s(Luts& luts, int mu_s) {
   const Sizes from = luts.model.sizes;
@@ -312,6 +320,46 @@ void store_mu_s(Luts& luts, int mu_s) {
   luts.scattering = resample(luts.scattering);
   luts.single_mie = resample(luts.single_mie);
   luts.model.sizes = to;
+}
+
+// Along ν: the 3D layout's x = ν_slice · MU_S + μ_s, slice k at unit coordinate k / (NU − 1).
+void store_nu(Luts& luts, int nu) {
+  const Sizes from = luts.model.sizes;
+  if (nu == from.nu) return;
+  Sizes to = from;
+  to.nu = nu;
+  const auto resample = [&](const std::vector<double>& in) {
+    std::vector<double> out(3ULL * to.scattering_texels());
+    const long long rows = 1LL * from.r * from.mu;  // (z, y)
+    const long long row_in = 3LL * from.nu * from.mu_s, row_out = 3LL * nu * from.mu_s;
+    parallel_for(rows, [&](long long row) {
+      for (int j = 0; j < nu; ++j) {
+        // j (NU_baked − 1) / (NU − 1) in one division: a whole number exactly where a baked slice is
+        const double x = static_cast<double>(j * (from.nu - 1)) / (nu - 1);
+        const int i0 = std::min(static_cast<int>(std::floor(x)), from.nu - 1);
+        const double g = x - i0;
+        const double* a = &in[row * row_in + 3LL * i0 * from.mu_s];
+        double* o = &out[row * row_out + 3LL * j * from.mu_s];
+        if (g == 0.0) {
+          std::copy(a, a + 3LL * from.mu_s, o);
+          continue;
+        }
+        const double* b = a + 3LL * from.mu_s;
+        for (long long k = 0; k < 3LL * from.mu_s; ++k) o[k] = a[k] + (b[k] - a[k]) * g;
+      }
+    });
+    return out;
+  };
+  luts.scattering = resample(luts.scattering);
+  luts.single_mie = resample(luts.single_mie);
+  luts.model.sizes = to;
+}
+
+}  // namespace
+
+void store_sun_axes(Luts& luts, int mu_s, int nu) {
+  store_mu_s(luts, mu_s);
+  store_nu(luts, nu);
 }
 
 double bake_seconds(const AtmosphereSpec& spec) {
@@ -425,6 +473,12 @@ json parameters_json(const AtmosphereSpec& spec) {
         {"meaning", "the bake's own mu_s texels (the densities of every order); the stored textures are resampled "
                     "to mu_s (each stored texel the baked texture's lookup at its mu_s): the sky-view table holds "
                     "the scene's views, the 4D textures the rest"}};
+  if (s.nu != m.sizes.nu)
+    p["sizes"]["scattering"]["nu_baked"] = {
+        {"nu", m.sizes.nu},
+        {"meaning", "the bake's own nu slices (the densities of every order); the stored textures hold every "
+                    "other one (resampled linearly where the count is even): the sky-view table holds the "
+                    "scene's views, the 4D textures the rest"}};
   // what an engine holds: transmittance, irradiance, scattering and single Mie (and the sky-view
   // table's two textures where there is one) as float32 R,G,B
   const SkyView& v = m.sky_view;

@@ -18,13 +18,15 @@ namespace specbake::atmosphere {
 // The resolved model and wavelengths (the manifest's parameters): atmosphere, channels, ...
 nlohmann::json parameters_json(const AtmosphereSpec& spec);
 
-// The sizes the bundle stores: the baked ones, with half the μ_s texels where the spec stores half
-// (AtmosphereSpec::store_half_mu_s; the bake resamples them, store_mu_s).
+// The sizes the bundle stores: the baked ones, with half the μ_s texels (n / 2) and ν slices
+// ((n + 1) / 2: every other one of an odd count) where the spec stores half
+// (AtmosphereSpec::store_half_sun_axes; the bake resamples them, store_sun_axes).
 Sizes stored_sizes(const AtmosphereSpec& spec);
-// The scattering and single Mie textures of `luts` resampled along μ_s to `mu_s` texels: each
-// stored texel is the lookup of the baked texture at its own μ_s (the two baked texels around its
-// texture coordinate, blended as the shader blends them); luts.model.sizes follows.
-void store_mu_s(Luts& luts, int mu_s);
+// The scattering and single Mie textures of `luts` resampled to `mu_s` texels along μ_s, then to
+// `nu` slices along ν: each stored texel is the lookup of the baked texture at its own μ_s and ν
+// (the two baked texels around its texture coordinate, blended as the shader blends them: μ_s as
+// the model reads it, ν linearly); luts.model.sizes follows.
+void store_sun_axes(Luts& luts, int mu_s, int nu);
 
 // Channels per pass: 3 (R, G, B) for rgb; for spectral bakes the smallest of kPassWidths that
 // holds every wavelength, else the widest (then ⌈n / 16⌉ passes). A pass's geometry (ray

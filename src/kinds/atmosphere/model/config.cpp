@@ -239,8 +239,11 @@ bool reaches_deep_twilight(const AtmosphereSpec& s) {
 
 void set_scene_default_sizes(AtmosphereSpec& s) {
   for (auto axis : kSizeAxes) s.*axis = AtmosphereSpec{}.*axis;
-  if (reaches_deep_twilight(s)) s.scattering_mu_s = kDeepTwilightScatteringMuS;
-  s.store_half_mu_s = reaches_deep_twilight(s) && sky_view_of(s).on() && !s.store_radiance;
+  if (reaches_deep_twilight(s)) {
+    s.scattering_mu_s = kDeepTwilightScatteringMuS;
+    s.scattering_nu = kDeepTwilightScatteringNu;
+  }
+  s.store_half_sun_axes = reaches_deep_twilight(s) && sky_view_of(s).on() && !s.store_radiance;
 }
 
 double scene_ray_reach_deg(const AtmosphereSpec& s) {
