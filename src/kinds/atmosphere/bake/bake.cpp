@@ -294,72 +294,48 @@ Sizes stored_sizes(const AtmosphereSpec& spec) {
 
 namespace {
 
-void store_mu_s(Luts& luts, int mu_s) {
-  const Sizes from = luts.model.sizes;
-  if (mu_s == from.mu_s) return;
-  Sizes to = from;
-  to.mu_s = mu_s;
-  // baked texel i sits at unit coordinate i / (n − 1) (coord_of_unit); stored texel j at j / (m − 1)
-  const auto resample = [&](const std::vector<double>& in) {
-    std::vector<double> out(3ULL * to.scattering_texels());
-    const long long rows = 1LL * from.r * from.mu * from.nu;  // (z, y, ν slice)
-    parallel_for(rows, [&](long long row) {
-      for (int j = 0; j < mu_s; ++j) {
-        const double x = static_cast<double>(j) / (mu_s - 1) * (from.mu_s - 1);
-        const int i0 = std::min(static_cast<int>(std::floor(x)), from.mu_s - 2);
-        const double g = x - i0;
-        for (int c = 0; c < 3; ++c) {
-          const double a = in[3 * (row * from.mu_s + i0) + c], b = in[3 * (row * from.mu_s + i0 + 1) + c];
-          out[3 * (row * mu_s + j) + c] =
-              luts.model.mu_s_geometric ? ref3::mu_s_blend(a, b, g) : a + (b - a) * g;
-        }
+// `in` laid out [outer][n_from][inner] resampled along its middle axis to n_to: stored slice j at
+// unit coordinate j / (n_to − 1) is the baked texture's value there, baked slice i sitting at
+// i / (n_from − 1) (coord_of_unit); its two neighbours joined by `blend` (g ∈ (0, 1)), a baked
+// slice copied as it is (x = j (n_from − 1) / (n_to − 1) in one division is whole exactly there).
+template <class Blend>
+std::vector<double> resample_axis(const std::vector<double>& in, long long outer, int n_from, int n_to,
+                                  long long inner, const Blend& blend) {
+  std::vector<double> out(static_cast<std::size_t>(outer * n_to * inner));
+  parallel_for(outer, [&](long long row) {
+    for (int j = 0; j < n_to; ++j) {
+      const double x = static_cast<double>(1LL * j * (n_from - 1)) / (n_to - 1);
+      const int i0 = std::min(static_cast<int>(std::floor(x)), n_from - 1);
+      const double g = x - i0;
+      const double* a = &in[(row * n_from + i0) * inner];
+      double* o = &out[(row * n_to + j) * inner];
+      if (g == 0.0) {
+        std::copy(a, a + inner, o);
+        continue;
       }
-    });
-    return out;
-  };
-  luts.scattering = resample(luts.scattering);
-  luts.single_mie = resample(luts.single_mie);
-  luts.model.sizes = to;
-}
-
-// Along ν: the 3D layout's x = ν_slice · MU_S + μ_s, slice k at unit coordinate k / (NU − 1).
-void store_nu(Luts& luts, int nu) {
-  const Sizes from = luts.model.sizes;
-  if (nu == from.nu) return;
-  Sizes to = from;
-  to.nu = nu;
-  const auto resample = [&](const std::vector<double>& in) {
-    std::vector<double> out(3ULL * to.scattering_texels());
-    const long long rows = 1LL * from.r * from.mu;  // (z, y)
-    const long long row_in = 3LL * from.nu * from.mu_s, row_out = 3LL * nu * from.mu_s;
-    parallel_for(rows, [&](long long row) {
-      for (int j = 0; j < nu; ++j) {
-        // j (NU_baked − 1) / (NU − 1) in one division: a whole number exactly where a baked slice is
-        const double x = static_cast<double>(j * (from.nu - 1)) / (nu - 1);
-        const int i0 = std::min(static_cast<int>(std::floor(x)), from.nu - 1);
-        const double g = x - i0;
-        const double* a = &in[row * row_in + 3LL * i0 * from.mu_s];
-        double* o = &out[row * row_out + 3LL * j * from.mu_s];
-        if (g == 0.0) {
-          std::copy(a, a + 3LL * from.mu_s, o);
-          continue;
-        }
-        const double* b = a + 3LL * from.mu_s;
-        for (long long k = 0; k < 3LL * from.mu_s; ++k) o[k] = a[k] + (b[k] - a[k]) * g;
-      }
-    });
-    return out;
-  };
-  luts.scattering = resample(luts.scattering);
-  luts.single_mie = resample(luts.single_mie);
-  luts.model.sizes = to;
+      const double* b = a + inner;
+      for (long long k = 0; k < inner; ++k) o[k] = blend(a[k], b[k], g);
+    }
+  });
+  return out;
 }
 
 }  // namespace
 
 void store_sun_axes(Luts& luts, int mu_s, int nu) {
-  store_mu_s(luts, mu_s);
-  store_nu(luts, nu);
+  // the 3D layout [r][mu][ν slice][μ_s][RGB]: μ_s blended as the shader reads it, ν linearly
+  const auto linear = [](double a, double b, double g) { return a + (b - a) * g; };
+  const bool geometric = luts.model.mu_s_geometric;
+  const auto along_mu_s = [geometric, linear](double a, double b, double g) {
+    return geometric ? ref3::mu_s_blend(a, b, g) : linear(a, b, g);
+  };
+  Sizes& z = luts.model.sizes;
+  for (auto* t : {&luts.scattering, &luts.single_mie}) {
+    if (mu_s != z.mu_s) *t = resample_axis(*t, 1LL * z.r * z.mu * z.nu, z.mu_s, mu_s, 3, along_mu_s);
+    if (nu != z.nu) *t = resample_axis(*t, 1LL * z.r * z.mu, z.nu, nu, 3LL * mu_s, linear);
+  }
+  z.mu_s = mu_s;
+  z.nu = nu;
 }
 
 double bake_seconds(const AtmosphereSpec& spec) {
