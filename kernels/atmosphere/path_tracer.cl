@@ -511,9 +511,14 @@ FN real truth_sun_depth_table(const AtmosphereParameters* a, GLOBAL const real* 
  * walk's radiance varies by a factor of ~3 between walks). So 3 of 4 sun transmittances, a third
  * of a twilight walk's exact depths, cost a table read. */
 #define TRUTH_SUN_EXACT_SHARE R(0.25)
+/* The cosine of the ray T_sun is taken along: the disc centre's, or the horizon's when the
+ * centre is below it (what the transmittance texture's clamp to its edge gives). */
+FN real truth_sun_ray_cosine(const AtmosphereParameters* a, real h, real mu_s) {
+  return fmax(mu_s, -horizon_distance(a, h) / radius_of(a, h));
+}
 FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu_s,
                                 int exact, PhiloxStream* rng, int* violations) {
-  const real mu = fmax(mu_s, -horizon_distance(a, h) / radius_of(a, h));
+  const real mu = truth_sun_ray_cosine(a, h, mu_s);
   if (!exact) return truth_transmittance(a, c, medium, h, mu, 0, distance_to_top(a, h, mu), 0, rng, violations);
   const real t_table = exp(-truth_sun_depth_table(a, medium, c, h, mu_s));
   if (philox_uniform(rng) >= TRUTH_SUN_EXACT_SHARE) return t_table;
@@ -840,6 +845,13 @@ FN real truth_guide_pdf(const TruthGuide* g, const real* w) {
 #define TRUTH_GUIDE_STRIDE (TRUTH_GUIDE_CELLS + 2)
 #define TRUTH_GUIDE_LEARNED_SHARE R(0.8)
 #define TRUTH_PILOT_STRIDE 6
+/* Order 1 (the sun scattered once on the view ray): walked (next-event estimation at the view
+ * ray's vertex) or given — the host's deterministic quadrature of it (truth.cpp,
+ * single_scattering), added to every walk of a traced launch (not a pilot's), the walks then
+ * carrying orders ≥ 2 only: in the first minutes of twilight single scattering is most of the
+ * light and most of a walk's variance (the vertex seldom falls on the ray's sunlit part). */
+#define TRUTH_ORDER1_WALKED 0
+#define TRUTH_ORDER1_GIVEN 1
 #define TRUTH_MODE_PILOT 1   /* the pilot's tables, and the walks' pilot records */
 #define TRUTH_MODE_LEARNED 2 /* each point's tables: learned where its flag says so, else fixed */
 /* (u_e, |2u_φ − 1|) of the unit direction w: the inverse of truth_guide_sample. */
@@ -886,7 +898,7 @@ FN void truth_learned_sample(GLOBAL const real* cells, const TruthGuide* g, real
 FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, GLOBAL const real* node_t,
                    GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* medium,
                    GLOBAL const real* cells, int mode, int max_orders, int split_order, int next_sun,
-                   PhiloxStream* rng, real* radiance_low, real* pilot, int* events, int* truncated,
+                   int order1_from, PhiloxStream* rng, real* radiance_low, real* pilot, int* events, int* truncated,
                    int* violations) {
   *radiance_low = R(0.0);
   if (mode == TRUTH_MODE_PILOT) {
@@ -960,7 +972,9 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       real s_r, s_m, s_t;
       truth_coefficients(a, c, h, &s_r, &s_m, &s_t);
       const real nu = clamp_cosine(dot3(w, sun));
-      const real visible = sun_done ? R(0.0) : sun_visible_fraction(a, h, mu_s);
+      /* order 1 given (TRUTH_ORDER1_GIVEN): the view ray's own sun term is the host's quadrature */
+      const int given = order == 1 && order1_from == TRUTH_ORDER1_GIVEN;
+      const real visible = sun_done || given ? R(0.0) : sun_visible_fraction(a, h, mu_s);
       if (visible > R(0.0) && s_r + s_m > R(0.0)) {
         const real t_sun = truth_sun_transmittance(a, c, medium, h, mu_s, use_line, rng, violations);
         const real add = weight * (s_r * rayleigh_phase(nu) + s_m * mie_phase(a->mie_g, nu)) * e_sun * t_sun * visible;
@@ -1075,7 +1089,8 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
  * (b + 1)·paths_per_batch − 1 of its stream) when j < batch_count[c], and nothing otherwise
  * (its statistics written as 0): each channel walks as many batches as its own precision
  * needs. Writes TRUTH_OUT_STRIDE reals at out_item: per channel (mean, m2) of the whole walk,
- * of orders 1..split_order and of the orders above it. Table
+ * of orders 1..split_order and of the orders above it (with order 1 given, TRUTH_ORDER1_GIVEN,
+ * the walks' own part: the host adds the quadrature's order 1 to the first two means). Table
  * layouts: node_t [P][nodes], node_tau and node_cdf [P][NCH][nodes], medium
  * as TRUTH_MEDIUM_SIZE describes it (majorants, then kinks), cells [P][TRUTH_GUIDE_STRIDE]
  * (read in TRUTH_MODE_LEARNED only). A pilot launch (TRUTH_MODE_PILOT) also writes each walk's
@@ -1084,8 +1099,8 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
                          GLOBAL const real* node_tau, GLOBAL const real* node_cdf, GLOBAL const real* medium,
                          int nodes, int p, int point_base, int j, GLOBAL const int* batch_base,
                          GLOBAL const int* batch_count, int paths_per_batch, int max_orders,
-                         int split_order, int next_sun, philox_u32 seed_lo, philox_u32 seed_hi, int channel_base,
-                         int channels, GLOBAL const real* cells, int mode, GLOBAL real* out_item,
+                         int split_order, int next_sun, int order1, philox_u32 seed_lo, philox_u32 seed_hi,
+                         int channel_base, int channels, GLOBAL const real* cells, int mode, GLOBAL real* out_item,
                          GLOBAL real* pilot_item) {
   GLOBAL const real* pt = points + p * TRUTH_POINT_STRIDE;
   int events = 0, truncated = 0, violations = 0;
@@ -1101,7 +1116,7 @@ FN void truth_trace_item(const AtmosphereParameters* a, GLOBAL const real* point
         real low, rec[TRUTH_PILOT_STRIDE];
         const real x = truth_walk(a, c, pt, node_t + p * nodes, node_tau + (p * NCH + c) * nodes,
                                   node_cdf + (p * NCH + c) * nodes, medium, cells + p * TRUTH_GUIDE_STRIDE, mode,
-                                  max_orders, split_order, next_sun, &rng, &low, rec, &events, &truncated, &violations);
+                                  max_orders, split_order, next_sun, order1, &rng, &low, rec, &events, &truncated, &violations);
         if (mode == TRUTH_MODE_PILOT)
           for (int k = 0; k < TRUTH_PILOT_STRIDE; ++k) pilot_item[(i * NCH + c) * TRUTH_PILOT_STRIDE + k] = rec[k];
         const real xs[TRUTH_STATS] = {x, low, x - low};

@@ -163,6 +163,7 @@ struct Prepared {
   std::vector<double> cells;     // [P][TRUTH_GUIDE_STRIDE]: the learned first-direction cells, flag
   std::vector<char> guided_paths;  // [P]: its walks guide their free paths (truth_deep_shadow_cosine)
   std::vector<std::vector<double>> medium;  // [group]: medium_table of channels 3g..3g+2
+  std::vector<double> single;    // [P][C]: order 1 by quadrature (TruthOptions::Order1::quadrature), else empty
 };
 
 // The view ray of point p in the frame zenith = (0, 0, 1), view in the xz plane.
@@ -203,12 +204,12 @@ void point_geometry(const AtmosphereParameters& a, const TruthPoint& p, double* 
   row[PT_NODES] = 2;  // refined by view_table
 }
 
-// The nodes of a view ray of length D from (h, mu): kSegments equal segments and the crossings
+// The nodes of a view ray of length D from (h, mu): `segments` equal segments and the crossings
 // of the kink altitudes (s² + 2 rμ s + (ρ² − ρ_k²) = 0), sorted, without near repeats, ending at D.
 std::vector<double> view_nodes(const AtmosphereParameters& a, const std::vector<double>& kinks, double h, double mu,
-                               double D) {
+                               double D, int segments = kSegments) {
   std::vector<double> t;
-  for (int k = 0; k <= kSegments; ++k) t.push_back(D * k / kSegments);
+  for (int k = 0; k <= segments; ++k) t.push_back(D * k / segments);
   const double r_mu = (a.bottom_radius + h) * mu, rho2 = ref3::horizon_distance2(&a, h);
   for (double hk : kinks) {
     const double c0 = rho2 - ref3::horizon_distance2(&a, hk);
@@ -484,6 +485,141 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
                   node_cdf + c * kNodes);
 }
 
+// ---- order 1 by quadrature (TruthOptions::Order1::quadrature) ------------------------------
+// The profiles as a medium of three channels with unit coefficients (channel i: profile i —
+// Rayleigh, Mie, absorption): truth_optical_depth of channel i is then profile i's optical
+// length, to TRUTH_DEPTH_ERROR of itself (the cuts are placed for each profile alone), so that
+// every channel's optical depth, a positive sum of them, is as exact.
+Channels unit_channels() {
+  Channels unit;
+  unit.lambda_nm = {0.0, 0.0, 0.0};
+  unit.solar_irradiance = unit.mie_scattering = unit.ground_albedo = {0.0, 0.0, 0.0};
+  unit.rayleigh_scattering = {1.0, 0.0, 0.0};
+  unit.mie_extinction = {0.0, 1.0, 0.0};
+  unit.absorption_extinction = {0.0, 0.0, 1.0};
+  return unit;
+}
+
+// Order 1 of every channel at one point, the walks' expectation of the sun term at the view
+// ray's vertex (path_tracer.cl, truth_walk):
+//   L₁ = ∫_0^D E_sun e^{−τ(0,t)} (β_R ρ_R(t) P_R(ν) + β_M ρ_M(t) P_M(ν)) V(t) e^{−τ_sun(t)} dt,
+// with the optical depths exact (three profiles' lengths, shared by the channels) and V the sun
+// disc's visible fraction. The view ray is cut into kSingleSegments equal intervals and at
+// every kink crossing; each interval is bisected (4-point Gauss–Legendre on it against the same
+// on its halves) until, for every channel, the halves' sum moves by at most kSingleTolerance of
+// that channel's first estimate over the whole ray, in proportion to the interval's length:
+// the shadow's edge (V's smoothstep over the disc) and the sun ray's tangent point passing a
+// kink are what refine. Channels whose first estimate is below kSingleFloor of an unattenuated
+// thin ray's order 1 are held to that floor (deep in the shadow: nothing a picture shows).
+constexpr int kSingleSegments = 8;
+constexpr double kSingleTolerance = 1e-6;
+constexpr double kSingleFloor = 1e-12;
+constexpr int kSingleMaxDepth = 24;
+constexpr double kGauss4X[2] = {0.3399810435848563, 0.8611363115940526};
+constexpr double kGauss4W[2] = {0.6521451548625461, 0.3478548451374538};
+
+class SingleScattering {
+ public:
+  SingleScattering(const AtmosphereParameters& a, const AtmosphereParameters& unit, const double* unit_medium,
+                   const Channels& ch, const double* row)
+      : a_(a), unit_(unit), medium_(unit_medium), ch_(ch), row_(row), C_(ch.size()),
+        p_r_(ref3::rayleigh_phase(row[PT_NU])), p_m_(ref3::mie_phase(a.mie_g, row[PT_NU])) {}
+
+  // f_c(t) for every channel c.
+  void integrand(double t, double* f) const {
+    const double h0 = row_[PT_H], mu0 = row_[PT_MU];
+    double h, mu;
+    ref3::point_along(&a_, h0, mu0, t, row_[PT_GROUND] != 0.0, &h, &mu);
+    const double r0 = a_.bottom_radius + h0;
+    double z[3];
+    for (int k = 0; k < 3; ++k) z[k] = r0 * row_[PT_Z + k] + t * row_[PT_V + k];
+    const double sun[3] = {row_[PT_S], row_[PT_S + 1], row_[PT_S + 2]};
+    const double mu_s = std::clamp(ref3::dot3(sun, z) / std::sqrt(ref3::dot3(z, z)), -1.0, 1.0);
+    const double visible = ref3::sun_visible_fraction(&a_, h, mu_s);
+    if (!(visible > 0.0)) {
+      std::fill_n(f, C_, 0.0);
+      return;
+    }
+    const double mu_sun = ref3::truth_sun_ray_cosine(&a_, h, mu_s);
+    const double d_sun = ref3::distance_to_top(&a_, h, mu_sun);
+    double len[3];  // each profile's optical length: the view ray to t, then towards the sun
+    for (int i = 0; i < 3; ++i)
+      len[i] = ref3::truth_optical_depth(&unit_, i, medium_, h0, mu0, t) +
+               ref3::truth_optical_depth(&unit_, i, medium_, h, mu_sun, d_sun);
+    const double rho_r = ref3::profile_density(&a_.rayleigh_density, h);
+    const double rho_m = ref3::profile_density(&a_.mie_density, h);
+    for (std::size_t c = 0; c < C_; ++c) {
+      const double tau = ch_.rayleigh_scattering[c] * len[0] + ch_.mie_extinction[c] * len[1] +
+                         ch_.absorption_extinction[c] * len[2];
+      f[c] = ch_.solar_irradiance[c] *
+             (ch_.rayleigh_scattering[c] * rho_r * p_r_ + ch_.mie_scattering[c] * rho_m * p_m_) * visible *
+             std::exp(-tau);
+    }
+  }
+  // 4-point Gauss–Legendre over [lo, hi], every channel, into out.
+  void rule(double lo, double hi, double* out) const {
+    const double mid = 0.5 * (lo + hi), half = 0.5 * (hi - lo);
+    std::vector<double> f(C_);
+    std::fill_n(out, C_, 0.0);
+    for (int i = 0; i < 2; ++i)
+      for (double t : {mid - half * kGauss4X[i], mid + half * kGauss4X[i]}) {
+        integrand(t, f.data());
+        for (std::size_t c = 0; c < C_; ++c) out[c] += kGauss4W[i] * half * f[c];
+      }
+  }
+
+  void integrate(const std::vector<double>& nodes, double* out) const {
+    struct Piece {
+      double lo, hi;
+      int depth;
+      std::vector<double> whole;
+    };
+    const double D = nodes.back();
+    std::vector<Piece> todo;
+    std::vector<double> first(C_, 0.0), tol(C_);
+    for (std::size_t k = 0; k + 1 < nodes.size(); ++k) {
+      Piece piece{nodes[k], nodes[k + 1], 0, std::vector<double>(C_)};
+      rule(piece.lo, piece.hi, piece.whole.data());
+      for (std::size_t c = 0; c < C_; ++c) first[c] += piece.whole[c];
+      todo.push_back(std::move(piece));
+    }
+    for (std::size_t c = 0; c < C_; ++c) {
+      const double thin = ch_.solar_irradiance[c] * (ch_.rayleigh_scattering[c] + ch_.mie_scattering[c]) * D / (4.0 * M_PI);
+      tol[c] = kSingleTolerance * std::max(first[c], kSingleFloor * thin);
+    }
+    std::fill_n(out, C_, 0.0);
+    std::vector<double> left(C_), right(C_);
+    while (!todo.empty()) {
+      Piece piece = std::move(todo.back());
+      todo.pop_back();
+      const double mid = 0.5 * (piece.lo + piece.hi);
+      rule(piece.lo, mid, left.data());
+      rule(mid, piece.hi, right.data());
+      bool done = piece.depth >= kSingleMaxDepth;
+      if (!done) {
+        done = true;
+        for (std::size_t c = 0; c < C_ && done; ++c)
+          done = std::fabs(left[c] + right[c] - piece.whole[c]) <= tol[c] * (piece.hi - piece.lo) / D;
+      }
+      if (done) {
+        for (std::size_t c = 0; c < C_; ++c) out[c] += left[c] + right[c];
+        continue;
+      }
+      todo.push_back(Piece{piece.lo, mid, piece.depth + 1, left});
+      todo.push_back(Piece{mid, piece.hi, piece.depth + 1, right});
+    }
+  }
+
+ private:
+  const AtmosphereParameters& a_;
+  const AtmosphereParameters& unit_;
+  const double* medium_;
+  const Channels& ch_;
+  const double* row_;
+  std::size_t C_;
+  double p_r_, p_m_;
+};
+
 Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, std::size_t point_base,
                  const TruthOptions& o) {
   Prepared P;
@@ -526,12 +662,21 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
         P.medium[c / kGroup][ref3::kTruthSkyAt + n * kGroup + c % kGroup] = sky[n * P.n_channels + c];
   }
   const SkyLight sky{&a, &P.medium};
+  const bool single = o.order1 == TruthOptions::Order1::quadrature;
+  const Channels unit = unit_channels();
+  const AtmosphereParameters a_unit = ref3::make_parameters(P.model, unit);
+  const std::vector<double> unit_medium = single ? medium_table(P.model, unit) : std::vector<double>{};
+  if (single) P.single.assign(P.n_points * P.n_channels, 0.0);
   parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
     view_table(a, P.channels, kinks, P.guided_paths[i] ? &sky : nullptr, row, &P.node_t[i * kNodes],
                &P.node_tau[i * P.n_channels * kNodes], &P.node_cdf[i * P.n_channels * kNodes]);
     for (int j = 0; j <= TRUTH_GUIDE_CELLS; ++j)
       P.cells[i * TRUTH_GUIDE_STRIDE + j] = static_cast<double>(j) / TRUTH_GUIDE_CELLS;
+    if (single && row[PT_NODES] != 0.0)
+      SingleScattering(a, a_unit, unit_medium.data(), P.channels, row)
+          .integrate(view_nodes(a, kinks, row[PT_H], row[PT_MU], row[PT_D], kSingleSegments),
+                     &P.single[i * P.n_channels]);
   });
   return P;
 }
@@ -692,6 +837,9 @@ philox_u32 seed_high(const TruthOptions& o, int mode) {
   const auto hi = static_cast<philox_u32>(o.seed >> 32);
   return mode == TRUTH_MODE_PILOT ? hi ^ 0x9e3779b9u : hi;
 }
+int order1_arg(const TruthOptions& o) {
+  return o.order1 == TruthOptions::Order1::quadrature ? TRUTH_ORDER1_GIVEN : TRUTH_ORDER1_WALKED;
+}
 std::size_t pilot_size(std::size_t points, int stride, int paths_per_batch) {
   return points * static_cast<std::size_t>(stride) * static_cast<std::size_t>(paths_per_batch) * kGroup *
          TRUTH_PILOT_STRIDE;
@@ -712,7 +860,8 @@ class HostEngine final : public Engine {
       ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.medium.data(),
                              kNodes, p, static_cast<int>(P_.point_base), j, &base[p * kGroup], &count[p * kGroup],
                              o_.paths_per_batch, o_.orders,
-                             o_.split_orders, static_cast<int>(o_.next_sun), static_cast<philox_u32>(o_.seed & 0xffffffffu),
+                             o_.split_orders, static_cast<int>(o_.next_sun), order1_arg(o_),
+                             static_cast<philox_u32>(o_.seed & 0xffffffffu),
                              seed_high(o_, mode), static_cast<int>(g.first), static_cast<int>(g.count), cells_.data(),
                              mode, &out[id * kStride],
                              mode == TRUTH_MODE_PILOT ? &(*pilot)[static_cast<std::size_t>(id) * item_pilot] : nullptr);
@@ -779,6 +928,7 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, static_cast<cl_int>(o_.orders));
       k.setArg(i++, static_cast<cl_int>(o_.split_orders));
       k.setArg(i++, static_cast<cl_int>(o_.next_sun));
+      k.setArg(i++, static_cast<cl_int>(order1_arg(o_)));
       k.setArg(i++, static_cast<cl_uint>(o_.seed & 0xffffffffu));
       k.setArg(i++, static_cast<cl_uint>(seed_high(o_, mode)));
       k.setArg(i++, static_cast<cl_int>(g.first));
@@ -1122,6 +1272,13 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   constexpr int kStats = TRUTH_STATS;  // whole walk, orders 1..split, orders above split
   std::vector<Stat> stats(P.n_points * C * kStats);
   auto stat = [&](std::size_t p, std::size_t c, int k = 0) -> Stat& { return stats[(p * C + c) * kStats + k]; };
+  // the estimate: the walks' mean, plus order 1 where the quadrature gives it (the whole and the
+  // orders up to the split; its error is far below any walk's)
+  auto estimate = [&](std::size_t p, std::size_t c, int k = 0) {
+    Stat s = stat(p, c, k);
+    if (k < 2 && !P.single.empty()) s.mean += P.single[p * C + c];
+    return s;
+  };
   long long launch_batches =
       std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
   std::vector<long long> cap(P.n_points, max_batches);  // per point and channel: max_batches, or the events budget's
@@ -1182,7 +1339,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
     if (!(o.target_relative_se > 0.0)) break;
     bool more = false;
     for (std::size_t p = 0; p < P.n_points; ++p) {
-      const std::vector<double> need = walks_needed(o, C, [&](std::size_t c) -> const Stat& { return stat(p, c); });
+      const std::vector<double> need = walks_needed(o, C, [&](std::size_t c) { return estimate(p, c); });
       std::vector<long long> w(C);
       long long total = 0, traced = 0;
       for (std::size_t c = 0; c < C; ++c) {
@@ -1227,10 +1384,10 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
     for (std::size_t c = 0; c < C; ++c) {
       const std::size_t i = row * C + c;
       r.channel_paths[i] = done[p * C + c] * ppb;
-      r.radiance[i] = stat(p, c).mean;
+      r.radiance[i] = estimate(p, c).mean;
       r.standard_error[i] = stat(p, c).se();
       if (o.split_orders > 0) {
-        r.radiance_low[i] = stat(p, c, 1).mean;
+        r.radiance_low[i] = estimate(p, c, 1).mean;
         r.standard_error_low[i] = stat(p, c, 1).se();
         r.radiance_high[i] = stat(p, c, 2).mean;
         r.standard_error_high[i] = stat(p, c, 2).se();
@@ -1260,6 +1417,7 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
   r.channels = r.lambda_nm.size();
   r.orders = o.orders;
   r.seed = o.seed;
+  r.order1 = o.order1 == TruthOptions::Order1::quadrature ? "quadrature" : "walked";
   r.radiance.assign(r.points * r.channels, 0.0);
   r.standard_error.assign(r.points * r.channels, 0.0);
   r.paths.assign(r.points, 0);
@@ -1361,13 +1519,18 @@ nlohmann::json TruthResult::summary() const {
     total += n;
   }
   for (long long n : channel_paths) walks += n;
-  return {{"method", "Monte Carlo path tracing (kernels/atmosphere/path_tracer.cl): view-ray vertex from the "
-                     "tabulated optical depth, delta tracking, sun by next-event estimation with ratio "
-                     "tracking (at vertices after the first, for points whose sun is low enough for the "
-                     "planet's shadow to matter, its expectation along the ray drawn on the ray's sunlit "
-                     "part; points with the sun below the horizon first trace pilot walks and keep a learned view-ray "
-                     "table and first direction where the pilot predicts a gain), Philox4x32-10 streams per (seed, "
-                     "path, point, channel)"},
+  return {{"method", std::string(order1 == "quadrature"
+                                     ? "order 1 (single scattering) by adaptive Gauss-Legendre quadrature of the view "
+                                       "ray with exact optical depths (relative 1e-6), orders 2 and above by "
+                                     : "") +
+                         "Monte Carlo path tracing (kernels/atmosphere/path_tracer.cl): view-ray vertex from the "
+                         "tabulated optical depth, delta tracking, sun by next-event estimation with ratio "
+                         "tracking (at vertices after the first, for points whose sun is low enough for the "
+                         "planet's shadow to matter, its expectation along the ray drawn on the ray's sunlit "
+                         "part; points with the sun below the horizon first trace pilot walks and keep a learned view-ray "
+                         "table and first direction where the pilot predicts a gain), Philox4x32-10 streams per (seed, "
+                         "path, point, channel)"},
+          {"order1", order1},
           {"wavelengths_nm", lambda_nm},
           {"channels", channel_names},
           {"points", points},
@@ -1395,6 +1558,7 @@ nlohmann::json truth_options_json(const TruthOptions& o) {
           {"split", o.split_orders},
           {"weights", o.target_weights},
           {"next_sun", static_cast<int>(o.next_sun)},
+          {"order1", o.order1 == TruthOptions::Order1::quadrature ? "quadrature" : "walked"},
           {"learn", o.learn},
           {"max_events_per_point", o.max_events_per_point}};
 }

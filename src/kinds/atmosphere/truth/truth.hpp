@@ -72,6 +72,13 @@ struct TruthOptions {
   // or one of the two everywhere (tests compare them). Same expectation; other noise and cost.
   enum class NextSun { automatic = 0, along_ray = 1, at_vertex = 2 };
   NextSun next_sun = NextSun::automatic;
+  // Order 1, the sun scattered once on the view ray: a deterministic quadrature on the host
+  // (exact optical depths, adaptive to a relative 1e-6; no noise), the walks carrying orders ≥ 2
+  // (path_tracer.cl, TRUTH_ORDER1_GIVEN), or walked like the other orders (next-event estimation
+  // at the view ray's vertex; tests compare the two). Same expectation; in the first minutes of
+  // twilight, where single scattering is most of the light, a fraction of the walks.
+  enum class Order1 { quadrature = 0, walked = 1 };
+  Order1 order1 = Order1::quadrature;
   // Twilight points (those whose walks are guided towards the sunlit air) first trace a few
   // pilot walks and learn from them where their light comes from: the view ray's segment
   // table and the first direction's cells (path_tracer.cl "learned guides"). Same
@@ -108,6 +115,7 @@ struct TruthResult {
   std::string device;                  // device description, or "host (C++ double)"
   double seconds = 0.0;                // wall time (tables and walks); 0 when reused
   std::string reused;                  // the kept entry it was read from (a file name); empty: traced now
+  std::string order1 = "walked";       // how order 1 was found: "quadrature" or "walked" (TruthOptions::Order1)
   double L(std::size_t point, std::size_t channel) const { return radiance[point * channels + channel]; }
   double se(std::size_t point, std::size_t channel) const { return standard_error[point * channels + channel]; }
   // The orders-1..N part as a result of its own (radiance = low), for the same conversions.

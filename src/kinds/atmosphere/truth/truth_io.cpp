@@ -132,7 +132,8 @@ std::string truth_result_bytes(const TruthResult& r) {
                             {"mean_events", r.mean_events},
                             {"truncated", r.truncated},
                             {"precision", r.precision},
-                            {"device", r.device}};  // not its seconds: the bytes are the same every run
+                            {"device", r.device},
+                            {"order1", r.order1}};  // not its seconds: the bytes are the same every run
   const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(j);
   return std::string(cbor.begin(), cbor.end());
 }
@@ -164,6 +165,7 @@ TruthResult truth_result_from_bytes(const std::string& bytes) {
   j.at("truncated").get_to(r.truncated);
   j.at("precision").get_to(r.precision);
   j.at("device").get_to(r.device);
+  r.order1 = j.value("order1", std::string("walked"));  // kept before order 1 had a quadrature: walked
   const std::size_t cells = r.points * r.channels;
   const std::size_t split = r.split_orders > 0 ? cells : 0;
   if (r.channels != r.lambda_nm.size() || r.channels != r.channel_names.size() || r.radiance.size() != cells ||
