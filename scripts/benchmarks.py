@@ -136,8 +136,10 @@ def bake_facts(m, process_wall):
         # per point and channel of what relative_se targets (X, Y, Z of a spectrum), both traces
         facts["truth_se_target_p99"] = se.get("target_channels", {}).get("p99")
         facts["reference_se_xyz_p99"] = se.get("reference_xyz_relative", {}).get("p99")
+        facts["truth_se_target_max"] = se.get("target_channels", {}).get("max")
         for band, key in (("below", "sun_below_-6_deg"), ("from", "sun_from_-6_deg")):
             facts[f"truth_se_target_p99_sun_{band}_-6"] = se.get("target_channels_by_sun", {}).get(key, {}).get("p99")
+            facts[f"truth_se_target_max_sun_{band}_-6"] = se.get("target_channels_by_sun", {}).get(key, {}).get("max")
         facts["truth_se_de2000_p99"] = se.get("de2000", {}).get("p99")
         facts["points_at_walk_cap"] = se.get("points_at_max_paths")
         facts["vs_path_traced"] = check.get("value")
@@ -314,6 +316,11 @@ def extra_of(rec):
                      (("sun below −6°", "truth_se_target_p99_sun_below_-6"), ("from −6°", "truth_se_target_p99_sun_from_-6"))
                      if cold.get(k) is not None]
             bits.append(f"XYZ {100 * cold['truth_se_target_p99']:.3g} %" + (f" ({', '.join(bands)})" if bands else ""))
+            worst = [f"{name} {100 * cold[k]:.3g} %" for name, k in
+                     (("sun below −6°", "truth_se_target_max_sun_below_-6"), ("from −6°", "truth_se_target_max_sun_from_-6"))
+                     if cold.get(k) is not None]
+            if worst:
+                bits.append("largest " + ", ".join(worst))
         if cold.get("reference_se_xyz_p99") is not None:
             bits.append(f"the 48-wavelength reference's XYZ {100 * cold['reference_se_xyz_p99']:.3g} %")
         bits.append(f"{cold.get('points_at_walk_cap')} at cap")
