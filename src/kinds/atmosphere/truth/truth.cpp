@@ -1213,19 +1213,12 @@ constexpr double kAllocationFloor = 0.1;
 // from the walks so far (stat n, mean, se per channel); 0 for channels that need no more.
 //  - no weights: every channel on its own, n (se / (target L))², the walks that bring its se to
 //    the target;
-//  - weights (rows Σ_c w_rc L_c, e.g. CIE X, Y, Z over a spectrum), when a row misses the target:
-//    the allocation with the fewest walks that brings every row's relative variance,
-//    Σ_c A_rc / n_c with A_rc = w_rc² σ_c² / L_r² (σ the per-walk standard deviation), to the
-//    target's. For one row that is Neyman's, n_c ∝ |w_c| σ_c; for several its shape is
-//    n_c ∝ √(Σ_r λ_r A_rc) with the row weights λ that maximise Σ_c √(Σ_r λ_r A_rc) (the
-//    minimax's concave dual, whose gradient is the rows' relative variances at that shape;
-//    exponentiated-gradient steps), scaled so that the largest row meets the target. Each
-//    weighted channel takes at least kAllocationFloor of the mean. Channels whose walks mean
-//    little to the colour (the spectrum's ends) take a few walks instead of as many as the
-//    brightest, and no row is over-served: the largest of the rows' own Neyman allocations,
-//    which this replaces, gave every channel the walks of its most demanding row — at a walk cap
-//    (deep twilight) 4–6 % more se for the same walks.
-constexpr int kAllocationSteps = 200;
+//  - weights (rows Σ_c w_rc L_c, e.g. CIE X, Y, Z over a spectrum): for each row that misses the
+//    target, the allocation with the fewest walks whose weighted sum has the target's variance V
+//    (Neyman's: n_c = (Σ_k |w_rk| σ_k) |w_rc| σ_c / V, σ the per-walk standard deviation), each
+//    channel at least kAllocationFloor of the row's mean; the channel's need is the largest over
+//    the rows. Channels whose walks mean little to the colour (the spectrum's ends) then take a
+//    few of them instead of as many as the brightest.
 template <class StatOf>
 std::vector<double> walks_needed(const TruthOptions& o, std::size_t C, const StatOf& stat) {
   std::vector<double> need(C, 0.0);
@@ -1237,65 +1230,31 @@ std::vector<double> walks_needed(const TruthOptions& o, std::size_t C, const Sta
     }
     return need;
   }
+  std::vector<double> sigma(C);  // per-walk standard deviation of each channel
+  for (std::size_t c = 0; c < C; ++c) sigma[c] = stat(c).se() * std::sqrt(stat(c).n);
   const std::size_t rows = o.target_weights.size() / C;
-  std::vector<double> A(rows * C, 0.0);  // relative variance coefficients of the rows that have a value
-  std::vector<char> weighted(C, 0);
-  bool missed = false;
   for (std::size_t row = 0; row < rows; ++row) {
     const double* w = &o.target_weights[row * C];
-    double L = 0.0, var = 0.0;
+    double L = 0.0, var = 0.0, sum = 0.0;  // the row's value, its variance, Σ |w| σ
+    std::size_t weighted = 0;
     for (std::size_t c = 0; c < C; ++c) {
-      const auto& s = stat(c);
+      const Stat& s = stat(c);
       L += w[c] * s.mean;
       var += w[c] * w[c] * s.se() * s.se();
-      weighted[c] = weighted[c] || w[c] != 0.0;
+      sum += std::fabs(w[c]) * sigma[c];
+      weighted += w[c] != 0.0;
     }
-    if (!(std::fabs(L) > 0.0)) continue;
-    missed = missed || var > (target * L) * (target * L);
+    const double V = (target * L) * (target * L);
+    if (!(V > 0.0) || !(var > V) || !(sum > 0.0)) continue;
+    std::vector<double> n(C, 0.0);
+    double mean = 0.0;
     for (std::size_t c = 0; c < C; ++c) {
-      const double sigma2 = stat(c).se() * stat(c).se() * stat(c).n;
-      A[row * C + c] = w[c] * w[c] * sigma2 / (L * L);
+      n[c] = sum * std::fabs(w[c]) * sigma[c] / V * kTopUpMargin;
+      mean += n[c] / static_cast<double>(weighted);
     }
+    for (std::size_t c = 0; c < C; ++c)
+      if (w[c] != 0.0) need[c] = std::max(need[c], std::max(n[c], kAllocationFloor * mean));
   }
-  if (!missed) return need;
-  // the shape m_c = √(Σ_r λ_r A_rc) and its rows' relative variances at n = m
-  std::vector<double> lambda(rows, 1.0 / static_cast<double>(rows)), m(C), f(rows), best_m;
-  double best = std::numeric_limits<double>::infinity();  // Σ m · max_r f_r: the walks the shape needs, × target²
-  for (int step = 0; step <= kAllocationSteps; ++step) {
-    for (std::size_t c = 0; c < C; ++c) {
-      double x = 0.0;
-      for (std::size_t row = 0; row < rows; ++row) x += lambda[row] * A[row * C + c];
-      m[c] = std::sqrt(x);
-    }
-    double f_max = 0.0, m_sum = 0.0;
-    for (std::size_t row = 0; row < rows; ++row) {
-      f[row] = 0.0;
-      for (std::size_t c = 0; c < C; ++c)
-        if (A[row * C + c] > 0.0) f[row] += m[c] > 0.0 ? A[row * C + c] / m[c] : std::numeric_limits<double>::infinity();
-      f_max = std::max(f_max, f[row]);
-    }
-    for (double x : m) m_sum += x;
-    if (!(f_max > 0.0) || !std::isfinite(f_max)) break;
-    if (m_sum * f_max < best) {
-      best = m_sum * f_max;
-      best_m = m;
-      for (std::size_t c = 0; c < C; ++c) best_m[c] *= f_max / (target * target);  // walks: the largest row at the target
-    }
-    double norm = 0.0;
-    for (std::size_t row = 0; row < rows; ++row) norm += lambda[row] *= std::exp(2.0 * f[row] / f_max);
-    for (double& l : lambda) l /= norm;
-  }
-  if (best_m.empty()) return need;
-  double mean = 0.0;
-  std::size_t n_weighted = 0;
-  for (std::size_t c = 0; c < C; ++c)
-    if (weighted[c]) {
-      mean += best_m[c] * kTopUpMargin;
-      ++n_weighted;
-    }
-  mean /= static_cast<double>(std::max<std::size_t>(n_weighted, 1));
-  for (std::size_t c = 0; c < C; ++c)
-    if (weighted[c]) need[c] = std::max(best_m[c] * kTopUpMargin, kAllocationFloor * mean);
   return need;
 }
 
