@@ -40,8 +40,9 @@
  *    with delta tracking ("the light at a vertex" below): in the planet's shadow the light at
  *    a vertex spans orders of magnitude with its altitude, and delta tracking seldom ends where
  *    it is bright;
- *  - the sun: at the view ray's vertex, next-event estimation (T_sun by ratio tracking,
- *    unbiased); for every later vertex, its expectation over where the free path ends, drawn
+ *  - order 1 (the sun at the view ray's vertex): given by the host's quadrature
+ *    (TRUTH_ORDER1_GIVEN, the walks then carry orders ≥ 2), or next-event estimation there
+ *    (T_sun by ratio tracking, unbiased); for every later vertex, its expectation over where the free path ends, drawn
  *    on the sunlit part of the new direction's ray by the vertex before it
  *    (truth_next_sun_term: T and T_sun by ratio tracking) — in twilight a free path rarely
  *    ends in sunlit air, and the plain estimate is that rare event;

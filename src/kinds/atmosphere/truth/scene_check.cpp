@@ -307,8 +307,10 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   // sun's transmittance from its table with an exact correction); whole scenes, traced at once as
   // the check does, ~0.8 of that below the horizon's band: the default scene's job 10.3 s cold
   // (these constants: 12), the sun −12…0° scene of 128 points at 16 wavelengths 64 s (59); the
-  // bands' jobs within 0.9–1.25 of the measured.
-  constexpr double kHighSun = 0.016, kLowSun = 0.035, kBelowHorizon = 0.148, kDeepTwilight = 0.70, kEarthEvents = 1.8;
+  // bands' jobs within 0.9–1.25 of the measured. With order 1 by quadrature (the walks carry
+  // orders ≥ 2) the same bands gave 0.017, 0.038, 0.113 and 0.60 s a point (rgb, 1981dc9): the
+  // constants below scaled by those ratios.
+  constexpr double kHighSun = 0.0145, kLowSun = 0.030, kBelowHorizon = 0.090, kDeepTwilight = 0.60, kEarthEvents = 1.8;
   // Longer walks also need more of them (their radiance is noisier): Rayleigh ×10, 4.3 events a
   // walk, took 1.23 s a point against the Earth's 0.164 over the same scene: (4.3/1.8)^2.3.
   constexpr double kLongerWalks = 2.3;

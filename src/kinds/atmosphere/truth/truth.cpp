@@ -60,11 +60,13 @@ constexpr double kLearnGainGuided = 1.0;
 constexpr int kLearnBins = 24;
 constexpr double kKeepFixed = 0.5;
 constexpr double kCellFloor = 0.3;
-// The rest is an even mixture of two densities: ∝ β_s ρ T (what scattering of any order at the
-// vertex is weighted by) and ∝ (β_R ρ_R P_R(ν) + β_M ρ_M P_M(ν)) T × V T_sun, single scattering
-// itself (in twilight only the part of the ray above the Earth's shadow is lit, and the first
-// density alone would put most vertices in the dark; towards the sun Mie's forward peak makes
-// the light come from the aerosols near the ground, where β_s ρ alone draws too few vertices).
+// The rest is an even mixture of two densities (channel_table): ∝ β_s ρ T (what scattering of
+// any order at the vertex is weighted by) and the light's: with order 1 walked,
+// ∝ (β_R ρ_R P_R(ν) + β_M ρ_M P_M(ν)) T × V T_sun, single scattering itself (in twilight only
+// the part of the ray above the Earth's shadow is lit, and the first density alone would put
+// most vertices in the dark; towards the sun Mie's forward peak makes the light come from the
+// aerosols near the ground, where β_s ρ alone draws too few vertices); for guided points also
+// ∝ β_s ρ T S̄, the light scattered once towards the vertex (what orders ≥ 2 start from).
 constexpr double kSunlitShare = 0.5;
 // Majorants: the exact maxima of the profiles over [h_j − δ, top] (δ = 1e-3 shell) times
 // 1 + 1e-5, far above float32 rounding of the densities (6e-8 relative).
