@@ -703,8 +703,10 @@ int main(int argc, char** argv) {
   truth->add_option("--points", truth_args.points,
                     "POINTS.csv: altitude_km,view_zenith_deg,sun_zenith_deg,view_sun_azimuth_deg")->required();
   truth->add_option("-o,--out", truth_args.out, "RESULT.csv: the four columns, then L_<c>,se_<c> per channel")->required();
-  truth->add_option("--paths", truth_args.paths, "random walks per point and channel");
-  truth->add_option("--orders", truth_args.orders, "scattering orders traced: N (1..N) or all");
+  truth->add_option("--paths", truth_args.paths, "random walks per point and channel (they carry orders 2 and above)");
+  truth->add_option("--orders", truth_args.orders,
+                    "scattering orders traced: N (1..N) or all; order 1 is integrated by quadrature (no noise: se 0 "
+                    "with --orders 1)");
   truth->add_option("--seed", truth_args.seed, "seed of the counter-based random streams (same seed: same bytes)");
   truth->add_option("--bundle", truth_args.bundle, "also lut_<c>: that bundle's (or job folder's latest) GetSkyRadiance at the points");
   truth->add_option("--device", truth_args.device, "OpenCL device (default: the config's, else auto)");
