@@ -644,6 +644,37 @@ TEST(SceneCheck, TheJobsProgressSharesFollowTheCheckItsCost) {
   EXPECT_GT(again, 2.0 * first);
 }
 
+// A CPU device runs the scattering density one altitude layer at a time and reports progress
+// between the layers (the job's stop request, Ctrl-C, is checked there): r = 8 layers give 8
+// reports of each order's density stage (7 between them, 1 at its end), and an exception thrown
+// from one of them — what `run` does on a stop request — ends the bake inside the launch. On a
+// GPU the density is one launch (1 report).
+TEST(SceneCheck, TheDensityReportsProgressBetweenItsAltitudeLayers) {
+  const AtmosphereSpec s = spec_of(
+      "    orders: 2\n"
+      "    previews: none\n"
+      "    sizes: {transmittance: [64, 16], irradiance: [16, 4], scattering: {r: 8, mu: 32, mu_s: 8, nu: 4}}\n"
+      "    scene: none\n"
+      "    sky_view: none\n");
+  const bool cpu = t::shared_device().info().type == "cpu";
+  struct Stop {};
+  for (const int stop_at : {0, 3}) {
+    JobContext ctx{t::shared_device()};
+    int reports = 0;
+    ctx.progress = [&](std::string_view what, double) {
+      if (what != "order 2: scattering density") return;
+      if (++reports == stop_at) throw Stop{};
+    };
+    if (stop_at == 0) {
+      (void)specbake::atmosphere::bake(s, ctx);
+      EXPECT_EQ(reports, cpu ? 8 : 1);
+    } else if (cpu) {
+      EXPECT_THROW((void)specbake::atmosphere::bake(s, ctx), Stop);
+      EXPECT_EQ(reports, 3);
+    }
+  }
+}
+
 // ---- the hard cases ------------------------------------------------------------------------
 
 namespace {

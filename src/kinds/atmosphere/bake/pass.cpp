@@ -188,6 +188,39 @@ class DeviceQueue {
       return 0;
     });
   }
+  // launch(), in slices of `slice` work items (rounded up to the launch's work group) from
+  // increasing global offsets on a CPU device, `between` called after each slice but the last;
+  // one launch elsewhere (a GPU runs it in milliseconds and wants it whole). The work groups are
+  // the unsliced launch's, and every work item writes its own texel: the same values.
+  void launch_sliced(const char* name, long long n, long long slice, const std::function<void()>& between,
+                     std::initializer_list<std::variant<cl::Buffer*, int>> args) {
+    const cl::NDRange group = group_for(n);
+    if (dev_.info().type != "cpu" || slice >= n || group.dimensions() == 0) {
+      launch(name, n, args);
+      return;
+    }
+    const long long g = static_cast<long long>(group[0]);
+    slice = (slice + g - 1) / g * g;
+    cl_util::checked(name, [&] {
+      cl::Kernel k(program_, name);
+      k.setArg(0, block_.bytes.size(), block_.bytes.data());
+      cl_uint i = 1;
+      for (const auto& a : args) {
+        if (const auto* b = std::get_if<cl::Buffer*>(&a)) k.setArg(i++, **b);
+        else k.setArg(i++, std::get<int>(a));
+      }
+      for (long long at = 0; at < n; at += slice) {
+        const long long count = std::min(slice, n - at);
+        cl::Event ev;
+        dev_.queue().enqueueNDRangeKernel(k, cl::NDRange(static_cast<std::size_t>(at)),
+                                          cl::NDRange(static_cast<std::size_t>(count)), group, nullptr, &ev);
+        dev_.profiler().record(ev);
+        dev_.profiler().wait([&] { dev_.queue().finish(); });
+        if (between && at + count < n) between();
+      }
+      return 0;
+    });
+  }
   void zero(cl::Buffer& b, long long n) {
     cl::Event ev;
     if (dbl_) dev_.queue().enqueueFillBuffer(b, 0.0, 0, n * sizeof(double), nullptr, &ev);
@@ -463,8 +496,8 @@ class DeviceBackend final : public PassBackend {
   void scattering_density(int order) override {
     q_.launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * model_.density_theta,
               {&tex_.T, &tex_.dR, &tex_.dM, &tex_.dS, order, &incidence_});
-    q_.launch("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s,
-              {&incidence_, &tex_.dE, order, &tex_.J});
+    q_.launch_sliced("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s,
+                     1LL * sizes_.mu * sizes_.mu_s, between_slices, {&incidence_, &tex_.dE, order, &tex_.J});
   }
   void indirect_irradiance(int order) override {
     q_.launch("indirect_irradiance_texture", n_e_, {&tex_.dR, &tex_.dM, &tex_.dS, order, &tex_.dE});
@@ -986,6 +1019,8 @@ class PassProgress {
     done_ += cost;
     progress_(stage, p0_ + (p1_ - p0_) * std::min(1.0, done_ / total_));
   }
+  // Within a stage: the fraction so far, under the stage's name.
+  void within(const std::string& stage) const { progress_(stage, p0_ + (p1_ - p0_) * std::min(1.0, done_ / total_)); }
 
  private:
   const Progress& progress_;
@@ -999,6 +1034,10 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
   const int w = b.channels();
   const int cap = plan.auto_orders ? kMaxAutoOrders : plan.orders;
   PassProgress steps(progress, plan, cap, p0, p1);
+  struct NoSlicesAfter {  // the hook refers to this frame: gone with it, however run_pass ends
+    PassBackend& b;
+    ~NoSlicesAfter() { b.between_slices = nullptr; }
+  } no_slices_after{b};
   PassResult r;
   r.width = w;
   PassTimeline timeline(b);
@@ -1030,9 +1069,11 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
   r.orders_used = 1;
   r.converged = !plan.auto_orders;
   for (int n = 2; n <= cap; ++n) {
+    const std::string density = "order " + std::to_string(n) + ": scattering density";
+    b.between_slices = [&] { steps.within(density); };
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
     if (plan.sky_view) timeline.stage("sky_view", n, [&] { b.add_density_sum(n); });
-    steps.step("order " + std::to_string(n) + ": scattering density", 0.55);
+    steps.step(density, 0.55);
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
     const double rel_e = sums.add_irradiance(n - 1);
     steps.step("order " + std::to_string(n) + ": indirect irradiance", 0.02);

@@ -123,6 +123,10 @@ class PassBackend {
   virtual void sky_view(int orders_used, std::vector<double>& out) = 0;
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
   virtual cl_util::Profiler* profiler() { return nullptr; }
+  // Called between the slices of a long launch (a CPU device runs the scattering density one
+  // altitude layer at a time): run_pass reports progress there, where a stop request (Ctrl-C)
+  // lands instead of after the whole launch. It may throw; the launch then stops.
+  std::function<void()> between_slices;
 };
 
 // The OpenCL backend: kernels built with NCH = width and float (or double) arithmetic.
