@@ -175,15 +175,10 @@ class DeviceQueue {
   }
   // Runs kernel `name` over n work items with the parameter block, then `args` in order
   // (device buffers, or the scattering order as an int).
-  void launch(const char* name, long long n, std::initializer_list<std::variant<cl::Buffer*, int>> args) {
+  using Args = std::initializer_list<std::variant<cl::Buffer*, int>>;
+  void launch(const char* name, long long n, Args args) {
     cl_util::checked(name, [&] {
-      cl::Kernel k(program_, name);
-      k.setArg(0, block_.bytes.size(), block_.bytes.data());
-      cl_uint i = 1;
-      for (const auto& a : args) {
-        if (const auto* b = std::get_if<cl::Buffer*>(&a)) k.setArg(i++, **b);
-        else k.setArg(i++, std::get<int>(a));
-      }
+      cl::Kernel k = kernel(name, args);
       enqueue(k, n);
       return 0;
     });
@@ -192,8 +187,7 @@ class DeviceQueue {
   // increasing global offsets on a CPU device, `between` called after each slice but the last;
   // one launch elsewhere (a GPU runs it in milliseconds and wants it whole). The work groups are
   // the unsliced launch's, and every work item writes its own texel: the same values.
-  void launch_sliced(const char* name, long long n, long long slice, const std::function<void()>& between,
-                     std::initializer_list<std::variant<cl::Buffer*, int>> args) {
+  void launch_sliced(const char* name, long long n, long long slice, const std::function<void()>& between, Args args) {
     const cl::NDRange group = group_for(n);
     if (dev_.info().type != "cpu" || slice >= n || group.dimensions() == 0) {
       launch(name, n, args);
@@ -202,13 +196,7 @@ class DeviceQueue {
     const long long g = static_cast<long long>(group[0]);
     slice = (slice + g - 1) / g * g;
     cl_util::checked(name, [&] {
-      cl::Kernel k(program_, name);
-      k.setArg(0, block_.bytes.size(), block_.bytes.data());
-      cl_uint i = 1;
-      for (const auto& a : args) {
-        if (const auto* b = std::get_if<cl::Buffer*>(&a)) k.setArg(i++, **b);
-        else k.setArg(i++, std::get<int>(a));
-      }
+      cl::Kernel k = kernel(name, args);
       for (long long at = 0; at < n; at += slice) {
         const long long count = std::min(slice, n - at);
         cl::Event ev;
@@ -291,6 +279,17 @@ class DeviceQueue {
   // largest divisor of n up to kCpuGroupLimit (the largest kernel, the density at NU = 64 and 16
   // channels, holds ~35 KB per item: 2.2 MiB a group); on other devices the driver chooses. The
   // kernels share nothing within a group, so the results do not depend on it.
+  // Kernel `name` with the parameter block, then `args` in order (device buffers, or an int).
+  cl::Kernel kernel(const char* name, Args args) const {
+    cl::Kernel k(program_, name);
+    k.setArg(0, block_.bytes.size(), block_.bytes.data());
+    cl_uint i = 1;
+    for (const auto& a : args) {
+      if (const auto* b = std::get_if<cl::Buffer*>(&a)) k.setArg(i++, **b);
+      else k.setArg(i++, std::get<int>(a));
+    }
+    return k;
+  }
   cl::NDRange group_for(long long n) const {
     if (dev_.info().type != "cpu") return cl::NullRange;
     long long g = std::min<long long>(kCpuGroupLimit, n);
