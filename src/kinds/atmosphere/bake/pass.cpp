@@ -167,9 +167,10 @@ class DeviceQueue {
                       std::max<long long>(n, 1) * (dbl_ ? sizeof(double) : sizeof(float)));
   }
   void enqueue(cl::Kernel& k, long long n) { enqueue(k, cl::NDRange(static_cast<std::size_t>(n)), group_for(n)); }
-  void enqueue(cl::Kernel& k, const cl::NDRange& global, const cl::NDRange& local) {
+  void enqueue(cl::Kernel& k, const cl::NDRange& global, const cl::NDRange& local,
+               const cl::NDRange& offset = cl::NullRange) {
     cl::Event ev;
-    dev_.queue().enqueueNDRangeKernel(k, cl::NullRange, global, local, nullptr, &ev);
+    dev_.queue().enqueueNDRangeKernel(k, offset, global, local, nullptr, &ev);
     dev_.profiler().record(ev);
     dev_.profiler().wait([&] { dev_.queue().finish(); });
   }
@@ -199,11 +200,7 @@ class DeviceQueue {
       cl::Kernel k = kernel(name, args);
       for (long long at = 0; at < n; at += slice) {
         const long long count = std::min(slice, n - at);
-        cl::Event ev;
-        dev_.queue().enqueueNDRangeKernel(k, cl::NDRange(static_cast<std::size_t>(at)),
-                                          cl::NDRange(static_cast<std::size_t>(count)), group, nullptr, &ev);
-        dev_.profiler().record(ev);
-        dev_.profiler().wait([&] { dev_.queue().finish(); });
+        enqueue(k, cl::NDRange(static_cast<std::size_t>(count)), group, cl::NDRange(static_cast<std::size_t>(at)));
         if (between && at + count < n) between();
       }
       return 0;

@@ -241,22 +241,24 @@ struct Sub {
 // when the disc centre is below it, as the model does) from distance t_mid on the view ray of the
 // point `row`: 8-point Gauss–Legendre on each side of the sun ray's tangent point (an
 // approximation: it only shapes the sampling density).
-void sunlit(const AtmosphereParameters& a, const double* row, double t_mid, double h_mid, Sub& sub) {
-  const double h = row[PT_H];
-  const double zenith[3] = {row[PT_Z], row[PT_Z + 1], row[PT_Z + 2]}, view[3] = {row[PT_V], row[PT_V + 1], row[PT_V + 2]},
-               sun[3] = {row[PT_S], row[PT_S + 1], row[PT_S + 2]};
-  const double r0 = a.bottom_radius + h;
+// The sun's cosine at distance t along the view ray of the point `row`.
+double sun_cosine_along(const AtmosphereParameters& a, const double* row, double t) {
+  const double r0 = a.bottom_radius + row[PT_H];
   double z[3];
-  for (int k = 0; k < 3; ++k) z[k] = r0 * zenith[k] + t_mid * view[k];
-  const double zn = std::sqrt(ref3::dot3(z, z));
-  const double mu_s = std::clamp(ref3::dot3(sun, z) / zn, -1.0, 1.0);
+  for (int k = 0; k < 3; ++k) z[k] = r0 * row[PT_Z + k] + t * row[PT_V + k];
+  const double sun[3] = {row[PT_S], row[PT_S + 1], row[PT_S + 2]};
+  return std::clamp(ref3::dot3(sun, z) / std::sqrt(ref3::dot3(z, z)), -1.0, 1.0);
+}
+
+void sunlit(const AtmosphereParameters& a, const double* row, double t_mid, double h_mid, Sub& sub) {
+  const double mu_s = sun_cosine_along(a, row, t_mid);
   sub.h_mid = h_mid;
   sub.mu_s = mu_s;
   sub.visible = ref3::sun_visible_fraction(&a, h_mid, mu_s);
   sub.sun_l[0] = sub.sun_l[1] = sub.sun_l[2] = 0.0;
   if (!(sub.visible > 0.0)) return;
   const double r = a.bottom_radius + h_mid;
-  const double mu = std::max(mu_s, -ref3::horizon_distance(&a, h_mid) / r);
+  const double mu = ref3::truth_sun_ray_cosine(&a, h_mid, mu_s);
   const double d = ref3::distance_to_top(&a, h_mid, mu);
   const double s_tan = mu < 0.0 ? std::min(-r * mu, d) : 0.0;
   for (const auto& [lo, hi] : {std::pair{0.0, s_tan}, std::pair{s_tan, d}}) {
@@ -316,6 +318,21 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
   return out;
 }
 
+// The profiles as a medium of three channels with unit coefficients (channel i: profile i —
+// Rayleigh, Mie, absorption): truth_optical_depth of channel i is then profile i's optical
+// length, to TRUTH_DEPTH_ERROR of itself (the cuts are placed for each profile alone), so that
+// every channel's optical depth, a positive sum of them, is as exact. Its medium table
+// (medium_table(m, unit_channels())) serves the light at a vertex and order 1 by quadrature.
+Channels unit_channels() {
+  Channels unit;
+  unit.lambda_nm = {0.0, 0.0, 0.0};
+  unit.solar_irradiance = unit.mie_scattering = unit.ground_albedo = {0.0, 0.0, 0.0};
+  unit.rayleigh_scattering = {1.0, 0.0, 0.0};
+  unit.mie_extinction = {0.0, 1.0, 0.0};
+  unit.absorption_extinction = {0.0, 0.0, 1.0};
+  return unit;
+}
+
 // log S̄ (path_tracer.cl, "the light at a vertex") of every channel at the sky table's nodes,
 // [TRUTH_SKY_H · TRUTH_SKY_MU][C]: ∫_4π dω ∫ σ_s T T_sun V dt by a coarse quadrature (it only
 // shapes a pdf; a factor of 2 only moves noise) whose geometry every channel shares: directions at
@@ -328,15 +345,8 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
 constexpr double kSkyOffsets[] = {-0.3, -0.03, 0.0, 0.02, 0.05, 0.1, 0.25, 0.6, 1.2};
 constexpr int kSkyAzimuths = 5;
 constexpr int kSkySteps = 16;
-std::vector<double> sky_light_table(const Model& m, const Channels& ch) {
+std::vector<double> sky_light_table(const Model& m, const Channels& ch, const std::vector<double>& lengths) {
   const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
-  Channels unit;  // channel i: profile i's optical length (Rayleigh, Mie, absorption)
-  unit.lambda_nm = {0.0, 0.0, 0.0};
-  unit.solar_irradiance = unit.mie_scattering = unit.ground_albedo = {0.0, 0.0, 0.0};
-  unit.rayleigh_scattering = {1.0, 0.0, 0.0};
-  unit.mie_extinction = {0.0, 1.0, 0.0};
-  unit.absorption_extinction = {0.0, 0.0, 1.0};
-  const std::vector<double> lengths = medium_table(m, unit);
   const std::size_t C = ch.size();
   constexpr int E = static_cast<int>(std::size(kSkyOffsets));
   std::vector<double> out(static_cast<std::size_t>(TRUTH_SKY_H) * TRUTH_SKY_MU * C, ref3::kTruthSkyNone);
@@ -492,20 +502,6 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
 }
 
 // ---- order 1 by quadrature (TruthOptions::Order1::quadrature) ------------------------------
-// The profiles as a medium of three channels with unit coefficients (channel i: profile i —
-// Rayleigh, Mie, absorption): truth_optical_depth of channel i is then profile i's optical
-// length, to TRUTH_DEPTH_ERROR of itself (the cuts are placed for each profile alone), so that
-// every channel's optical depth, a positive sum of them, is as exact.
-Channels unit_channels() {
-  Channels unit;
-  unit.lambda_nm = {0.0, 0.0, 0.0};
-  unit.solar_irradiance = unit.mie_scattering = unit.ground_albedo = {0.0, 0.0, 0.0};
-  unit.rayleigh_scattering = {1.0, 0.0, 0.0};
-  unit.mie_extinction = {0.0, 1.0, 0.0};
-  unit.absorption_extinction = {0.0, 0.0, 1.0};
-  return unit;
-}
-
 // Order 1 of every channel at one point, the walks' expectation of the sun term at the view
 // ray's vertex (path_tracer.cl, truth_walk):
 //   L₁ = ∫_0^D E_sun e^{−τ(0,t)} (β_R ρ_R(t) P_R(ν) + β_M ρ_M(t) P_M(ν)) V(t) e^{−τ_sun(t)} dt,
@@ -536,11 +532,7 @@ class SingleScattering {
     const double h0 = row_[PT_H], mu0 = row_[PT_MU];
     double h, mu;
     ref3::point_along(&a_, h0, mu0, t, row_[PT_GROUND] != 0.0, &h, &mu);
-    const double r0 = a_.bottom_radius + h0;
-    double z[3];
-    for (int k = 0; k < 3; ++k) z[k] = r0 * row_[PT_Z + k] + t * row_[PT_V + k];
-    const double sun[3] = {row_[PT_S], row_[PT_S + 1], row_[PT_S + 2]};
-    const double mu_s = std::clamp(ref3::dot3(sun, z) / std::sqrt(ref3::dot3(z, z)), -1.0, 1.0);
+    const double mu_s = sun_cosine_along(a_, row_, t);
     const double visible = ref3::sun_visible_fraction(&a_, h, mu_s);
     if (!(visible > 0.0)) {
       std::fill_n(f, C_, 0.0);
@@ -661,17 +653,17 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   for (std::size_t first = 0; first < P.n_channels; first += kGroup)
     P.medium.push_back(
         medium_table(P.model, P.channels.slice(first, std::min<std::size_t>(kGroup, P.n_channels - first))));
+  const bool single = o.order1 == TruthOptions::Order1::quadrature;
+  const AtmosphereParameters a_unit = ref3::make_parameters(P.model, unit_channels());
+  const std::vector<double> unit_medium =
+      single || any_guided ? medium_table(P.model, unit_channels()) : std::vector<double>{};
   if (any_guided) {
-    const std::vector<double> sky = sky_light_table(P.model, P.channels);
+    const std::vector<double> sky = sky_light_table(P.model, P.channels, unit_medium);
     for (std::size_t c = 0; c < P.n_channels; ++c)
       for (int n = 0; n < TRUTH_SKY_H * TRUTH_SKY_MU; ++n)
         P.medium[c / kGroup][ref3::kTruthSkyAt + n * kGroup + c % kGroup] = sky[n * P.n_channels + c];
   }
   const SkyLight sky{&a, &P.medium};
-  const bool single = o.order1 == TruthOptions::Order1::quadrature;
-  const Channels unit = unit_channels();
-  const AtmosphereParameters a_unit = ref3::make_parameters(P.model, unit);
-  const std::vector<double> unit_medium = single ? medium_table(P.model, unit) : std::vector<double>{};
   if (single) P.single.assign(P.n_points * P.n_channels, 0.0);
   parallel_for(static_cast<long long>(P.n_points), [&](long long i) {
     double* row = &P.points[i * TRUTH_POINT_STRIDE];
