@@ -69,22 +69,31 @@ TEST(SkyView, ConfigKeysAndTheAutomaticRange) {
   EXPECT_EQ(one_altitude.sun, 5);
   const SkyView sized = model_of(small_twilight()).sky_view;
   EXPECT_EQ(sized.texels(), 3LL * 7 * 16 * 7);
-  // a deep-twilight scene with its table stores half the μ_s texels it bakes (the table holds its
+  // a twilight scene with its table stores half the μ_s texels it bakes (the table holds its
   // views); given sizes, no table or `store: radiance` store what they bake
   const auto deep = [](const std::string& more) {
     return specbake::testing::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 10]}\n" + more);
   };
-  EXPECT_TRUE(deep("").store_half_sun_axes);
-  EXPECT_EQ(stored_sizes(deep("")).mu_s, kDeepTwilightScatteringMuS / 2);
-  EXPECT_EQ(sizes_of(deep("")).mu_s, kDeepTwilightScatteringMuS);
+  EXPECT_TRUE(deep("").store_half_mu_s && deep("").store_half_nu);
+  EXPECT_EQ(stored_sizes(deep("")).mu_s, kTwilightScatteringMuS / 2);
+  EXPECT_EQ(sizes_of(deep("")).mu_s, kTwilightScatteringMuS);
   // ν: 15 slices baked, the default 8 stored (every other one) — the 4D textures' memory unchanged
   EXPECT_EQ(sizes_of(deep("")).nu, kDeepTwilightScatteringNu);
   EXPECT_EQ(stored_sizes(deep("")).nu, AtmosphereSpec{}.scattering_nu);
-  EXPECT_EQ(stored_sizes(deep("")).scattering_texels(), sizes_of(specbake::testing::spec_of("    preset: earth\n")).scattering_texels());
-  EXPECT_FALSE(deep("    sky_view: none\n").store_half_sun_axes);
-  EXPECT_FALSE(deep("    sizes: 100%\n").store_half_sun_axes);
-  EXPECT_FALSE(deep("    spectrum: {min_nm: 360, max_nm: 830, count: 16, store: radiance}\n").store_half_sun_axes);
-  EXPECT_FALSE(specbake::testing::spec_of("    preset: earth\n").store_half_sun_axes);  // sun −6…90°: 32 baked
+  EXPECT_EQ(stored_sizes(deep("")).scattering_texels(), sizes_of(specbake::testing::spec_of("    preset: earth\n    scene: none\n")).scattering_texels());
+  for (const char* more : {"    sky_view: none\n", "    sizes: 100%\n",
+                           "    spectrum: {min_nm: 360, max_nm: 830, count: 16, store: radiance}\n"})
+    EXPECT_FALSE(deep(more).store_half_mu_s || deep(more).store_half_nu) << more;
+  // early twilight (sun −6…10°): 64 μ_s texels baked, 32 stored; the default 8 ν slices
+  const AtmosphereSpec early = specbake::testing::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-6, 10]}\n");
+  EXPECT_EQ(sizes_of(early).mu_s, kTwilightScatteringMuS);
+  EXPECT_EQ(sizes_of(early).nu, AtmosphereSpec{}.scattering_nu);
+  EXPECT_TRUE(early.store_half_mu_s && !early.store_half_nu);
+  EXPECT_EQ(stored_sizes(early).scattering_texels(), sizes_of(specbake::testing::spec_of("    preset: earth\n    scene: none\n")).scattering_texels());
+  // a scene whose sun stays above the horizon bakes the defaults
+  const AtmosphereSpec day = specbake::testing::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [0, 60]}\n");
+  EXPECT_EQ(sizes_of(day).mu_s, AtmosphereSpec{}.scattering_mu_s);
+  EXPECT_FALSE(day.store_half_mu_s || day.store_half_nu);
   for (const char* bad : {"    sky_view: {view: 15}\n", "    sky_view: {azimuth: 1}\n", "    sky_view: {sun: 0}\n",
                           "    sky_view: {altitudes: 3}\n", "    sky_view: sometimes\n"}) {
     try {

@@ -298,21 +298,21 @@ constexpr double kQuadratureLogError = 0.023;  // the quadrature's own error in 
 TEST(TwilightTruth, DeepTwilightScenesBakeEnoughSunTexels) {
   AtmosphereSpec s = specbake::testing::spec_of(
       "    preset: earth\n    spectrum: rgb\n    orders: 2\n    scene: {sun_elevation_deg: [-12, 0]}\n");
-  ASSERT_EQ(s.scattering_mu_s, kDeepTwilightScatteringMuS);
+  ASSERT_EQ(s.scattering_mu_s, kTwilightScatteringMuS);
   ASSERT_TRUE(model_of(s).sky_view.on());
   s.ground_albedo = 0.0;
   AtmosphereSpec coarse = s;
   coarse.scattering_mu_s = AtmosphereSpec{}.scattering_mu_s;
   coarse.sky_view = AtmosphereSpec::SkyViewMode::none;
-  coarse.store_half_sun_axes = false;
+  coarse.store_half_mu_s = coarse.store_half_nu = false;
   std::vector<TruthPoint> points;
   for (double sun : {-8.0, -11.0})
     for (const auto& [altitude, view_zenith] : {std::pair{0.3, 20.0}, {1.0, 50.0}, {0.5, 75.0}, {1.5, 85.0}})
       for (double azimuth : {0.0, 180.0}) points.push_back({altitude, view_zenith, 90.0 - sun, azimuth});
   const auto quiet = [](std::string_view, double) {};
-  ASSERT_TRUE(s.store_half_sun_axes);
+  ASSERT_TRUE(s.store_half_mu_s && s.store_half_nu);
   const Luts with_table = bake_luts(s, specbake::testing::shared_device(), quiet, 0).luts;
-  ASSERT_EQ(with_table.model.sizes.mu_s, kDeepTwilightScatteringMuS / 2);
+  ASSERT_EQ(with_table.model.sizes.mu_s, kTwilightScatteringMuS / 2);
   ASSERT_EQ(s.scattering_nu, kDeepTwilightScatteringNu);
   ASSERT_EQ(with_table.model.sizes.nu, AtmosphereSpec{}.scattering_nu);
   Luts resampled = with_table;  // the same bake read through its stored 4D textures alone
@@ -321,7 +321,7 @@ TEST(TwilightTruth, DeepTwilightScenesBakeEnoughSunTexels) {
   resampled.sky_view_mie.clear();
   AtmosphereSpec no_table = s;  // 64 μ_s texels baked and stored, no table
   no_table.sky_view = AtmosphereSpec::SkyViewMode::none;
-  no_table.store_half_sun_axes = false;
+  no_table.store_half_mu_s = no_table.store_half_nu = false;
   // the same scene's table with the densities read linearly in μ_s, and with the textures' sun
   // domain left at the default 102° (ablations: what each of the two rules buys)
   AtmosphereSpec linear_reads = s, narrow = s;

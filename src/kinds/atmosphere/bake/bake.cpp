@@ -143,7 +143,7 @@ class Baking {
     clock_.host("setup", [&] { backend_ = make_(all_.slice(0, std::min(width_, n_)), width_); });
     for (int p = 0; p < passes_; ++p) pass(p, progress);
     combine();
-    if (spec_.store_half_sun_axes)
+    if (spec_.store_half_mu_s || spec_.store_half_nu)
       clock_.host("combine", [&] {
         const Sizes stored = stored_sizes(spec_);
         store_sun_axes(out_.luts, stored.mu_s, stored.nu);
@@ -285,10 +285,8 @@ double bake_files_seconds(const AtmosphereSpec& spec) {
 
 Sizes stored_sizes(const AtmosphereSpec& spec) {
   Sizes s = sizes_of(spec);
-  if (spec.store_half_sun_axes) {
-    s.mu_s = std::max(2, s.mu_s / 2);
-    s.nu = std::max(2, (s.nu + 1) / 2);
-  }
+  if (spec.store_half_mu_s) s.mu_s = std::max(2, s.mu_s / 2);
+  if (spec.store_half_nu) s.nu = std::max(2, (s.nu + 1) / 2);
   return s;
 }
 

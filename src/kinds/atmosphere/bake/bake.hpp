@@ -20,7 +20,7 @@ nlohmann::json parameters_json(const AtmosphereSpec& spec);
 
 // The sizes the bundle stores: the baked ones, with half the μ_s texels (n / 2) and ν slices
 // ((n + 1) / 2: every other one of an odd count) where the spec stores half
-// (AtmosphereSpec::store_half_sun_axes; the bake resamples them, store_sun_axes).
+// (AtmosphereSpec::store_half_mu_s, store_half_nu; the bake resamples them, store_sun_axes).
 Sizes stored_sizes(const AtmosphereSpec& spec);
 // The scattering and single Mie textures of `luts` resampled to `mu_s` texels along μ_s, then to
 // `nu` slices along ν: each stored texel is the lookup of the baked texture at its own μ_s and ν

@@ -233,17 +233,19 @@ void scale_sizes(AtmosphereSpec& s, double f) {
   }
 }
 
+bool reaches_twilight(const AtmosphereSpec& s) { return s.scene.check && s.scene.sun_elevation_min_deg < 0.0; }
+
 bool reaches_deep_twilight(const AtmosphereSpec& s) {
   return s.scene.check && s.scene.sun_elevation_min_deg < kDeepTwilightSunDeg;
 }
 
 void set_scene_default_sizes(AtmosphereSpec& s) {
   for (auto axis : kSizeAxes) s.*axis = AtmosphereSpec{}.*axis;
-  if (reaches_deep_twilight(s)) {
-    s.scattering_mu_s = kDeepTwilightScatteringMuS;
-    s.scattering_nu = kDeepTwilightScatteringNu;
-  }
-  s.store_half_sun_axes = reaches_deep_twilight(s) && sky_view_of(s).on() && !s.store_radiance;
+  if (reaches_twilight(s)) s.scattering_mu_s = kTwilightScatteringMuS;
+  if (reaches_deep_twilight(s)) s.scattering_nu = kDeepTwilightScatteringNu;
+  const bool stored_apart = sky_view_of(s).on() && !s.store_radiance;
+  s.store_half_mu_s = stored_apart && reaches_twilight(s);
+  s.store_half_nu = stored_apart && reaches_deep_twilight(s);
 }
 
 double scene_ray_reach_deg(const AtmosphereSpec& s) {
@@ -365,13 +367,16 @@ void parse_bake(const At& job, AtmosphereSpec& s) {
 }
 
 // The scene, and the tolerance the searches judge by (after the bake's keys: the scene's lowest
-// sun defaults to what the textures hold). A scene in deep twilight (sun below −6°) gets the
-// density's horizon rule with 32 θ nodes unless the config gives the count: there the light of
-// orders ≥ 2 arrives within a few degrees of the horizontal, and 16 nodes leave it unconverged;
-// and, unless the config gives sizes, 64 μ_s texels: the default 32 lie 1.3–1.9° of sun elevation
-// apart below −8°, where the sky falls by about e per degree, and the orders ≥ 2 computed from
-// them come out up to 2.8× too bright there (measured against an independent quadrature:
-// docs/atmosphere.md, "Twilight"). Other scenes keep 16 and 32, which they do not need more of.
+// sun defaults to what the textures hold). Unless the config gives sizes, a scene whose sun goes
+// below the horizon bakes 64 μ_s texels: the default 32 lie 1.3–1.9° of sun elevation apart there,
+// where the sky falls by about e per degree, and the orders ≥ 2 computed from them come out up to
+// 2.8× too bright below −8° (measured against an independent quadrature: docs/atmosphere.md,
+// "Twilight"); at sun −6…0° over hazy Earth they were the largest part of the error (p99 ΔE 5.8 →
+// 3.4 with 64). In deep twilight (sun below −6°) it also bakes 15 ν slices, and gets the density's
+// horizon rule with 32 θ nodes unless the config gives the count: there the light of orders ≥ 2
+// arrives within a few degrees of the horizontal, and 16 nodes leave it unconverged. Where the
+// sky-view table holds the scene's views the bundle stores the default counts (set_scene_default_sizes).
+// Scenes whose sun stays up keep 16, 32 and 8, which they do not need more of.
 // Such a scene's textures also hold the suns its view rays' points see (unless the config gives
 // max_sun_zenith_deg): a point up to scene_ray_reach_deg around the planet from the camera sees
 // the sun that much lower, and a lookup below the textures' lowest sun reads that sun's brighter

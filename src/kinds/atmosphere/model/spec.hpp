@@ -48,11 +48,11 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   int transmittance_mu = 256, transmittance_r = 64, irradiance_mu_s = 64, irradiance_r = 16;
   int scattering_r = 32, scattering_mu = 128, scattering_mu_s = 32, scattering_nu = 8;
   bool sizes_given = false;  // a `sizes:` key (any form); else the scene decides the μ_s count (config.cpp)
-  // The bundle stores half the baked μ_s texels and ν slices (resampled): a deep-twilight scene
-  // whose sky-view table holds its views bakes kDeepTwilightScatteringMuS and
-  // kDeepTwilightScatteringNu for its densities, but its 4D textures serve only the views outside
-  // the scene's range, which the default counts hold (config.cpp).
-  bool store_half_sun_axes = false;
+  // The bundle stores half the baked μ_s texels / ν slices (resampled): a twilight scene whose
+  // sky-view table holds its views bakes kTwilightScatteringMuS (and, in deep twilight,
+  // kDeepTwilightScatteringNu) for its densities, but its 4D textures serve only the views
+  // outside the scene's range, which the default counts hold (config.cpp).
+  bool store_half_mu_s = false, store_half_nu = false;
   // `quadrature:` the scattering density's sphere rule: θ nodes (even), and whether they are
   // packed towards the horizon (default) or uniform as in the reference (docs/atmosphere.md).
   int density_theta = 16;
@@ -89,13 +89,14 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
 // Texture size limits (config errors name them; searches stay inside them).
 inline constexpr int kMaxAtmosphereAxis = 4096;
 inline constexpr long long kMaxScatteringTexels = 1LL << 26;
-// Scenes whose sun goes below this (deep twilight) get kDeepTwilightDensityTheta θ nodes in the
-// scattering density unless the config gives them, and kDeepTwilightScatteringMuS μ_s texels and
-// kDeepTwilightScatteringNu ν slices unless the config gives sizes (config.cpp, parse_checks). 15
-// slices: the 8 stored are every other one of them, unresampled.
+// Scenes whose sun goes below the horizon get kTwilightScatteringMuS μ_s texels unless the config
+// gives sizes; those whose sun goes below kDeepTwilightSunDeg (deep twilight) also
+// kDeepTwilightScatteringNu ν slices, and kDeepTwilightDensityTheta θ nodes in the scattering
+// density unless the config gives them (config.cpp, parse_checks). 15 slices: the 8 stored are
+// every other one of them, unresampled.
 inline constexpr double kDeepTwilightSunDeg = -6.0;
 inline constexpr int kDeepTwilightDensityTheta = 32;
-inline constexpr int kDeepTwilightScatteringMuS = 64;
+inline constexpr int kTwilightScatteringMuS = 64;
 inline constexpr int kDeepTwilightScatteringNu = 15;
 // The sky-view table (`sky_view: auto`): built for a scene whose sun goes below the horizon, over its
 // camera altitudes and its sun elevations up to kSkyViewSunMaxDeg (above, the sky changes slowly
@@ -115,11 +116,13 @@ inline constexpr int AtmosphereSpec::*const kSizeAxes[] = {
     &AtmosphereSpec::scattering_mu_s,  &AtmosphereSpec::scattering_nu};
 // Every axis times f, rounded (mu to an even count), at least 2; no limit checked.
 void scale_sizes(AtmosphereSpec& s, double f);
-// Whether the spec's scene reaches deep twilight (a scene check with its sun below kDeepTwilightSunDeg).
+// Whether the spec's scene reaches twilight (a scene check with its sun below the horizon), and
+// deep twilight (below kDeepTwilightSunDeg).
+bool reaches_twilight(const AtmosphereSpec& s);
 bool reaches_deep_twilight(const AtmosphereSpec& s);
-// Every texture axis to the scene's default: AtmosphereSpec's, with kDeepTwilightScatteringMuS
-// μ_s texels and kDeepTwilightScatteringNu ν slices where the scene reaches deep twilight (what a
-// config without `sizes:` bakes; where `sizes: auto` starts from, halved).
+// Every texture axis to the scene's default: AtmosphereSpec's, with kTwilightScatteringMuS μ_s
+// texels where the scene reaches twilight and kDeepTwilightScatteringNu ν slices where it reaches
+// deep twilight (what a config without `sizes:` bakes; where `sizes: auto` starts from, halved).
 void set_scene_default_sizes(AtmosphereSpec& s);
 // Each axis at most kMaxAtmosphereAxis, nu at most ATMOSPHERE_NU_LIMIT, the scattering texture at
 // most kMaxScatteringTexels.
