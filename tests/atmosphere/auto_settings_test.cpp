@@ -484,9 +484,13 @@ TEST(AutoSettings, TheDensitysThetaNodesAreASearchAxisUnlessTheConfigGivesThem) 
   const AtmosphereSpec deep =
       t::spec_of("    sizes: auto\n    scene: {tolerance_de2000: 1, sun_elevation_deg: [-12, 0]}\n");
   EXPECT_EQ(search_start(deep).density_theta, 32);
-  // and from half the scene's default μ_s texels: 64 there, 32 in daylight
+  // and from half the scene's default μ_s texels: 64 where the sun goes below the horizon (the
+  // default scene, sun −6…90°, too), 32 in daylight
   EXPECT_EQ(search_start(deep).scattering_mu_s, 32);
-  EXPECT_EQ(search_start(day).scattering_mu_s, 16);
+  EXPECT_EQ(search_start(day).scattering_mu_s, 32);
+  EXPECT_EQ(search_start(t::spec_of("    sizes: auto\n    scene: {tolerance_de2000: 1, sun_elevation_deg: [0, 90]}\n"))
+                .scattering_mu_s,
+            16);
   EXPECT_NE(named(deep, "quadrature.density_theta"), nullptr);
 
   EXPECT_EQ(named(t::spec_of("    sizes: auto\n    quadrature: {density_theta: 24}\n" + scene),

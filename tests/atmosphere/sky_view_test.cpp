@@ -105,6 +105,42 @@ TEST(SkyView, ConfigKeysAndTheAutomaticRange) {
   }
 }
 
+// The aerosol's vertical scattering optical depth against its closed form for an exponential
+// profile, β ω H (1 − e^(−T/H)) at 1 µm scaled by λ^−α (the column's trapezoid at 1 m steps is
+// within (1 m)² / (12 H²) ≈ 6e-8 relative of it), and the rule it drives: a twilight scene with
+// thick aerosol bakes 15 ν slices and stores 8; thin aerosol, or a sun that stays up, does not.
+TEST(SkyView, ThickAerosolTwilightScenesBakeFifteenNuSlices) {
+  const auto spec = [](const std::string& media, const std::string& sun) {
+    return specbake::testing::spec_of("    preset: earth\n" + media + "    scene: {sun_elevation_deg: [" + sun + "]}\n");
+  };
+  const std::string hazy = "    mie: {scale_height_km: 2.0, extinction_per_m: 3.5e-5, single_scattering_albedo: 0.95}\n";
+  const std::string dusty = "    mie: {scale_height_km: 11.0, extinction_per_m: 4.5e-5, angstrom_alpha: 1.3}\n";
+  const double thickness = 60.0;  // the Earth preset's atmosphere, km
+  EXPECT_NEAR(mie_vertical_scattering_depth(spec(hazy, "-6, 10"), 550.0),
+              3.5e-2 * 0.95 * 2.0 * (1.0 - std::exp(-thickness / 2.0)), 1e-6 * 0.067);
+  const double dusty_depth = 4.5e-2 * std::pow(0.55, -1.3) * 0.9 * 11.0 * (1.0 - std::exp(-thickness / 11.0));
+  EXPECT_NEAR(mie_vertical_scattering_depth(spec(dusty, "-6, 10"), 550.0), dusty_depth, 1e-6 * dusty_depth);
+  const double earth_depth = 4.44e-3 * 0.9 * 1.2 * (1.0 - std::exp(-thickness / 1.2));
+  EXPECT_NEAR(mie_vertical_scattering_depth(spec("", "-6, 10"), 550.0), earth_depth, 1e-6 * earth_depth);
+  EXPECT_EQ(mie_vertical_scattering_depth(spec("    mie: false\n", "-6, 10"), 550.0), 0.0);
+
+  const AtmosphereSpec thick = spec(hazy, "-6, 10");
+  EXPECT_TRUE(has_thick_aerosol(thick));
+  EXPECT_EQ(sizes_of(thick).nu, kDeepTwilightScatteringNu);
+  EXPECT_EQ(sizes_of(thick).mu_s, kTwilightScatteringMuS);
+  EXPECT_TRUE(thick.store_half_mu_s && thick.store_half_nu);
+  EXPECT_EQ(stored_sizes(thick).nu, AtmosphereSpec{}.scattering_nu);
+  EXPECT_FALSE(has_thick_aerosol(spec("", "-6, 10")));
+  EXPECT_EQ(sizes_of(spec("", "-6, 10")).nu, AtmosphereSpec{}.scattering_nu);
+  for (const char* day : {"0, 60", "10, 90"}) {  // no twilight: the default counts
+    EXPECT_EQ(sizes_of(spec(hazy, day)).nu, AtmosphereSpec{}.scattering_nu) << day;
+    EXPECT_EQ(sizes_of(spec(hazy, day)).mu_s, AtmosphereSpec{}.scattering_mu_s) << day;
+  }
+  const AtmosphereSpec given = spec(hazy + "    sizes: 100%\n", "-6, 10");  // sizes given: baked as given, stored whole
+  EXPECT_EQ(sizes_of(given).nu, AtmosphereSpec{}.scattering_nu);
+  EXPECT_FALSE(given.store_half_mu_s || given.store_half_nu);
+}
+
 // The float32 kernel against the double reference (same functions, same inputs): each texel is
 // single_scattering_ray + multiple_scattering_ray over the bake's transmittance and summed
 // density, the quadratures of the 4D texture's own texels, so the 4D textures' float32 chain

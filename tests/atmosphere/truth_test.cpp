@@ -36,7 +36,9 @@ namespace {
 cl_util::Device& device() { return specbake::testing::shared_device(); }
 
 using specbake::testing::spec_of;
-AtmosphereSpec earth() { return spec_of("    preset: earth\n"); }
+// The default Earth at Bruneton's texture sizes (refdata/textures; without `sizes:` its default
+// scene, which reaches twilight, would bake 64 μ_s texels).
+AtmosphereSpec earth() { return spec_of("    preset: earth\n    sizes: 100%\n"); }
 AtmosphereSpec mars() {  // configs/mars.yaml's planet and media
   return spec_of(
       "    preset: earth\n    bottom_radius_km: 3389.5\n    top_radius_km: 3469.5\n"

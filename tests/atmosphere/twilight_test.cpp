@@ -96,9 +96,9 @@ TEST(Twilight, SecondOrderIsNeitherDarkNorBright) {
 }
 
 // A scene in deep twilight (sun below −6°) bakes the density with 32 θ nodes unless the config
-// gives the count, and 64 μ_s texels unless it gives sizes; other scenes, `quadrature: reference`
-// and an explicit count or sizes keep theirs.
-TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodesAndSixtyFourSunTexels) {
+// gives the count, and any scene whose sun goes below the horizon 64 μ_s texels unless it gives
+// sizes; other scenes, `quadrature: reference` and an explicit count or sizes keep theirs.
+TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodesAndTwilightOnesSixtyFourSunTexels) {
   EXPECT_EQ(t::spec_of("    preset: earth\n").density_theta, 16);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-6, 10]}\n").density_theta, 16);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n").density_theta, 32);
@@ -110,8 +110,9 @@ TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodesAndSixtyFourSunTexels) 
             16);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: none\n    max_sun_zenith_deg: 110\n").density_theta, 16);
   // and 64 μ_s texels unless the config gives sizes (TwilightTruth.DeepTwilightScenesBakeEnoughSunTexels)
-  EXPECT_EQ(t::spec_of("    preset: earth\n").scattering_mu_s, 32);
-  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-6, 10]}\n").scattering_mu_s, 32);
+  EXPECT_EQ(t::spec_of("    preset: earth\n").scattering_mu_s, 64);  // sun −6…90°
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-6, 10]}\n").scattering_mu_s, 64);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [0, 10]}\n").scattering_mu_s, 32);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n").scattering_mu_s, 64);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 0]}\n    sizes: 100%\n").scattering_mu_s,
             32);

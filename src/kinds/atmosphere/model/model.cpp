@@ -182,6 +182,13 @@ double vertical_scattering_depth(const AtmosphereSpec& spec, const std::vector<d
   return tau / static_cast<double>(lambda_nm.size());
 }
 
+double mie_vertical_scattering_depth(const AtmosphereSpec& spec, double lambda_nm) {
+  if (!spec.mie) return 0.0;
+  const double beta_per_km = spec.mie_extinction_per_m * std::pow(lambda_nm * 1e-3, -spec.mie_angstrom_alpha) *
+                             spec.mie_single_scattering_albedo * 1e3;
+  return beta_per_km * profile_column_km(spec.mie_density, spec.top_radius_km - spec.bottom_radius_km);
+}
+
 Channels channels_at(const AtmosphereSpec& s, const std::vector<double>& lambda_nm) {
   const Model m = model_of(s);
   Channels c;

@@ -68,6 +68,8 @@ Channels channels_at(const AtmosphereSpec& spec, const std::vector<double>& lamb
 // The scattering optical depth of a vertical column from the ground to the top (Rayleigh and
 // Mie), averaged over the wavelengths: how many times light scatters on its way through.
 double vertical_scattering_depth(const AtmosphereSpec& spec, const std::vector<double>& lambda_nm);
+// The aerosol's (Mie) part of it at one wavelength.
+double mie_vertical_scattering_depth(const AtmosphereSpec& spec, double lambda_nm);
 
 // The solar spectrum (ASTM G-173 10 nm bin means, W m^-2 nm^-1) and the ozone absorption
 // cross-section (m^2), 360..830 nm at 10 nm, linearly interpolated and clamped at the ends.

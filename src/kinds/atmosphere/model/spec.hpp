@@ -95,6 +95,11 @@ inline constexpr long long kMaxScatteringTexels = 1LL << 26;
 // density unless the config gives them (config.cpp, parse_checks). 15 slices: the 8 stored are
 // every other one of them, unresampled.
 inline constexpr double kDeepTwilightSunDeg = -6.0;
+// A twilight scene whose aerosol scatters at least this vertical optical depth at 550 nm (thick
+// aerosol: the hazy Earth of configs/hazy-earth.yaml 0.066, Mars 0.47; the default Earth 0.0048) bakes
+// kDeepTwilightScatteringNu ν slices too: its multiply scattered light keeps the aerosol's
+// forward peak, which 8 slices do not resolve (docs/atmosphere.md, "Twilight").
+inline constexpr double kThickAerosolMieDepth = 0.02;
 inline constexpr int kDeepTwilightDensityTheta = 32;
 inline constexpr int kTwilightScatteringMuS = 64;
 inline constexpr int kDeepTwilightScatteringNu = 15;
@@ -119,10 +124,12 @@ void scale_sizes(AtmosphereSpec& s, double f);
 // Whether the spec's scene reaches twilight (a scene check with its sun below the horizon), and
 // deep twilight (below kDeepTwilightSunDeg).
 bool reaches_twilight(const AtmosphereSpec& s);
+// Whether its aerosol's vertical scattering optical depth at 550 nm is at least kThickAerosolMieDepth.
+bool has_thick_aerosol(const AtmosphereSpec& s);
 bool reaches_deep_twilight(const AtmosphereSpec& s);
 // Every texture axis to the scene's default: AtmosphereSpec's, with kTwilightScatteringMuS μ_s
 // texels where the scene reaches twilight and kDeepTwilightScatteringNu ν slices where it reaches
-// deep twilight (what a config without `sizes:` bakes; where `sizes: auto` starts from, halved).
+// deep twilight or twilight with thick aerosol (what a config without `sizes:` bakes; where `sizes: auto` starts from, halved).
 void set_scene_default_sizes(AtmosphereSpec& s);
 // Each axis at most kMaxAtmosphereAxis, nu at most ATMOSPHERE_NU_LIMIT, the scattering texture at
 // most kMaxScatteringTexels.
