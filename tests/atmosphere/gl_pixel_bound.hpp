@@ -12,6 +12,9 @@
 #include "kinds/atmosphere/shader/shader_host.hpp"
 
 namespace specbake::testing::gl_bound {
+// Internal linkage, as the shader functions' host copies it holds (shader_host.hpp): each
+// includer (one test binary) gets its own.
+namespace {
 
 using dvec3 = glm::dvec3;
 namespace glsl = specbake::atmosphere::glsl;
@@ -69,7 +72,7 @@ struct Host {
 };
 
 // The combined texture (RGB scattering, alpha single Mie red), as scattering.ktx2 holds it.
-inline std::vector<double> combined_texture(const atmosphere::Luts& luts) {
+std::vector<double> combined_texture(const atmosphere::Luts& luts) {
   std::vector<double> combined(luts.scattering.size() / 3 * 4);
   for (std::size_t i = 0; i < luts.scattering.size() / 3; ++i) {
     for (int c = 0; c < 3; ++c) combined[4 * i + c] = luts.scattering[3 * i + c];
@@ -78,7 +81,7 @@ inline std::vector<double> combined_texture(const atmosphere::Luts& luts) {
   return combined;
 }
 // The host evaluation of a bundle's textures (`combined`: combined_texture(luts), kept alive).
-inline Host host_of(const atmosphere::Luts& luts, const std::vector<double>& combined) {
+Host host_of(const atmosphere::Luts& luts, const std::vector<double>& combined) {
   const auto& s = luts.model.sizes;
   return Host{glsl::atmosphere_of(luts.model, luts.rgb),
               {luts.transmittance.data(), s.transmittance_w, s.transmittance_h},
@@ -174,4 +177,5 @@ Out bound_of(const Host& host, const dvec3& up, double h, const dvec3& sun, cons
   return b;
 }
 
+}  // namespace
 }  // namespace specbake::testing::gl_bound
