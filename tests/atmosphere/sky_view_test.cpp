@@ -78,7 +78,7 @@ TEST(SkyView, ConfigKeysAndTheAutomaticRange) {
   EXPECT_EQ(stored_sizes(deep("")).mu_s, kTwilightScatteringMuS / 2);
   EXPECT_EQ(sizes_of(deep("")).mu_s, kTwilightScatteringMuS);
   // ν: 15 slices baked, the default 8 stored (every other one) — the 4D textures' memory unchanged
-  EXPECT_EQ(sizes_of(deep("")).nu, kDeepTwilightScatteringNu);
+  EXPECT_EQ(sizes_of(deep("")).nu, kTwilightScatteringNu);
   EXPECT_EQ(stored_sizes(deep("")).nu, AtmosphereSpec{}.scattering_nu);
   EXPECT_EQ(stored_sizes(deep("")).scattering_texels(), sizes_of(specbake::testing::spec_of("    preset: earth\n    scene: none\n")).scattering_texels());
   for (const char* more : {"    sky_view: none\n", "    sizes: 100%\n",
@@ -126,7 +126,7 @@ TEST(SkyView, ThickAerosolTwilightScenesBakeFifteenNuSlices) {
 
   const AtmosphereSpec thick = spec(hazy, "-6, 10");
   EXPECT_TRUE(has_thick_aerosol(thick));
-  EXPECT_EQ(sizes_of(thick).nu, kDeepTwilightScatteringNu);
+  EXPECT_EQ(sizes_of(thick).nu, kTwilightScatteringNu);
   EXPECT_EQ(sizes_of(thick).mu_s, kTwilightScatteringMuS);
   EXPECT_TRUE(thick.store_half_mu_s && thick.store_half_nu);
   EXPECT_EQ(stored_sizes(thick).nu, AtmosphereSpec{}.scattering_nu);

@@ -287,7 +287,7 @@ TEST(TwilightTruth, MultipleScatteringPhaseAtTheSlicesNuUnderAHighSun) {
 // far points see (scene_ray_reach_deg: 111.3° here, not 102°), and the table reads the summed
 // density's μ_s texels geometrically. Measured (rgb) with the 8 ν slices baked before: the table
 // 0.031 mean |log|, worst 1.13×; read linearly 0.059, 1.37×; at 102° 0.050, 1.90×. With the 15
-// now baked (kDeepTwilightScatteringNu): the table 0.049, 1.13×; read linearly 0.031, 1.18×; at
+// now baked (kTwilightScatteringNu): the table 0.049, 1.13×; read linearly 0.031, 1.18×; at
 // 102° 0.059, 1.66×. So in these orders and views (the sun's vertical plane) the finer ν buys
 // nothing and the geometric reads now cost; the scene check against the path-traced truth
 // (orders 1–4, 128 points at all azimuths, docs/atmosphere-method.md) is what chose both: its
@@ -313,7 +313,7 @@ TEST(TwilightTruth, DeepTwilightScenesBakeEnoughSunTexels) {
   ASSERT_TRUE(s.store_half_mu_s && s.store_half_nu);
   const Luts with_table = bake_luts(s, specbake::testing::shared_device(), quiet, 0).luts;
   ASSERT_EQ(with_table.model.sizes.mu_s, kTwilightScatteringMuS / 2);
-  ASSERT_EQ(s.scattering_nu, kDeepTwilightScatteringNu);
+  ASSERT_EQ(s.scattering_nu, kTwilightScatteringNu);
   ASSERT_EQ(with_table.model.sizes.nu, AtmosphereSpec{}.scattering_nu);
   Luts resampled = with_table;  // the same bake read through its stored 4D textures alone
   resampled.model.sky_view = SkyView{};

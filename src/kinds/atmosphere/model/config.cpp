@@ -245,7 +245,7 @@ void set_scene_default_sizes(AtmosphereSpec& s) {
   for (auto axis : kSizeAxes) s.*axis = AtmosphereSpec{}.*axis;
   if (reaches_twilight(s)) s.scattering_mu_s = kTwilightScatteringMuS;
   const bool fine_nu = reaches_deep_twilight(s) || (reaches_twilight(s) && has_thick_aerosol(s));
-  if (fine_nu) s.scattering_nu = kDeepTwilightScatteringNu;
+  if (fine_nu) s.scattering_nu = kTwilightScatteringNu;
   const bool stored_apart = sky_view_of(s).on() && !s.store_radiance;
   s.store_half_mu_s = stored_apart && reaches_twilight(s);
   s.store_half_nu = stored_apart && fine_nu;

@@ -49,8 +49,8 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   int scattering_r = 32, scattering_mu = 128, scattering_mu_s = 32, scattering_nu = 8;
   bool sizes_given = false;  // a `sizes:` key (any form); else the scene decides the μ_s count (config.cpp)
   // The bundle stores half the baked μ_s texels / ν slices (resampled): a twilight scene whose
-  // sky-view table holds its views bakes kTwilightScatteringMuS (and, in deep twilight,
-  // kDeepTwilightScatteringNu) for its densities, but its 4D textures serve only the views
+  // sky-view table holds its views bakes kTwilightScatteringMuS (and, in deep twilight or with
+  // thick aerosol, kTwilightScatteringNu) for its densities, but its 4D textures serve only the views
   // outside the scene's range, which the default counts hold (config.cpp).
   bool store_half_mu_s = false, store_half_nu = false;
   // `quadrature:` the scattering density's sphere rule: θ nodes (even), and whether they are
@@ -90,19 +90,19 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
 inline constexpr int kMaxAtmosphereAxis = 4096;
 inline constexpr long long kMaxScatteringTexels = 1LL << 26;
 // Scenes whose sun goes below the horizon get kTwilightScatteringMuS μ_s texels unless the config
-// gives sizes; those whose sun goes below kDeepTwilightSunDeg (deep twilight) also
-// kDeepTwilightScatteringNu ν slices, and kDeepTwilightDensityTheta θ nodes in the scattering
-// density unless the config gives them (config.cpp, parse_checks). 15 slices: the 8 stored are
-// every other one of them, unresampled.
+// gives sizes; those whose sun goes below kDeepTwilightSunDeg (deep twilight), or whose aerosol
+// is thick (kThickAerosolMieDepth), also kTwilightScatteringNu ν slices; deep twilight also gets
+// kDeepTwilightDensityTheta θ nodes in the scattering density unless the config gives them
+// (config.cpp, parse_checks). 15 slices: the 8 stored are every other one of them, unresampled.
 inline constexpr double kDeepTwilightSunDeg = -6.0;
 // A twilight scene whose aerosol scatters at least this vertical optical depth at 550 nm (thick
-// aerosol: the hazy Earth of configs/hazy-earth.yaml 0.066, Mars 0.47; the default Earth 0.0048) bakes
-// kDeepTwilightScatteringNu ν slices too: its multiply scattered light keeps the aerosol's
-// forward peak, which 8 slices do not resolve (docs/atmosphere.md, "Twilight").
+// aerosol: the hazy Earth of configs/hazy-earth.yaml 0.066, Mars 0.47; the default Earth
+// 0.0048) bakes kTwilightScatteringNu ν slices too: its multiply scattered light keeps the
+// aerosol's forward peak, which 8 slices do not resolve (docs/atmosphere.md, "Twilight").
 inline constexpr double kThickAerosolMieDepth = 0.02;
 inline constexpr int kDeepTwilightDensityTheta = 32;
 inline constexpr int kTwilightScatteringMuS = 64;
-inline constexpr int kDeepTwilightScatteringNu = 15;
+inline constexpr int kTwilightScatteringNu = 15;
 // The sky-view table (`sky_view: auto`): built for a scene whose sun goes below the horizon, over its
 // camera altitudes and its sun elevations up to kSkyViewSunMaxDeg (above, the sky changes slowly
 // with the sun and the 4D textures hold it well), with a node every kSkyViewSunStepDeg of sun
@@ -128,7 +128,7 @@ bool reaches_twilight(const AtmosphereSpec& s);
 bool has_thick_aerosol(const AtmosphereSpec& s);
 bool reaches_deep_twilight(const AtmosphereSpec& s);
 // Every texture axis to the scene's default: AtmosphereSpec's, with kTwilightScatteringMuS μ_s
-// texels where the scene reaches twilight and kDeepTwilightScatteringNu ν slices where it reaches
+// texels where the scene reaches twilight and kTwilightScatteringNu ν slices where it reaches
 // deep twilight or twilight with thick aerosol (what a config without `sizes:` bakes; where `sizes: auto` starts from, halved).
 void set_scene_default_sizes(AtmosphereSpec& s);
 // Each axis at most kMaxAtmosphereAxis, nu at most ATMOSPHERE_NU_LIMIT, the scattering texture at
