@@ -243,11 +243,12 @@ bool reaches_deep_twilight(const AtmosphereSpec& s) {
 
 void set_scene_default_sizes(AtmosphereSpec& s) {
   for (auto axis : kSizeAxes) s.*axis = AtmosphereSpec{}.*axis;
-  if (reaches_twilight(s)) s.scattering_mu_s = kTwilightScatteringMuS;
-  const bool fine_nu = reaches_deep_twilight(s) || (reaches_twilight(s) && has_thick_aerosol(s));
+  const bool twilight = reaches_twilight(s);
+  const bool fine_nu = reaches_deep_twilight(s) || (twilight && has_thick_aerosol(s));
+  if (twilight) s.scattering_mu_s = kTwilightScatteringMuS;
   if (fine_nu) s.scattering_nu = kTwilightScatteringNu;
   const bool stored_apart = sky_view_of(s).on() && !s.store_radiance;
-  s.store_half_mu_s = stored_apart && reaches_twilight(s);
+  s.store_half_mu_s = stored_apart && twilight;
   s.store_half_nu = stored_apart && fine_nu;
 }
 

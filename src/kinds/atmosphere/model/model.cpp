@@ -182,19 +182,23 @@ double vertical_scattering_depth(const AtmosphereSpec& spec, const std::vector<d
   return tau / static_cast<double>(lambda_nm.size());
 }
 
+namespace {
+// The aerosol's extinction at the bottom of its profile (per m): e · λ_µm^−α, 0 without one.
+double mie_extinction_per_m(const AtmosphereSpec& s, double nm) {
+  return s.mie ? s.mie_extinction_per_m * std::pow(nm * 1e-3, -s.mie_angstrom_alpha) : 0.0;
+}
+}  // namespace
+
 double mie_vertical_scattering_depth(const AtmosphereSpec& spec, double lambda_nm) {
-  if (!spec.mie) return 0.0;
-  const double beta_per_km = spec.mie_extinction_per_m * std::pow(lambda_nm * 1e-3, -spec.mie_angstrom_alpha) *
-                             spec.mie_single_scattering_albedo * 1e3;
-  return beta_per_km * profile_column_km(spec.mie_density, spec.top_radius_km - spec.bottom_radius_km);
+  return mie_extinction_per_m(spec, lambda_nm) * spec.mie_single_scattering_albedo * 1e3 *
+         profile_column_km(spec.mie_density, spec.top_radius_km - spec.bottom_radius_km);
 }
 
 Channels channels_at(const AtmosphereSpec& s, const std::vector<double>& lambda_nm) {
   const Model m = model_of(s);
   Channels c;
   for (double nm : lambda_nm) {
-    const double um = nm * 1e-3;
-    const double mie_ext = s.mie ? s.mie_extinction_per_m * std::pow(um, -s.mie_angstrom_alpha) : 0.0;
+    const double um = nm * 1e-3, mie_ext = mie_extinction_per_m(s, nm);
     c.lambda_nm.push_back(nm);
     c.solar_irradiance.push_back(solar_irradiance_at(nm) * s.solar_irradiance_scale);
     c.rayleigh_scattering.push_back(s.rayleigh ? s.rayleigh_scattering_per_m_at_1um * std::pow(um, -4.0) * 1e3 : 0.0);
