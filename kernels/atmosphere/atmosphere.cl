@@ -1135,6 +1135,22 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
   }
 }
 
+/* ---- the orders beyond the last (`orders_tail: geometric`) -------------------------- */
+/* The density of every order from n on, J_{≥n} = Σ_{k≥0} J_{n+k}, from the last two densities
+ * at one texel and channel, as a geometric series: each order beyond n is taken to be ρ times
+ * the one before, ρ = J_n / J_{n−1} (this texel's own ratio), so J_{≥n} = J_n / (1 − ρ).
+ * Successive orders tend to a fixed ratio at every texel — the light settles into the scattering
+ * operator's leading eigenfunction, ~0.5 per order in the default Earth's blue by order 5 — and
+ * the texel's ratio keeps what a global one loses: in the planet's shadow every order is a
+ * larger fraction of the one before than in daylight. ρ is clamped to [0, TAIL_RATIO_MAX]
+ * (no tail where J_{n−1} ≤ 0): a ratio near 1 is an optically thick medium, whose orders a
+ * series started this early cannot stand for (`orders: auto` there). J per km. */
+#define TAIL_RATIO_MAX R(0.9)
+FN real geometric_tail(real j, real j_prev) {
+  const real rho = j_prev > R(0.0) ? fmin(fmax(j / j_prev, R(0.0)), TAIL_RATIO_MAX) : R(0.0);
+  return j / (R(1.0) - rho);
+}
+
 /* ---- ground irradiance ---------------------------------------------------------------- */
 /* The mean cosine of the sun on a horizontal surface over the visible part of its disc
  * (the reference's approximation near the horizon). */

@@ -294,6 +294,13 @@ __kernel void add_values(AtmosphereParameters a, __global const real* x, int n, 
   if (id < n) sum[id] += x[id];
 }
 
+/* J ← J_{≥n} = geometric_tail(J, J_prev) for the n values of the last order's density J, where
+ * J_prev holds the order before (`orders_tail: geometric`). */
+__kernel void density_tail(AtmosphereParameters a, __global const real* J_prev, int n, __global real* J) {
+  const int id = get_global_id(0);
+  if (id < n) J[id] = geometric_tail(J[id], J_prev[id]);
+}
+
 /* rgb[t][k] += Σ_c w[k·NCH + c] x[t][c] for the n texels of x ([texels][NCH]); `= ` instead of
  * `+=` where first is 1 (the first addition into a sum, which then needs no zeroing). */
 __kernel void add_rgb(AtmosphereParameters a, __global const real* x, __constant real* w, int n, int first,

@@ -310,6 +310,72 @@ TEST(AtmosphereDevice, AutoOrdersStopAtTolerance) {
   EXPECT_GE(b.orders[b.orders.size() - 2]["relative_change"].get<double>(), 1e-2);
 }
 
+// geometric_tail (atmosphere.cl) on a geometric sequence J_k = ρ^k is exactly the series from
+// k = n on: ρ^n / (1 − ρ), to rounding (a few ulps of double); its ratio is clamped to [0, 0.9]
+// and it adds nothing where the order before is not positive.
+TEST(AtmosphereOrdersTail, GeometricTailSumsAGeometricSeries) {
+  for (double rho : {0.05, 0.3, 0.51, 0.85})
+    for (int n : {3, 4, 6}) {
+      double series = 0.0;
+      for (int k = n; k < 4000; ++k) series += std::pow(rho, k);
+      EXPECT_NEAR(ref3::geometric_tail(std::pow(rho, n), std::pow(rho, n - 1)), series, 1e-13 * series)
+          << "rho " << rho << ", n " << n;
+    }
+  EXPECT_DOUBLE_EQ(ref3::geometric_tail(2.0, 1.0), 2.0 / (1.0 - 0.9));  // a ratio above 0.9: clamped
+  EXPECT_DOUBLE_EQ(ref3::geometric_tail(-1e-9, 1.0), -1e-9);            // a negative ratio: 0
+  EXPECT_DOUBLE_EQ(ref3::geometric_tail(0.5, 0.0), 0.5);                 // nothing before it: no tail
+}
+
+// orders_tail: geometric on the device against the double reference's tailed bake (the same
+// tail after the same stages). The tail divides by 1 − ρ, ρ = J_n / J_(n−1): a relative error ε
+// in each density becomes ≤ 2ε in ρ and ≤ 2ε ρ/(1 − ρ) more in the result, ≤ 18ε at the clamp
+// ρ ≤ 0.9 — so the float32 chain bound times 19. And it stands for the orders beyond the last:
+// the small Earth's 4 orders + tail against 40 orders (the series converged far below float32)
+// must leave at most a quarter of what 4 plain orders leave, in the scattering and the
+// irradiance, relative to the channel's largest value (from order 5 on this Earth's orders fall
+// by a nearly constant ratio at each texel, so a series from order 4's own ratio is within a few
+// per cent of their sum; a tail that missed its texels' ratios, or added nothing, fails this).
+// Where 4 plain orders are below the converged value, the tailed bake is not further below.
+TEST(AtmosphereOrdersTail, TheTailMatchesTheReferenceAndStandsForTheOrdersBeyond) {
+  AtmosphereSpec s = small(earth());
+  s.orders = 4;
+  s.orders_tail = true;
+  const Baked host = bake_luts_reference(s);
+  const Baked dev = bake_luts(s, device(), kQuiet, 8);
+  expect_all_finite(dev);
+  const Sizes sz = model_of(s).sizes;
+  const double ee = max_rel(dev.luts.irradiance, host.luts.irradiance, 1e-3);
+  const SplitError es = split_rel(dev.luts.scattering, host.luts.scattering, sz, 1e-3);
+  std::printf("tail, float32 vs double: E %.3g  S %.3g (horizon rows %.3g)  self-check %.3g\n", ee, es.rest,
+              es.horizon, dev.self_check_worst);
+  EXPECT_LE(ee, 19 * kFloat32Chain);
+  EXPECT_LE(es.rest, 19 * kFloat32Chain);
+  EXPECT_LE(es.horizon, 19 * kFloat32Chain);
+  EXPECT_LE(dev.self_check_worst, kSelfCheckTolerance);
+
+  AtmosphereSpec plain = s, all = s;
+  plain.orders_tail = false;
+  all.orders_tail = false;
+  all.orders = 40;
+  const Baked p = bake_luts_reference(plain), a = bake_luts_reference(all);
+  // the largest |x − a| over texels and channels, relative to the channel's largest value of a
+  auto off = [](const std::vector<double>& x, const std::vector<double>& a) {
+    std::array<double, 3> mx{};
+    for (std::size_t i = 0; i < a.size(); ++i) mx[i % 3] = std::max(mx[i % 3], std::fabs(a[i]));
+    double e = 0.0;
+    for (std::size_t i = 0; i < a.size(); ++i) e = std::max(e, std::fabs(x[i] - a[i]) / mx[i % 3]);
+    return e;
+  };
+  const double plain_s = off(p.luts.scattering, a.luts.scattering), tail_s = off(host.luts.scattering, a.luts.scattering),
+               plain_e = off(p.luts.irradiance, a.luts.irradiance), tail_e = off(host.luts.irradiance, a.luts.irradiance);
+  std::printf("against 40 orders: scattering 4 orders %.3g, + tail %.3g; irradiance %.3g, + tail %.3g\n", plain_s,
+              tail_s, plain_e, tail_e);
+  EXPECT_LE(tail_s, 0.25 * plain_s);
+  EXPECT_LE(tail_e, 0.25 * plain_e);
+  for (std::size_t i = 0; i < a.luts.scattering.size(); ++i)
+    ASSERT_GE(host.luts.scattering[i], p.luts.scattering[i] - 1e-12 * std::fabs(p.luts.scattering[i])) << i;
+}
+
 // Tiny and odd sizes work and give finite values everywhere.
 TEST(AtmosphereDevice, TinyAndOddSizes) {
   AtmosphereSpec s = earth();
@@ -567,6 +633,8 @@ class Corrupting final : public PassBackend {
   void use_channels(const Channels& ch) override { b_.use_channels(ch); }
   void add_density_sum(int order) override { b_.add_density_sum(order); }
   void sky_view(int orders_used, std::vector<double>& out) override { b_.sky_view(orders_used, out); }
+  void keep_density() override { b_.keep_density(); }
+  void density_tail() override { b_.density_tail(); }
   int reads = 0;             // whole-texture reads, by anyone
   long long gathered = 0;    // texels gathered
   int scans = 0;             // whole-texture scans
@@ -676,6 +744,8 @@ class HostSummed final : public PassBackend {
   void use_channels(const Channels& ch) override { b_->use_channels(ch); }
   void add_density_sum(int order) override { b_->add_density_sum(order); }
   void sky_view(int orders_used, std::vector<double>& out) override { b_->sky_view(orders_used, out); }
+  void keep_density() override { b_->keep_density(); }
+  void density_tail() override { b_->density_tail(); }
 
  private:
   std::unique_ptr<PassBackend> b_;

@@ -123,6 +123,39 @@ TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodesAndTwilightOnesSixtyFou
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: none\n    max_sun_zenith_deg: 110\n").scattering_mu_s, 32);
 }
 
+// A scene whose sun goes below the horizon takes the orders beyond its last as a geometric tail
+// (orders_tail: geometric) when it bakes a fixed count of at least 4 and the config does not say;
+// daylight scenes, orders: auto and counts below 4 keep the exact sum, and the config's word wins.
+// A deep-twilight scene (sun below −6°) bakes 5 orders unless the config gives them.
+// A tail needs two orders' densities: asked for with fewer, or with auto, it is a config error
+// naming the key.
+TEST(Twilight, TwilightScenesTakeTheOrdersBeyondTheLastAsAGeometricTail) {
+  EXPECT_TRUE(t::spec_of("    preset: earth\n").orders_tail);  // sun −6…90°, 4 orders
+  EXPECT_TRUE(t::spec_of("    preset: earth\n    orders: 4\n    scene: {sun_elevation_deg: [-12, 10]}\n").orders_tail);
+  EXPECT_FALSE(t::spec_of("    preset: earth\n    orders: 3\n").orders_tail);
+  EXPECT_FALSE(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [0, 10]}\n").orders_tail);
+  EXPECT_FALSE(t::spec_of("    preset: earth\n    scene: none\n").orders_tail);
+  EXPECT_FALSE(t::spec_of("    preset: earth\n    orders: 2\n").orders_tail);
+  EXPECT_FALSE(t::spec_of("    preset: earth\n    orders: auto\n").orders_tail);
+  EXPECT_FALSE(t::spec_of("    preset: earth\n    orders_tail: none\n").orders_tail);
+  EXPECT_EQ(t::spec_of("    preset: earth\n").orders, 4);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 10]}\n").orders, 5);
+  EXPECT_EQ(t::spec_of("    preset: earth\n    orders: 4\n    scene: {sun_elevation_deg: [-12, 10]}\n").orders, 4);
+  EXPECT_TRUE(t::spec_of("    preset: earth\n    orders_tail: geometric\n    scene: {sun_elevation_deg: [10, 60]}\n")
+                  .orders_tail);
+  for (const char* bad : {"    preset: earth\n    orders: 3\n    orders_tail: geometric\n",
+                          "    preset: earth\n    orders: auto\n    orders_tail: geometric\n",
+                          "    preset: earth\n    orders_tail: yes\n"}) {
+    try {
+      (void)t::spec_of(bad);
+      ADD_FAILURE() << "accepted: " << bad;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("orders_tail"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("spec_of.yaml"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // A deep-twilight scene's textures hold the suns its view rays' points see: a point up to
 // scene_ray_reach_deg around the planet from the camera sees the sun that much lower (Earth:
 // 7.84° from the ground's horizon to the top of the atmosphere, plus 1.44° more from a camera at

@@ -61,7 +61,9 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
                       table_rays = std::uint64_t(v.altitude) * v.view * (SCATTERING_STEPS + 1) * (RAY_FIXED + w) * real,
                       table_device = v.on() ? texture + table + table_rays : 0;
   host += std::uint64_t(v.texels()) * 8 * (2 * 3 + 2 * w);
-  return MemoryEstimate{6 * texture + sums + rays + incidence + table_device + (std::uint64_t{1} << 24) + check.device,
+  // orders_tail: the order before the last one's density, kept while that is computed
+  const std::uint64_t tail = s.orders_tail ? texture : 0;
+  return MemoryEstimate{6 * texture + tail + sums + rays + incidence + table_device + (std::uint64_t{1} << 24) + check.device,
                         std::max({texture, rays, incidence, table, check.largest_buffer}), host + check.host};
 }
 
@@ -83,6 +85,7 @@ Kind kind() {
     const nlohmann::json requested = p.value("orders_requested", nlohmann::json("?"));
     s += ", orders " + (orders.is_number() ? orders.dump()
                                            : requested.is_string() ? requested.get<std::string>() : requested.dump());
+    if (p.value("orders_tail", std::string("none")).rfind("geometric", 0) == 0) s += " + geometric tail";
     if (p.contains("sizes") && p["sizes"].contains("scattering")) {
       const auto& sc = p["sizes"]["scattering"];
       s += ", scattering " + std::to_string(sc.value("r", 0)) + "x" + std::to_string(sc.value("mu", 0)) + "x" +

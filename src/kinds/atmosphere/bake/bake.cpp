@@ -91,6 +91,7 @@ PassPlan pass_plan(const AtmosphereSpec& spec, const Spectrum& sp, int n, int fi
   plan.keep_textures = spec.store_radiance;
   plan.last_pass = last_pass;
   plan.sky_view = sky_view_of(spec).on();
+  plan.tail = spec.orders_tail;
   return plan;
 }
 
@@ -474,6 +475,10 @@ json parameters_json(const AtmosphereSpec& spec) {
   if (spec.layout_tiled2d) layouts.push_back("tiled2d");
   p["layout"] = layouts;
   p["orders_requested"] = spec.orders ? json(*spec.orders) : json("auto");
+  p["orders_tail"] = spec.orders_tail ? json("geometric: the last order's density at every texel and channel "
+                                              "divided by 1 - rho, rho = J_n / J_(n-1) clamped to [0, 0.9]; the "
+                                              "irradiance of orders >= n from its light")
+                                      : json("none");
   p["tolerance"] = spec.tolerance;
   p["precision"] = spec.double_precision ? "float64" : "float32";
   const int width = channels_per_pass(spec);

@@ -567,6 +567,15 @@ class DeviceBackend final : public PassBackend {
       q_.launch("add_values", n, {&tex_.J, static_cast<int>(n), &J_sum_});
     }
   }
+  void keep_density() override {
+    if (J_prev_() == nullptr) J_prev_ = q_.alloc(n_s_);
+    q_.copy(tex_.J, J_prev_, n_s_ * width_);
+  }
+  void density_tail() override {
+    const long long n = n_s_ * width_;
+    q_.launch("density_tail", n, {&J_prev_, static_cast<int>(n), &tex_.J});
+    J_prev_ = cl::Buffer();
+  }
   void sky_view(int orders_used, std::vector<double>& out) override {
     const SkyView& v = model_.sky_view;
     cl_util::checked("sky_view_texture", [&] {
@@ -656,7 +665,7 @@ class DeviceBackend final : public PassBackend {
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0;
   std::size_t row_group_ = 0;
   DeviceTextures tex_;
-  cl::Buffer rays_, incidence_, J_sum_;
+  cl::Buffer rays_, incidence_, J_sum_, J_prev_;
   DeviceSums sums_;
 };
 
@@ -1064,10 +1073,13 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
   r.orders.push_back({1, 1.0});
   r.orders_used = 1;
   r.converged = !plan.auto_orders;
+  const bool tail = plan.tail && !plan.auto_orders && cap >= 3;
   for (int n = 2; n <= cap; ++n) {
     const std::string density = "order " + std::to_string(n) + ": scattering density";
     b.between_slices = [&] { steps.within(density); };
+    if (tail && n == cap) b.keep_density();
     timed(PassStage::scattering_density, n, [&] { b.scattering_density(n); });
+    if (tail && n == cap) timeline.stage("density_tail", n, [&] { b.density_tail(); });
     if (plan.sky_view) timeline.stage("sky_view", n, [&] { b.add_density_sum(n); });
     steps.step(density, 0.55);
     timed(PassStage::indirect_irradiance, n - 1, [&] { b.indirect_irradiance(n - 1); });
@@ -1083,6 +1095,10 @@ PassResult run_pass(PassBackend& b, const PassPlan& plan, const Progress& progre
       r.converged = true;
       break;
     }
+  }
+  if (tail) {  // the irradiance of the light of orders ≥ cap, from its multiple scattering
+    timed(PassStage::indirect_irradiance, cap, [&] { b.indirect_irradiance(cap); });
+    r.orders.back().relative = std::max(r.orders.back().relative, sums.add_irradiance(cap));
   }
   if (plan.sky_view) {
     timeline.stage("sky_view", 0, [&] { b.sky_view(r.orders_used, r.sky_view); });

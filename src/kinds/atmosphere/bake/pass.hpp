@@ -121,6 +121,11 @@ class PassBackend {
   // [texels][2 · channels()] (radiance without single Mie, then single Mie without its phase).
   virtual void add_density_sum(int order) = 0;
   virtual void sky_view(int orders_used, std::vector<double>& out) = 0;
+  // `orders_tail: geometric` (run_pass, around the last order's density): keep_density sets the
+  // current J (the order before) aside; density_tail then makes J the density of every order from
+  // the last on, geometric_tail(J, kept) per value (atmosphere.cl), and lets the kept one go.
+  virtual void keep_density() = 0;
+  virtual void density_tail() = 0;
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
   virtual cl_util::Profiler* profiler() { return nullptr; }
   // Called between the slices of a long launch (a CPU device runs the scattering density one
@@ -166,6 +171,11 @@ struct PassPlan {
   bool last_pass = true;       // the bake's last pass (Sums::begin_pass)
   bool keep_textures = true;   // PassResult's textures read back at the end
   bool sky_view = false;       // the model's sky-view table into PassResult::sky_view
+  // The orders beyond the last as a geometric series (`orders_tail: geometric`; fixed orders ≥ 3,
+  // kMinTailOrders in a config):
+  // the last order's density becomes J_{≥n} before its multiple scattering and the sky-view sum,
+  // and one more indirect irradiance (of the light of orders ≥ n) is added.
+  bool tail = false;
 };
 inline constexpr int kMaxAutoOrders = 40;
 // Texels whose accumulated value is below this fraction of their channel's maximum do not

@@ -44,6 +44,11 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   // the radiance at every wavelength, four per RGBA texel (files spectral_*; sampling_spectral.glsl)
   bool store_radiance = false;
   std::optional<int> orders = 4;  // nullopt: auto
+  bool orders_given = false;       // the config gave `orders:`; else the scene decides (kDeepTwilightOrders)
+  // `orders_tail: geometric`: the orders beyond the last as a geometric series at every texel
+  // (atmosphere.cl, geometric_tail; fixed orders ≥ kMinTailOrders); `none`: exactly the orders' sum.
+  bool orders_tail = false;
+  bool orders_tail_given = false;  // the config gave it; else the scene decides (config.cpp)
   double tolerance = 1e-3;
   int transmittance_mu = 256, transmittance_r = 64, irradiance_mu_s = 64, irradiance_r = 16;
   int scattering_r = 32, scattering_mu = 128, scattering_mu_s = 32, scattering_nu = 8;
@@ -101,6 +106,14 @@ inline constexpr double kDeepTwilightSunDeg = -6.0;
 // aerosol's forward peak, which 8 slices do not resolve (docs/atmosphere.md, "Twilight").
 inline constexpr double kThickAerosolMieDepth = 0.02;
 inline constexpr int kDeepTwilightDensityTheta = 32;
+// The fewest orders a geometric tail (`orders_tail`) starts after: the ratio of order 3's density
+// to order 2's (whose light is single scattering, of another angular shape) is far from the ratio
+// later orders settle to — a tail from order 3 is 1.5× to 30× too bright in deep twilight.
+inline constexpr int kMinTailOrders = 4;
+// A deep-twilight scene bakes this many orders unless the config gives `orders:` (with the
+// geometric tail every twilight scene gets): in the planet's shadow the ratio of one order to the
+// one before still falls from order 4 to 5, so a tail from order 4 overstates the blue there.
+inline constexpr int kDeepTwilightOrders = 5;
 inline constexpr int kTwilightScatteringMuS = 64;
 inline constexpr int kTwilightScatteringNu = 15;
 // The sky-view table (`sky_view: auto`): built for a scene whose sun goes below the horizon, over its

@@ -139,7 +139,7 @@ std::string advice(const std::string& part, const AtmosphereSpec& spec, int orde
            "and nu first; now " + std::to_string(spec.scattering_r) + "x" + std::to_string(spec.scattering_mu) + "x" +
            std::to_string(spec.scattering_mu_s) + "x" + std::to_string(spec.scattering_nu) + ")";
   if (part == "order_truncation")
-    return "raise orders (now " + std::to_string(orders_used) + "), or use orders: auto with a smaller tolerance";
+    return "use orders_tail: geometric (orders >= 3), raise orders (now " + std::to_string(orders_used) + "), or use orders: auto with a smaller tolerance";
   return "bake a spectrum (spectrum: {count: 16} or more) instead of rgb";
 }
 
@@ -374,7 +374,9 @@ SceneTracePlan plan_traces(const AtmosphereSpec& spec, const std::vector<TruthPo
   const std::string what = "/" + scene.dump() + "/first " + std::to_string(first);
   SceneTracePlan t;
   t.o = scene_truth_options(spec, seed);
-  t.o.split_orders = orders_used;
+  // a bake with a geometric tail (orders_tail) stands for every order: its truth is split where
+  // orders: auto stops at the latest, so its tail's error counts as lut_discretisation
+  t.o.split_orders = spec.orders_tail && spec.orders ? kMaxAutoOrders : orders_used;
   t.bake_what = "bake" + what;
   t.points_code = points_code_key(points, dev);
   t.bake_key = truth_key_at(spec, t.bake_what, t.o, t.points_code);
@@ -595,9 +597,11 @@ json check_details(const AtmosphereSpec& spec, const std::vector<TruthPoint>& po
                     "ranges, view directions uniform in solid angle within the view elevations, view-sun azimuth "
                     "uniform in its range"},
       {"orders_baked", orders_used},
+      {"orders_tail", spec.orders_tail ? "geometric" : "none"},
       {"orders_note", "the walks are split at the bake's order count (for spectral bakes in several passes with "
                       "orders: auto, the largest of the passes'; a pass that stopped earlier then counts its "
-                      "missing orders as lut_discretisation)"},
+                      "missing orders as lut_discretisation); with orders_tail: geometric, at orders: auto's "
+                      "cap, the tail's error then in lut_discretisation"},
       {"points_without_light", std::count_if(v.shown_ref.begin(), v.shown_ref.end(),
                                              [](const Vec3& c) { return !(srgb_luminance(c) > 0.0); })},
       {"exposure", sc.exposure_ev100
