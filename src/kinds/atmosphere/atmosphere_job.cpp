@@ -181,12 +181,15 @@ Shares job_shares(const AtmosphereSpec& spec, JobContext& ctx) {
 void record_orders(const AtmosphereSpec& spec, const Baked& b, BakeResult& r) {
   r.parameters["orders"] = {{"requested", spec.orders ? json(*spec.orders) : json("auto")},
                             {"used", b.orders_used},
+                            {"tail", spec.orders_tail && spec.orders ? "geometric" : "none"},
                             {"converged", b.converged},
                             {"tolerance", spec.tolerance},
                             {"per_order", b.orders},
                             {"note", "order 1 = single scattering; 'scattering' is what the order adds to "
                                      "scattering.bin (order 1: single Rayleigh; n >= 2: deltaS_n / P_R(nu)), "
-                                     "'irradiance' what its light adds to irradiance.bin (orders 1..used-1); "
+                                     "'irradiance' what its light adds to irradiance.bin (orders 1..used-1; with tail: "
+                                     "geometric the last order's deltaS and irradiance are those of every order "
+                                     "from it on); "
                                      "relative_change = max over texels above 1e-4 of their channel's maximum of "
                                      "added / accumulated, over scattering (order n) and irradiance (order n-1)"}};
   r.parameters["pass_details"] = b.passes;
