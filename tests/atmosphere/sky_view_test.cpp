@@ -51,7 +51,7 @@ TEST(SkyView, ConfigKeysAndTheAutomaticRange) {
   EXPECT_EQ(twilight.sun_min_deg, -12.0);
   EXPECT_EQ(twilight.sun_max_deg, kSkyViewSunMaxDeg);
   EXPECT_EQ(twilight.sun, 45);       // 22° in 0.5° steps, both ends
-  EXPECT_EQ(twilight.altitude, 5);   // 2 km in 0.5 km steps
+  EXPECT_EQ(twilight.altitude, 9);   // 2 km in 0.25 km steps
   EXPECT_EQ(twilight.view, kSkyViewViews);
   EXPECT_EQ(twilight.azimuth, kSkyViewAzimuths);
   const SkyView ground = model_of(specbake::testing::spec_of("    preset: earth\n")).sky_view;  // sun −6…90°

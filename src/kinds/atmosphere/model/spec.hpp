@@ -122,7 +122,7 @@ inline constexpr int kTwilightScatteringNu = 15;
 // elevation and every kSkyViewAltitudeStepKm of altitude (2 to kSkyViewMaxAltitudes; 1 for a single
 // altitude), kSkyViewViews view zeniths (half above, half below the horizon) and kSkyViewAzimuths
 // view–sun azimuths over [0°, 180°].
-inline constexpr double kSkyViewSunMaxDeg = 10.0, kSkyViewSunStepDeg = 0.5, kSkyViewAltitudeStepKm = 0.5;
+inline constexpr double kSkyViewSunMaxDeg = 10.0, kSkyViewSunStepDeg = 0.5, kSkyViewAltitudeStepKm = 0.25;
 inline constexpr int kSkyViewMaxAltitudes = 9, kSkyViewViews = 64, kSkyViewAzimuths = 32;
 
 namespace atmosphere {
