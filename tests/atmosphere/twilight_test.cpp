@@ -139,6 +139,10 @@ TEST(Twilight, TwilightScenesTakeTheOrdersBeyondTheLastAsAGeometricTail) {
   EXPECT_FALSE(t::spec_of("    preset: earth\n    orders: auto\n").orders_tail);
   EXPECT_FALSE(t::spec_of("    preset: earth\n    orders_tail: none\n").orders_tail);
   EXPECT_EQ(t::spec_of("    preset: earth\n").orders, 4);
+  // thick aerosol (the hazy Earth's): from 6 orders on
+  const std::string hazy = "    preset: earth\n    mie: {scale_height_km: 2.0, extinction_per_m: 3.5e-5}\n";
+  EXPECT_FALSE(t::spec_of(hazy + "    orders: 5\n").orders_tail);
+  EXPECT_TRUE(t::spec_of(hazy + "    orders: 6\n").orders_tail);
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 10]}\n").orders, 5);
   EXPECT_EQ(t::spec_of("    preset: earth\n    orders: 4\n    scene: {sun_elevation_deg: [-12, 10]}\n").orders, 4);
   EXPECT_TRUE(t::spec_of("    preset: earth\n    orders_tail: geometric\n    scene: {sun_elevation_deg: [10, 60]}\n")

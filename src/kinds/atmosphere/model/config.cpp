@@ -416,7 +416,9 @@ void parse_checks(const At& job, AtmosphereSpec& s) {
   // orders at every scene point (docs/atmosphere.md, "The orders beyond the last"); daylight
   // scenes keep the exact sum.
   if (!s.orders_given && reaches_deep_twilight(s)) s.orders = kDeepTwilightOrders;
-  if (!s.orders_tail_given) s.orders_tail = s.orders && *s.orders >= kMinTailOrders && reaches_twilight(s);
+  if (!s.orders_tail_given)
+    s.orders_tail = s.orders && reaches_twilight(s) &&
+                    *s.orders >= (has_thick_aerosol(s) ? kMinTailOrdersThickAerosol : kMinTailOrders);
   // the searches judge bakes by the scene's tolerance
   const char* no_tolerance = " searches for the cheapest bake that meets the scene's tolerance against the "
                              "path-traced truth; expected a scene with tolerance_de2000";
