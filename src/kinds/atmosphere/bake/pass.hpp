@@ -124,6 +124,8 @@ class PassBackend {
   // `orders_tail: geometric` (run_pass, around the last order's density): keep_density sets the
   // current J (the order before) aside; density_tail then makes J the density of every order from
   // the last on, geometric_tail(J, kept) per value (atmosphere.cl), and lets the kept one go.
+  // The tail is not a stage of its own: the density's self-check sees J before it, the multiple
+  // scattering's the tailed J it reads; the tests hold it to the double reference.
   virtual void keep_density() = 0;
   virtual void density_tail() = 0;
   // Where the backend's device commands are recorded (cl/timing.hpp); null: no device.
