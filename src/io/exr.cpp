@@ -38,6 +38,10 @@ std::string exr_bytes(const ExrImage& img) {
   if (img.width <= 0 || img.height <= 0 || nc == 0 ||
       img.pixels.size() != static_cast<std::size_t>(img.width) * img.height * nc)
     throw JobError("EXR image has inconsistent size");
+  if (img.width > kMaxExrSide || img.height > kMaxExrSide || 1LL * img.width * img.height > kMaxExrPixels)
+    throw JobError("an EXR image of " + std::to_string(img.width) + " x " + std::to_string(img.height) +
+                   " pixels is more than its readers take (" + std::to_string(kMaxExrSide) + " per side, " +
+                   std::to_string(kMaxExrPixels) + " in all); leave exr out of formats or use smaller sizes");
   try {
     Imf::Header header(img.width, img.height);
     // Float32 data is noise-like in its low mantissa bytes, which ZIP hardly shrinks: 0.4 % of a
@@ -93,9 +97,10 @@ ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& chan
     ExrImage img;
     const long long w = static_cast<long long>(dw.max.x) - dw.min.x + 1, h = static_cast<long long>(dw.max.y) - dw.min.y + 1;
     // The header is untrusted: refuse sizes before allocating for them.
-    if (w < 1 || h < 1 || w > kMaxExrSide || h > kMaxExrSide)
+    if (w < 1 || h < 1 || w > kMaxExrSide || h > kMaxExrSide || w * h > kMaxExrPixels)
       throw InputError({"", 0, 0, ""}, "expected an EXR image of 1 to " + std::to_string(kMaxExrSide) +
-                                           " pixels per side, header says " + std::to_string(w) + " x " + std::to_string(h));
+                                           " pixels per side and at most " + std::to_string(kMaxExrPixels) +
+                                           " pixels, header says " + std::to_string(w) + " x " + std::to_string(h));
     img.width = static_cast<int>(w);
     img.height = static_cast<int>(h);
     img.channels = channels;

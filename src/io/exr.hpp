@@ -15,7 +15,11 @@ struct ExrImage {
 };
 
 std::string exr_bytes(const ExrImage& image);
-inline constexpr int kMaxExrSide = 16384;
+// What exr_read accepts of an untrusted header, and exr_bytes writes: bundle files are flattened
+// arrays (a sky-view table is AZIMUTH wide and SUN·ALTITUDE·VIEW high: 32 × 19008 for the default
+// ground scene), not pictures, so a side may be long; the pixel count bounds the allocation.
+inline constexpr int kMaxExrSide = 1 << 20;
+inline constexpr long long kMaxExrPixels = 1LL << 28;
 
 // Decodes an EXR (any pixel type) into float, channels in the given order (tests, readers).
 ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels);

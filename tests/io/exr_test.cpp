@@ -70,6 +70,28 @@ TEST(Exr, HugeDataWindowInHeaderIsRefusedBeforeAllocation) {
   }
 }
 
+// A flattened table is long and narrow: the default ground scene's sky-view table is 32 pixels
+// wide and 33 suns × 9 altitudes × 64 views = 19008 high. It writes and reads back bit for bit;
+// past the limits the writer refuses (a file its own readers would refuse is never written).
+TEST(Exr, LongNarrowTablesRoundTripAndOversizeOnesAreNotWritten) {
+  ExrImage img;
+  img.width = 32;
+  img.height = 19008;
+  img.channels = {"R", "G", "B"};
+  img.pixels.resize(static_cast<std::size_t>(img.width) * img.height * 3);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = static_cast<float>(i % 1000) * 0.25f;
+  const ExrImage back = exr_read(exr_bytes(img), {"R", "G", "B"});
+  EXPECT_EQ(back.width, 32);
+  EXPECT_EQ(back.height, 19008);
+  EXPECT_EQ(back.pixels, img.pixels);
+  ExrImage tall;
+  tall.width = 1;
+  tall.height = kMaxExrSide + 1;
+  tall.channels = {"R"};
+  tall.pixels.assign(static_cast<std::size_t>(tall.height), 0.0f);
+  EXPECT_THROW((void)exr_bytes(tall), JobError);
+}
+
 TEST(Exr, GarbageIsAnInputError) {
   EXPECT_THROW(exr_read("not an exr file at all", {"R"}), InputError);
 }
