@@ -139,7 +139,8 @@ std::string advice(const std::string& part, const AtmosphereSpec& spec, int orde
            "and nu first; now " + std::to_string(spec.scattering_r) + "x" + std::to_string(spec.scattering_mu) + "x" +
            std::to_string(spec.scattering_mu_s) + "x" + std::to_string(spec.scattering_nu) + ")";
   if (part == "order_truncation")
-    return "use orders_tail: geometric (orders >= 3), raise orders (now " + std::to_string(orders_used) + "), or use orders: auto with a smaller tolerance";
+    return "use orders_tail: geometric (orders >= " + std::to_string(kMinTailOrders) + "), raise orders (now " +
+           std::to_string(orders_used) + "), or use orders: auto with a smaller tolerance";
   return "bake a spectrum (spectrum: {count: 16} or more) instead of rgb";
 }
 
