@@ -145,6 +145,17 @@ TEST(SceneCheck, TheWalkCapFollowsAFinerTarget) {
   const AtmosphereSpec ss = spectral_reference_of(fine);
   EXPECT_EQ(scene_truth_options(ss, 1).max_paths, 3 * 4 * 32768 / 48);
   EXPECT_EQ(scene_truth_options(spec_of("    preset: earth\n"), 1).max_paths, 32768);
+  // below −6° the points ask 1.5 × relative_se with a cap standing for a walk of relative
+  // standard deviation ~5.4 there: 9 × 32768 × (1 %/1.5 %)² = 4 × 32768 at the default, never
+  // below the daylight cap, a spectrum's wavelengths 3/n of it
+  EXPECT_EQ(deep_twilight_walk_cap(0.01), 4 * 32768);
+  EXPECT_EQ(deep_twilight_walk_cap(0.005), 16 * 32768);
+  EXPECT_EQ(deep_twilight_walk_cap(0.1), 32768);
+  const TruthOptions o = scene_truth_options(spec_of("    preset: earth\n"), 1);
+  EXPECT_EQ(o.low_sun_elevation_deg, -6.0);
+  EXPECT_DOUBLE_EQ(o.low_sun_relative_se, 0.015);
+  EXPECT_EQ(o.low_sun_max_paths, 4 * 32768);
+  EXPECT_EQ(scene_truth_options(ss, 1).low_sun_max_paths, 3 * 16 * 32768 / 48);
   // an auto search may halve a default relative_se, not one the config gives
   EXPECT_TRUE(fine.scene.relative_se_given);
   EXPECT_FALSE(spec_of("    preset: earth\n").scene.relative_se_given);

@@ -807,6 +807,45 @@ TEST(Truth, EventsBudgetBoundsLongWalks) {
   }
 }
 
+// Points whose sun is below low_sun_elevation_deg walk to their own target and cap (the scene
+// check asks 1.5 × relative_se below −6°, scene_truth_options). Targets 5 % and, below −6°,
+// 10 %: the sun −3° point meets 5 % in every channel, the sun −9° point 10 % and stops there
+// (a twilight walk's relative standard deviation is 2–5, so from 64 walks the top-ups aim at
+// 10 % and leave some channel above 5 %: had it walked to 5 % it would hold ~4× the walks).
+// With a low-sun cap of 128 walks only the −9° point stops at a cap.
+TEST(Truth, LowSunPointsWalkToTheirOwnTargetAndCap) {
+  const std::vector<TruthPoint> points = {{0, 70, 93, 30}, {0, 70, 99, 30}};
+  TruthOptions o;
+  o.paths = 64;
+  o.max_paths = 1 << 16;
+  o.target_relative_se = 0.05;
+  o.low_sun_elevation_deg = -6.0;
+  o.low_sun_relative_se = 0.1;
+  o.low_sun_max_paths = 1 << 16;
+  const TruthResult r = trace_truth(earth(), device(), points, o);
+  double deep_worst = 0.0;
+  for (std::size_t c = 0; c < r.channels; ++c) {
+    ASSERT_GT(r.L(0, c), 0.0);
+    ASSERT_GT(r.L(1, c), 0.0);
+    EXPECT_LE(r.se(0, c), 0.05 * r.L(0, c)) << c;
+    EXPECT_LE(r.se(1, c), 0.10 * r.L(1, c)) << c;
+    deep_worst = std::max(deep_worst, r.se(1, c) / r.L(1, c));
+  }
+  EXPECT_GT(deep_worst, 0.05);
+  EXPECT_FALSE(r.at_cap[0]);
+  EXPECT_FALSE(r.at_cap[1]);
+  o.low_sun_max_paths = 128;
+  const TruthResult capped = trace_truth(earth(), device(), points, o);
+  EXPECT_FALSE(capped.at_cap[0]);
+  EXPECT_TRUE(capped.at_cap[1]);
+  EXPECT_EQ(capped.paths[1], 128);
+  EXPECT_EQ(capped.paths[0], r.paths[0]);  // the other point walks as before
+  // the options are part of a kept trace's key
+  EXPECT_NE(truth_options_json(o).dump(), truth_options_json(TruthOptions{}).dump());
+  o.low_sun_relative_se = -1.0;
+  EXPECT_THROW(trace_truth(earth(), device(), points, o), InputError);
+}
+
 // ---- against the baked LUTs ------------------------------------------------------------------
 
 // High-sun points (sun zenith 15–45°; views from 0–3 km, at least 15° from the horizon, sky

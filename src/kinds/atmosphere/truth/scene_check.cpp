@@ -38,6 +38,18 @@ constexpr long long kFirstPaths = 1024;
 constexpr long long kMaxPaths = 1LL << 15;
 constexpr double kMaxPathsAt = 0.01;
 constexpr long long kMaxPathsEver = 1LL << 22;
+// Points whose sun is below kDeepTwilightSunDeg (−6°, where civil twilight ends and the sky is
+// 10⁻³–10⁻⁵ of the day's) ask kDeepTwilightSeFactor × relative_se of the truth, with a cap that
+// stands for a walk whose relative standard deviation is 3× the daylight cap's (~5.4; the
+// −12…0° scene's noisiest points measured 5.3 in X, Y or Z): there the light comes through rare
+// paths and a walk's relative standard deviation is 2–5 against ~1 in daylight, so 1 % would
+// take up to 9× the walks of 2 %. Measured on the 2-core CPU, default Earth at 16 wavelengths,
+// sun −12…0°, cameras 0–2 km, 128 points, relative_se 1 % (both traces): every point at 1 %
+// with the daylight cap, 51 s, 46 points at the cap, the deep points' X, Y, Z se up to 2.9 %;
+// factor 1.5 (this), 40 s, none at the cap, at most 1.5 %, truth se p99 1.2 CIEDE2000; factor
+// 2, 26 s, at most 2.0 %, se p99 1.5.
+constexpr double kDeepTwilightSeFactor = 1.5;
+constexpr double kDeepTwilightCapFactor = 9.0;
 // The events budget per point and channel: the walk cap times this many scattering events per
 // walk (the default Earth's walks take ~2 on average, so it binds only where walks are long: an
 // optically thick atmosphere, whose walks take up to TRUTH_MAX_EVENTS; there it bounds the
@@ -197,6 +209,13 @@ long long scene_walk_cap(double relative_se) {
   return static_cast<long long>(std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * k)));
 }
 
+long long deep_twilight_walk_cap(double relative_se) {
+  const double k = kDeepTwilightCapFactor * (kMaxPathsAt / (kDeepTwilightSeFactor * relative_se)) *
+                   (kMaxPathsAt / (kDeepTwilightSeFactor * relative_se));
+  const double walks = std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * k));
+  return std::max(scene_walk_cap(relative_se), static_cast<long long>(walks));
+}
+
 // The relative standard errors a trace's precision target is set on, [point][3]: a spectral
 // trace's X, Y and Z (its channels independent: var = Σ w² se²), an rgb trace's three channels;
 // NaN where the value is not positive (summaries leave those out).
@@ -235,12 +254,17 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
   o.max_paths = cap;
   o.max_events_per_point = kEventsPerWalk * static_cast<double>(cap);
   o.target_relative_se = traced.scene.relative_se;
+  o.low_sun_elevation_deg = kDeepTwilightSunDeg;
+  o.low_sun_relative_se = kDeepTwilightSeFactor * traced.scene.relative_se;
+  const long long low_sun_cap = deep_twilight_walk_cap(traced.scene.relative_se);
+  o.low_sun_max_paths = low_sun_cap;
   o.seed = seed;
   if (traced.spectral) {
     const Spectrum sp = spectrum_of(traced);
     const long long n = static_cast<long long>(sp.lambda_nm.size());
     o.paths = std::max<long long>(64, kFirstPaths * 3 / n);
     o.max_paths = std::max<long long>(o.paths, cap * 3 / n);
+    o.low_sun_max_paths = std::max<long long>(o.paths, low_sun_cap * 3 / n);
     o.max_events_per_point = kEventsPerWalk * static_cast<double>(o.max_paths);
     o.target_weights = sp.to_xyz;  // the precision target: X, Y, Z
   }
@@ -295,7 +319,7 @@ double walk_events_estimate(const AtmosphereSpec& spec) {
 }
 
 double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,
-                     double walk_share) {
+                     double walk_share, bool deep_twilight_rule) {
   // Measured on the 2-core CPU (PoCL, an Intel Xeon), default Earth, relative_se 1 %, both
   // traces (the bake's wavelengths and the 48-wavelength reference; rgb and 16-wavelength bakes
   // cost about the same, as a spectrum's walks go where its colour's variance is), seconds per
@@ -311,7 +335,11 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   // bands' jobs within 0.9–1.25 of the measured. With order 1 by quadrature (the walks carry
   // orders ≥ 2) the same bands gave 0.017, 0.038, 0.113 and 0.60 s a point (rgb, 1981dc9): the
   // constants below scaled by those ratios.
-  constexpr double kHighSun = 0.0145, kLowSun = 0.030, kBelowHorizon = 0.090, kDeepTwilight = 0.60, kEarthEvents = 1.8;
+  // With deep_twilight_rule the points below −6° ask 1.5 × relative_se (kDeepTwilightSeFactor) and
+  // may take more walks (deep_twilight_walk_cap): the −12…0° scene above then took 40 s, the
+  // −6…0° points at the constant here and the deeper ones 0.52 s a point.
+  constexpr double kHighSun = 0.0145, kLowSun = 0.030, kBelowHorizon = 0.090, kEarthEvents = 1.8;
+  const double kDeepTwilight = deep_twilight_rule ? 0.52 : 0.60;
   // Longer walks also need more of them (their radiance is noisier): Rayleigh ×10, 4.3 events a
   // walk, took 1.23 s a point against the Earth's 0.164 over the same scene: (4.3/1.8)^2.3.
   constexpr double kLongerWalks = 2.3;
@@ -325,13 +353,17 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   // 399 (Rayleigh ×100 and ×1000, every point at the budget); ~2.0 µs in the Earth's twilight walks
   // (exact sun optical depths at every vertex; below −6° most points at the cap: 0.70 s a point).
   const double event_s = std::max(2.0e-6, 5.0e-6 * std::pow(e / 57.0, 1.26));
-  auto bounded = [&](const AtmosphereSpec& traced) {
+  auto bounded = [&](const AtmosphereSpec& traced, bool deep) {
     const TruthOptions o = scene_truth_options(traced, 0);
-    const double w = static_cast<double>(o.max_paths);
+    const double cap = static_cast<double>(o.max_paths);
+    const double w = deep ? static_cast<double>(o.low_sun_max_paths) : cap;
     const double channels = traced.spectral ? static_cast<double>(spectrum_of(traced).lambda_nm.size()) : 3.0;
-    return channels * std::max(64.0 * e, std::min(w * e, o.max_events_per_point)) * event_s;
+    return channels * std::max(64.0 * e, std::min(w * e, o.max_events_per_point * w / cap)) * event_s;
   };
-  const double bound = walk_share * (bounded(spec) + (with_reference ? bounded(spectral_reference_of(spec)) : 0.0));
+  auto bound = [&](bool deep) {
+    return walk_share *
+           (bounded(spec, deep) + (with_reference ? bounded(spectral_reference_of(spec), deep) : 0.0));
+  };
   const double traces = (with_reference ? 1.0 : 0.5) * walk_share;  // the per-point figures above hold both traces
   double s = 0.0;
   for (const TruthPoint& p : points) {
@@ -340,7 +372,8 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
                          : sun >= 0.0   ? kLowSun
                          : sun >= kDeepTwilightSunDeg ? kBelowHorizon
                                                       : kDeepTwilight;
-    s += std::min(traces * walks * finer * std::pow(std::max(1.0, e / kEarthEvents), kLongerWalks), bound);
+    s += std::min(traces * walks * finer * std::pow(std::max(1.0, e / kEarthEvents), kLongerWalks),
+                  bound(deep_twilight_rule && sun < kDeepTwilightSunDeg));
   }
   return s;
 }
@@ -630,6 +663,7 @@ json check_details(const AtmosphereSpec& spec, const std::vector<TruthPoint>& po
                                          : "relative se of the trace's three channels (what relative_se targets)"},
                           {"de2000", summary_json(noise.se_de)},
                           {"target_relative", sc.relative_se},
+                          {"target_relative_sun_below_-6_deg", kDeepTwilightSeFactor * sc.relative_se},
                           {"points_at_max_paths", noise.below_target}}},  // reached the cap, met or not
       {"truth", tr.bake->summary()}};
   for (const Part& part : parts) {
@@ -700,8 +734,9 @@ std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n
                   " points stopped at the truth's walk cap (" + walk_cap +
                   ", fewer where walks are long: " + format_g(kEventsPerWalk) +
                   " scattering events a walk on average), their standard error above the target relative_se " +
-                  format_g(sc.relative_se) +
-                  " (standard_error in the record says how far)");
+                  format_g(sc.relative_se) + " (" + format_g(kDeepTwilightSeFactor * sc.relative_se) +
+                  " where the sun is below " + format_g(kDeepTwilightSunDeg) +
+                  " deg; standard_error in the record says how far)");
   if (n_dark > 0)
     out.push_back("scene check: " + std::to_string(n_dark) + " of the " + std::to_string(n) +
                   " points are darker than " + format_g(kDarkLuminance) +
@@ -783,10 +818,12 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
   // a spectral trace shares the rgb cap's work out over its wavelengths: say both
   const std::size_t wavelengths = tr.bake->lambda_nm.size();
   const std::string walk_cap =
-      spec.spectral ? std::to_string(tr.o.max_paths * static_cast<long long>(wavelengths)) + " walks a point over " +
-                          std::to_string(wavelengths) + " wavelengths, the work of " +
-                          std::to_string(scene_walk_cap(sc.relative_se)) + " rgb walks"
-                    : std::to_string(tr.o.max_paths) + " walks a channel";
+      (spec.spectral ? std::to_string(tr.o.max_paths * static_cast<long long>(wavelengths)) + " walks a point over " +
+                           std::to_string(wavelengths) + " wavelengths, the work of " +
+                           std::to_string(scene_walk_cap(sc.relative_se)) + " rgb walks"
+                     : std::to_string(tr.o.max_paths) + " walks a channel") +
+      "; " + std::to_string(deep_twilight_walk_cap(sc.relative_se)) + " rgb walks' work where the sun is below " +
+      format_g(kDeepTwilightSunDeg) + " deg";
   out.warnings = check_warnings(sc, n, dark_scene, total, noise, walk_cap, v.n_dark);
   out.record.details["warnings"] = out.warnings;
   if (dark_scene)
@@ -890,6 +927,7 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
       {"parts", {{"total", part_json(total, false)}}},
       {"standard_error", {{"de2000", summary_json(summarize_errors(select_points(de_se, dark, false)))},
                           {"target_relative", sc.relative_se},
+                          {"target_relative_sun_below_-6_deg", kDeepTwilightSeFactor * sc.relative_se},
                           {"points_at_max_paths", at_cap}}},
       {"dark_points", {{"threshold_cd_m2", kDarkLuminance}, {"count", std::count(dark.begin(), dark.end(), 1)}}}};
   SceneCheck out;

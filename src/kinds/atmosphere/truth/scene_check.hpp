@@ -90,6 +90,9 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
 // (1 %/relative_se)² below it — a walk noisier than ~1.8 relative standard deviation stops at
 // the cap whatever the target — at most 2²².
 long long scene_walk_cap(double relative_se);
+// The same for points whose sun is below kDeepTwilightSunDeg, which ask twice relative_se
+// (scene_check.cpp, kDeepTwilightSeFactor) and may take more walks for it.
+long long deep_twilight_walk_cap(double relative_se);
 // The spectral reference of an rgb bake: the same atmosphere at 48 wavelengths over 360–830 nm.
 AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
 
@@ -119,9 +122,11 @@ double check_seconds(const AtmosphereSpec& spec);
 bool scene_truth_kept(const AtmosphereSpec& spec, std::optional<int> orders_used, cl_util::Device& dev,
                       const Memo& memo);
 // The same model for any points: the bake's wavelengths traced (and the spectral reference with
-// `with_reference`), with `walk_share` of the scene check's walks and caps.
+// `with_reference`), with `walk_share` of the scene check's walks and caps; deep_twilight_rule:
+// the points below −6° at the check's own target and cap for them (scene_truth_options), else at
+// relative_se and the daylight cap like the rest.
 double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& points, bool with_reference,
-                     double walk_share);
+                     double walk_share, bool deep_twilight_rule = true);
 // The truth's scattering events per walk, estimated from the atmosphere's vertical scattering
 // optical depth at the bake's wavelengths (a fit to measured walks: ~1.8 for the Earth, ~60 at
 // 100× its Rayleigh), at most the tracer's limit of 1000.

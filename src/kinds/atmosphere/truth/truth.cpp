@@ -89,6 +89,11 @@ void check_options(const std::vector<TruthPoint>& points, const TruthOptions& o)
   if (o.paths > (1LL << 32) || (o.paths + o.paths_per_batch - 1) / o.paths_per_batch > std::numeric_limits<int>::max())
     throw InputError(Location{{}, 0, 0, "paths"}, "at most 2^32 walks per point, and 2^31 batches");
   if (o.max_paths < 1) throw InputError(Location{{}, 0, 0, "max_paths"}, "max_paths >= 1");
+  if (!(o.low_sun_relative_se >= 0.0 && std::isfinite(o.low_sun_relative_se)))
+    throw InputError(Location{{}, 0, 0, "low_sun_relative_se"}, "a fraction >= 0 (0: target_relative_se)");
+  if (o.low_sun_max_paths < 0) throw InputError(Location{{}, 0, 0, "low_sun_max_paths"}, ">= 0 (0: max_paths)");
+  if (!(o.low_sun_elevation_deg >= -90.0 && o.low_sun_elevation_deg <= 90.0))
+    throw InputError(Location{{}, 0, 0, "low_sun_elevation_deg"}, "an elevation in [-90, 90]");
   if (o.split_orders < 0 || o.split_orders > 1000)
     throw InputError(Location{{}, 0, 0, "split_orders"}, "0 (none) or 1..1000, got " + std::to_string(o.split_orders));
   // the random streams count points in 32 bits; the kernels index [point][node] with int
@@ -166,6 +171,7 @@ struct Prepared {
   std::vector<char> guided_paths;  // [P]: its walks guide their free paths (truth_deep_shadow_cosine)
   std::vector<std::vector<double>> medium;  // [group]: medium_table of channels 3g..3g+2
   std::vector<double> single;    // [P][C]: order 1 by quadrature (TruthOptions::Order1::quadrature), else empty
+  std::vector<char> low_sun;     // [P]: its sun is below TruthOptions::low_sun_elevation_deg
 };
 
 // The view ray of point p in the frame zenith = (0, 0, 1), view in the xz plane.
@@ -634,6 +640,8 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   P.node_tau.assign(P.n_points * P.n_channels * kNodes, 0.0);
   P.node_cdf.assign(P.n_points * P.n_channels * kNodes, 0.0);
   P.twilight.assign(P.n_points, 0);
+  P.low_sun.assign(P.n_points, 0);
+  for (std::size_t i = 0; i < P.n_points; ++i) P.low_sun[i] = 90.0 - points[i].sun_zenith_deg < o.low_sun_elevation_deg;
   P.cells.assign(P.n_points * TRUTH_GUIDE_STRIDE, 0.0);
   const double reach = ref3::truth_shadow_reach_cosine(&a);
   // the kernel's rules: walks guided towards the horizon under the sun (truth_walk's use_line),
@@ -1184,13 +1192,17 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
 // channel.
 void size_launches(const Prepared& P, const TruthOptions& o, const std::vector<double>& events,
                    long long& launch_batches, std::vector<long long>& cap) {
+  const double low_sun_budget = o.low_sun_max_paths > 0 ? static_cast<double>(o.low_sun_max_paths) /
+                                                              static_cast<double>(std::max(o.max_paths, o.paths))
+                                                        : 1.0;
   const double ppb = o.paths_per_batch;
   double per_batch = 0.0;  // events of one batch of every point, one channel group
   for (std::size_t p = 0; p < P.n_points; ++p) {
     const double per_walk = events[p] / (ppb * static_cast<double>(P.n_channels));
     per_batch += per_walk * ppb * std::min<std::size_t>(kGroup, P.n_channels);
     if (o.max_events_per_point > 0.0) {
-      const auto budget = static_cast<long long>(o.max_events_per_point / (std::max(per_walk, 1.0) * ppb));
+      const double events_budget = o.max_events_per_point * (P.low_sun[p] ? low_sun_budget : 1.0);
+      const auto budget = static_cast<long long>(events_budget / (std::max(per_walk, 1.0) * ppb));
       cap[p] = std::max<long long>(1, std::min(cap[p], budget));
     }
   }
@@ -1214,9 +1226,8 @@ constexpr double kAllocationFloor = 0.1;
 //    the rows. Channels whose walks mean little to the colour (the spectrum's ends) then take a
 //    few of them instead of as many as the brightest.
 template <class StatOf>
-std::vector<double> walks_needed(const TruthOptions& o, std::size_t C, const StatOf& stat) {
+std::vector<double> walks_needed(const TruthOptions& o, double target, std::size_t C, const StatOf& stat) {
   std::vector<double> need(C, 0.0);
-  const double target = o.target_relative_se;
   if (o.target_weights.empty()) {
     for (std::size_t c = 0; c < C; ++c) {
       const double L = std::fabs(stat(c).mean), se = stat(c).se();
@@ -1261,8 +1272,14 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
                  const std::function<void(double)>& progress) {
   const std::size_t C = P.n_channels, n_groups = (C + kGroup - 1) / kGroup;
   const long long ppb = o.paths_per_batch;
-  const long long max_walks = std::min<long long>(std::max(o.max_paths, o.paths), 1LL << 32);
-  const long long max_batches = std::min<long long>((max_walks + ppb - 1) / ppb, std::numeric_limits<int>::max());
+  // per point: its walk cap in batches, and its precision target (TruthOptions::low_sun_*)
+  auto batches_of = [&](long long walks) {
+    const long long w = std::min<long long>(std::max(walks, o.paths), 1LL << 32);
+    return std::min<long long>((w + ppb - 1) / ppb, std::numeric_limits<int>::max());
+  };
+  const long long max_batches = batches_of(o.max_paths);
+  const long long low_sun_batches = o.low_sun_max_paths > 0 ? batches_of(o.low_sun_max_paths) : max_batches;
+  const double low_sun_target = o.low_sun_relative_se > 0.0 ? o.low_sun_relative_se : o.target_relative_se;
   const long long stream_batches = std::min<long long>((1LL << 32) / ppb, std::numeric_limits<int>::max());
   const bool weighted = !o.target_weights.empty();
   // per (point, channel): batches traced, batches wanted
@@ -1279,7 +1296,8 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   };
   long long launch_batches =
       std::max<long long>(1, std::min<long long>(kLaunchWalks / ppb, kLaunchItems / static_cast<long long>(P.n_points)));
-  std::vector<long long> cap(P.n_points, max_batches);  // per point and channel: max_batches, or the events budget's
+  std::vector<long long> cap(P.n_points);  // per point and channel: its walk cap's batches, or the events budget's
+  for (std::size_t p = 0; p < P.n_points; ++p) cap[p] = P.low_sun[p] ? low_sun_batches : max_batches;
   std::vector<char> clipped(P.n_points, 0);             // a top-up was cut by the cap
   std::vector<double> events(P.n_points, 0.0);          // per point, all its channels
   bool probed = false;  // the first launch traces one batch per (point, channel): its events per walk
@@ -1337,7 +1355,8 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
     if (!(o.target_relative_se > 0.0)) break;
     bool more = false;
     for (std::size_t p = 0; p < P.n_points; ++p) {
-      const std::vector<double> need = walks_needed(o, C, [&](std::size_t c) { return estimate(p, c); });
+      const double target = P.low_sun[p] ? low_sun_target : o.target_relative_se;
+      const std::vector<double> need = walks_needed(o, target, C, [&](std::size_t c) { return estimate(p, c); });
       std::vector<long long> w(C);
       long long total = 0, traced = 0;
       for (std::size_t c = 0; c < C; ++c) {
@@ -1558,7 +1577,10 @@ nlohmann::json truth_options_json(const TruthOptions& o) {
           {"next_sun", static_cast<int>(o.next_sun)},
           {"order1", o.order1 == TruthOptions::Order1::quadrature ? "quadrature" : "walked"},
           {"learn", o.learn},
-          {"max_events_per_point", o.max_events_per_point}};
+          {"max_events_per_point", o.max_events_per_point},
+          {"low_sun", {{"below_deg", o.low_sun_elevation_deg},
+                       {"target", o.low_sun_relative_se},
+                       {"max_paths", o.low_sun_max_paths}}}};
 }
 
 TruthResult trace_truth(const AtmosphereSpec& spec, cl_util::Device& dev, const std::vector<TruthPoint>& points,

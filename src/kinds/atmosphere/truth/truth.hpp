@@ -58,6 +58,14 @@ struct TruthOptions {
   // or the point has max(paths, max_paths) walks. 0: exactly `paths` walks.
   double target_relative_se = 0.0;
   long long max_paths = 1LL << 22;
+  // Points whose sun elevation (degrees, at the point's camera as given) is below
+  // low_sun_elevation_deg ask low_sun_relative_se of their radiance instead (0: the same target)
+  // and may take low_sun_max_paths walks (0: max_paths; the events budget scales with it): where
+  // the light comes from rare paths a walk costs most, and a precision stated per band keeps
+  // the cost where it buys the most. Default: no point is such.
+  double low_sun_elevation_deg = -90.0;
+  double low_sun_relative_se = 0.0;
+  long long low_sun_max_paths = 0;
   // N >= 1: also estimate, from the same walks, the part of orders 1..N and the part of orders
   // above N (TruthResult::low / high). 0: no split.
   int split_orders = 0;

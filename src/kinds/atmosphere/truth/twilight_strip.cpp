@@ -77,7 +77,8 @@ std::vector<TruthPoint> strip_points(const AtmosphereSpec& spec, double* lowest_
 
 double twilight_strip_seconds(const AtmosphereSpec& spec) {
   if (!wants_twilight_strip(spec)) return 0.0;
-  return kStripViewsCost * truth_seconds(spec, strip_points(spec, nullptr, nullptr), false, 1.0 / kStripCapDivisor);
+  return kStripViewsCost * truth_seconds(spec, strip_points(spec, nullptr, nullptr), false, 1.0 / kStripCapDivisor,
+                                         false);
 }
 
 bool wants_twilight_strip(const AtmosphereSpec& spec) {
@@ -96,6 +97,8 @@ TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_ut
   const long long cap = std::max(o.paths, o.max_paths / kStripCapDivisor);
   o.max_events_per_point *= static_cast<double>(cap) / static_cast<double>(o.max_paths);  // its events a walk
   o.max_paths = cap;
+  o.low_sun_relative_se = 0.0;  // one relaxed target and cap for every column, twilight or not
+  o.low_sun_max_paths = 0;
   const std::string key = truth_key(spec, "twilight-strip", o, points, dev);
   const auto truth = keep.kept<TruthResult>(
       key, [&] { return trace_truth(spec, dev, points, o, progress); }, truth_result_bytes,
