@@ -181,7 +181,7 @@ Shares job_shares(const AtmosphereSpec& spec, JobContext& ctx) {
 void record_orders(const AtmosphereSpec& spec, const Baked& b, BakeResult& r) {
   r.parameters["orders"] = {{"requested", spec.orders ? json(*spec.orders) : json("auto")},
                             {"used", b.orders_used},
-                            {"tail", spec.orders_tail && spec.orders ? "geometric" : "none"},
+                            {"tail", takes_geometric_tail(spec) ? "geometric" : "none"},
                             {"converged", b.converged},
                             {"tolerance", spec.tolerance},
                             {"per_order", b.orders},

@@ -62,7 +62,7 @@ MemoryEstimate device_memory(const AtmosphereSpec& s) {
                       table_device = v.on() ? texture + table + table_rays : 0;
   host += std::uint64_t(v.texels()) * 8 * (2 * 3 + 2 * w);
   // orders_tail: the order before the last one's density, kept while that is computed
-  const std::uint64_t tail = s.orders_tail ? texture : 0;
+  const std::uint64_t tail = takes_geometric_tail(s) ? texture : 0;
   return MemoryEstimate{6 * texture + tail + sums + rays + incidence + table_device + (std::uint64_t{1} << 24) + check.device,
                         std::max({texture, rays, incidence, table, check.largest_buffer}), host + check.host};
 }

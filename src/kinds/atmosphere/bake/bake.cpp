@@ -91,7 +91,7 @@ PassPlan pass_plan(const AtmosphereSpec& spec, const Spectrum& sp, int n, int fi
   plan.keep_textures = spec.store_radiance;
   plan.last_pass = last_pass;
   plan.sky_view = sky_view_of(spec).on();
-  plan.tail = spec.orders_tail;
+  plan.tail = takes_geometric_tail(spec);
   return plan;
 }
 
@@ -475,7 +475,7 @@ json parameters_json(const AtmosphereSpec& spec) {
   if (spec.layout_tiled2d) layouts.push_back("tiled2d");
   p["layout"] = layouts;
   p["orders_requested"] = spec.orders ? json(*spec.orders) : json("auto");
-  p["orders_tail"] = spec.orders_tail ? json("geometric: the last order's density at every texel and channel "
+  p["orders_tail"] = takes_geometric_tail(spec) ? json("geometric: the last order's density at every texel and channel "
                                               "divided by 1 - rho, rho = J_n / J_(n-1) clamped to [0, 0.9]; the "
                                               "irradiance of orders >= n from its light")
                                       : json("none");

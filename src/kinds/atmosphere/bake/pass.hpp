@@ -173,8 +173,8 @@ struct PassPlan {
   bool last_pass = true;       // the bake's last pass (Sums::begin_pass)
   bool keep_textures = true;   // PassResult's textures read back at the end
   bool sky_view = false;       // the model's sky-view table into PassResult::sky_view
-  // The orders beyond the last as a geometric series (`orders_tail: geometric`; fixed orders ≥ 3,
-  // kMinTailOrders in a config):
+  // The orders beyond the last as a geometric series (`orders_tail: geometric`; fixed orders ≥ 3 here,
+  // kMinTailOrders (4) in a config):
   // the last order's density becomes J_{≥n} before its multiple scattering and the sky-view sum,
   // and one more indirect irradiance (of the light of orders ≥ n) is added.
   bool tail = false;

@@ -512,7 +512,7 @@ json normalised_json(const AtmosphereSpec& s) {
                             : s.spectral   ? json{{"min_nm", s.min_nm}, {"max_nm", s.max_nm}, {"count", s.count}}
                                            : json("rgb")},
                {"orders", s.orders ? json(*s.orders) : json("auto")},
-               {"orders_tail", s.orders_tail ? "geometric" : "none"},
+               {"orders_tail", takes_geometric_tail(s) ? "geometric" : "none"},
                {"tolerance", s.tolerance},
                {"sizes", {{"transmittance", {s.transmittance_mu, s.transmittance_r}},
                           {"irradiance", {s.irradiance_mu_s, s.irradiance_r}},

@@ -142,6 +142,10 @@ void scale_sizes(AtmosphereSpec& s, double f);
 // Whether the spec's scene reaches twilight (a scene check with its sun below the horizon), and
 // deep twilight (below kDeepTwilightSunDeg).
 bool reaches_twilight(const AtmosphereSpec& s);
+// Whether the bake takes the orders beyond its last as a geometric tail: `orders_tail:
+// geometric` with a fixed count (the config refuses the tail with `orders: auto`, so this is
+// orders_tail itself for every parsed spec; the one test of it everywhere).
+inline bool takes_geometric_tail(const AtmosphereSpec& s) { return s.orders_tail && s.orders.has_value(); }
 // Whether its aerosol's vertical scattering optical depth at 550 nm is at least kThickAerosolMieDepth.
 bool has_thick_aerosol(const AtmosphereSpec& s);
 bool reaches_deep_twilight(const AtmosphereSpec& s);

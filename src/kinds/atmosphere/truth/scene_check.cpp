@@ -410,7 +410,7 @@ SceneTracePlan plan_traces(const AtmosphereSpec& spec, const std::vector<TruthPo
   t.o = scene_truth_options(spec, seed);
   // a bake with a geometric tail (orders_tail) stands for every order: its truth is split where
   // orders: auto stops at the latest, so its tail's error counts as lut_discretisation
-  t.o.split_orders = spec.orders_tail && spec.orders ? kMaxAutoOrders : orders_used;
+  t.o.split_orders = takes_geometric_tail(spec) ? kMaxAutoOrders : orders_used;
   t.bake_what = "bake" + what;
   t.points_code = points_code_key(points, dev);
   t.bake_key = truth_key_at(spec, t.bake_what, t.o, t.points_code);
@@ -631,7 +631,7 @@ json check_details(const AtmosphereSpec& spec, const std::vector<TruthPoint>& po
                     "ranges, view directions uniform in solid angle within the view elevations, view-sun azimuth "
                     "uniform in its range"},
       {"orders_baked", orders_used},
-      {"orders_tail", spec.orders_tail ? "geometric" : "none"},
+      {"orders_tail", takes_geometric_tail(spec) ? "geometric" : "none"},
       {"orders_note", "the walks are split at the bake's order count (for spectral bakes in several passes with "
                       "orders: auto, the largest of the passes'; a pass that stopped earlier then counts its "
                       "missing orders as lut_discretisation); with orders_tail: geometric, at orders: auto's "
