@@ -734,9 +734,12 @@ std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n
                   " points stopped at the truth's walk cap (" + walk_cap +
                   ", fewer where walks are long: " + format_g(kEventsPerWalk) +
                   " scattering events a walk on average), their standard error above the target relative_se " +
-                  format_g(sc.relative_se) + " (" + format_g(kDeepTwilightSeFactor * sc.relative_se) +
-                  " where the sun is below " + format_g(kDeepTwilightSunDeg) +
-                  " deg; standard_error in the record says how far)");
+                  format_g(sc.relative_se) +
+                  (sc.sun_elevation_min_deg < kDeepTwilightSunDeg
+                       ? " (" + format_g(kDeepTwilightSeFactor * sc.relative_se) + " where the sun is below " +
+                             format_g(kDeepTwilightSunDeg) + " deg; "
+                       : std::string(" (")) +
+                  "standard_error in the record says how far)");
   if (n_dark > 0)
     out.push_back("scene check: " + std::to_string(n_dark) + " of the " + std::to_string(n) +
                   " points are darker than " + format_g(kDarkLuminance) +
@@ -822,8 +825,10 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                            std::to_string(wavelengths) + " wavelengths, the work of " +
                            std::to_string(scene_walk_cap(sc.relative_se)) + " rgb walks"
                      : std::to_string(tr.o.max_paths) + " walks a channel") +
-      "; " + std::to_string(deep_twilight_walk_cap(sc.relative_se)) + " rgb walks' work where the sun is below " +
-      format_g(kDeepTwilightSunDeg) + " deg";
+      (sc.sun_elevation_min_deg < kDeepTwilightSunDeg
+           ? "; " + std::to_string(deep_twilight_walk_cap(sc.relative_se)) +
+                 " rgb walks' work where the sun is below " + format_g(kDeepTwilightSunDeg) + " deg"
+           : std::string());
   out.warnings = check_warnings(sc, n, dark_scene, total, noise, walk_cap, v.n_dark);
   out.record.details["warnings"] = out.warnings;
   if (dark_scene)
