@@ -38,7 +38,7 @@ std::string exr_bytes(const ExrImage& img) {
   if (img.width <= 0 || img.height <= 0 || nc == 0 ||
       img.pixels.size() != static_cast<std::size_t>(img.width) * img.height * nc)
     throw JobError("EXR image has inconsistent size");
-  if (img.width > kMaxExrSide || img.height > kMaxExrSide || 1LL * img.width * img.height > kMaxExrPixels)
+  if (!exr_size_allowed(img.width, img.height))
     throw JobError("an EXR image of " + std::to_string(img.width) + " x " + std::to_string(img.height) +
                    " pixels is more than its readers take (" + std::to_string(kMaxExrSide) + " per side, " +
                    std::to_string(kMaxExrPixels) + " in all); leave exr out of formats or use smaller sizes");
@@ -97,7 +97,7 @@ ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& chan
     ExrImage img;
     const long long w = static_cast<long long>(dw.max.x) - dw.min.x + 1, h = static_cast<long long>(dw.max.y) - dw.min.y + 1;
     // The header is untrusted: refuse sizes before allocating for them.
-    if (w < 1 || h < 1 || w > kMaxExrSide || h > kMaxExrSide || w * h > kMaxExrPixels)
+    if (!exr_size_allowed(w, h))
       throw InputError({"", 0, 0, ""}, "expected an EXR image of 1 to " + std::to_string(kMaxExrSide) +
                                            " pixels per side and at most " + std::to_string(kMaxExrPixels) +
                                            " pixels, header says " + std::to_string(w) + " x " + std::to_string(h));

@@ -20,6 +20,9 @@ std::string exr_bytes(const ExrImage& image);
 // ground scene), not pictures, so a side may be long; the pixel count bounds the allocation.
 inline constexpr int kMaxExrSide = 1 << 20;
 inline constexpr long long kMaxExrPixels = 1LL << 28;
+inline bool exr_size_allowed(long long width, long long height) {
+  return width >= 1 && height >= 1 && width <= kMaxExrSide && height <= kMaxExrSide && width * height <= kMaxExrPixels;
+}
 
 // Decodes an EXR (any pixel type) into float, channels in the given order (tests, readers).
 ExrImage exr_read(const std::string& bytes, const std::vector<std::string>& channels);

@@ -85,7 +85,7 @@ Kind kind() {
     const nlohmann::json requested = p.value("orders_requested", nlohmann::json("?"));
     s += ", orders " + (orders.is_number() ? orders.dump()
                                            : requested.is_string() ? requested.get<std::string>() : requested.dump());
-    if (p.value("orders_tail", std::string("none")).rfind("geometric", 0) == 0) s += " + geometric tail";
+    if (p.contains("orders") && p["orders"].value("tail", std::string("none")) == "geometric") s += " + geometric tail";
     if (p.contains("sizes") && p["sizes"].contains("scattering")) {
       const auto& sc = p["sizes"]["scattering"];
       s += ", scattering " + std::to_string(sc.value("r", 0)) + "x" + std::to_string(sc.value("mu", 0)) + "x" +

@@ -204,16 +204,20 @@ std::vector<double> relative_errors(const std::vector<Vec3>& test, const std::ve
   return out;
 }
 
-long long scene_walk_cap(double relative_se) {
-  const double k = std::max(1.0, (kMaxPathsAt / relative_se) * (kMaxPathsAt / relative_se));
-  return static_cast<long long>(std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * k)));
+namespace {
+// kMaxPaths × k (1 %/target)², rounded, at most kMaxPathsEver.
+long long walks_for(double k, double target) {
+  const double f = k * (kMaxPathsAt / target) * (kMaxPathsAt / target);
+  return static_cast<long long>(std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * f)));
 }
+double deep_twilight_relative_se(double relative_se) { return kDeepTwilightSeFactor * relative_se; }
+}  // namespace
+
+long long scene_walk_cap(double relative_se) { return walks_for(1.0, std::min(relative_se, kMaxPathsAt)); }
 
 long long deep_twilight_walk_cap(double relative_se) {
-  const double k = kDeepTwilightCapFactor * (kMaxPathsAt / (kDeepTwilightSeFactor * relative_se)) *
-                   (kMaxPathsAt / (kDeepTwilightSeFactor * relative_se));
-  const double walks = std::min(static_cast<double>(kMaxPathsEver), std::round(kMaxPaths * k));
-  return std::max(scene_walk_cap(relative_se), static_cast<long long>(walks));
+  return std::max(scene_walk_cap(relative_se),
+                  walks_for(kDeepTwilightCapFactor, deep_twilight_relative_se(relative_se)));
 }
 
 // The relative standard errors a trace's precision target is set on, [point][3]: a spectral
@@ -255,7 +259,7 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
   o.max_events_per_point = kEventsPerWalk * static_cast<double>(cap);
   o.target_relative_se = traced.scene.relative_se;
   o.low_sun_elevation_deg = kDeepTwilightSunDeg;
-  o.low_sun_relative_se = kDeepTwilightSeFactor * traced.scene.relative_se;
+  o.low_sun_relative_se = deep_twilight_relative_se(traced.scene.relative_se);
   const long long low_sun_cap = deep_twilight_walk_cap(traced.scene.relative_se);
   o.low_sun_max_paths = low_sun_cap;
   o.seed = seed;
@@ -339,7 +343,7 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
   // may take more walks (deep_twilight_walk_cap): the −12…0° scene above then took 40 s, the
   // −6…0° points at the constant here and the deeper ones 0.52 s a point.
   constexpr double kHighSun = 0.0145, kLowSun = 0.030, kBelowHorizon = 0.090, kEarthEvents = 1.8;
-  const double kDeepTwilight = deep_twilight_rule ? 0.52 : 0.60;
+  const double deep_twilight_s = deep_twilight_rule ? 0.52 : 0.60;
   // Longer walks also need more of them (their radiance is noisier): Rayleigh ×10, 4.3 events a
   // walk, took 1.23 s a point against the Earth's 0.164 over the same scene: (4.3/1.8)^2.3.
   constexpr double kLongerWalks = 2.3;
@@ -360,10 +364,11 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
     const double channels = traced.spectral ? static_cast<double>(spectrum_of(traced).lambda_nm.size()) : 3.0;
     return channels * std::max(64.0 * e, std::min(w * e, o.max_events_per_point * w / cap)) * event_s;
   };
-  auto bound = [&](bool deep) {
+  auto bound_of = [&](bool deep) {
     return walk_share *
            (bounded(spec, deep) + (with_reference ? bounded(spectral_reference_of(spec), deep) : 0.0));
   };
+  const double bound = bound_of(false), deep_bound = deep_twilight_rule ? bound_of(true) : bound;
   const double traces = (with_reference ? 1.0 : 0.5) * walk_share;  // the per-point figures above hold both traces
   double s = 0.0;
   for (const TruthPoint& p : points) {
@@ -371,9 +376,9 @@ double truth_seconds(const AtmosphereSpec& spec, const std::vector<TruthPoint>& 
     const double walks = sun >= low_sun ? kHighSun
                          : sun >= 0.0   ? kLowSun
                          : sun >= kDeepTwilightSunDeg ? kBelowHorizon
-                                                      : kDeepTwilight;
+                                                      : deep_twilight_s;
     s += std::min(traces * walks * finer * std::pow(std::max(1.0, e / kEarthEvents), kLongerWalks),
-                  bound(deep_twilight_rule && sun < kDeepTwilightSunDeg));
+                  sun < kDeepTwilightSunDeg ? deep_bound : bound);
   }
   return s;
 }
@@ -663,7 +668,7 @@ json check_details(const AtmosphereSpec& spec, const std::vector<TruthPoint>& po
                                          : "relative se of the trace's three channels (what relative_se targets)"},
                           {"de2000", summary_json(noise.se_de)},
                           {"target_relative", sc.relative_se},
-                          {"target_relative_sun_below_-6_deg", kDeepTwilightSeFactor * sc.relative_se},
+                          {"target_relative_sun_below_-6_deg", deep_twilight_relative_se(sc.relative_se)},
                           {"points_at_max_paths", noise.below_target}}},  // reached the cap, met or not
       {"truth", tr.bake->summary()}};
   for (const Part& part : parts) {
@@ -721,8 +726,9 @@ OutputFile points_csv(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
 }
 
 // What the truth cannot resolve, said in the record and the run summary.
-std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n, bool dark_scene, const Part& total,
-                                        const TruthNoise& noise, const std::string& walk_cap, long long n_dark) {
+std::vector<std::string> check_warnings(const AtmosphereScene& sc, bool deep_twilight, std::size_t n, bool dark_scene,
+                                        const Part& total, const TruthNoise& noise, const std::string& walk_cap,
+                                        long long n_dark) {
   std::vector<std::string> out;
   if (!dark_scene && noise.se_de.p99 > kNoisyTruthShare * total.de_summary.p99)
     out.push_back("scene check: the truth's own p99 standard error (" + format_g(noise.se_de.p99) +
@@ -735,8 +741,8 @@ std::vector<std::string> check_warnings(const AtmosphereScene& sc, std::size_t n
                   ", fewer where walks are long: " + format_g(kEventsPerWalk) +
                   " scattering events a walk on average), their standard error above the target relative_se " +
                   format_g(sc.relative_se) +
-                  (sc.sun_elevation_min_deg < kDeepTwilightSunDeg
-                       ? " (" + format_g(kDeepTwilightSeFactor * sc.relative_se) + " where the sun is below " +
+                  (deep_twilight
+                       ? " (" + format_g(deep_twilight_relative_se(sc.relative_se)) + " where the sun is below " +
                              format_g(kDeepTwilightSunDeg) + " deg; "
                        : std::string(" (")) +
                   "standard_error in the record says how far)");
@@ -825,11 +831,11 @@ SceneCheck check_scene(const AtmosphereSpec& spec, const Luts& luts, int orders_
                            std::to_string(wavelengths) + " wavelengths, the work of " +
                            std::to_string(scene_walk_cap(sc.relative_se)) + " rgb walks"
                      : std::to_string(tr.o.max_paths) + " walks a channel") +
-      (sc.sun_elevation_min_deg < kDeepTwilightSunDeg
+      (reaches_deep_twilight(spec)
            ? "; " + std::to_string(deep_twilight_walk_cap(sc.relative_se)) +
                  " rgb walks' work where the sun is below " + format_g(kDeepTwilightSunDeg) + " deg"
            : std::string());
-  out.warnings = check_warnings(sc, n, dark_scene, total, noise, walk_cap, v.n_dark);
+  out.warnings = check_warnings(sc, reaches_deep_twilight(spec), n, dark_scene, total, noise, walk_cap, v.n_dark);
   out.record.details["warnings"] = out.warnings;
   if (dark_scene)
     out.failure = dark_scene_failure(sc, n);
@@ -932,7 +938,7 @@ SceneCheck judge_scene(const AtmosphereSpec& spec, const Luts& luts, cl_util::De
       {"parts", {{"total", part_json(total, false)}}},
       {"standard_error", {{"de2000", summary_json(summarize_errors(select_points(de_se, dark, false)))},
                           {"target_relative", sc.relative_se},
-                          {"target_relative_sun_below_-6_deg", kDeepTwilightSeFactor * sc.relative_se},
+                          {"target_relative_sun_below_-6_deg", deep_twilight_relative_se(sc.relative_se)},
                           {"points_at_max_paths", at_cap}}},
       {"dark_points", {{"threshold_cd_m2", kDarkLuminance}, {"count", std::count(dark.begin(), dark.end(), 1)}}}};
   SceneCheck out;

@@ -90,8 +90,9 @@ TruthOptions scene_truth_options(const AtmosphereSpec& traced, std::uint64_t see
 // (1 %/relative_se)² below it — a walk noisier than ~1.8 relative standard deviation stops at
 // the cap whatever the target — at most 2²².
 long long scene_walk_cap(double relative_se);
-// The same for points whose sun is below kDeepTwilightSunDeg, which ask twice relative_se
-// (scene_check.cpp, kDeepTwilightSeFactor) and may take more walks for it.
+// The same for points whose sun is below kDeepTwilightSunDeg, which ask 1.5 × relative_se
+// (scene_check.cpp, kDeepTwilightSeFactor) and may take more walks for it: a cap standing for a
+// walk of relative standard deviation ~5.4 at that target, never below scene_walk_cap.
 long long deep_twilight_walk_cap(double relative_se);
 // The spectral reference of an rgb bake: the same atmosphere at 48 wavelengths over 360–830 nm.
 AtmosphereSpec spectral_reference_of(const AtmosphereSpec& spec);
