@@ -27,6 +27,8 @@
 
 #include "atmosphere/spec_of.hpp"
 #include "kinds/atmosphere/atmosphere_job.hpp"
+#include "kinds/atmosphere/bake/bake.hpp"
+#include "kinds/atmosphere/kind.hpp"
 #include "kinds/atmosphere/truth/truth.hpp"
 #include "kinds/atmosphere/truth/twilight_strip.hpp"
 #include "support/testing.hpp"
@@ -139,6 +141,12 @@ TEST(Twilight, TwilightScenesTakeTheOrdersBeyondTheLastAsAGeometricTail) {
   EXPECT_FALSE(t::spec_of("    preset: earth\n    orders: auto\n").orders_tail);
   EXPECT_FALSE(t::spec_of("    preset: earth\n    orders_tail: none\n").orders_tail);
   EXPECT_EQ(t::spec_of("    preset: earth\n").orders, 4);
+  // plan's and run's one-line summary say so (from the parameters a plan has, before a bake)
+  const auto describe = specbake::atmosphere::kind().describe;
+  EXPECT_NE(describe(parameters_json(t::spec_of("    preset: earth\n"))).find("orders 4 + geometric tail"),
+            std::string::npos);
+  EXPECT_EQ(describe(parameters_json(t::spec_of("    preset: earth\n    orders_tail: none\n"))).find("geometric"),
+            std::string::npos);
   // thick aerosol (the hazy Earth's): from 6 orders on
   const std::string hazy = "    preset: earth\n    mie: {scale_height_km: 2.0, extinction_per_m: 3.5e-5}\n";
   EXPECT_FALSE(t::spec_of(hazy + "    orders: 5\n").orders_tail);

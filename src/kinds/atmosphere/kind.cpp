@@ -85,7 +85,8 @@ Kind kind() {
     const nlohmann::json requested = p.value("orders_requested", nlohmann::json("?"));
     s += ", orders " + (orders.is_number() ? orders.dump()
                                            : requested.is_string() ? requested.get<std::string>() : requested.dump());
-    if (p.contains("orders") && p["orders"].value("tail", std::string("none")) == "geometric") s += " + geometric tail";
+    // parameters.orders_tail: "none", or what the tail is (plan's parameters, before orders.used exists)
+    if (p.value("orders_tail", std::string("none")) != "none") s += " + geometric tail";
     if (p.contains("sizes") && p["sizes"].contains("scattering")) {
       const auto& sc = p["sizes"]["scattering"];
       s += ", scattering " + std::to_string(sc.value("r", 0)) + "x" + std::to_string(sc.value("mu", 0)) + "x" +
