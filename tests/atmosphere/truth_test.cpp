@@ -846,6 +846,43 @@ TEST(Truth, LowSunPointsWalkToTheirOwnTargetAndCap) {
   EXPECT_THROW(trace_truth(earth(), device(), points, o), InputError);
 }
 
+// A trace's progress is the share of the walks its precision target will ask for, as the walks
+// so far predict it (plan_of after the first batch of every point and channel, then each round's
+// plan), each batch weighted by its point's events a walk. Twilight points at a fine target take
+// most of their walks in top-ups: the fraction of the first round's walks alone read 1 at that
+// round's end (what a user saw as a bar at its end, or stuck, for minutes of top-ups). Three
+// twilight points of like cost: the report after the first round (its 512 walks a channel) is
+// within 3× of those walks' share of all the trace's walks (the prediction from one batch of 64
+// walks is an estimate of a variance: low or high by tens of %, not 3×), no report falls more
+// than 0.25 below the highest before it, and the last is 1.
+TEST(Truth, ProgressCountsTheTopUpsTheTargetWillAsk) {
+  const std::vector<TruthPoint> points = {{0.5, 80, 95, 180}, {1, 85, 97, 10}, {0.5, 60, 93, 60}};
+  TruthOptions o;
+  o.paths = 512;
+  o.max_paths = 1 << 15;
+  o.target_relative_se = 0.02;
+  std::vector<double> f;
+  const TruthResult r = trace_truth(earth(), device(), points, o, [&](std::string_view, double x) { f.push_back(x); });
+  ASSERT_GE(f.size(), 3u);
+  double high = 0.0, fall = 0.0;
+  for (double x : f) {
+    high = std::max(high, x);
+    fall = std::max(fall, high - x);
+  }
+  long long walks = 0;
+  for (long long n : r.channel_paths) walks += n;
+  const double first_round = static_cast<double>(o.paths * static_cast<long long>(r.channel_paths.size())) /
+                             static_cast<double>(walks);
+  std::printf("%zu progress reports (%.3f after the first round, whose walks are %.3f of all %lld), largest fall "
+              "%.3f, last %.3f\n",
+              f.size(), f[1], first_round, walks, fall, f.back());
+  ASSERT_LT(first_round, 0.3);  // the top-ups are most of the walks
+  EXPECT_LE(f[1], 3.0 * first_round);
+  EXPECT_GE(f[1], first_round / 3.0);
+  EXPECT_LE(fall, 0.25);
+  EXPECT_NEAR(f.back(), 1.0, 1e-12);
+}
+
 // ---- against the baked LUTs ------------------------------------------------------------------
 
 // High-sun points (sun zenith 15–45°; views from 0–3 km, at least 15° from the horizon, sky

@@ -1301,6 +1301,42 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   std::vector<char> clipped(P.n_points, 0);             // a top-up was cut by the cap
   std::vector<double> events(P.n_points, 0.0);          // per point, all its channels
   bool probed = false;  // the first launch traces one batch per (point, channel): its events per walk
+  // The batches point p's channels need for their share of its precision target by the walks so
+  // far (walks_needed), each channel within the point's cap (no weights) or all of them within its
+  // budget (weights: shared in the allocation's proportions over what is still to trace); *clip:
+  // the cap or budget cut them.
+  auto plan_of = [&](std::size_t p, bool& clip) {
+    const double target = P.low_sun[p] ? low_sun_target : o.target_relative_se;
+    const std::vector<double> need = walks_needed(o, target, C, [&](std::size_t c) { return estimate(p, c); });
+    std::vector<long long> w(C);
+    long long total = 0, traced = 0;
+    for (std::size_t c = 0; c < C; ++c) {
+      w[c] = std::max(done[p * C + c], static_cast<long long>(std::ceil(need[c] / static_cast<double>(ppb))));
+      total += w[c];
+      traced += done[p * C + c];
+    }
+    clip = false;
+    if (!weighted) {
+      for (std::size_t c = 0; c < C; ++c)
+        if (w[c] > cap[p]) {
+          w[c] = std::max(done[p * C + c], cap[p]);
+          clip = true;
+        }
+    } else if (const long long budget = cap[p] * static_cast<long long>(C); total > budget) {
+      const double share =
+          static_cast<double>(std::max<long long>(budget - traced, 0)) / static_cast<double>(total - traced);
+      for (std::size_t c = 0; c < C; ++c)
+        w[c] = done[p * C + c] + static_cast<long long>(std::floor(share * static_cast<double>(w[c] - done[p * C + c])));
+      clip = true;
+    }
+    for (std::size_t c = 0; c < C; ++c) w[c] = std::min(w[c], stream_batches);
+    return w;
+  };
+  // Progress: the walks traced over those the target will ask for, each (point, channel) at the
+  // larger of its plan so far and what its walks so far say the top-ups will ask (plan_of), each
+  // batch weighted by its point's events a walk (a twilight walk costs many daylight ones): the
+  // first batches of a scene whose points then walk to their cap are not most of its work.
+  std::vector<long long> expected(P.n_points * C, 0);
   learn_tables(engine, P, o, totals);
   for (int round = 0; round < kMaxRounds; ++round) {
     for (;;) {
@@ -1339,51 +1375,44 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
             totals.violations += static_cast<long long>(item[2 * kStats * kGroup + 2]);
           }
       }
-      long long total_done = 0, total_want = 0;
       for (std::size_t i = 0; i < done.size(); ++i) done[i] += count[i];
       if (!probed) {
         probed = true;
         size_launches(P, o, events, launch_batches, cap);
         for (std::size_t i = 0; i < want.size(); ++i) want[i] = std::max(done[i], std::min(want[i], cap[i / C]));
+        if (o.target_relative_se > 0.0)
+          for (std::size_t p = 0; p < P.n_points; ++p) {
+            bool clip = false;
+            const std::vector<long long> w = plan_of(p, clip);
+            std::copy(w.begin(), w.end(), expected.begin() + static_cast<std::ptrdiff_t>(p * C));
+          }
       }
-      for (std::size_t i = 0; i < done.size(); ++i) {
-        total_done += done[i];
-        total_want += want[i];
+      if (progress) {
+        double traced = 0.0, total = 0.0;
+        for (std::size_t p = 0; p < P.n_points; ++p) {
+          long long walked = 0;
+          for (std::size_t c = 0; c < C; ++c) walked += done[p * C + c];
+          const double cost = walked > 0 ? std::max(events[p] / static_cast<double>(walked), 1.0) : 1.0;
+          for (std::size_t c = 0; c < C; ++c) {
+            traced += cost * static_cast<double>(done[p * C + c]);
+            total += cost * static_cast<double>(std::max(want[p * C + c], expected[p * C + c]));
+          }
+        }
+        progress(total > 0.0 ? traced / total : 1.0);
       }
-      if (progress) progress(static_cast<double>(total_done) / static_cast<double>(total_want));
     }
     if (!(o.target_relative_se > 0.0)) break;
     bool more = false;
     for (std::size_t p = 0; p < P.n_points; ++p) {
-      const double target = P.low_sun[p] ? low_sun_target : o.target_relative_se;
-      const std::vector<double> need = walks_needed(o, target, C, [&](std::size_t c) { return estimate(p, c); });
-      std::vector<long long> w(C);
-      long long total = 0, traced = 0;
+      bool clip = false;
+      const std::vector<long long> w = plan_of(p, clip);
+      clipped[p] = clipped[p] || clip;
       for (std::size_t c = 0; c < C; ++c) {
-        w[c] = std::max(done[p * C + c], static_cast<long long>(std::ceil(need[c] / static_cast<double>(ppb))));
-        total += w[c];
-        traced += done[p * C + c];
-      }
-      if (!weighted) {
-        for (std::size_t c = 0; c < C; ++c)
-          if (w[c] > cap[p]) {
-            w[c] = std::max(done[p * C + c], cap[p]);
-            clipped[p] = 1;
-          }
-      } else if (const long long budget = cap[p] * static_cast<long long>(C); total > budget) {
-        // the point's budget, shared in the allocation's proportions over what is still to trace
-        const double share = static_cast<double>(std::max<long long>(budget - traced, 0)) /
-                             static_cast<double>(total - traced);
-        for (std::size_t c = 0; c < C; ++c)
-          w[c] = done[p * C + c] + static_cast<long long>(std::floor(share * static_cast<double>(w[c] - done[p * C + c])));
-        clipped[p] = 1;
-      }
-      for (std::size_t c = 0; c < C; ++c) {
-        w[c] = std::min(w[c], stream_batches);
         if (w[c] > want[p * C + c]) {
           want[p * C + c] = w[c];
           more = true;
         }
+        expected[p * C + c] = want[p * C + c];
       }
     }
     if (!more) break;
