@@ -128,7 +128,8 @@ TEST(Twilight, DeepTwilightScenesGetThirtyTwoDensityNodesAndTwilightOnesSixtyFou
 // A scene whose sun goes below the horizon takes the orders beyond its last as a geometric tail
 // (orders_tail: geometric) when it bakes a fixed count of at least 4 and the config does not say;
 // daylight scenes, orders: auto and counts below 4 keep the exact sum, and the config's word wins.
-// A deep-twilight scene (sun below −6°) bakes 5 orders unless the config gives them.
+// A deep-twilight scene (sun below −6°) bakes 5 orders unless the config gives them, a twilight
+// scene with thick aerosol 6 (has_thick_aerosol: its orders settle later).
 // A tail needs two orders' densities: asked for with fewer, or with auto, it is a config error
 // naming the key.
 TEST(Twilight, TwilightScenesTakeTheOrdersBeyondTheLastAsAGeometricTail) {
@@ -151,6 +152,13 @@ TEST(Twilight, TwilightScenesTakeTheOrdersBeyondTheLastAsAGeometricTail) {
   const std::string hazy = "    preset: earth\n    mie: {scale_height_km: 2.0, extinction_per_m: 3.5e-5}\n";
   EXPECT_FALSE(t::spec_of(hazy + "    orders: 5\n").orders_tail);
   EXPECT_TRUE(t::spec_of(hazy + "    orders: 6\n").orders_tail);
+  // ... and bakes 6 orders (with the tail) in twilight unless the config gives orders; daylight keeps 4
+  EXPECT_EQ(t::spec_of(hazy).orders, 6);
+  EXPECT_TRUE(t::spec_of(hazy).orders_tail);
+  EXPECT_EQ(t::spec_of(hazy + "    scene: {sun_elevation_deg: [-12, 10]}\n").orders, 6);
+  EXPECT_EQ(t::spec_of(hazy + "    scene: {sun_elevation_deg: [0, 60]}\n").orders, 4);
+  EXPECT_EQ(t::spec_of(hazy + "    orders: 4\n").orders, 4);
+  EXPECT_FALSE(t::spec_of(hazy + "    orders: auto\n").orders.has_value());
   EXPECT_EQ(t::spec_of("    preset: earth\n    scene: {sun_elevation_deg: [-12, 10]}\n").orders, 5);
   EXPECT_EQ(t::spec_of("    preset: earth\n    orders: 4\n    scene: {sun_elevation_deg: [-12, 10]}\n").orders, 4);
   EXPECT_TRUE(t::spec_of("    preset: earth\n    orders_tail: geometric\n    scene: {sun_elevation_deg: [10, 60]}\n")
