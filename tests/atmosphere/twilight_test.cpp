@@ -254,7 +254,8 @@ TEST(Twilight, TheStripShowsTheBakeBesideTheTruth) {
   AtmosphereSpec single = s;
   single.orders = 1;
   Memo keep;
-  const TwilightStrip now = twilight_strip(s, bake_luts(s, t::shared_device(), kQuiet, 0).luts, t::shared_device(), keep, kQuiet);
+  const auto baked = bake_luts(s, t::shared_device(), kQuiet, 0);
+  const TwilightStrip now = twilight_strip(s, baked.luts, t::shared_device(), keep, kQuiet);
   const TwilightStrip before =
       twilight_strip(single, bake_luts(single, t::shared_device(), kQuiet, 0).luts, t::shared_device(), keep, kQuiet);
   EXPECT_EQ(keep.items.size(), 1u);  // one truth for both
@@ -273,4 +274,18 @@ TEST(Twilight, TheStripShowsTheBakeBesideTheTruth) {
               m_now, m_before, deep_now["truth_se_de2000"]["mean"].get<double>());
   EXPECT_GT(m_before, 3.0 * m_now);
   for (const json& b : now.record["bands"]) EXPECT_TRUE(std::isfinite(b["de2000"]["mean"].get<double>()));
+  // every column in this scene; a scene up to +5° (the same atmosphere and views: the same truth)
+  // leaves the columns +6…+10° outside it, apart in the record and hatched in the picture
+  EXPECT_EQ(now.record["columns_outside_scene"], 0);
+  EXPECT_EQ(now.record["bands"][2]["de2000_in_scene"]["count"], now.record["bands"][2]["de2000"]["count"]);
+  AtmosphereSpec up_to_5 = s;
+  up_to_5.scene.sun_elevation_max_deg = 5.0;
+  const TwilightStrip part =
+      twilight_strip(up_to_5, baked.luts, t::shared_device(), keep, kQuiet);
+  EXPECT_EQ(keep.items.size(), 1u);
+  EXPECT_EQ(part.record["columns_outside_scene"], 5);
+  EXPECT_EQ(part.record["scene_sun_elevation_deg"][1], 5.0);
+  EXPECT_EQ(part.record["bands"][2]["de2000"]["count"], 11 * 12);  // 0 … +10
+  EXPECT_EQ(part.record["bands"][2]["de2000_in_scene"]["count"], 6 * 12);  // 0 … +5
+  EXPECT_NE(part.png.bytes, now.png.bytes);
 }

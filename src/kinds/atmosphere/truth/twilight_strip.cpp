@@ -132,6 +132,17 @@ TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_ut
       de_se[q] = displayed_de2000(plus, shown_truth[q], y);  // the truth's own se, as a colour difference
     }
 
+  // The scene's suns: columns outside them (the strip always spans −12…+10°) are hatched in every
+  // panel, with a white line at the scene's edge: the bake has no sky-view table there, and the
+  // record's bands say what lies inside apart (de2000_in_scene).
+  const double scene_lo = spec.scene.sun_elevation_min_deg, scene_hi = spec.scene.sun_elevation_max_deg;
+  auto in_scene = [&](int i) {
+    const double sun = lowest + i;
+    return sun >= scene_lo - 1e-9 && sun <= scene_hi + 1e-9;
+  };
+  int outside = 0;
+  for (int i = 0; i < columns; ++i) outside += !in_scene(i);
+
   // the picture: three panels of columns × rows cells, labels above each and the sun's axis below
   const int size = spec.preview_size;
   const int cw = std::max(6, size / columns), ch = std::max(6, size / (2 * kRows));
@@ -157,11 +168,18 @@ TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_ut
         const std::array<std::uint8_t, 3> c = panel == 0   ? toned(shown_lut[q], column_y[i])
                                               : panel == 1 ? toned(shown_truth[q], column_y[i])
                                                            : error_colour(de[q]);
+        const bool hatched = !in_scene(i);
         for (int y = 0; y < ch; ++y)
-          for (int x = 0; x < cw; ++x) put(i * cw + x, top + j * ch + y, c);
+          for (int x = 0; x < cw; ++x)
+            put(i * cw + x, top + j * ch + y,
+                hatched && (i * cw + x + j * ch + y) % 4 == 0 ? std::array<std::uint8_t, 3>{128, 128, 128} : c);
       }
+    for (int i = 1; i < columns; ++i)  // the scene's edges: between a column in it and one outside
+      if (in_scene(i) != in_scene(i - 1))
+        for (int y = 0; y < ph; ++y) put(i * cw, top + y, {255, 255, 255});
   }
-  const char* titles[3] = {"bake: towards the sun, 0-40 deg up", "path-traced truth",
+  const char* titles[3] = {"bake: towards the sun, 0-40 deg up",
+                           outside > 0 ? "path-traced truth (hatched: suns beyond the scene)" : "path-traced truth",
                            "dE2000: 1 green, 2 yellow, 5+ red"};
   for (int panel = 0; panel < 3; ++panel) draw_label(img, 0, panel * (ph + band), {titles[panel]}, px);
   for (const double sun : {lowest, -6.0, 0.0, kHighestSunDeg})
@@ -176,18 +194,21 @@ TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_ut
   json bands = json::array();
   const double edges[][2] = {{-12.0, -6.0}, {-6.0, 0.0}, {0.0, 10.0 + 1e-9}};
   for (const auto& e : edges) {
-    std::vector<double> d, s;
+    std::vector<double> d, s, d_in;
     for (int j = 0; j < kRows; ++j)
       for (int i = 0; i < columns; ++i) {
         const double sun = lowest + i;
         if (sun < e[0] || sun >= e[1]) continue;
         d.push_back(de[static_cast<std::size_t>(j) * columns + i]);
         s.push_back(de_se[static_cast<std::size_t>(j) * columns + i]);
+        if (in_scene(i)) d_in.push_back(d.back());
       }
     if (d.empty()) continue;
-    bands.push_back({{"sun_elevation_deg", {e[0], std::min(e[1], kHighestSunDeg)}},
-                     {"de2000", summary_json(summarize_errors(d))},
-                     {"truth_se_de2000", summary_json(summarize_errors(s))}});
+    json band = {{"sun_elevation_deg", {e[0], std::min(e[1], kHighestSunDeg)}},
+                 {"de2000", summary_json(summarize_errors(d))},
+                 {"truth_se_de2000", summary_json(summarize_errors(s))}};
+    if (!d_in.empty()) band["de2000_in_scene"] = summary_json(summarize_errors(d_in));
+    bands.push_back(band);
   }
   TwilightStrip out;
   out.record = {{"file", "preview/twilight_strip.png"},
@@ -196,6 +217,8 @@ TwilightStrip twilight_strip(const AtmosphereSpec& spec, const Luts& luts, cl_ut
                 {"view_elevation_deg", {0.0, kTopViewDeg}},
                 {"view_sun_azimuth_deg", 0.0},
                 {"columns", columns},
+                {"scene_sun_elevation_deg", {scene_lo, scene_hi}},
+                {"columns_outside_scene", outside},
                 {"rows", kRows},
                 {"exposure", "per sun column: the truth's mean luminance brought to 0.18"},
                 {"truth", truth->summary()},

@@ -7,7 +7,9 @@
 // scene check's, to a 3 % target at an eighth of its walk cap), and the CIEDE2000 between them.
 // Each sun column is exposed at the truth's mean luminance over that column (a renderer's auto
 // exposure: the sky dims ~10⁵× across the strip), and the colour difference is taken at that
-// exposure. Made for scenes that reach deep twilight (sun below −6°), with previews on.
+// exposure. Columns beyond the scene's suns are hatched (the bake holds them with its 4D textures
+// alone: no sky-view table there), and each band's record has its figures inside the scene apart.
+// Made for scenes that reach deep twilight (sun below −6°), with previews on.
 // docs/atmosphere.md, "Previews".
 #include <nlohmann/json.hpp>
 
