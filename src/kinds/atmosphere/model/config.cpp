@@ -415,12 +415,11 @@ void parse_checks(const At& job, AtmosphereSpec& s) {
   // and in deep twilight from order 5 (unless the config gives orders) it is within 0.2 % of 13
   // orders at every scene point (docs/atmosphere.md, "The orders beyond the last"); daylight
   // scenes keep the exact sum.
-  if (!s.orders_given && reaches_deep_twilight(s)) s.orders = kDeepTwilightOrders;
   // Thick aerosol keeps scattering its light forwards order after order: in Mars' twilight orders
   // ≥ 3 carry most of the light and 4 orders leave p99 11.8 ΔE (order truncation alone, sun
-  // −6…10°); it bakes kMinTailOrdersThickAerosol orders, whose tail is then in effect (below).
-  if (!s.orders_given && reaches_twilight(s) && has_thick_aerosol(s))
-    s.orders = std::max(s.orders.value_or(kMinTailOrdersThickAerosol), kMinTailOrdersThickAerosol);
+  // −6…10°); such a scene bakes kMinTailOrdersThickAerosol orders, whose tail is then in effect.
+  if (!s.orders_given && reaches_twilight(s) && has_thick_aerosol(s)) s.orders = kMinTailOrdersThickAerosol;
+  else if (!s.orders_given && reaches_deep_twilight(s)) s.orders = kDeepTwilightOrders;
   if (!s.orders_tail_given)
     s.orders_tail = s.orders && reaches_twilight(s) &&
                     *s.orders >= (has_thick_aerosol(s) ? kMinTailOrdersThickAerosol : kMinTailOrders);

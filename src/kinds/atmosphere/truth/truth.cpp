@@ -1334,7 +1334,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   };
   // Progress: the walks traced over those the target will ask for, each (point, channel) at the
   // larger of its plan so far and what its walks so far say the top-ups will ask (plan_of), each
-  // batch weighted by its point's events a walk (a twilight walk costs many daylight ones): the
+  // batch weighted by its point's events a batch (a twilight walk costs many daylight ones): the
   // first batches of a scene whose points then walk to their cap are not most of its work.
   std::vector<long long> expected(P.n_points * C, 0);
   learn_tables(engine, P, o, totals);
@@ -1390,9 +1390,9 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
       if (progress) {
         double traced = 0.0, total = 0.0;
         for (std::size_t p = 0; p < P.n_points; ++p) {
-          long long walked = 0;
-          for (std::size_t c = 0; c < C; ++c) walked += done[p * C + c];
-          const double cost = walked > 0 ? std::max(events[p] / static_cast<double>(walked), 1.0) : 1.0;
+          long long batches = 0;
+          for (std::size_t c = 0; c < C; ++c) batches += done[p * C + c];
+          const double cost = batches > 0 ? std::max(events[p] / static_cast<double>(batches), 1.0) : 1.0;
           for (std::size_t c = 0; c < C; ++c) {
             traced += cost * static_cast<double>(done[p * C + c]);
             total += cost * static_cast<double>(std::max(want[p * C + c], expected[p * C + c]));
