@@ -87,8 +87,9 @@
 #ifndef LANES
 #  define LANES 1
 #endif
-/* NOTE_TEXEL(tex, offset): every read of a texture goes through one of the three places that
- * name it (texture_2d_blend, texture_3d_column, the density's ground taps); offset in reals
+/* NOTE_TEXEL(tex, offset): every read of a texture goes through one of the four places that
+ * name it (texture_2d_blend, texture_3d_column, the density's ground taps,
+ * scattering_lookup_azimuthal); offset in reals
  * from the texture's start, at a texel's first channel. Nothing in a kernel; the C++
  * reference defines it to note the texels a recomputation reads, so that a self-check fetches
  * only those from the device (src/kinds/atmosphere/bake/texel_reads.hpp). */
@@ -797,6 +798,63 @@ FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL c
       out[k * NCH + c] += j * s[RAY_T + c] * s[RAY_W];
     }
 }
+/* J (or any scattering-layout texture) at a ray sample, the view–sun azimuth kept across the
+ * texel rows it blends. The reference's lookup blends its (μ, r) rows at one ν; near the zenith
+ * a row's μ differs from the sample's, and the same ν there is another azimuth: at the ground
+ * Bruneton's μ mapping has no row within ~20° (Mars) to ~28° (Earth) of the zenith, whose rows
+ * allow only ν ∈ μμ_s ± √((1−μ²)(1−μ_s²)) and hold the clamped slices' values beyond it. For an
+ * air whose multiple scattering follows a forward phase (dust, g 0.7) that mixed views towards
+ * the sun with views across it: order 2 of near-zenith views came out 0.7× the truth towards the
+ * sun (docs/atmosphere-method.md, "Near the zenith: the azimuth of a J read"). Here each row q
+ * (μ_q, from corner_mu) is read at its own ν_q = μ_q μ_s + cos φ √((1 − μ_q²)(1 − μ_s²)), with
+ * cos φ the sample's (ν − μ μ_s)/√((1 − μ²)(1 − μ_s²)), between the two slices around ν_q weighted
+ * by the slices' own ν as the bake clamped them (scattering_nu_of_slice); at μ or μ_s = ±1 (no
+ * azimuth) every row takes ν. The same 16 texels as scattering_lookup_blend; μ_s joined linearly
+ * or (geometric) by mu_s_blend_near. uvwz as scattering_uvwz; mu, sin_mu = √(1 − μ²), mu_s: the
+ * sample's; corner_mu, corner_sin: the rows' μ and √(1 − μ²) (sky_view_ray_sample). */
+FN_HOT void scattering_lookup_azimuthal(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz,
+                                        const real* corner_mu, const real* corner_sin, real mu, real sin_mu, real mu_s,
+                                        real nu, int geometric, real* out) {
+  const int wd = a->nu_size * a->mu_s_size, plane = wd * a->mu_size;
+  const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
+  const TexelColumns xs = texture_columns(a->mu_s_size, uvwz[1]);
+  const real sin_s = sqrt(fmax(R(1.0) - mu_s * mu_s, R(0.0)));
+  const real s_view = sin_mu * sin_s;
+  const int azimuthal = s_view > R(1e-6);
+  const real cos_phi = azimuthal ? clamp_real((nu - mu * mu_s) / s_view, R(-1.0), R(1.0)) : R(0.0);
+  const real last = (real)(a->nu_size - 1);
+  real col0[NCH], col1[NCH]; /* the two μ_s columns, each blended over rows and slices */
+  for (int c = 0; c < NCH; ++c) col0[c] = col1[c] = R(0.0);
+  for (int q = 0; q < 4; ++q) {
+    const int j = (q & 1) ? rows.j1 : rows.j0, k = (q & 2) ? rows.k1 : rows.k0;
+    const real w = ((q & 1) ? rows.fy : R(1.0) - rows.fy) * ((q & 2) ? rows.fz : R(1.0) - rows.fz);
+    const real centre = corner_mu[q] * mu_s, spread = corner_sin[q] * sin_s;
+    const real nu_q = azimuthal ? clamp_cosine(centre + cos_phi * spread) : nu;
+    /* the slices around ν_q (corner-sampled: slice k at ν = 2k / (NU − 1) − 1), weighted by
+     * their ν as the bake took them, clamped to [centre − spread, centre + spread] */
+    const real x = clamp_real((nu_q + R(1.0)) * R(0.5), R(0.0), R(1.0)) * last;
+    const int s0 = clamp_int((int)floor(x), 0, a->nu_size - 1), s1 = clamp_int(s0 + 1, 0, a->nu_size - 1);
+    const real n0 = fmax(R(2.0) * (real)s0 / last - R(1.0), centre - spread);
+    const real n1 = fmin(R(2.0) * (real)s1 / last - R(1.0), centre + spread);
+    const real f = n1 > n0 ? clamp_real((nu_q - n0) / (n1 - n0), R(0.0), R(1.0)) : R(0.0);
+    GLOBAL const real* row = tex + (k * plane + j * wd) * NCH;
+    GLOBAL const real* t00 = row + (s0 * a->mu_s_size + xs.i0) * NCH;
+    GLOBAL const real* t01 = row + (s0 * a->mu_s_size + xs.i1) * NCH;
+    GLOBAL const real* t10 = row + (s1 * a->mu_s_size + xs.i0) * NCH;
+    GLOBAL const real* t11 = row + (s1 * a->mu_s_size + xs.i1) * NCH;
+    NOTE_TEXEL(tex, t00 - tex);
+    NOTE_TEXEL(tex, t01 - tex);
+    NOTE_TEXEL(tex, t10 - tex);
+    NOTE_TEXEL(tex, t11 - tex);
+    const real w0 = w * (R(1.0) - f), w1 = w * f;
+    for (int c = 0; c < NCH; ++c) {
+      col0[c] += w0 * t00[c] + w1 * t10[c];
+      col1[c] += w0 * t01[c] + w1 * t11[c];
+    }
+  }
+  for (int c = 0; c < NCH; ++c)
+    out[c] = geometric ? mu_s_blend_near(col0[c], col1[c], xs.fx) : (R(1.0) - xs.fx) * col0[c] + xs.fx * col1[c];
+}
 /* Multiple scattering along the ray (h, mu) of length d_b to its boundary. */
 FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J, real h,
                                 real mu, real d_b, int hits_ground, real mu_s, real nu, int geometric, real* out) {
@@ -845,52 +903,100 @@ FN void sky_view_texel_params(const AtmosphereParameters* a, const real* grid, i
   sky_view_ray(a, grid, n_h, n_view, k % n_h, i_v, h, mu, ground);
   sky_view_sun(grid, n_sun, n_az, k / n_h, i_az, *mu, mu_s, nu);
 }
-/* Its values: out[c] = single Rayleigh × P_R(ν) + Σ_{n≥2} L_n, out[NCH + c] = single Mie (no
- * phase), integrated along the texel's exact ray with the 4D texture's own rules
- * (single_scattering_ray, multiple_scattering_ray); J_sum = Σ_{n≥2} J_n in the scattering
- * texture's layout (L is linear in J: the sum of each order's integral). orders_above_one 0:
- * single scattering only (J_sum unread). mu_s_geometric 1 (SkyView::geometric_density: a scene
- * in deep twilight with `quadrature: {mu_s_blend: geometric}`, the default): J_sum's two μ_s
- * texels joined by mu_s_blend, as the shipped lookups join theirs
- * (scattering_lookup_blend): in deep twilight J falls by about e per degree of
- * the local sun and the ray's far points see the sun lower than the camera does, so a linear
- * blend reads the table's densities too bright (docs/atmosphere-method.md, "Deep twilight: the
- * sky-view table's density reads"). */
-FN void sky_view_texel(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
-                       int orders_above_one, int mu_s_geometric, const real* grid, int n_h, int n_sun, int n_view,
-                       int n_az, int id, real* out) {
-  real h, mu, mu_s, nu, ray[NCH], mie[NCH], ms[NCH];
-  int ground;
-  sky_view_texel_params(a, grid, n_h, n_sun, n_view, n_az, id, &h, &mu, &mu_s, &nu, &ground);
-  const real d = distance_to_nearest_boundary(a, h, mu, ground);
-  single_scattering_ray(a, T, h, mu, d, ground, mu_s, nu, ray, mie);
-  for (int c = 0; c < NCH; ++c) ms[c] = R(0.0);
-  if (orders_above_one != 0) multiple_scattering_ray(a, T, J_sum, h, mu, d, ground, mu_s, nu, mu_s_geometric, ms);
-  const real p = rayleigh_phase(nu);
-  for (int c = 0; c < NCH; ++c) {
-    out[c] = ray[c] * p + ms[c];
-    out[NCH + c] = mie[c];
+/* A sky-view ray sample: ray_sample's entries, then the sample's own μ and √(1 − μ²)
+ * (SKY_RAY_MU, SKY_RAY_SIN) and those of the four texel rows its J read blends
+ * (SKY_RAY_CORNER_MU, SKY_RAY_CORNER_SIN: rows j0/j1 × planes k0/k1 of texture_3d_rows,
+ * scattering_lookup_azimuthal's corners), which every sun and azimuth of the ray shares. */
+#define SKY_RAY_MU RAY_STRIDE
+#define SKY_RAY_SIN (RAY_STRIDE + 1)
+#define SKY_RAY_CORNER_MU (RAY_STRIDE + 2)
+#define SKY_RAY_CORNER_SIN (RAY_STRIDE + 6)
+#define SKY_RAY_EXTRA 10 /* entries after the transmittances */
+#define SKY_RAY_STRIDE (RAY_STRIDE + SKY_RAY_EXTRA)
+FN void sky_view_ray_sample(const AtmosphereParameters* a, GLOBAL const real* T, real h, real mu, int hits_ground,
+                            real d_b, const real* fixed, int i, real* s) {
+  ray_sample(a, T, h, mu, hits_ground, d_b, fixed, i, s);
+  real h_i, d_i;
+  int ground_i;
+  scattering_ray_from_uv(a, s[RAY_U_MU], s[RAY_U_R], &h_i, &s[SKY_RAY_MU], &d_i, &ground_i);
+  s[SKY_RAY_SIN] = sqrt(fmax(R(1.0) - s[SKY_RAY_MU] * s[SKY_RAY_MU], R(0.0)));
+  const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, s[RAY_U_MU], s[RAY_U_R]);
+  for (int q = 0; q < 4; ++q) {
+    const int j = (q & 1) ? rows.j1 : rows.j0, k = (q & 2) ? rows.k1 : rows.k0;
+    real h_q, mu_q, d_q;
+    int ground_q;
+    scattering_ray_of_texel(a, j, k, &h_q, &mu_q, &d_q, &ground_q);
+    s[SKY_RAY_CORNER_MU + q] = mu_q;
+    s[SKY_RAY_CORNER_SIN + q] = sqrt(fmax(R(1.0) - mu_q * mu_q, R(0.0)));
   }
 }
-
-/* sky_view_texel from its ray's samples (ray_sample of the texel's (altitude, view) ray, shared
- * by every sun and azimuth of that ray; sample i at samples[i · RAY_STRIDE]): the same sums. */
-FN void sky_view_texel_from_samples(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
-                                    int orders_above_one, int mu_s_geometric, GLOBAL const real* samples, real mu_s,
-                                    real nu, real* out) {
-  real sum_r[NCH], sum_m[NCH], ms[NCH], s[RAY_STRIDE], ray[NCH], mie[NCH];
-  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = ms[c] = R(0.0);
-  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
-    for (int k = 0; k < RAY_STRIDE; ++k) s[k] = samples[i * RAY_STRIDE + k];
-    single_scattering_add(a, T, s, mu_s, nu, sum_r, sum_m);
-    if (orders_above_one != 0) multiple_scattering_add(a, J_sum, s, mu_s, nu, mu_s_geometric, ms);
-  }
+/* Adds sky-view sample s's single scattering (sum_r, sum_m) and, orders_above_one ≠ 0, its
+ * J_sum term (ms) for the sun (mu_s, nu) of the ray's origin. */
+FN void sky_view_add_sample(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
+                            int orders_above_one, int mu_s_geometric, const real* s, real mu_s, real nu, real* sum_r,
+                            real* sum_m, real* ms) {
+  single_scattering_add(a, T, s, mu_s, nu, sum_r, sum_m);
+  if (orders_above_one == 0) return;
+  const real mu_s_i = ray_sample_mu_s(s, mu_s, nu);
+  real uvwz[4], j[NCH];
+  uvwz[0] = scattering_u_nu_at(nu);
+  uvwz[1] = scattering_u_mu_s(a, mu_s_i);
+  uvwz[2] = s[RAY_U_MU];
+  uvwz[3] = s[RAY_U_R];
+  scattering_lookup_azimuthal(a, J_sum, uvwz, s + SKY_RAY_CORNER_MU, s + SKY_RAY_CORNER_SIN, s[SKY_RAY_MU],
+                              s[SKY_RAY_SIN], mu_s_i, nu, mu_s_geometric, j);
+  for (int c = 0; c < NCH; ++c) ms[c] += j[c] * s[RAY_T + c] * s[RAY_W];
+}
+FN void sky_view_finish(const AtmosphereParameters* a, const real* sum_r, const real* sum_m, const real* ms, real nu,
+                        real* out) {
+  real ray[NCH], mie[NCH];
   single_scattering_finish(a, sum_r, sum_m, ray, mie);
   const real p = rayleigh_phase(nu);
   for (int c = 0; c < NCH; ++c) {
     out[c] = ray[c] * p + ms[c];
     out[NCH + c] = mie[c];
   }
+}
+/* Its values: out[c] = single Rayleigh × P_R(ν) + Σ_{n≥2} L_n, out[NCH + c] = single Mie (no
+ * phase), integrated along the texel's exact ray with the 4D texture's own rules
+ * (single_scattering_ray's samples and sums; J read by scattering_lookup_azimuthal); J_sum = Σ_{n≥2}
+ * J_n in the scattering texture's layout (L is linear in J: the sum of each order's integral).
+ * orders_above_one 0: single scattering only (J_sum unread). mu_s_geometric 1
+ * (SkyView::geometric_density: a scene in deep twilight with `quadrature: {mu_s_blend:
+ * geometric}`, the default): J_sum's two μ_s texels joined by mu_s_blend, as the shipped lookups
+ * join theirs (scattering_lookup_blend): in deep twilight J falls by about e per degree of the
+ * local sun and the ray's far points see the sun lower than the camera does, so a linear blend
+ * reads the table's densities too bright (docs/atmosphere-method.md, "Deep twilight: the
+ * sky-view table's density reads"). */
+FN void sky_view_texel(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
+                       int orders_above_one, int mu_s_geometric, const real* grid, int n_h, int n_sun, int n_view,
+                       int n_az, int id, real* out) {
+  real h, mu, mu_s, nu, fixed[NCH], s[SKY_RAY_STRIDE], sum_r[NCH], sum_m[NCH], ms[NCH];
+  int ground;
+  sky_view_texel_params(a, grid, n_h, n_sun, n_view, n_az, id, &h, &mu, &mu_s, &nu, &ground);
+  const real d = distance_to_nearest_boundary(a, h, mu, ground);
+  transmittance_fixed_end(a, T, h, mu, ground, fixed);
+  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = ms[c] = R(0.0);
+  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+    sky_view_ray_sample(a, T, h, mu, ground, d, fixed, i, s);
+    sky_view_add_sample(a, T, J_sum, orders_above_one, mu_s_geometric, s, mu_s, nu, sum_r, sum_m, ms);
+  }
+  sky_view_finish(a, sum_r, sum_m, ms, nu, out);
+}
+
+/* sky_view_texel from its ray's samples (sky_view_ray_sample of the texel's (altitude, view) ray,
+ * shared by every sun and azimuth of that ray; sample i at samples[i · SKY_RAY_STRIDE]): the
+ * same sums. */
+FN void sky_view_texel_from_samples(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J_sum,
+                                    int orders_above_one, int mu_s_geometric, GLOBAL const real* samples, real mu_s,
+                                    real nu, real* out) {
+  real sum_r[NCH], sum_m[NCH], ms[NCH], s[SKY_RAY_STRIDE];
+  for (int c = 0; c < NCH; ++c) sum_r[c] = sum_m[c] = ms[c] = R(0.0);
+  for (int i = 0; i <= SCATTERING_STEPS; ++i) {
+    for (int k = 0; k < SKY_RAY_STRIDE; ++k) s[k] = samples[i * SKY_RAY_STRIDE + k];
+    sky_view_add_sample(a, T, J_sum, orders_above_one, mu_s_geometric, s, mu_s, nu, sum_r, sum_m, ms);
+  }
+  sky_view_finish(a, sum_r, sum_m, ms, nu, out);
 }
 
 /* ---- scattering density J_n (paper Eq. 7's integrand, 16 × 32 midpoint rule) ---------- */

@@ -202,7 +202,7 @@ __kernel void multiple_scattering_texture(AtmosphereParameters a, __global const
 }
 
 /* The sky-view table (atmosphere.cl, sky_view_texel), grid = {h_min, h_max, e_min, e_max}: first
- * the samples of each (altitude, view) ray, [n_h · n_view][SCATTERING_STEPS + 1][RAY_STRIDE], one
+ * the samples of each (altitude, view) ray, [n_h · n_view][SCATTERING_STEPS + 1][SKY_RAY_STRIDE], one
  * work item per entry; then one work item per texel, 2·NCH values each (radiance without single
  * Mie, then single Mie), from its ray's samples. */
 __kernel void sky_view_ray_samples(AtmosphereParameters a, __global const real* T, __global const real* grid,
@@ -211,13 +211,13 @@ __kernel void sky_view_ray_samples(AtmosphereParameters a, __global const real* 
   const int n = SCATTERING_STEPS + 1;
   if (id >= n_h * n_view * n) return;
   const int i = id % n, row = id / n;
-  real g[4], h, mu, fixed[NCH], s[RAY_STRIDE];
+  real g[4], h, mu, fixed[NCH], s[SKY_RAY_STRIDE];
   int ground;
   for (int k = 0; k < 4; ++k) g[k] = grid[k];
   sky_view_ray(&a, g, n_h, n_view, row / n_view, row % n_view, &h, &mu, &ground);
   transmittance_fixed_end(&a, T, h, mu, ground, fixed);
-  ray_sample(&a, T, h, mu, ground, distance_to_nearest_boundary(&a, h, mu, ground), fixed, i, s);
-  for (int k = 0; k < RAY_STRIDE; ++k) samples[(long)id * RAY_STRIDE + k] = s[k];
+  sky_view_ray_sample(&a, T, h, mu, ground, distance_to_nearest_boundary(&a, h, mu, ground), fixed, i, s);
+  for (int k = 0; k < SKY_RAY_STRIDE; ++k) samples[(long)id * SKY_RAY_STRIDE + k] = s[k];
 }
 __kernel void sky_view_texture(AtmosphereParameters a, __global const real* T, __global const real* J_sum,
                                int orders_above_one, int mu_s_geometric, __global const real* grid,
@@ -231,7 +231,7 @@ __kernel void sky_view_texture(AtmosphereParameters a, __global const real* T, _
   for (int j = 0; j < 4; ++j) g[j] = grid[j];
   sky_view_ray(&a, g, n_h, n_view, i_h, i_v, &h, &mu, &ground);
   sky_view_sun(g, n_sun, n_az, i_s, i_az, mu, &mu_s, &nu);
-  __global const real* row = samples + (long)(i_h * n_view + i_v) * (SCATTERING_STEPS + 1) * RAY_STRIDE;
+  __global const real* row = samples + (long)(i_h * n_view + i_v) * (SCATTERING_STEPS + 1) * SKY_RAY_STRIDE;
   sky_view_texel_from_samples(&a, T, J_sum, orders_above_one, mu_s_geometric, row, mu_s, nu, v);
   for (int c = 0; c < 2 * NCH; ++c) out[(long)id * 2 * NCH + c] = v[c];
 }

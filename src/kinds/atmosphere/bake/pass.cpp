@@ -97,6 +97,8 @@ std::size_t lanes(const cl_util::DeviceInfo& info) { return info.type == "cpu" ?
 // [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][density_theta][(2 NU + 1) NCH + INC_FIXED].
 constexpr int kScatteringSteps = SCATTERING_STEPS, kRayFixed = RAY_T,
               kIncidenceFixed = INC_FIXED;
+// A sky-view sample's entries after the transmittances (SKY_RAY_STRIDE − RAY_STRIDE).
+constexpr int kSkyRayExtra = SKY_RAY_EXTRA;
 
 // Parameter block, and the values the layout kernel must echo back.
 struct Block {
@@ -584,7 +586,8 @@ class DeviceBackend final : public PassBackend {
                                               v.sun_max_deg * M_PI / 180.0},
                                              q_.dbl());
       cl::Buffer values = q_.alloc(2 * v.texels());
-      cl::Buffer samples = q_.alloc_reals(1LL * v.altitude * v.view * (kScatteringSteps + 1) * (kRayFixed + width_));
+      cl::Buffer samples =
+          q_.alloc_reals(1LL * v.altitude * v.view * (kScatteringSteps + 1) * (kRayFixed + width_ + kSkyRayExtra));
       cl::Buffer& J = orders_used > 1 ? J_sum_ : tex_.J;
       q_.launch("sky_view_ray_samples", 1LL * v.altitude * v.view * (kScatteringSteps + 1),
                 {&tex_.T, &grid, v.altitude, v.view, &samples});
