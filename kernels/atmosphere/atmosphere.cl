@@ -801,14 +801,14 @@ FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL c
 /* J (or any scattering-layout texture) at a ray sample, the view–sun azimuth kept across the
  * texel rows it blends. The reference's lookup blends its (μ, r) rows at one ν; near the zenith
  * a row's μ differs from the sample's, and the same ν there is another azimuth: at the ground
- * Bruneton's μ mapping has no row within ~20° (Mars) to ~28° (Earth) of the zenith, whose rows
- * allow only ν ∈ μμ_s ± √((1−μ²)(1−μ_s²)) and hold the clamped slices' values beyond it. For an
+ * Bruneton's μ rows are the zenith, then ~28° (Mars) or ~35° (Earth) from it, and a row at μ_q
+ * allows only ν ∈ μ_q μ_s ± √((1−μ_q²)(1−μ_s²)), holding the clamped slices' values beyond. For an
  * air whose multiple scattering follows a forward phase (dust, g 0.7) that mixed views towards
  * the sun with views across it: order 2 of near-zenith views came out 0.7× the truth towards the
  * sun (docs/atmosphere-method.md, "Near the zenith: the azimuth of a J read"). Here each row q
  * (μ_q, from corner_mu) is read at its own ν_q = μ_q μ_s + cos φ √((1 − μ_q²)(1 − μ_s²)), with
  * cos φ the sample's (ν − μ μ_s)/√((1 − μ²)(1 − μ_s²)), between the two slices around ν_q weighted
- * by the slices' own ν as the bake clamped them (scattering_nu_of_slice); at μ or μ_s = ±1 (no
+ * by the slices' own ν as the bake clamped them (as scattering_nu_of_slice); at μ or μ_s = ±1 (no
  * azimuth) every row takes ν. The same 16 texels as scattering_lookup_blend; μ_s joined linearly
  * or (geometric) by mu_s_blend_near. uvwz as scattering_uvwz; mu, sin_mu = √(1 − μ²), mu_s: the
  * sample's; corner_mu, corner_sin: the rows' μ and √(1 − μ²) (sky_view_ray_sample). */

@@ -244,9 +244,9 @@ TEST(SkyView, StoredNuSlicesAreTheBakedTexturesLookups) {
 // near-zenith views from 1 km, the sun 1° below and 5° above the horizon, towards and away from
 // it, against the path-traced truth of the same order (the split of orders 2 walks: order 1 by
 // quadrature, order 2 alone by walks; 65536 walks, relative se of order 2 ≤ 1.5 %, asserted).
-// The table reads the summed densities J along each view's ray. Bruneton's μ rows start ~20°
-// from the zenith at the ground here, and within a row's cone the reference's lookup at one ν
-// reads another azimuth: order 2 came out 0.68× the truth towards the sun and 1.36× away.
+// The table reads the summed densities J along each view's ray. At the ground Bruneton's μ rows
+// are the zenith, then ~28° from it (here), and between rows the reference's lookup at one ν
+// reads another azimuth in each: order 2 came out 0.68× the truth towards the sun, 1.36× away.
 // scattering_lookup_azimuthal keeps the azimuth across the rows: towards the sun within 12 %
 // (measured 0.93–0.96). Away from the sun the rows' own spacing still leaves order 2 up to ~1.38×
 // at the default 128 μ rows; with 512 (and 16 r rows, which these views do not need more of:
