@@ -529,7 +529,7 @@ FN_HOT ScatteringColumns scattering_columns(const AtmosphereParameters* a, real 
  * (s0.fx, s1.fx, f), trilinear as the reference. (The shipped lookups can blend μ_s
  * geometrically, render.glsl; here a pow per blend in the multiple scattering's inner loop
  * made a bake ~5× slower on a CPU, docs/atmosphere-method.md "Twilight"; the sky-view table's
- * reads of the summed densities blend so, scattering_lookup_blend.) */
+ * reads of the summed densities blend so, scattering_lookup_azimuthal.) */
 FN_HOT real scattering_blend(real fx0, real fx1, real f, real c00, real c01, real c10, real c11) {
   const real v0 = (R(1.0) - fx0) * c00 + fx0 * c01;
   const real v1 = (R(1.0) - fx1) * c10 + fx1 * c11;
@@ -545,14 +545,8 @@ FN_HOT real mu_s_blend_near(real a, real b, real g) {
   const int geo = a > R(0.0) && b > R(0.0) && fmin(a, b) > R(1e-3) * fmax(a, b);
   return geo ? a * exp2(g * log2(b / a)) : a + (b - a) * g;
 }
-/* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu
- * (geometric 0). geometric 1: the μ_s texels joined by mu_s_blend_near instead — the two ν
- * slices blended linearly at each of the two μ_s columns (their μ_s weights agree, x.s0.fx =
- * x.s1.fx up to rounding: the slices' columns lie MU_S texels apart), then the two joined
- * geometrically: one logarithm per channel instead of the shipped lookup's two (which joins each
- * slice first; the same exactness for a value exponential in μ_s and linear in ν). */
-FN_HOT void scattering_lookup_blend(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz,
-                                    int geometric, real* out) {
+/* The reference's GetScattering from its texture coordinates: two trilinear lookups around nu. */
+FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
   const int wd = a->nu_size * a->mu_s_size;
   const ScatteringColumns x = scattering_columns(a, uvwz[0], uvwz[1]);
   const TexelRows rows = texture_3d_rows(a->mu_size, a->r_size, uvwz[2], uvwz[3]);
@@ -561,14 +555,7 @@ FN_HOT void scattering_lookup_blend(const AtmosphereParameters* a, GLOBAL const 
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s0.i1, c01);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i0, c10);
   texture_3d_column(tex, wd, a->mu_size, &rows, x.s1.i1, c11);
-  if (geometric)
-    for (int c = 0; c < NCH; ++c)
-      out[c] = mu_s_blend_near(c00[c] * (R(1.0) - x.f) + c10[c] * x.f, c01[c] * (R(1.0) - x.f) + c11[c] * x.f, x.s0.fx);
-  else
-    for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
-}
-FN_HOT void scattering_lookup(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz, real* out) {
-  scattering_lookup_blend(a, tex, uvwz, 0, out);
+  for (int c = 0; c < NCH; ++c) out[c] = scattering_blend(x.s0.fx, x.s1.fx, x.f, c00[c], c01[c], c10[c], c11[c]);
 }
 FN void get_scattering(const AtmosphereParameters* a, GLOBAL const real* tex, real h, real mu, real mu_s, real nu,
                        int hits_ground, real* out) {
@@ -759,13 +746,13 @@ FN void single_scattering(const AtmosphereParameters* a, GLOBAL const real* T, r
 
 /* ---- multiple scattering of order n (paper Eq. 7, 50-interval trapezoid) --------------- */
 FN_HOT void multiple_scattering_add(const AtmosphereParameters* a, GLOBAL const real* J, const real* s, real mu_s, real nu,
-                                int geometric, real* out) {
+                                real* out) {
   real uvwz[4], j[NCH];
   uvwz[0] = scattering_u_nu_at(nu);
   uvwz[1] = scattering_u_mu_s(a, ray_sample_mu_s(s, mu_s, nu));
   uvwz[2] = s[RAY_U_MU];
   uvwz[3] = s[RAY_U_R];
-  scattering_lookup_blend(a, J, uvwz, geometric, j);
+  scattering_lookup(a, J, uvwz, j);
   for (int c = 0; c < NCH; ++c) out[c] += j[c] * s[RAY_T + c] * s[RAY_W];
 }
 /* multiple_scattering_add for LANES texels of one (μ, r) row (lane k: mu_s[k], nu[k];
@@ -809,8 +796,8 @@ FN_HOT void multiple_scattering_add_lanes(const AtmosphereParameters* a, LOCAL c
  * (μ_q, from corner_mu) is read at its own ν_q = μ_q μ_s + cos φ √((1 − μ_q²)(1 − μ_s²)), with
  * cos φ the sample's (ν − μ μ_s)/√((1 − μ²)(1 − μ_s²)), between the two slices around ν_q weighted
  * by the slices' own ν as the bake clamped them (as scattering_nu_of_slice); at μ or μ_s = ±1 (no
- * azimuth) every row takes ν. The same 16 texels as scattering_lookup_blend; μ_s joined linearly
- * or (geometric) by mu_s_blend_near. uvwz as scattering_uvwz; mu, sin_mu = √(1 − μ²), mu_s: the
+ * azimuth) every row takes ν. The same 16 texels as scattering_lookup; μ_s joined linearly or
+ * (geometric: the two ν-blended μ_s columns, one logarithm per channel) by mu_s_blend_near. uvwz as scattering_uvwz; mu, sin_mu = √(1 − μ²), mu_s: the
  * sample's; corner_mu, corner_sin: the rows' μ and √(1 − μ²) (sky_view_ray_sample). */
 FN_HOT void scattering_lookup_azimuthal(const AtmosphereParameters* a, GLOBAL const real* tex, const real* uvwz,
                                         const real* corner_mu, const real* corner_sin, real mu, real sin_mu, real mu_s,
@@ -857,13 +844,13 @@ FN_HOT void scattering_lookup_azimuthal(const AtmosphereParameters* a, GLOBAL co
 }
 /* Multiple scattering along the ray (h, mu) of length d_b to its boundary. */
 FN void multiple_scattering_ray(const AtmosphereParameters* a, GLOBAL const real* T, GLOBAL const real* J, real h,
-                                real mu, real d_b, int hits_ground, real mu_s, real nu, int geometric, real* out) {
+                                real mu, real d_b, int hits_ground, real mu_s, real nu, real* out) {
   real fixed[NCH], s[RAY_STRIDE];
   for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
   transmittance_fixed_end(a, T, h, mu, hits_ground, fixed);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     ray_sample(a, T, h, mu, hits_ground, d_b, fixed, i, s);
-    multiple_scattering_add(a, J, s, mu_s, nu, geometric, out);
+    multiple_scattering_add(a, J, s, mu_s, nu, out);
   }
 }
 
@@ -964,7 +951,7 @@ FN void sky_view_finish(const AtmosphereParameters* a, const real* sum_r, const 
  * orders_above_one 0: single scattering only (J_sum unread). mu_s_geometric 1
  * (SkyView::geometric_density: a scene in deep twilight with `quadrature: {mu_s_blend:
  * geometric}`, the default): J_sum's two μ_s texels joined by mu_s_blend, as the shipped lookups
- * join theirs (scattering_lookup_blend): in deep twilight J falls by about e per degree of the
+ * join theirs (scattering_lookup_azimuthal): in deep twilight J falls by about e per degree of the
  * local sun and the ray's far points see the sun lower than the camera does, so a linear blend
  * reads the table's densities too bright (docs/atmosphere-method.md, "Deep twilight: the
  * sky-view table's density reads"). */

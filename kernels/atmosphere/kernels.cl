@@ -155,7 +155,7 @@ __kernel void multiple_scattering_texels(AtmosphereParameters a, __global const 
   for (int c = 0; c < NCH; ++c) out[c] = R(0.0);
   for (int i = 0; i <= SCATTERING_STEPS; ++i) {
     for (int k = 0; k < RAY_STRIDE; ++k) s[k] = row[i * RAY_STRIDE + k];
-    multiple_scattering_add(&a, J, s, mu_s, nu, 0, out);
+    multiple_scattering_add(&a, J, s, mu_s, nu, out);
   }
   for (int c = 0; c < NCH; ++c) delta_S[id * NCH + c] = out[c];
 }
