@@ -809,7 +809,6 @@ FN_HOT void scattering_lookup_azimuthal(const AtmosphereParameters* a, GLOBAL co
   const real s_view = sin_mu * sin_s;
   const int azimuthal = s_view > R(1e-6);
   const real cos_phi = azimuthal ? clamp_real((nu - mu * mu_s) / s_view, R(-1.0), R(1.0)) : R(0.0);
-  const real last = (real)(a->nu_size - 1);
   real col0[NCH], col1[NCH]; /* the two μ_s columns, each blended over rows and slices */
   for (int c = 0; c < NCH; ++c) col0[c] = col1[c] = R(0.0);
   for (int q = 0; q < 4; ++q) {
@@ -817,12 +816,13 @@ FN_HOT void scattering_lookup_azimuthal(const AtmosphereParameters* a, GLOBAL co
     const real w = ((q & 1) ? rows.fy : R(1.0) - rows.fy) * ((q & 2) ? rows.fz : R(1.0) - rows.fz);
     const real centre = corner_mu[q] * mu_s, spread = corner_sin[q] * sin_s;
     const real nu_q = azimuthal ? clamp_cosine(centre + cos_phi * spread) : nu;
-    /* the slices around ν_q (corner-sampled: slice k at ν = 2k / (NU − 1) − 1), weighted by
-     * their ν as the bake took them, clamped to [centre − spread, centre + spread] */
-    const real x = clamp_real((nu_q + R(1.0)) * R(0.5), R(0.0), R(1.0)) * last;
-    const int s0 = clamp_int((int)floor(x), 0, a->nu_size - 1), s1 = clamp_int(s0 + 1, 0, a->nu_size - 1);
-    const real n0 = fmax(R(2.0) * (real)s0 / last - R(1.0), centre - spread);
-    const real n1 = fmin(R(2.0) * (real)s1 / last - R(1.0), centre + spread);
+    /* the slices around ν_q, weighted by their ν as the bake took them (as
+     * scattering_nu_of_slice: clamped to [centre − spread, centre + spread]) */
+    real f_slice;
+    const int s0 = (int)scattering_nu_slice(a, scattering_u_nu_at(nu_q), &f_slice);
+    const int s1 = clamp_int(s0 + 1, 0, a->nu_size - 1);
+    const real n0 = fmax(scattering_u_nu_of_slice(a, s0) * R(2.0) - R(1.0), centre - spread);
+    const real n1 = fmin(scattering_u_nu_of_slice(a, s1) * R(2.0) - R(1.0), centre + spread);
     const real f = n1 > n0 ? clamp_real((nu_q - n0) / (n1 - n0), R(0.0), R(1.0)) : R(0.0);
     GLOBAL const real* row = tex + (k * plane + j * wd) * NCH;
     GLOBAL const real* t00 = row + (s0 * a->mu_s_size + xs.i0) * NCH;
