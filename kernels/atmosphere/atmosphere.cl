@@ -24,7 +24,9 @@
  *   transmittance    500-interval trapezoid over the distance to the top boundary;
  *   single/multiple  50-interval trapezoid over the distance to the nearest boundary;
  *   density J_n      n_θ × 32 midpoint rule over the sphere (θ through density_theta_node: by
- *                    default 16 nodes packed towards the horizon; the reference: 16 uniform);
+ *                    default 16 nodes packed towards the horizon; the reference: 16 uniform),
+ *                    the view's phase weights summed to 1 per direction by default
+ *                    (density_phase_norm; the reference: as the rule gives them);
  *   indirect E       16 × 64 midpoint rule over the upper hemisphere.
  * Transmittance inside every integral is read from the transmittance texture (bilinear),
  * never integrated again; the same for the scattering textures (trilinear + a lerp in ν).
@@ -139,6 +141,7 @@ typedef struct {
   real mu_s_min;
   real mie_g;
   real density_theta_power;         /* p of the density's θ rule (density_theta_node): 1 = uniform */
+  real density_phase_norm;          /* 1: the density's phase weights sum to 1 (scattering_density); 0: as the rule gives them */
   int transmittance_w, transmittance_h;   /* mu, r */
   int irradiance_w, irradiance_h;         /* mu_s, r */
   int r_size, mu_size, mu_s_size, nu_size;
@@ -1049,6 +1052,37 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
   if (order == 2) scattering_slices(a, delta_mie, uvwz[1], uvwz[2], uvwz[3], e + INC_MIE(a));
 }
 
+/* The density rule's weights of the view's phase functions for a view of cosine mu,
+ * q_X = Σ_{θ,φ} P_X(ω·ω_i) dω (X = R, M; 1 for the exact integral), returned as the factors
+ * the density multiplies them by: 1/q_X with density_phase_norm, else 1. Normalised, each phase
+ * function's weights sum to 1 and the density scatters exactly β_s ρ of a uniform light (energy
+ * conservation, whatever the rule). As the rule gives them, the 16-node horizon rule's sums are
+ * 1.007–1.011 (Rayleigh), 1.003–1.094 (Mie, g 0.7) and 0.97–1.17 (g 0.8), worst towards the
+ * nadir and the zenith, where its θ nodes are widest: each order scatters that much more, or
+ * less, light than it received — for dust a baked sky a few % too bright
+ * (docs/atmosphere-method.md, "The density's phase weights"). The same for every texel of a
+ * (μ, r) row: the bake tabulates them per row (density_phase_table). */
+FN void density_phase_factors(const AtmosphereParameters* a, real mu, real* f_r, real* f_m) {
+  *f_r = *f_m = R(1.0);
+  if (a->density_phase_norm == R(0.0)) return;
+  const real omega_x = sqrt(fmax(R(1.0) - mu * mu, R(0.0)));
+  const real d_angle = ATM_PI / (real)DENSITY_SPHERE_STEPS;
+  real q_r = R(0.0), q_m = R(0.0);
+  for (int l = 0; l < a->density_theta; ++l) {
+    real theta_l, d_theta;
+    density_theta_node(a, l, &theta_l, &d_theta);
+    const real cos_theta = cos(theta_l), sin_theta = sin(theta_l);
+    const real d_omega = R(2.0) * d_theta * d_angle * sin_theta; /* φ and 2π − φ */
+    for (int m = 0; m < DENSITY_SPHERE_STEPS; ++m) {
+      const real nu2 = cos(((real)m + R(0.5)) * d_angle) * sin_theta * omega_x + cos_theta * mu;
+      q_r += rayleigh_phase(nu2) * d_omega;
+      q_m += mie_phase(a->mie_g, nu2) * d_omega;
+    }
+  }
+  *f_r = R(1.0) / q_r;
+  *f_m = R(1.0) / q_m;
+}
+
 /* J_n at (h, mu, mu_s) and `count` values nu[k] (a texel row of the ν axis) from the n_θ
  * incidence entries of (h, mu_s) and the ground irradiance of order n − 2 (direct for order
  * 2); out[k·NCH + c], per km per sr.
@@ -1064,7 +1098,8 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
  * scattering stored without its phase function, so the weights also carry P_R(ν_i) (for the
  * Rayleigh slices) or P_M(ν_i) (Mie): four arrays. The ground's light, T·albedo/π times the
  * ground irradiance at the ground normal's μ_s, is added per direction. The view's phase
- * functions, which do not depend on ν, are computed once per θ_l for the whole row.
+ * functions, which do not depend on ν, are computed once per θ_l for the whole row, times
+ * norm_r and norm_m (density_phase_factors).
  *
  * The row's suns are the innermost loop, in lanes of LANES (a fixed trip count; lanes past
  * `count` get a sun at ν = μ μ_s and are discarded), inside the loop over θ: each θ's incidence
@@ -1072,7 +1107,7 @@ FN void density_incidence(const AtmosphereParameters* a, GLOBAL const real* T, G
  * in the same order as one sun at a time would, so the lane width does not change a result. */
 FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* incidence,
                            GLOBAL const real* delta_irradiance, real h, real mu, real mu_s, const real* nu, int count,
-                           int order, real* out) {
+                           int order, real norm_r, real norm_m, real* out) {
   const real omega_x = sqrt(fmax(R(1.0) - mu * mu, R(0.0)));
   const real d_angle = ATM_PI / (real)DENSITY_SPHERE_STEPS;
   const real rho_r = profile_density(&a->rayleigh_density, h);
@@ -1122,8 +1157,8 @@ FN void scattering_density(const AtmosphereParameters* a, GLOBAL const real* inc
       wx[m] = cos_phi[m] * sin_theta;
       wy[m] = sin_phi[m] * sin_theta;
       const real nu2 = wx[m] * omega_x + cos_theta * mu;
-      view_r[m] = rayleigh_phase(nu2) * d_omega;
-      view_m[m] = mie_phase(a->mie_g, nu2) * d_omega;
+      view_r[m] = rayleigh_phase(nu2) * d_omega * norm_r;
+      view_m[m] = mie_phase(a->mie_g, nu2) * d_omega * norm_m;
       for (int c = 0; c < NCH; ++c) scatter[m * NCH + c] = beta_r[c] * view_r[m] + beta_m[c] * view_m[m];
     }
     for (int k0 = 0; k0 < count; k0 += LANES) {

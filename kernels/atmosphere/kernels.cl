@@ -17,6 +17,7 @@ __kernel void atmosphere_layout(AtmosphereParameters a, __global real* reals, __
   reals[3] = a.bottom_radius;
   reals[4] = a.mie_g;
   reals[5] = a.density_theta_power;
+  reals[6] = a.density_phase_norm;
   ints[0] = a.transmittance_w;
   ints[1] = a.nu_size;
   ints[2] = (int)sizeof(AtmosphereParameters);
@@ -114,9 +115,22 @@ __kernel void density_incidence_table(AtmosphereParameters a, __global const rea
   for (int k = 0; k < stride; ++k) incidence[id * stride + k] = e[k];
 }
 
+/* The density's phase factors per (μ, r) texel row (density_phase_factors): [R][MU][2]. */
+__kernel void density_phase_table(AtmosphereParameters a, __global real* factors) {
+  const int id = get_global_id(0);
+  if (id >= a.r_size * a.mu_size) return;
+  real h, mu, d, f_r, f_m;
+  int ground;
+  scattering_ray_of_texel(&a, id % a.mu_size, id / a.mu_size, &h, &mu, &d, &ground);
+  density_phase_factors(&a, mu, &f_r, &f_m);
+  factors[2 * id] = f_r;
+  factors[2 * id + 1] = f_m;
+}
+
 /* One work item per texel row along ν: (z, y, mu_s index), all NU slices. */
 __kernel void scattering_density_texture(AtmosphereParameters a, __global const real* incidence,
-                                         __global const real* delta_E, int order, __global real* J) {
+                                         __global const real* phase_factors, __global const real* delta_E, int order,
+                                         __global real* J) {
   const int id = get_global_id(0);
   if (id >= a.r_size * a.mu_size * a.mu_s_size) return;
   const int xs = id % a.mu_s_size, y = (id / a.mu_s_size) % a.mu_size, z = id / (a.mu_s_size * a.mu_size);
@@ -125,8 +139,10 @@ __kernel void scattering_density_texture(AtmosphereParameters a, __global const 
   for (int k = 0; k < a.nu_size; ++k)
     scattering_params_from_texel(&a, k * a.mu_s_size + xs, y, z, &h, &mu, &mu_s, &nu[k], &ground);
   __global const real* block = incidence + (z * a.mu_s_size + xs) * a.density_theta * incidence_stride(&a);
-  scattering_density(&a, block, delta_E, h, mu, mu_s, nu, a.nu_size, order, j);
-  const int row = (z * a.mu_size + y) * a.nu_size * a.mu_s_size;
+  const int row_id = z * a.mu_size + y;
+  scattering_density(&a, block, delta_E, h, mu, mu_s, nu, a.nu_size, order, phase_factors[2 * row_id],
+                     phase_factors[2 * row_id + 1], j);
+  const int row = row_id * a.nu_size * a.mu_s_size;
   for (int k = 0; k < a.nu_size; ++k)
     for (int c = 0; c < NCH; ++c) J[(row + k * a.mu_s_size + xs) * NCH + c] = j[k * NCH + c];
 }

@@ -108,7 +108,7 @@ std::string ref(const std::string& name) { return (specbake::testing::refdata_di
 // the parameterisation, not from a discriminant that is 0 ± rounding; reported separately).
 TEST(AtmosphereDevice, FullSizeEarthMatchesReferenceTextures) {
   AtmosphereSpec s = earth();  // with the reference's quadratures (`quadrature: reference`)
-  s.density_horizon = s.mu_s_geometric = s.ray_simpson = s.phase_nu_slice = false;
+  s.use_reference_quadrature();
   const Baked b = bake_luts(s, device(), kQuiet, 0);
   expect_all_finite(b);
   const auto T = specbake::testing::read_npy(ref("textures/transmittance.npy"));
@@ -282,6 +282,54 @@ TEST(AtmosphereDevice, EnergyConservedForThinConservativeShell) {
       up += l[c] * -mu * 2.0 * M_PI / n;
     }
     EXPECT_NEAR((down + up) / removed, 1.0, 0.03) << "channel " << c << " down " << down << " up " << up;
+  }
+}
+
+// The density of a uniform light: with L ≡ L₀ from every direction (order 3's incoming light a
+// constant texture, black ground) J = (β_R ρ_R + β_M ρ_M) L₀ exactly, Σ P dω = 1 for each phase
+// function. With the phase weights normalised (the default) every texel holds it to rounding
+// (~1e-15 relative: 16 × 64 terms of a double sum, each ~1e-16); as the 16-node horizon rule
+// gives them ("plain", the reference's way), the Mie phase of g 0.8 weighs 0.97–1.17 and the
+// texels stray by up to ~10 % (atmosphere.cl, density_phase_factors) — at least 1 % somewhere.
+TEST(AtmosphereDevice, DensityScattersAUniformLightExactly) {
+  for (const bool normalised : {true, false}) {
+    AtmosphereSpec s = small(earth());
+    s.ground_albedo = 0.0;
+    s.phase_weights_normalised = normalised;
+    const Model m = model_of(s);
+    const Channels ch = channels_at(s, {kLambdaR, kLambdaG, kLambdaB});
+    const auto a = ref3::make_parameters(m, ch);
+    const Sizes& z = m.sizes;
+    const double L0 = 0.37;
+    const std::vector<double> T(3LL * z.transmittance_w * z.transmittance_h, 1.0);
+    const std::vector<double> E(3LL * z.irradiance_w * z.irradiance_h, 0.0);
+    const std::vector<double> zero(3 * z.scattering_texels(), 0.0), uniform(3 * z.scattering_texels(), L0);
+    const int stride = ref3::incidence_stride(&a);
+    double worst = 0.0;
+    for (int zr = 0; zr < z.r; ++zr)
+      for (int y = 0; y < z.mu; ++y)
+        for (int x = 0; x < z.nu * z.mu_s; ++x) {
+          double h, mu, mu_s, nu;
+          int ground;
+          ref3::scattering_params_from_texel(&a, x, y, zr, &h, &mu, &mu_s, &nu, &ground);
+          std::vector<double> incidence(static_cast<std::size_t>(a.density_theta) * stride);
+          for (int l = 0; l < a.density_theta; ++l)
+            ref3::density_incidence(&a, T.data(), zero.data(), zero.data(), uniform.data(), h, mu_s, 3, l,
+                                    &incidence[l * stride]);
+          double f_r, f_m, j[3];
+          ref3::density_phase_factors(&a, mu, &f_r, &f_m);
+          ref3::scattering_density(&a, incidence.data(), E.data(), h, mu, mu_s, &nu, 1, 3, f_r, f_m, j);
+          const double rho_r = ref3::profile_density(&a.rayleigh_density, h);
+          const double rho_m = ref3::profile_density(&a.mie_density, h);
+          for (int c = 0; c < 3; ++c) {
+            const double want = (a.rayleigh_scattering[c] * rho_r + a.mie_scattering[c] * rho_m) * L0;
+            worst = std::max(worst, std::fabs(j[c] - want) / want);
+          }
+        }
+    if (normalised)
+      EXPECT_LE(worst, 1e-13);
+    else
+      EXPECT_GT(worst, 0.01);
   }
 }
 

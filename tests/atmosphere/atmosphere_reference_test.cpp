@@ -30,8 +30,7 @@ struct Earth {
     spec.ozone_density[0] = DensityLayer{25.0, 0, 0, 1.0 / 15.0, -2.0 / 3.0};
     spec.ozone_density[1] = DensityLayer{0, 0, 0, -1.0 / 15.0, 8.0 / 3.0};
     // the reference's quadratures and linear μ_s lookups (`quadrature: reference`)
-    spec.density_theta = 16;
-    spec.density_horizon = spec.mu_s_geometric = spec.ray_simpson = spec.phase_nu_slice = false;
+    spec.use_reference_quadrature();
     m = model_of(spec);
     ch = channels_at(spec, {kLambdaR, kLambdaG, kLambdaB});
     a = ref3::make_parameters(m, ch);

@@ -136,6 +136,9 @@ std::vector<BadConfig> bad_configs() {
       {"scene: unknown key", sky("    scene: {point: 10}\n"), 3, "point", 1, "", "jobs[0].scene.point",
        {"unknown key 'point'", "points"}},
       {"scene: not none", sky("    scene: nothing\n"), 3, "nothing", 1, "", "jobs[0].scene", {"none"}},
+      // the quadratures (docs/atmosphere.md, "Config")
+      {"quadrature: unknown phase weights", sky("    quadrature: {phase_weights: normalized}\n"), 3, "normalized", 1, "",
+       "jobs[0].quadrature.phase_weights", {"normalised | plain", "did you mean 'normalised'"}},
       // sizes as a percentage of the defaults (docs/atmosphere.md, "Config")
       {"sizes: not a percentage", sky("    sizes: large\n"), 3, "large", 1, "", "jobs[0].sizes",
        {"percentage of the sizes", "e.g. 150%"}},

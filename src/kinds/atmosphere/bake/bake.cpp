@@ -491,9 +491,11 @@ json parameters_json(const AtmosphereSpec& spec) {
                      {"ray_rule", m.ray_simpson ? "simpson" : "trapezoid"},
                      {"phase_nu", m.phase_nu_slice ? "slice" : "clamped"},
                      {"scattering_density", "midpoint " + std::to_string(m.density_theta) + " x 32 over the sphere, theta " +
-                                                (m.density_theta_power == 1.0 ? "uniform" : "packed towards the horizon")},
+                                                (m.density_theta_power == 1.0 ? "uniform" : "packed towards the horizon") +
+                                                (m.phase_weights_normalised ? ", phase weights normalised to sum 1" : "")},
                      {"density_theta", m.density_theta},
                      {"density_rule", m.density_theta_power == 1.0 ? "uniform" : "horizon"},
+                     {"phase_weights", m.phase_weights_normalised ? "normalised" : "plain"},
                      {"mu_s_blend", m.mu_s_geometric ? "geometric" : "linear"},
                      {"indirect_irradiance", "midpoint 16 x 64 over the upper hemisphere"}};
   return p;

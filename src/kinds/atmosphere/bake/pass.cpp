@@ -103,7 +103,7 @@ constexpr int kSkyRayExtra = SKY_RAY_EXTRA;
 // Parameter block, and the values the layout kernel must echo back.
 struct Block {
   std::vector<unsigned char> bytes;
-  std::vector<double> echo_reals;  // solar[0], albedo[NCH-1], absorption constant[1], rb, g, density_theta_power
+  std::vector<double> echo_reals;  // solar[0], albedo[NCH-1], absorption constant[1], rb, g, density_theta_power, density_phase_norm
   std::vector<int> echo_ints;      // transmittance_w, nu_size, sizeof
 };
 
@@ -114,7 +114,7 @@ Block make_block(const Model& m, const Channels& ch, int width, bool dbl) {
     Block b;
     b.bytes = W::block(a, dbl);
     b.echo_reals = {a.solar_irradiance[0], a.ground_albedo[W::channels - 1], a.absorption_density.constant_term[1],
-                    a.bottom_radius, a.mie_g, a.density_theta_power};
+                    a.bottom_radius, a.mie_g, a.density_theta_power, a.density_phase_norm};
     b.echo_ints = {a.transmittance_w, a.nu_size, static_cast<int>(b.bytes.size())};
     return b;
   });
@@ -494,8 +494,13 @@ class DeviceBackend final : public PassBackend {
   void scattering_density(int order) override {
     q_.launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * model_.density_theta,
               {&tex_.T, &tex_.dR, &tex_.dM, &tex_.dS, order, &incidence_});
+    if (!phase_factors_ready_) {  // geometry and the phase functions only: once per bake
+      q_.launch("density_phase_table", 1LL * sizes_.r * sizes_.mu, {&phase_factors_});
+      phase_factors_ready_ = true;
+    }
     q_.launch_sliced("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s,
-                     1LL * sizes_.mu * sizes_.mu_s, between_slices, {&incidence_, &tex_.dE, order, &tex_.J});
+                     1LL * sizes_.mu * sizes_.mu_s, between_slices,
+                     {&incidence_, &phase_factors_, &tex_.dE, order, &tex_.J});
   }
   void indirect_irradiance(int order) override {
     q_.launch("indirect_irradiance_texture", n_e_, {&tex_.dR, &tex_.dM, &tex_.dS, order, &tex_.dE});
@@ -604,7 +609,8 @@ class DeviceBackend final : public PassBackend {
 
  private:
   // The pass's textures and the tables of the scattering stages: ray samples
-  // [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][density_theta][(2 NU + 1) NCH + INC_FIXED].
+  // [R][MU][SCATTERING_STEPS + 1][RAY_T + NCH], incidence [R][MU_S][density_theta][(2 NU + 1) NCH + INC_FIXED],
+  // the density's phase factors [R][MU][2].
   void allocate() {
     const long long n_ray = 1LL * sizes_.r * sizes_.mu * (kScatteringSteps + 1) * (kRayFixed + width_);
     const long long n_inc =
@@ -612,6 +618,7 @@ class DeviceBackend final : public PassBackend {
     cl_util::checked("allocating atmosphere textures", [&] {
       rays_ = q_.alloc_reals(n_ray);
       incidence_ = q_.alloc_reals(n_inc);
+      phase_factors_ = q_.alloc_reals(2LL * sizes_.r * sizes_.mu);
       tex_.T = q_.alloc(n_t_);
       tex_.dE = q_.alloc(n_e_);
       tex_.dR = q_.alloc(n_s_);
@@ -668,7 +675,8 @@ class DeviceBackend final : public PassBackend {
   long long n_t_ = 0, n_e_ = 0, n_s_ = 0;
   std::size_t row_group_ = 0;
   DeviceTextures tex_;
-  cl::Buffer rays_, incidence_, J_sum_, J_prev_;
+  cl::Buffer rays_, incidence_, phase_factors_, J_sum_, J_prev_;
+  bool phase_factors_ready_ = false;
   DeviceSums sums_;
 };
 

@@ -98,20 +98,23 @@ void parse_sizes(const At& at, AtmosphereSpec& s) {
   if (at.has("scale")) scale_sizes_at(at.child("scale"), percent_at(at.child("scale")), s);  // given or default, scaled
 }
 
-// `quadrature: reference | {density_theta, density_rule, mu_s_blend, ray_rule, phase_nu}` — the
-// scattering density's sphere rule, the scattering textures' blend along μ_s, the view rays' rule
-// and the ν of the stored multiple scattering's 1/P_R; `reference` is the reference
-// implementation's (16 uniform θ, linear, trapezoid, clamped ν).
+// `quadrature: reference | {density_theta, density_rule, phase_weights, mu_s_blend, ray_rule,
+// phase_nu}` — the scattering density's sphere rule and its phase weights, the scattering textures'
+// blend along μ_s, the view rays' rule and the ν of the stored multiple scattering's 1/P_R;
+// `reference` is the reference implementation's (16 uniform θ, plain weights, linear, trapezoid,
+// clamped ν).
 void parse_quadrature(const At& at, AtmosphereSpec& s) {
   if (at.node.IsScalar()) {
     at.choice<int>({{"reference", 0}});
-    s.density_theta = 16;
-    s.density_theta_given = true;
-    s.density_horizon = s.mu_s_geometric = s.ray_simpson = s.phase_nu_slice = false;
+    s.use_reference_quadrature();
     return;
   }
-  at.expect_map("quadrature settings: reference, or {density_theta, density_rule, mu_s_blend, ray_rule, phase_nu}");
-  at.allow_keys({"density_theta", "density_rule", "mu_s_blend", "ray_rule", "phase_nu"});
+  at.expect_map(
+      "quadrature settings: reference, or {density_theta, density_rule, phase_weights, mu_s_blend, ray_rule, phase_nu}");
+  at.allow_keys({"density_theta", "density_rule", "phase_weights", "mu_s_blend", "ray_rule", "phase_nu"});
+  if (at.has("phase_weights"))
+    s.phase_weights_normalised =
+        at.child("phase_weights").choice<int>({{"normalised", 1}, {"plain", 0}}) == 1;
   if (at.has("phase_nu")) s.phase_nu_slice = at.child("phase_nu").choice<int>({{"slice", 1}, {"clamped", 0}}) == 1;
   if (at.has("ray_rule")) s.ray_simpson = at.child("ray_rule").choice<int>({{"simpson", 1}, {"trapezoid", 0}}) == 1;
   if (at.has("mu_s_blend"))
@@ -524,6 +527,7 @@ json normalised_json(const AtmosphereSpec& s) {
                                           {"nu", s.scattering_nu}}}}},
                {"quadrature", {{"density_theta", s.density_theta},
                                {"density_rule", s.density_horizon ? "horizon" : "uniform"},
+                               {"phase_weights", s.phase_weights_normalised ? "normalised" : "plain"},
                                {"mu_s_blend", s.mu_s_geometric ? "geometric" : "linear"},
                                {"ray_rule", s.ray_simpson ? "simpson" : "trapezoid"},
                                {"phase_nu", s.phase_nu_slice ? "slice" : "clamped"}}},

@@ -154,6 +154,7 @@ Model model_of(const AtmosphereSpec& s) {
   m.density_theta_power = s.density_horizon ? 2.0 : 1.0;
   m.ray_simpson = s.ray_simpson;
   m.phase_nu_slice = s.phase_nu_slice;
+  m.phase_weights_normalised = s.phase_weights_normalised;
   m.mu_s_geometric = s.mu_s_geometric;
   m.mie_g = s.mie_phase_g;
   for (int i = 0; i < 2; ++i) {

@@ -55,8 +55,9 @@ struct Model {
   // the density's θ rule (atmosphere.cl density_theta_node): nodes, and p (1: uniform, 2: horizon)
   int density_theta = 16;
   double density_theta_power = 2.0;
-  bool ray_simpson = true;
-  bool phase_nu_slice = true;  // 1/P_R(ν) of the stored multiple scattering at the slice's ν, else at the clamped ν  // the view rays' rule (atmosphere.cl ray_sample): Simpson, else the reference's trapezoid
+  bool ray_simpson = true;      // the view rays' rule (atmosphere.cl ray_sample): Simpson, else the reference's trapezoid
+  bool phase_nu_slice = true;   // 1/P_R(ν) of the stored multiple scattering at the slice's ν, else at the clamped ν
+  bool phase_weights_normalised = true;  // the density's phase weights summed to 1 (atmosphere.cl scattering_density)
   bool mu_s_geometric = true;  // the shipped μ_s lookups: mu_s_blend (lookup.cl), else linear as the reference
   DensityLayer rayleigh_density[2]{}, mie_density[2]{}, absorption_density[2]{};
   double ozone_peak_number_density_per_m3 = 0;

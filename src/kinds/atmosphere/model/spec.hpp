@@ -70,7 +70,18 @@ struct AtmosphereSpec : KindSpec, AtmosphereMedia {
   // stored — the slice's own ν (default), or its ν clamped to the texel's feasible range as the
   // reference does (docs/atmosphere-method.md, "Daylight")
   bool phase_nu_slice = true;
+  // `quadrature: {phase_weights}`: the scattering density's weights of the view's phase functions
+  // divided by their sum over the sphere rule, per direction (default `normalised`), or as the rule
+  // gives them (`plain`, the reference; docs/atmosphere-method.md, "The density's phase weights")
+  bool phase_weights_normalised = true;
   bool mu_s_geometric = true;  // the scattering textures' μ_s lookups: geometric (default) or linear
+  // `quadrature: reference`: the reference implementation's rules (16 uniform θ, plain phase
+  // weights, linear μ_s lookups, trapezoid rays, clamped ν)
+  void use_reference_quadrature() {
+    density_theta = 16;
+    density_theta_given = true;
+    density_horizon = mu_s_geometric = ray_simpson = phase_nu_slice = phase_weights_normalised = false;
+  }
   bool layout_3d = true, layout_tiled2d = false;
   bool out_transmittance = true, out_irradiance = true, out_scattering = true, out_single_mie = true;
   // File formats of the textures: .bin and .exr always; KTX2 (2D/3D RGBA textures engines load) on request.
