@@ -288,7 +288,7 @@ TEST(AtmosphereDevice, EnergyConservedForThinConservativeShell) {
 // The density of a uniform light: with L ≡ L₀ from every direction (order 3's incoming light a
 // constant texture, black ground) J = (β_R ρ_R + β_M ρ_M) L₀ exactly, Σ P dω = 1 for each phase
 // function. With the phase weights normalised (the default) every texel holds it to rounding
-// (~1e-15 relative: 16 × 64 terms of a double sum, each ~1e-16); as the 16-node horizon rule
+// (a double sum of 16 × 64 terms, each rounded to ~1e-16 relative: ≤ 1e-13); as the 16-node horizon rule
 // gives them ("plain", the reference's way), the Mie phase of g 0.8 weighs 0.97–1.17 and the
 // texels stray by up to ~10 % (atmosphere.cl, density_phase_factors) — at least 1 % somewhere.
 TEST(AtmosphereDevice, DensityScattersAUniformLightExactly) {
