@@ -475,6 +475,8 @@ class DeviceBackend final : public PassBackend {
     n_s_ = sizes_.scattering_texels();
     allocate();
     q_.check_layout();
+    // the density's phase factors: geometry and the phase functions only, the same for every pass
+    q_.launch("density_phase_table", 1LL * sizes_.r * sizes_.mu, {&phase_factors_});
     row_group_ = choose_row_group();
     spdlog::debug("atmosphere: LANES {} (texels per work item of single and multiple scattering, suns side by side "
                   "in the density); multiple scattering {} ({} B of local memory per row, {} B on the device)",
@@ -494,10 +496,6 @@ class DeviceBackend final : public PassBackend {
   void scattering_density(int order) override {
     q_.launch("density_incidence_table", 1LL * sizes_.r * sizes_.mu_s * model_.density_theta,
               {&tex_.T, &tex_.dR, &tex_.dM, &tex_.dS, order, &incidence_});
-    if (!phase_factors_ready_) {  // geometry and the phase functions only: once per bake
-      q_.launch("density_phase_table", 1LL * sizes_.r * sizes_.mu, {&phase_factors_});
-      phase_factors_ready_ = true;
-    }
     q_.launch_sliced("scattering_density_texture", 1LL * sizes_.r * sizes_.mu * sizes_.mu_s,
                      1LL * sizes_.mu * sizes_.mu_s, between_slices,
                      {&incidence_, &phase_factors_, &tex_.dE, order, &tex_.J});
@@ -676,7 +674,6 @@ class DeviceBackend final : public PassBackend {
   std::size_t row_group_ = 0;
   DeviceTextures tex_;
   cl::Buffer rays_, incidence_, phase_factors_, J_sum_, J_prev_;
-  bool phase_factors_ready_ = false;
   DeviceSums sums_;
 };
 
