@@ -416,7 +416,7 @@ void parse_checks(const At& job, AtmosphereSpec& s) {
   // Earth's orders beyond 4 are the largest part of its error at sun −12…0° (p99 1.6 ΔE). A
   // geometric tail from the last two orders stands for them for one more indirect irradiance,
   // and in deep twilight from order 5 (unless the config gives orders) it is within 0.2 % of 13
-  // orders at every scene point (docs/atmosphere.md, "The orders beyond the last"); daylight
+  // orders at every scene point (docs/atmosphere-method.md, "The orders beyond the last"); daylight
   // scenes keep the exact sum.
   // Thick aerosol keeps scattering its light forwards order after order: in Mars' twilight orders
   // ≥ 3 carry most of the light and 4 orders leave p99 11.8 ΔE (order truncation alone, sun
