@@ -1368,6 +1368,31 @@ TEST(TruthTracking, DepthPieceErrorBoundsTheGaussRule) {
     }
 }
 
+// The tracer builds its channel groups' sun tables from the profiles' optical lengths (the
+// medium table of unit_channels()): at every node the sum Σ_i coefficient_i · length_i must be
+// the group's own exact quadrature. Both are quadratures of ~1e-7 relative error (what
+// ExactOpticalDepthMatchesAFineQuadrature asserts of truth_optical_depth on its rays; the cut
+// rule's 4e-8 is an estimate per piece); at these nodes they differ by up to 2.2e-7.
+// The table only shapes a pdf, whose own interpolation error is 0.05 + 0.02 τ (the test
+// below), so 1e-6 relative is asserted: far below anything a walk sees, and an indexing slip
+// (profile, channel or node order) is off by O(1).
+TEST(TruthTracking, GroupSunTablesFromTheProfilesLengthsMatchTheirQuadrature) {
+  for (const AtmosphereSpec& s : {earth(), mars()}) {
+    const Medium M(s);
+    const std::vector<double> lengths = medium_table(model_of(s), unit_channels());
+    const std::vector<double> own = medium_table(model_of(s), M.ch);
+    const std::vector<double> summed = medium_table(model_of(s), M.ch, &lengths);
+    ASSERT_EQ(own.size(), summed.size());
+    for (int n = 0; n < TRUTH_SUN_H * TRUTH_SUN_MU; ++n)
+      for (int c = 0; c < 3; ++c) {
+        const double want = own[ref3::kTruthSunAt + n * 3 + c], got = summed[ref3::kTruthSunAt + n * 3 + c];
+        EXPECT_NEAR(got, want, 1e-6 * want + 1e-12) << "node " << n << " channel " << c;
+      }
+    // everything before the sun table (majorants, cuts) is the group's own
+    EXPECT_TRUE(std::equal(own.begin(), own.begin() + ref3::kTruthSunAt, summed.begin()));
+  }
+}
+
 // The sun depths of the medium table (truth_sun_depth_table), which shape the twilight line's
 // pdf only: between the nodes, against the exact optical depth towards the sun (the horizon's
 // ray when the sun is below it), for the Earth and Mars, where the sun is not blocked beyond

@@ -23,6 +23,22 @@ static_assert(static_cast<int>(TruthOptions::NextSun::automatic) == TRUTH_NEXT_S
               static_cast<int>(TruthOptions::NextSun::along_ray) == TRUTH_NEXT_SUN_LINE &&
               static_cast<int>(TruthOptions::NextSun::at_vertex) == TRUTH_NEXT_SUN_VERTEX);
 
+// The profiles as a medium of three channels with unit coefficients (channel i: profile i —
+// Rayleigh, Mie, absorption): truth_optical_depth of channel i is then profile i's optical
+// length, to TRUTH_DEPTH_ERROR of itself (the cuts are placed for each profile alone), so that
+// every channel's optical depth, a positive sum of them, is as exact. Its medium table
+// (medium_table(m, unit_channels())) serves the light at a vertex, order 1 by quadrature and
+// the channel groups' sun tables.
+Channels unit_channels() {
+  Channels unit;
+  unit.lambda_nm = {0.0, 0.0, 0.0};
+  unit.solar_irradiance = unit.mie_scattering = unit.ground_albedo = {0.0, 0.0, 0.0};
+  unit.rayleigh_scattering = {1.0, 0.0, 0.0};
+  unit.mie_extinction = {0.0, 1.0, 0.0};
+  unit.absorption_extinction = {0.0, 0.0, 1.0};
+  return unit;
+}
+
 namespace {
 
 using ref3::AtmosphereParameters;
@@ -324,20 +340,6 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
   return out;
 }
 
-// The profiles as a medium of three channels with unit coefficients (channel i: profile i —
-// Rayleigh, Mie, absorption): truth_optical_depth of channel i is then profile i's optical
-// length, to TRUTH_DEPTH_ERROR of itself (the cuts are placed for each profile alone), so that
-// every channel's optical depth, a positive sum of them, is as exact. Its medium table
-// (medium_table(m, unit_channels())) serves the light at a vertex and order 1 by quadrature.
-Channels unit_channels() {
-  Channels unit;
-  unit.lambda_nm = {0.0, 0.0, 0.0};
-  unit.solar_irradiance = unit.mie_scattering = unit.ground_albedo = {0.0, 0.0, 0.0};
-  unit.rayleigh_scattering = {1.0, 0.0, 0.0};
-  unit.mie_extinction = {0.0, 1.0, 0.0};
-  unit.absorption_extinction = {0.0, 0.0, 1.0};
-  return unit;
-}
 
 // log S̄ (path_tracer.cl, "the light at a vertex") of every channel at the sky table's nodes,
 // [TRUTH_SKY_H · TRUTH_SKY_MU][C]: ∫_4π dω ∫ σ_s T T_sun V dt by a coarse quadrature (it only
@@ -658,13 +660,16 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
     P.guided_paths[i] = guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < deep;
     any_guided = any_guided || P.guided_paths[i];
   }
-  for (std::size_t first = 0; first < P.n_channels; first += kGroup)
-    P.medium.push_back(
-        medium_table(P.model, P.channels.slice(first, std::min<std::size_t>(kGroup, P.n_channels - first))));
   const bool single = o.order1 == TruthOptions::Order1::quadrature;
   const AtmosphereParameters a_unit = ref3::make_parameters(P.model, unit_channels());
-  const std::vector<double> unit_medium =
-      single || any_guided ? medium_table(P.model, unit_channels()) : std::vector<double>{};
+  const std::vector<double> unit_medium = medium_table(P.model, unit_channels());
+  const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
+  P.medium.resize(n_groups);
+  parallel_for(static_cast<long long>(n_groups), [&](long long g) {
+    const std::size_t first = static_cast<std::size_t>(g) * kGroup;
+    P.medium[g] = medium_table(P.model, P.channels.slice(first, std::min<std::size_t>(kGroup, P.n_channels - first)),
+                               &unit_medium);
+  });
   if (any_guided) {
     const std::vector<double> sky = sky_light_table(P.model, P.channels, unit_medium);
     for (std::size_t c = 0; c < P.n_channels; ++c)
@@ -740,8 +745,12 @@ static DepthCuts depth_cuts(const AtmosphereParameters& a, std::size_t channels,
 
 // The medium table of one channel group (path_tracer.cl): [TRUTH_SHELLS][kGroup] majorants,
 // then the exact depths' cut altitudes' count and the cuts (depth_cuts), and the sun
-// table (the sky table is left at 0: prepare() fills it where walks read it).
-std::vector<double> medium_table(const Model& m, const Channels& group) {
+// table (the sky table is left at 0: prepare() fills it where walks read it). The sun table's
+// depths are exact quadratures; given the medium table of unit_channels() (`lengths`), each is
+// instead the channel's coefficients times the three profiles' optical lengths at the same
+// node — the same sum, each length exact to TRUTH_DEPTH_ERROR of itself — so a 48-wavelength
+// trace integrates its 3072 sun rays once, not once a group.
+std::vector<double> medium_table(const Model& m, const Channels& group, const std::vector<double>* lengths) {
   const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
   const double t = m.top_radius_km - m.bottom_radius_km, width = t / TRUTH_SHELLS;
   std::vector<double> out(ref3::kTruthMediumSize, 0.0);
@@ -761,8 +770,18 @@ std::vector<double> medium_table(const Model& m, const Channels& group) {
                              group.absorption_extinction[c] * ma) *
                             (1.0 + kMajorantMargin);
   }
-  // the optical depth towards the sun at the sun table's nodes (exact quadrature; the cuts above
-  // are already in place, which truth_optical_depth reads)
+  // the optical depth towards the sun at the sun table's nodes: from the profiles' lengths, or
+  // by exact quadrature (the cuts above are already in place, which truth_optical_depth reads)
+  if (lengths) {
+    for (int n = 0; n < TRUTH_SUN_H * TRUTH_SUN_MU; ++n) {
+      const double* l = &(*lengths)[ref3::kTruthSunAt + n * kGroup];
+      for (std::size_t c = 0; c < group.size(); ++c)
+        out[ref3::kTruthSunAt + n * kGroup + c] = group.rayleigh_scattering[c] * l[0] +
+                                                  group.mie_extinction[c] * l[1] +
+                                                  group.absorption_extinction[c] * l[2];
+    }
+    return out;
+  }
   for (int i = 0; i < TRUTH_SUN_H; ++i)
     for (int j = 0; j < TRUTH_SUN_MU; ++j) {
       double h, mu;

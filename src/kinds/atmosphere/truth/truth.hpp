@@ -145,8 +145,13 @@ struct Channels;
 // The tracer's medium table for one group of up to three channels (path_tracer.cl): the
 // majorants per altitude shell, the cut altitudes of its exact optical depths (depth_cuts) and
 // the optical depth towards the sun (the light scattered once towards a point, which twilight
-// walks read, is filled in by the trace).
-std::vector<double> medium_table(const Model& m, const Channels& group);
+// walks read, is filled in by the trace). With `lengths`, the medium table of the three profiles
+// as unit channels, the sun depths are the channels' sums of those lengths instead of
+// quadratures of their own.
+std::vector<double> medium_table(const Model& m, const Channels& group,
+                                 const std::vector<double>* lengths = nullptr);
+// The profiles as three channels of unit coefficients (Rayleigh, Mie, absorption).
+Channels unit_channels();
 
 struct TruthMemory {
   std::uint64_t host = 0, device = 0, largest_buffer = 0;
