@@ -1383,9 +1383,10 @@ TEST(TruthTracking, GroupSunTablesFromTheProfilesLengthsMatchTheirQuadrature) {
     const std::vector<double> own = medium_table(model_of(s), M.ch);
     const std::vector<double> summed = medium_table(model_of(s), M.ch, &lengths);
     ASSERT_EQ(own.size(), summed.size());
+    constexpr int G = ref3::kTruthChannels;  // the table's [node][channel] stride
     for (int n = 0; n < TRUTH_SUN_H * TRUTH_SUN_MU; ++n)
       for (int c = 0; c < 3; ++c) {
-        const double want = own[ref3::kTruthSunAt + n * 3 + c], got = summed[ref3::kTruthSunAt + n * 3 + c];
+        const double want = own[ref3::kTruthSunAt + n * G + c], got = summed[ref3::kTruthSunAt + n * G + c];
         EXPECT_NEAR(got, want, 1e-6 * want + 1e-12) << "node " << n << " channel " << c;
       }
     // everything before the sun table (majorants, cuts) is the group's own

@@ -340,7 +340,6 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
   return out;
 }
 
-
 // log S̄ (path_tracer.cl, "the light at a vertex") of every channel at the sky table's nodes,
 // [TRUTH_SKY_H · TRUTH_SKY_MU][C]: ∫_4π dω ∫ σ_s T T_sun V dt by a coarse quadrature (it only
 // shapes a pdf; a factor of 2 only moves noise) whose geometry every channel shares: directions at
@@ -748,8 +747,8 @@ static DepthCuts depth_cuts(const AtmosphereParameters& a, std::size_t channels,
 // table (the sky table is left at 0: prepare() fills it where walks read it). The sun table's
 // depths are exact quadratures; given the medium table of unit_channels() (`lengths`), each is
 // instead the channel's coefficients times the three profiles' optical lengths at the same
-// node — the same sum, each length exact to TRUTH_DEPTH_ERROR of itself — so a 48-wavelength
-// trace integrates its 3072 sun rays once, not once a group.
+// node — the same sum, each length as exact a quadrature as the group's own — so a
+// 48-wavelength trace integrates its 3072 sun rays once, not once a group.
 std::vector<double> medium_table(const Model& m, const Channels& group, const std::vector<double>* lengths) {
   const AtmosphereParameters a = ref3::make_parameters(m, Channels{});
   const double t = m.top_radius_km - m.bottom_radius_km, width = t / TRUTH_SHELLS;
