@@ -44,6 +44,12 @@ namespace {
 using ref3::AtmosphereParameters;
 using ref3::DensityProfile;
 
+// Channel c's optical depth from the three profiles' optical lengths (Rayleigh, Mie,
+// absorption: what the medium of unit_channels() measures), km⁻¹ · km.
+double depth_of_lengths(const Channels& ch, std::size_t c, const double* len) {
+  return ch.rayleigh_scattering[c] * len[0] + ch.mie_extinction[c] * len[1] + ch.absorption_extinction[c] * len[2];
+}
+
 constexpr int kGroup = ref3::kTruthChannels;  // channels per launch (the kernels' NCH)
 constexpr int kStride = ref3::kTruthOutStride;
 // The view ray's table: kSegments equal segments, split again at every altitude where a
@@ -401,8 +407,7 @@ std::vector<double> sky_light_table(const Model& m, const Channels& ch, const st
             const double s_s = (ch.rayleigh_scattering[c] * rho_r + ch.mie_scattering[c] * rho_m) * visible;
             double g = 0.0, lg = 0.0;
             if (s_s > 0.0) {
-              lg = std::log(s_s) - tau[c] -
-                   (ch.rayleigh_scattering[c] * l[0] + ch.mie_extinction[c] * l[1] + ch.absorption_extinction[c] * l[2]);
+              lg = std::log(s_s) - tau[c] - depth_of_lengths(ch, c, l);
               g = std::exp(lg);
             }
             if (k > 0) {
@@ -554,8 +559,7 @@ class SingleScattering {
     const double rho_r = ref3::profile_density(&a_.rayleigh_density, h);
     const double rho_m = ref3::profile_density(&a_.mie_density, h);
     for (std::size_t c = 0; c < C_; ++c) {
-      const double tau = ch_.rayleigh_scattering[c] * len[0] + ch_.mie_extinction[c] * len[1] +
-                         ch_.absorption_extinction[c] * len[2];
+      const double tau = depth_of_lengths(ch_, c, len);
       f[c] = ch_.solar_irradiance[c] *
              (ch_.rayleigh_scattering[c] * rho_r * p_r_ + ch_.mie_scattering[c] * rho_m * p_m_) * visible *
              std::exp(-tau);
@@ -775,9 +779,7 @@ std::vector<double> medium_table(const Model& m, const Channels& group, const st
     for (int n = 0; n < TRUTH_SUN_H * TRUTH_SUN_MU; ++n) {
       const double* l = &(*lengths)[ref3::kTruthSunAt + n * kGroup];
       for (std::size_t c = 0; c < group.size(); ++c)
-        out[ref3::kTruthSunAt + n * kGroup + c] = group.rayleigh_scattering[c] * l[0] +
-                                                  group.mie_extinction[c] * l[1] +
-                                                  group.absorption_extinction[c] * l[2];
+        out[ref3::kTruthSunAt + n * kGroup + c] = depth_of_lengths(group, c, l);
     }
     return out;
   }
