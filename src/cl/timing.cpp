@@ -29,16 +29,15 @@ cl_int status_of(const cl::Event& ev) {
 
 }  // namespace
 
-Profiler::Record Profiler::open(std::string stage, int order) {
+Profiler::Record Profiler::open(std::string stage, int order, Clock::time_point t0) {
   auto r = std::make_shared<StageSeconds>();
   r->stage = std::move(stage);
   r->order = order;
-  open_.push_back({r, Clock::now()});
+  open_.push_back({r, t0});
   return r;
 }
 
-void Profiler::close(const Record& r) {
-  const auto now = Clock::now();
+void Profiler::close(const Record& r, Clock::time_point now) {
   const auto it = std::find_if(open_.begin(), open_.end(), [&](const Open& o) { return o.r == r; });
   if (it == open_.end()) return;
   r->wall_s += std::chrono::duration<double>(now - it->t0).count();

@@ -52,11 +52,13 @@ class Profiler {
   Profiler(const Profiler&) = delete;
   Profiler& operator=(const Profiler&) = delete;
 
-  // Opens a stage; its record fills in as commands complete and stays valid after close().
-  Record open(std::string stage, int order = 0);
-  // Stops the stage's wall clock and reads the times of commands that have completed
+  // Opens a stage at `t0` (now by default; a caller chaining stages passes the previous one's
+  // end, so that consecutive stages leave no gap); its record fills in as commands complete and
+  // stays valid after close().
+  Record open(std::string stage, int order = 0, Clock::time_point t0 = Clock::now());
+  // Stops the stage's wall clock at `t` and reads the times of commands that have completed
   // (without waiting for the others).
-  void close(const Record& r);
+  void close(const Record& r, Clock::time_point t = Clock::now());
 
   // A command just enqueued with `ev` (an event of a profiling queue).
   void record(const cl::Event& ev);
@@ -85,12 +87,13 @@ class Profiler {
   // RAII: opens on construction, closes on close() or destruction (also when unwinding).
   class Stage {
    public:
-    Stage(Profiler& p, std::string stage, int order = 0) : p_(&p), r_(p.open(std::move(stage), order)) {}
+    Stage(Profiler& p, std::string stage, int order = 0, Clock::time_point t0 = Clock::now())
+        : p_(&p), r_(p.open(std::move(stage), order, t0)) {}
     ~Stage() { close(); }
     Stage(const Stage&) = delete;
     Stage& operator=(const Stage&) = delete;
-    const Record& close() {
-      if (!r_->closed) p_->close(r_);
+    const Record& close(Clock::time_point t = Clock::now()) {
+      if (!r_->closed) p_->close(r_, t);
       return r_;
     }
     const Record& record() const { return r_; }

@@ -414,14 +414,17 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   ctx.judge = judge && !job.tolerance_advisory;
   ctx.memo = memo;
   ctx.bundle_hash = bundle_hash;
-  // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp).
+  // Each step is a stage of the device's profiler: device and host seconds (cl/timing.hpp). The
+  // steps are chained — each opens at the instant the one before closed, the first at the bake's
+  // start — so that their wall times partition the bake's.
   std::vector<cl_util::Profiler::Record> steps;
-  std::optional<cl_util::Profiler::Stage> step(std::in_place, dev.profiler(), to_string(ev.stage));
+  std::optional<cl_util::Profiler::Stage> step(std::in_place, dev.profiler(), to_string(ev.stage), 0, tb);
   ctx.on_stage = [&](Stage s) {
-    steps.push_back(step->close());
+    const auto t = Clock::now();
+    steps.push_back(step->close(t));
     step.reset();
     ev.stage = s;
-    step.emplace(dev.profiler(), to_string(s));
+    step.emplace(dev.profiler(), to_string(s), 0, t);
     throw_if_stopped();
   };
   ctx.progress = [&](std::string_view what, double f) {
@@ -437,10 +440,11 @@ TimedBake bake_timed(const Kind& kind, const JobSpec& job, cl_util::Device& dev,
   };
   TimedBake out{kind.bake(job, ctx), 0.0, {}};
   if (!defer_files) finish_files(out.result);  // in the step the bake ended in: files
-  steps.push_back(step->close());  // the last step
+  dev.profiler().settle();  // waiting for the commands still running is the last step's time
+  const auto te = Clock::now();
+  steps.push_back(step->close(te));
   step.reset();
-  dev.profiler().settle();
-  out.bake_s = seconds_since(tb);
+  out.bake_s = std::chrono::duration<double>(te - tb).count();
   for (const auto& rec : steps) cl_util::accumulate(out.steps[rec->stage], *rec);
   for (const auto& [step_name, sec] : out.steps)
     spdlog::debug("{}: step {}: device {:.3f} s, host {:.3f} s (wall {:.3f} s)", ev.job, step_name, sec.device_s,
