@@ -1394,6 +1394,62 @@ TEST(TruthTracking, GroupSunTablesFromTheProfilesLengthsMatchTheirQuadrature) {
   }
 }
 
+// The line estimate's view transmittance (truth_view_transmittance, exact mode: T̂ + [u < q]
+// (T − T̂)/q from the trapezoid's depth T̂ = e^{−τ̂} and the exact depth) keeps the expectation
+// T = e^{−τ} whatever τ̂: the trapezoid at the line's 9 nodes as the walk takes it (the tests' own
+// σ_t), and τ̂ halved and doubled. Rays that rise from the ground, graze it, descend to it from
+// 10 km and pass a tangent point from 30 km, Earth and Mars, over the whole ray and to a point
+// inside its fifth segment. The estimate takes two values, so its sample se is exact up to
+// O(1/N): bound 4 se. Beside it, what the trapezoid leaves: the correction's relative variance
+// (1/q − 1)(T − T̂)²/T² on these rays (printed; a twilight walk's own is ~1–2).
+TEST(TruthTracking, LineViewTransmittanceKeepsItsExpectationWhateverItsTrapezoid) {
+  for (const AtmosphereSpec& s : {earth(), mars()}) {
+    const Medium M(s);
+    const auto a = ref3::make_parameters(model_of(s), M.ch);
+    const std::vector<double> medium = medium_table(model_of(s), M.ch);
+    const double rays[][2] = {{0.0, 0.3}, {0.0, 0.01}, {10.0, -0.1}, {30.0, -0.08}, {2.0, 0.002}};
+    constexpr int N = 20000, kSeg = 8;
+    double worst_var = 0.0;
+    for (const auto& ray : rays) {
+      const double h = ray[0], mu = ray[1];
+      const int ground = ref3::ray_hits_ground(&a, h, mu);
+      const double D = ref3::distance_to_nearest_boundary(&a, h, mu, ground);
+      const double x[3] = {0, 0, s.bottom_radius_km + h}, v[3] = {std::sqrt(1 - mu * mu), 0, mu};
+      for (int c = 0; c < 3; ++c) {
+        double tau_k[kSeg + 1], prev = 0.0;
+        for (int k = 0; k <= kSeg; ++k) {
+          const double sd = D * k / kSeg, p[3] = {x[0] + sd * v[0], x[1] + sd * v[1], x[2] + sd * v[2]};
+          const double sigma = M.sigma_t(c, p);
+          tau_k[k] = k == 0 ? 0.0 : tau_k[k - 1] + 0.5 * (prev + sigma) * D / kSeg;
+          prev = sigma;
+        }
+        for (const double s_end : {D, D * 4.37 / kSeg}) {
+          const double exact = std::exp(-ref3::truth_optical_depth(&a, c, medium.data(), h, mu, s_end));
+          const double trapezoid = s_end == D ? tau_k[kSeg] : tau_k[4] + 0.37 * (tau_k[5] - tau_k[4]);
+          worst_var = std::max(worst_var, (1.0 / ref3::kTruthSunExactShare - 1.0) *
+                                              std::pow((exact - std::exp(-trapezoid)) / exact, 2.0));
+          for (const double scale : {1.0, 0.5, 2.0}) {
+            double sum = 0.0, sum2 = 0.0;
+            int violations = 0;
+            for (int i = 0; i < N; ++i) {
+              PhiloxStream rng;
+              philox_stream_init(&rng, 17, 5, i, c, 0);
+              const double e = ref3::truth_view_transmittance(&a, c, medium.data(), h, mu, ground, s_end,
+                                                              scale * trapezoid, 1, &rng, &violations);
+              sum += e;
+              sum2 += e * e;
+            }
+            const double mean = sum / N, se = std::sqrt(std::max(sum2 / N - mean * mean, 0.0) / N);
+            EXPECT_NEAR(mean, exact, 4 * se + 1e-12) << "h " << h << " mu " << mu << " c " << c << " s " << s_end
+                                                     << " scale " << scale;
+          }
+        }
+      }
+    }
+    std::printf("line view transmittance: worst relative variance the trapezoid leaves %.3g\n", worst_var);
+  }
+}
+
 // The sun depths of the medium table (truth_sun_depth_table), which shape the twilight line's
 // pdf only: between the nodes, against the exact optical depth towards the sun (the horizon's
 // ray when the sun is below it), for the Earth and Mars, where the sun is not blocked beyond

@@ -20,5 +20,6 @@ inline constexpr int kTruthMediumSize = TRUTH_MEDIUM_SIZE;
 inline constexpr int kTruthSunAt = TRUTH_SUN_AT;
 inline constexpr int kTruthSkyAt = TRUTH_SKY_AT;
 inline constexpr double kTruthSkyNone = TRUTH_SKY_NONE;
+inline constexpr double kTruthSunExactShare = TRUTH_SUN_EXACT_SHARE;
 #undef NCH
 }  // namespace specbake::atmosphere::ref3
