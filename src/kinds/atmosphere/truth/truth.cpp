@@ -65,20 +65,21 @@ constexpr int kNodes = kSegments + 1 + 2 * kMaxKinkAltitudes;
 // thinner air), which β_s ρ T does not know, and the pilot must explore the whole ray.
 constexpr double kUniformMix = 1e-3;
 constexpr double kUniformMixPilot = 0.5;
-// Learned tables (twilight points, path_tracer.cl "learned guides"): pilot walks per point, all
-// channels together (at least one batch per channel); a point keeps its learned tables only
-// where the pilot predicts they cut the view ray's second moment below kLearnGain of the fixed
-// table's (learned walks reach sunlit air more often, so each costs more) — in deep twilight,
-// where free paths are guided too, wherever it predicts any gain (kLearnGainGuided: with 0.5 there
-// the twilight scene's truth learned at 4 of 128 points and took 1.1× the time for a 10 % larger
-// mean se); the view ray's
-// learned bins; the share of the pilot's table kept in the learned one and the floor of each
+// Learned tables (deep-twilight points, whose free paths are guided; path_tracer.cl "learned
+// guides"): pilot walks per point, all channels together (at least one batch per channel); a
+// point keeps its learned tables wherever the pilot predicts they cut the view ray's second
+// moment below kLearnGain of the fixed table's, i.e. any gain (with 0.5 the twilight scene's
+// truth learned at 4 of 128 points and took 1.1× the time for a 10 % larger mean se). Shallower twilight (sun
+// −5.6…0° on Earth) does not pilot: there, asked to halve the second moment (learned walks reach
+// sunlit air more often, so each costs more), the pilot kept its tables at 0 of the twilight
+// scene's 124 such points, 0 of the default scene's 9 and 1 of ~170 in −6…0° scenes of an
+// 8–10 km camera and of Mars, while its walks took ~5 % of the default Earth's check. The view
+// ray's learned bins; the share of the pilot's table kept in the learned one and the floor of each
 // direction cell (defensive mixtures: a learned table starves no region by more than 2× and
 // ~3× in weight, so a region the pilot missed is not made rarer still — with 0.2 and 0.1 the
 // twilight scene's worst channels reached a relative se of 1.7).
 constexpr double kPilotWalks = 1024;
-constexpr double kLearnGain = 0.5;
-constexpr double kLearnGainGuided = 1.0;
+constexpr double kLearnGain = 1.0;
 constexpr int kLearnBins = 24;
 constexpr double kKeepFixed = 0.5;
 constexpr double kCellFloor = 0.3;
@@ -188,7 +189,7 @@ struct Prepared {
   std::vector<double> node_t;    // [P][kNodes]
   std::vector<double> node_tau;  // [P][C][kNodes]
   std::vector<double> node_cdf;  // [P][C][kNodes]
-  std::vector<char> twilight;    // [P]: may learn its tables (guided walks, the sun below the horizon)
+  std::vector<char> twilight;    // [P]: may learn its tables (its free paths are guided: deep twilight)
   std::vector<double> cells;     // [P][TRUTH_GUIDE_STRIDE]: the learned first-direction cells, flag
   std::vector<char> guided_paths;  // [P]: its walks guide their free paths (truth_deep_shadow_cosine)
   std::vector<std::vector<double>> medium;  // [group]: medium_table of channels 3g..3g+2
@@ -659,8 +660,8 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
     point_geometry(a, points[i], row);
     const bool guided = o.next_sun == TruthOptions::NextSun::along_ray ||
                         (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach);
-    P.twilight[i] = o.learn && guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < 0.0;
     P.guided_paths[i] = guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < deep;
+    P.twilight[i] = o.learn && P.guided_paths[i];
     any_guided = any_guided || P.guided_paths[i];
   }
   const bool single = o.order1 == TruthOptions::Order1::quadrature;
@@ -1192,8 +1193,7 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
       const PilotWalks& w = walks[p];
       const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
       learn_view_table(w, n, cdf, P.n_channels);
-      keep[p] = predicted_ratio(w, n, &tables.node_cdf[at], &P.node_cdf[at], cdf) <
-                (P.guided_paths[p] ? kLearnGainGuided : kLearnGain);
+      keep[p] = predicted_ratio(w, n, &tables.node_cdf[at], &P.node_cdf[at], cdf) < kLearnGain;
       if (keep[p]) {
         learn_cells(w, &learned.cells[p * TRUTH_GUIDE_STRIDE]);
         learned.cells[p * TRUTH_GUIDE_STRIDE + TRUTH_GUIDE_CELLS + 1] = 1.0;
