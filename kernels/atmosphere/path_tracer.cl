@@ -524,8 +524,9 @@ FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL con
  * T̂ + [u < q] (T − T̂) / q, T̂ = e^{−tau_hat}, T exact (truth_optical_depth): its expectation is
  * T whatever T̂, and its variance (1/q − 1)(T − T̂)² is small beside a walk's own: at most
  * 0.08 T² on the rays of test TruthTracking.LineViewTransmittanceKeepsItsExpectationWhatever
- * ItsTrapezoid (Earth; Mars 0.02), against ~1–2 for a twilight walk. The exact depth it spares on 3 of 4 line estimates (~40 Gauss–Legendre
- * points over the cut pieces, against the line's 9 nodes) was most of such an estimate's cost. */
+ * ItsTrapezoid (Earth; Mars 0.02), against ~1–2 for a twilight walk. The exact depth it spares
+ * on 3 of 4 line estimates (~40 Gauss–Legendre points over the cut pieces, against the line's
+ * 9 nodes) was most of such an estimate's cost. */
 FN real truth_view_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
                                  int ground, real s_end, real tau_hat, int exact, PhiloxStream* rng,
                                  int* violations) {

@@ -69,12 +69,12 @@ constexpr double kUniformMixPilot = 0.5;
 // guides"): pilot walks per point, all channels together (at least one batch per channel); a
 // point keeps its learned tables wherever the pilot predicts they cut the view ray's second
 // moment below kLearnGain of the fixed table's, i.e. any gain (with 0.5 the twilight scene's
-// truth learned at 4 of 128 points and took 1.1× the time for a 10 % larger mean se). Shallower twilight (sun
-// −5.6…0° on Earth) does not pilot: there, asked to halve the second moment (learned walks reach
-// sunlit air more often, so each costs more), the pilot kept its tables at 0 of the twilight
-// scene's 124 such points, 0 of the default scene's 9 and 1 of ~170 in −6…0° scenes of an
-// 8–10 km camera and of Mars, while its walks took ~5 % of the default Earth's check. The view
-// ray's learned bins; the share of the pilot's table kept in the learned one and the floor of each
+// truth learned at 4 of 128 points and took 1.1× the time for a 10 % larger mean se).
+// Shallower twilight (sun −5.6…0° on Earth) does not pilot: there, asked to halve the second
+// moment (learned walks reach sunlit air more often, so each costs more), the pilot kept its
+// tables at 0 of the twilight scene's 124 such points, 0 of the default scene's 9 and 1 of ~170
+// in −6…0° scenes of an 8–10 km camera and of Mars, while its walks took ~5 % of the default
+// Earth's check. The view ray's learned bins; the share of the pilot's table kept in the learned one and the floor of each
 // direction cell (defensive mixtures: a learned table starves no region by more than 2× and
 // ~3× in weight, so a region the pilot missed is not made rarer still — with 0.2 and 0.1 the
 // twilight scene's worst channels reached a relative se of 1.7).
