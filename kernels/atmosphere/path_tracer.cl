@@ -771,10 +771,18 @@ FN int truth_guided_free_path(const AtmosphereParameters* a, int c, GLOBAL const
  * is), the guide being a product, over the local frame (zenith z, azimuth 0 towards the sun),
  * of a wrapped Cauchy azimuth (concentration TRUTH_GUIDE_RHO) and a Cauchy elevation about
  * truth_guide_centre, just above the horizon's dip (scale TRUTH_GUIDE_WIDTH) truncated to
- * [−π/2, π/2]; pdf per sr p_φ p_e / cos e. */
+ * [−π/2, π/2]; pdf per sr p_φ p_e / cos e.
+ * The scale is TRUTH_GUIDE_WIDTH where free paths are guided (deep twilight) and
+ * TRUTH_GUIDE_WIDTH_SHALLOW at the other points that guide (sun from −5.6° to ~8°). There the
+ * walks' largest sun terms come from vertices 5–45 km up in the shadow looking 0–12° above the
+ * local horizontal towards the sun (ν 0.75–0.99), above the narrow guide's band: with 0.1
+ * instead of 0.05, blue's variance per walk ×0.75–0.94 at five such ground views (50 000–100 000
+ * walks), red's up to ×1.5 (which the 1024-walk floor hides: red is at 0.2–0.4 % there); with
+ * the sun at −9° and −11° every channel ×1.3–1.7, so deep twilight keeps 0.05. */
 #define TRUTH_GUIDE_SHARE R(0.5)
 #define TRUTH_GUIDE_RHO R(0.5)
 #define TRUTH_GUIDE_WIDTH R(0.05)
+#define TRUTH_GUIDE_WIDTH_SHALLOW R(0.1)
 /* The horizontal unit vectors t1 (towards the sun's azimuth) and t2 = z × t1. */
 FN void truth_guide_frame(const real* z, const real* sun, real* t1, real* t2) {
   const real sz = dot3(sun, z);
@@ -805,19 +813,20 @@ FN real truth_guide_centre(const AtmosphereParameters* a, real h) {
  * Cauchy elevation about e0 truncated to [−π/2, π/2]: u_e ↦ e0 + W tan(lo + u_e (hi − lo)). */
 typedef struct {
   real z[3], t1[3], t2[3];
-  real e0, lo, hi;
+  real e0, lo, hi, width;
 } TruthGuide;
-FN void truth_guide_at(const real* z, const real* sun, real e0, TruthGuide* g) {
+FN void truth_guide_at(const real* z, const real* sun, real e0, real width, TruthGuide* g) {
   truth_guide_frame(z, sun, g->t1, g->t2);
   for (int k = 0; k < 3; ++k) g->z[k] = z[k];
   g->e0 = e0;
-  g->lo = atan((R(-0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
-  g->hi = atan((R(0.5) * ATM_PI - e0) / TRUTH_GUIDE_WIDTH);
+  g->width = width;
+  g->lo = atan((R(-0.5) * ATM_PI - e0) / width);
+  g->hi = atan((R(0.5) * ATM_PI - e0) / width);
 }
 FN void truth_guide_sample(const TruthGuide* g, real u_e, real u_phi, real* out) {
   const real q = (R(1.0) - TRUTH_GUIDE_RHO) / (R(1.0) + TRUTH_GUIDE_RHO);
   const real phi = R(2.0) * atan(q * tan(ATM_PI * (u_phi - R(0.5))));
-  const real e = g->e0 + TRUTH_GUIDE_WIDTH * tan(g->lo + u_e * (g->hi - g->lo));
+  const real e = g->e0 + g->width * tan(g->lo + u_e * (g->hi - g->lo));
   const real ce = cos(e), se = sin(e), cp = cos(phi), sp = sin(phi);
   for (int k = 0; k < 3; ++k) out[k] = ce * (cp * g->t1[k] + sp * g->t2[k]) + se * g->z[k];
   v3_normalize(out);
@@ -829,8 +838,8 @@ FN real truth_guide_pdf(const TruthGuide* g, const real* w) {
   const real e = asin(se), phi = atan2(dot3(w, g->t2), dot3(w, g->t1));
   const real rho = TRUTH_GUIDE_RHO;
   const real p_phi = (R(1.0) - rho * rho) / (R(2.0) * ATM_PI * (R(1.0) + rho * rho - R(2.0) * rho * cos(phi)));
-  const real x = (e - g->e0) / TRUTH_GUIDE_WIDTH;
-  const real p_e = R(1.0) / ((g->hi - g->lo) * TRUTH_GUIDE_WIDTH * (R(1.0) + x * x));
+  const real x = (e - g->e0) / g->width;
+  const real p_e = R(1.0) / ((g->hi - g->lo) * g->width * (R(1.0) + x * x));
   return p_phi * p_e / ce;
 }
 
@@ -874,7 +883,7 @@ FN void truth_guide_coordinates(const TruthGuide* g, const real* w, real* u_e, r
   const real e = asin(clamp_cosine(dot3(w, g->z)));
   const real phi = atan2(dot3(w, g->t2), dot3(w, g->t1));
   const real q = (R(1.0) - TRUTH_GUIDE_RHO) / (R(1.0) + TRUTH_GUIDE_RHO);
-  *u_e = fmin(fmax((atan((e - g->e0) / TRUTH_GUIDE_WIDTH) - g->lo) / (g->hi - g->lo), R(0.0)), R(1.0));
+  *u_e = fmin(fmax((atan((e - g->e0) / g->width) - g->lo) / (g->hi - g->lo), R(0.0)), R(1.0));
   *u_abs = fmin(R(2.0) * atan(tan(R(0.5) * fabs(phi)) / q) / ATM_PI, R(1.0));
 }
 FN int truth_guide_cell(real u_e, real u_abs) {
@@ -1007,7 +1016,9 @@ FN real truth_walk(const AtmosphereParameters* a, int c, GLOBAL const real* pt, 
       const int record = mode == TRUTH_MODE_PILOT && order == 1 && use_line;
       const real guide_share = learned ? TRUTH_GUIDE_LEARNED_SHARE : TRUTH_GUIDE_SHARE;
       TruthGuide guide;
-      if (use_line) truth_guide_at(z, sun, learned || record || mu_s < R(0.0) ? truth_guide_centre(a, h) : R(0.0), &guide);
+      if (use_line)
+        truth_guide_at(z, sun, learned || record || mu_s < R(0.0) ? truth_guide_centre(a, h) : R(0.0),
+                       guided_paths ? TRUTH_GUIDE_WIDTH : TRUTH_GUIDE_WIDTH_SHALLOW, &guide);
       if (use_line && philox_uniform(rng) < guide_share) {
         if (learned) {
           const real u1 = philox_uniform(rng), u2 = philox_uniform(rng);
