@@ -503,6 +503,14 @@ FN real truth_sun_depth_table(const AtmosphereParameters* a, GLOBAL const real* 
  * walk's radiance varies by a factor of ~3 between walks). So 3 of 4 sun transmittances, a third
  * of a twilight walk's exact depths, cost a table read. */
 #define TRUTH_SUN_EXACT_SHARE R(0.25)
+/* t_hat, an approximation of T over [0, s_end] of the ray (h, mu), corrected by the exact depth
+ * with probability TRUTH_SUN_EXACT_SHARE = q: t_hat + [u < q] (T − t_hat) / q, expectation T. */
+FN real truth_corrected_transmittance(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h,
+                                      real mu, real s_end, real t_hat, PhiloxStream* rng) {
+  if (philox_uniform(rng) >= TRUTH_SUN_EXACT_SHARE) return t_hat;
+  const real t = exp(-truth_optical_depth(a, c, medium, h, mu, s_end));
+  return t_hat + (t - t_hat) / TRUTH_SUN_EXACT_SHARE;
+}
 /* The cosine of the ray T_sun is taken along: the disc centre's, or the horizon's when the
  * centre is below it (what the transmittance texture's clamp to its edge gives). */
 FN real truth_sun_ray_cosine(const AtmosphereParameters* a, real h, real mu_s) {
@@ -512,10 +520,8 @@ FN real truth_sun_transmittance(const AtmosphereParameters* a, int c, GLOBAL con
                                 int exact, PhiloxStream* rng, int* violations) {
   const real mu = truth_sun_ray_cosine(a, h, mu_s);
   if (!exact) return truth_ratio_track(a, c, medium, h, mu, 0, distance_to_top(a, h, mu), rng, violations);
-  const real t_table = exp(-truth_sun_depth_table(a, medium, c, h, mu_s));
-  if (philox_uniform(rng) >= TRUTH_SUN_EXACT_SHARE) return t_table;
-  const real t = exp(-truth_optical_depth(a, c, medium, h, mu, distance_to_top(a, h, mu)));
-  return t_table + (t - t_table) / TRUTH_SUN_EXACT_SHARE;
+  return truth_corrected_transmittance(a, c, medium, h, mu, distance_to_top(a, h, mu),
+                                       exp(-truth_sun_depth_table(a, medium, c, h, mu_s)), rng);
 }
 /* T over [0, s_end] of the line estimate's ray (h, mu, ground), whose trapezoid rule at the
  * line's nodes gave the depth tau_hat: by ratio tracking, or where `exact` (the walks of points
@@ -531,10 +537,7 @@ FN real truth_view_transmittance(const AtmosphereParameters* a, int c, GLOBAL co
                                  int ground, real s_end, real tau_hat, int exact, PhiloxStream* rng,
                                  int* violations) {
   if (!exact) return truth_ratio_track(a, c, medium, h, mu, ground, s_end, rng, violations);
-  const real t_hat = exp(-tau_hat);
-  if (philox_uniform(rng) >= TRUTH_SUN_EXACT_SHARE) return t_hat;
-  const real t = exp(-truth_optical_depth(a, c, medium, h, mu, s_end));
-  return t_hat + (t - t_hat) / TRUTH_SUN_EXACT_SHARE;
+  return truth_corrected_transmittance(a, c, medium, h, mu, s_end, exp(-tau_hat), rng);
 }
 
 /* ---- the light at a vertex: where twilight free paths should end ---------------------------- */

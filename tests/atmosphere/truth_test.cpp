@@ -102,6 +102,19 @@ std::array<double, 3> single_scattering_trapezoid(const Medium& M, const TruthPo
 // Reference textures of Bruneton's implementation (full size, 4 orders, rgb).
 std::string ref(const std::string& name) { return (specbake::testing::refdata_dir() / "atmosphere" / name).string(); }
 
+// A test ray: from altitude h (km) above the pole, zenith cosine mu, in the x–z plane: whether it
+// meets the ground, its length D to the ground or the top (km), its start x and direction v.
+struct TestRay {
+  int ground;
+  double D;
+  double x[3], v[3];
+};
+TestRay test_ray(const ref3::AtmosphereParameters& a, double h, double mu) {
+  const int ground = ref3::ray_hits_ground(&a, h, mu);
+  return {ground, ref3::distance_to_nearest_boundary(&a, h, mu, ground), {0, 0, a.bottom_radius + h},
+          {std::sqrt(1 - mu * mu), 0, mu}};
+}
+
 }  // namespace
 
 // ---- random numbers -------------------------------------------------------------------------
@@ -1171,9 +1184,7 @@ TEST(TruthTracking, FreePathsAndShadowRaysFollowTheTransmittance) {
   constexpr int N = 40000;
   for (const auto& ray : rays) {
     const double h = ray[0], mu = ray[1];
-    const int ground = ref3::ray_hits_ground(&a, h, mu);
-    const double D = ref3::distance_to_nearest_boundary(&a, h, mu, ground);
-    const double x[3] = {0, 0, s.bottom_radius_km + h}, v[3] = {std::sqrt(1 - mu * mu), 0, mu};
+    const auto& [ground, D, x, v] = test_ray(a, h, mu);
     for (int c = 0; c < 3; ++c) {
       for (double f : {0.25, 1.0}) {
         const double d = f * D;
@@ -1238,9 +1249,7 @@ TEST(TruthTracking, GuidedFreePathsKeepTheExpectationWhateverTheirTable) {
   int tabled = 0;
   for (const auto& ray : rays) {
     const double h = ray[0], mu = ray[1];
-    const int ground = ref3::ray_hits_ground(&a, h, mu);
-    const double D = ref3::distance_to_nearest_boundary(&a, h, mu, ground);
-    const double x[3] = {0, 0, s.bottom_radius_km + h}, v[3] = {std::sqrt(1 - mu * mu), 0, mu};
+    const auto& [ground, D, x, v] = test_ray(a, h, mu);
     const double z[3] = {0, 0, 1};
     auto g = [&](double sd, double h_s) { return 1.0 + sd / D + std::exp(h_s / 10.0); };
     const double g_ground = 3.0;
@@ -1312,9 +1321,7 @@ TEST(TruthTracking, ExactOpticalDepthMatchesAFineQuadrature) {
                               {10.0, -0.056}, {0.2, 0.002}, {25.0, -0.09}, {15.0, -0.068}};
     for (const auto& ray : rays) {
       const double h = ray[0], mu = ray[1];
-      const int ground = ref3::ray_hits_ground(&a, h, mu);
-      const double D = ref3::distance_to_nearest_boundary(&a, h, mu, ground);
-      const double x[3] = {0, 0, s.bottom_radius_km + h}, v[3] = {std::sqrt(1 - mu * mu), 0, mu};
+      const auto& [ground, D, x, v] = test_ray(a, h, mu);
       for (double f : {0.3, 1.0})
         for (int c = 0; c < 3; ++c) {
           const double want = M.depth(c, x, v, f * D, 200000);
@@ -1412,9 +1419,7 @@ TEST(TruthTracking, LineViewTransmittanceKeepsItsExpectationWhateverItsTrapezoid
     double worst_var = 0.0;
     for (const auto& ray : rays) {
       const double h = ray[0], mu = ray[1];
-      const int ground = ref3::ray_hits_ground(&a, h, mu);
-      const double D = ref3::distance_to_nearest_boundary(&a, h, mu, ground);
-      const double x[3] = {0, 0, s.bottom_radius_km + h}, v[3] = {std::sqrt(1 - mu * mu), 0, mu};
+      const auto& [ground, D, x, v] = test_ray(a, h, mu);
       for (int c = 0; c < 3; ++c) {
         double tau_k[kSeg + 1], prev = 0.0;
         for (int k = 0; k <= kSeg; ++k) {

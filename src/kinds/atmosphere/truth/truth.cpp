@@ -74,10 +74,10 @@ constexpr double kUniformMixPilot = 0.5;
 // moment (learned walks reach sunlit air more often, so each costs more), the pilot kept its
 // tables at 0 of the twilight scene's 124 such points, 0 of the default scene's 9 and 1 of ~170
 // in −6…0° scenes of an 8–10 km camera and of Mars, while its walks took ~5 % of the default
-// Earth's check. The view ray's learned bins; the share of the pilot's table kept in the learned one and the floor of each
-// direction cell (defensive mixtures: a learned table starves no region by more than 2× and
-// ~3× in weight, so a region the pilot missed is not made rarer still — with 0.2 and 0.1 the
-// twilight scene's worst channels reached a relative se of 1.7).
+// Earth's check. The view ray's learned bins; the share of the pilot's table kept in the
+// learned one and the floor of each direction cell (defensive mixtures: a learned table starves
+// no region by more than 2× and ~3× in weight, so a region the pilot missed is not made rarer
+// still — with 0.2 and 0.1 the twilight scene's worst channels reached a relative se of 1.7).
 constexpr double kPilotWalks = 1024;
 constexpr double kLearnGain = 1.0;
 constexpr int kLearnBins = 24;
@@ -189,9 +189,9 @@ struct Prepared {
   std::vector<double> node_t;    // [P][kNodes]
   std::vector<double> node_tau;  // [P][C][kNodes]
   std::vector<double> node_cdf;  // [P][C][kNodes]
-  std::vector<char> twilight;    // [P]: may learn its tables (its free paths are guided: deep twilight)
   std::vector<double> cells;     // [P][TRUTH_GUIDE_STRIDE]: the learned first-direction cells, flag
   std::vector<char> guided_paths;  // [P]: its walks guide their free paths (truth_deep_shadow_cosine)
+                                   // and, with TruthOptions::learn, it pilots for learned tables
   std::vector<std::vector<double>> medium;  // [group]: medium_table of channels 3g..3g+2
   std::vector<double> single;    // [P][C]: order 1 by quadrature (TruthOptions::Order1::quadrature), else empty
   std::vector<char> low_sun;     // [P]: its sun is below TruthOptions::low_sun_elevation_deg
@@ -645,7 +645,6 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
   P.node_t.assign(P.n_points * kNodes, 0.0);
   P.node_tau.assign(P.n_points * P.n_channels * kNodes, 0.0);
   P.node_cdf.assign(P.n_points * P.n_channels * kNodes, 0.0);
-  P.twilight.assign(P.n_points, 0);
   P.low_sun.assign(P.n_points, 0);
   for (std::size_t i = 0; i < P.n_points; ++i) P.low_sun[i] = 90.0 - points[i].sun_zenith_deg < o.low_sun_elevation_deg;
   P.cells.assign(P.n_points * TRUTH_GUIDE_STRIDE, 0.0);
@@ -661,7 +660,6 @@ Prepared prepare(const AtmosphereSpec& spec, const std::vector<TruthPoint>& poin
     const bool guided = o.next_sun == TruthOptions::NextSun::along_ray ||
                         (o.next_sun == TruthOptions::NextSun::automatic && row[PT_MU_S] < reach);
     P.guided_paths[i] = guided && row[PT_NODES] != 0.0 && row[PT_MU_S] < deep;
-    P.twilight[i] = o.learn && P.guided_paths[i];
     any_guided = any_guided || P.guided_paths[i];
   }
   const bool single = o.order1 == TruthOptions::Order1::quadrature;
@@ -1141,27 +1139,28 @@ double predicted_ratio(const PilotWalks& w, int n, const double* pilot, const do
   return den > 0.0 ? num / den : 1.0;
 }
 
-// Pilot walks for the twilight points, then their learned tables in the engine where the pilot
-// predicts a gain (kLearnGain). The pilot's walks only shape the tables: they are not part of
-// the estimate (their streams are their own).
+// Pilot walks for the points whose free paths are guided (deep twilight; TruthOptions::learn),
+// then their learned tables in the engine where the pilot predicts a gain (kLearnGain). The
+// pilot's walks only shape the tables: they are not part of the estimate (their streams are
+// their own).
 void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Totals& totals) {
   bool any = false;
-  for (char t : P.twilight) any = any || t;
-  if (!any) return;
+  for (char t : P.guided_paths) any = any || t;
+  if (!o.learn || !any) return;
   Prepared tables;
   tables.n_points = P.n_points;
   tables.n_channels = P.n_channels;
   tables.node_cdf = P.node_cdf;
   tables.cells = P.cells;
   for (std::size_t p = 0; p < P.n_points; ++p)
-    if (P.twilight[p]) explore_table(P, p, &tables.node_cdf[p * P.n_channels * kNodes]);
+    if (P.guided_paths[p]) explore_table(P, p, &tables.node_cdf[p * P.n_channels * kNodes]);
   engine.learn(tables);
   const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
   const int batches = std::max(1, static_cast<int>(std::ceil(kPilotWalks / static_cast<double>(P.n_channels) /
                                                              o.paths_per_batch)));
   std::vector<int> base(P.n_points * kGroup, 0), count(P.n_points * kGroup, 0);
   for (std::size_t p = 0; p < P.n_points; ++p)
-    if (P.twilight[p]) std::fill_n(&count[p * kGroup], kGroup, batches);
+    if (P.guided_paths[p]) std::fill_n(&count[p * kGroup], kGroup, batches);
   std::vector<PilotWalks> walks(P.n_points);
   for (auto& w : walks) w.channel.resize(P.n_channels);
   std::vector<double> pilot;
@@ -1189,7 +1188,7 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
   parallel_for(static_cast<long long>(P.n_points), [&](long long p) {
     const std::size_t at = p * P.n_channels * kNodes, size = P.n_channels * kNodes;
     double* cdf = &learned.node_cdf[at];
-    if (P.twilight[p]) {
+    if (P.guided_paths[p]) {
       const PilotWalks& w = walks[p];
       const int n = static_cast<int>(P.points[p * TRUTH_POINT_STRIDE + PT_NODES]);
       learn_view_table(w, n, cdf, P.n_channels);
