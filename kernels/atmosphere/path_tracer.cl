@@ -291,37 +291,44 @@ FN real truth_depth_piece_error(const AtmosphereParameters* a, int c, int n, rea
   }
   return error;
 }
-/* σ_t at the point x of the ray whose tangent point is at ρ_t². */
-FN real truth_extinction_at_x(const AtmosphereParameters* a, int c, real rho_t2, real x) {
-  return truth_extinction(a, c, altitude_of_rho2(a, rho_t2 + x * x));
+/* The three profiles' densities (Rayleigh, Mie, absorption) at the point x of the ray whose
+ * tangent point is at ρ_t², added with weight w to acc[0..2]. */
+FN void truth_add_densities_at_x(const AtmosphereParameters* a, real rho_t2, real x, real w, real* acc) {
+  const real h = altitude_of_rho2(a, rho_t2 + x * x);
+  acc[0] += w * profile_density(&a->rayleigh_density, h);
+  acc[1] += w * profile_density(&a->mie_density, h);
+  acc[2] += w * profile_density(&a->absorption_density, h);
 }
-/* ∫ σ_t dx over [x0, x1] of that ray, by n-point Gauss–Legendre (n = 5 or 8). */
-FN real truth_piece_depth(const AtmosphereParameters* a, int c, int n, real rho_t2, real x0, real x1) {
+/* ∫ ρ_i dx over [x0, x1] of that ray for the three profiles (their optical lengths, km), by
+ * n-point Gauss–Legendre (n = 5 or 8), added to len[0..2]. */
+FN void truth_add_piece_lengths(const AtmosphereParameters* a, int n, real rho_t2, real x0, real x1, real* len) {
   const real mid = R(0.5) * (x0 + x1), half_len = R(0.5) * (x1 - x0);
-  real sum = R(0.0);
+  real sum[3] = {R(0.0), R(0.0), R(0.0)};
   if (n == 5) {
     const real x[2] = {R(0.5384693101056831), R(0.9061798459386640)};
     const real w[2] = {R(0.4786286704993665), R(0.2369268850561891)};
-    sum = R(0.5688888888888889) * truth_extinction_at_x(a, c, rho_t2, mid);
-    for (int i = 0; i < 2; ++i)
-      sum += w[i] * (truth_extinction_at_x(a, c, rho_t2, mid - half_len * x[i]) +
-                     truth_extinction_at_x(a, c, rho_t2, mid + half_len * x[i]));
+    truth_add_densities_at_x(a, rho_t2, mid, R(0.5688888888888889), sum);
+    for (int i = 0; i < 2; ++i) {
+      truth_add_densities_at_x(a, rho_t2, mid - half_len * x[i], w[i], sum);
+      truth_add_densities_at_x(a, rho_t2, mid + half_len * x[i], w[i], sum);
+    }
   } else {
     const real x[4] = {R(0.1834346424956498), R(0.5255324099163290), R(0.7966664774136268), R(0.9602898564975363)};
     const real w[4] = {R(0.3626837833783620), R(0.3137066458778874), R(0.2223810344533745), R(0.1012285362903762)};
-    for (int i = 0; i < 4; ++i)
-      sum += w[i] * (truth_extinction_at_x(a, c, rho_t2, mid - half_len * x[i]) +
-                     truth_extinction_at_x(a, c, rho_t2, mid + half_len * x[i]));
+    for (int i = 0; i < 4; ++i) {
+      truth_add_densities_at_x(a, rho_t2, mid - half_len * x[i], w[i], sum);
+      truth_add_densities_at_x(a, rho_t2, mid + half_len * x[i], w[i], sum);
+    }
   }
-  return sum * half_len;
+  for (int i = 0; i < 3; ++i) len[i] += sum[i] * half_len;
 }
 /* Adds the pieces of |x| ∈ [lo, hi] cut at the crossings √(ρ_j² − ρ_t²) of the cut altitudes
  * (the integrand depends on x² only, so the descending side is integrated in |x| too). */
-FN real truth_monotone_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real rho_t2, real lo,
-                             real hi) {
-  if (!(hi > lo)) return R(0.0);
+FN void truth_add_monotone_lengths(const AtmosphereParameters* a, GLOBAL const real* medium, real rho_t2, real lo,
+                                   real hi, real* len) {
+  if (!(hi > lo)) return;
   const int n_cuts = (int)medium[TRUTH_CUTS_AT];
-  real depth = R(0.0), prev = lo;
+  real prev = lo;
   int order = 8; /* the rule of the piece below the next cut crossed */
   for (int k = 0; k < n_cuts; ++k) {
     const real x2 = horizon_distance2(a, medium[TRUTH_CUTS_AT + 1 + k]) - rho_t2;
@@ -330,21 +337,34 @@ FN real truth_monotone_depth(const AtmosphereParameters* a, int c, GLOBAL const 
     if (x <= prev) continue;
     order = (int)medium[TRUTH_CUTS_AT + 1 + TRUTH_MAX_CUTS + k];
     if (x >= hi) break;
-    depth += truth_piece_depth(a, c, order, rho_t2, prev, x);
+    truth_add_piece_lengths(a, order, rho_t2, prev, x, len);
     prev = x;
   }
-  return depth + truth_piece_depth(a, c, order, rho_t2, prev, hi);
+  truth_add_piece_lengths(a, order, rho_t2, prev, hi, len);
 }
-FN real truth_optical_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
-                            real s_end) {
+/* The three profiles' optical lengths ∫ ρ_i ds (km) over [0, s_end] of the ray (h, mu), exact
+ * to TRUTH_DEPTH_ERROR at the cuts of `medium` (whose piece rules hold for every channel of its
+ * group: the lengths serve each of them). */
+FN void truth_optical_lengths(const AtmosphereParameters* a, GLOBAL const real* medium, real h, real mu, real s_end,
+                              real* len) {
   const real r_mu = radius_of(a, h) * mu;
   const real rho_t2 = horizon_distance2(a, h) - r_mu * r_mu;
   const real x0 = r_mu, x1 = r_mu + s_end;
+  for (int i = 0; i < 3; ++i) len[i] = R(0.0);
   /* the descending part (x < 0), then the rising part (x > 0) */
-  real depth = R(0.0);
-  if (x0 < R(0.0)) depth += truth_monotone_depth(a, c, medium, rho_t2, fmax(-x1, R(0.0)), -x0);
-  if (x1 > R(0.0)) depth += truth_monotone_depth(a, c, medium, rho_t2, fmax(x0, R(0.0)), x1);
-  return depth;
+  if (x0 < R(0.0)) truth_add_monotone_lengths(a, medium, rho_t2, fmax(-x1, R(0.0)), -x0, len);
+  if (x1 > R(0.0)) truth_add_monotone_lengths(a, medium, rho_t2, fmax(x0, R(0.0)), x1, len);
+}
+/* Channel c's optical depth from the three profiles' optical lengths. */
+FN real truth_depth_of_lengths(const AtmosphereParameters* a, int c, const real* len) {
+  return a->rayleigh_scattering[c] * len[0] + a->mie_extinction[c] * len[1] + a->absorption_extinction[c] * len[2];
+}
+/* Channel c's optical depth ∫ σ_t ds over [0, s_end] of the ray (h, mu). */
+FN real truth_optical_depth(const AtmosphereParameters* a, int c, GLOBAL const real* medium, real h, real mu,
+                            real s_end) {
+  real len[3];
+  truth_optical_lengths(a, medium, h, mu, s_end, len);
+  return truth_depth_of_lengths(a, c, len);
 }
 
 /* ---- transmittance estimates: ratio tracking ----------------------------------------------- */

@@ -220,6 +220,16 @@ Channels Channels::slice(std::size_t first, std::size_t count) const {
           cut(mie_extinction), cut(absorption_extinction), cut(ground_albedo)};
 }
 
+Channels Channels::subset(const std::vector<std::size_t>& channels) const {
+  auto pick = [&](const std::vector<double>& v) {
+    std::vector<double> out;
+    for (std::size_t c : channels) out.push_back(v.at(c));
+    return out;
+  };
+  return {pick(lambda_nm), pick(solar_irradiance), pick(rayleigh_scattering), pick(mie_scattering),
+          pick(mie_extinction), pick(absorption_extinction), pick(ground_albedo)};
+}
+
 Spectrum spectrum_of(const AtmosphereSpec& s) {
   Spectrum sp;
   sp.spectral = s.spectral;

@@ -48,6 +48,7 @@ struct Channels {
   std::vector<double> ground_albedo;
   std::size_t size() const { return lambda_nm.size(); }
   Channels slice(std::size_t first, std::size_t count) const;
+  Channels subset(const std::vector<std::size_t>& channels) const;  // those channels, in that order
 };
 
 struct Model {

@@ -152,6 +152,10 @@ std::vector<double> medium_table(const Model& m, const Channels& group,
                                  const std::vector<double>* lengths = nullptr);
 // The profiles as three channels of unit coefficients (Rayleigh, Mie, absorption).
 Channels unit_channels();
+// log S̄, the light scattered once towards a point (path_tracer.cl, "the light at a vertex"), of
+// every channel at the sky table's nodes, [TRUTH_SKY_H · TRUTH_SKY_MU][channel]; `lengths`: the
+// medium table of unit_channels(). Only shapes the pdfs of twilight walks.
+std::vector<double> sky_light_table(const Model& m, const Channels& ch, const std::vector<double>& lengths);
 
 struct TruthMemory {
   std::uint64_t host = 0, device = 0, largest_buffer = 0;
