@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -265,10 +266,6 @@ struct Sub {
   double h_mid = 0.0, mu_s = 0.0;  // the middle's altitude and sun cosine
 };
 
-// The sun's visible fraction and the optical lengths of the ray towards it (along the horizon
-// when the disc centre is below it, as the model does) from distance t_mid on the view ray of the
-// point `row`: 8-point Gauss–Legendre on each side of the sun ray's tangent point (an
-// approximation: it only shapes the sampling density).
 // The sun's cosine at distance t along the view ray of the point `row`.
 double sun_cosine_along(const AtmosphereParameters& a, const double* row, double t) {
   const double r0 = a.bottom_radius + row[PT_H];
@@ -278,13 +275,18 @@ double sun_cosine_along(const AtmosphereParameters& a, const double* row, double
   return std::clamp(ref3::dot3(sun, z) / std::sqrt(ref3::dot3(z, z)), -1.0, 1.0);
 }
 
-void sunlit(const AtmosphereParameters& a, const double* row, double t_mid, double h_mid, Sub& sub) {
+// The sun's visible fraction and, with `lengths` (only order 1's share of the pdf reads them),
+// the optical lengths of the ray towards it (along the horizon when the disc centre is below it,
+// as the model does) from distance t_mid on the view ray of the point `row`: 8-point
+// Gauss–Legendre on each side of the sun ray's tangent point (an approximation: it only shapes
+// the sampling density).
+void sunlit(const AtmosphereParameters& a, const double* row, double t_mid, double h_mid, bool lengths, Sub& sub) {
   const double mu_s = sun_cosine_along(a, row, t_mid);
   sub.h_mid = h_mid;
   sub.mu_s = mu_s;
   sub.visible = ref3::sun_visible_fraction(&a, h_mid, mu_s);
   sub.sun_l[0] = sub.sun_l[1] = sub.sun_l[2] = 0.0;
-  if (!(sub.visible > 0.0)) return;
+  if (!lengths || !(sub.visible > 0.0)) return;
   const double r = a.bottom_radius + h_mid;
   const double mu = ref3::truth_sun_ray_cosine(&a, h_mid, mu_s);
   const double d = ref3::distance_to_top(&a, h_mid, mu);
@@ -304,12 +306,14 @@ void sunlit(const AtmosphereParameters& a, const double* row, double t_mid, doub
   }
 }
 
-// Per segment between nodes t: the optical lengths of the three profiles, and its sub-segments.
+// Per segment between nodes t: the optical lengths of the three profiles, and its sub-segments
+// (the sun's optical lengths from them with `sun_lengths`).
 struct Segments {
   std::vector<std::array<double, 3>> lengths;
   std::vector<std::array<Sub, kSubSegments>> subs;
 };
-Segments view_segments(const AtmosphereParameters& a, const double* row, const std::vector<double>& t) {
+Segments view_segments(const AtmosphereParameters& a, const double* row, const std::vector<double>& t,
+                       bool sun_lengths) {
   const double h = row[PT_H], mu = row[PT_MU];
   const int ground = row[PT_GROUND] != 0.0;
   const int n = static_cast<int>(t.size());
@@ -323,7 +327,7 @@ Segments view_segments(const AtmosphereParameters& a, const double* row, const s
       {
         double h_mid, mu_mid;
         ref3::point_along(&a, h, mu, mid, ground, &h_mid, &mu_mid);
-        sunlit(a, row, mid, h_mid, sub);
+        sunlit(a, row, mid, h_mid, sun_lengths, sub);
       }
       for (int i = 0; i < 4; ++i)
         for (int side = 0; side < 2; ++side) {
@@ -539,7 +543,7 @@ void view_table(const AtmosphereParameters& a, const Channels& ch, const std::ve
   const int n = static_cast<int>(t.size());
   row[PT_NODES] = n;
   for (int k = 0; k < kNodes; ++k) node_t[k] = t[std::min(k, n - 1)];
-  const Segments seg = view_segments(a, row, t);
+  const Segments seg = view_segments(a, row, t, order1_walked);
   // the phase functions at the point's view–sun angle (the same all along the view ray)
   const double p_r = ref3::rayleigh_phase(row[PT_NU]), p_m = ref3::mie_phase(a.mie_g, row[PT_NU]);
   for (std::size_t c = 0; c < C; ++c)
@@ -1043,6 +1047,7 @@ constexpr double kChunkTableBytes = 64e6;      // view-ray tables of one chunk o
 struct Totals {
   double events = 0.0;
   long long walks = 0, truncated = 0, violations = 0;
+  double tables_s = 0.0, pilot_s = 0.0;  // host tables and device set-up; the learned tables' pilots
 };
 
 // One twilight point's pilot walks: per channel, per walk, its record (path_tracer.cl).
@@ -1390,7 +1395,9 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
   // batch weighted by its point's events a batch (a twilight walk costs many daylight ones): the
   // first batches of a scene whose points then walk to their cap are not most of its work.
   std::vector<long long> expected(P.n_points * C, 0);
+  const auto pilot_start = std::chrono::steady_clock::now();
   learn_tables(engine, P, o, totals);
+  totals.pilot_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - pilot_start).count();
   for (int round = 0; round < kMaxRounds; ++round) {
     for (;;) {
       std::vector<long long> count(P.n_points * C);
@@ -1536,13 +1543,16 @@ TruthResult trace_all(const AtmosphereSpec& spec, const std::vector<TruthPoint>&
   for (std::size_t k = 0; k < n_chunks; ++k) {
     const std::size_t first = k * chunk, n = std::min(chunk, points.size() - first);
     const std::vector<TruthPoint> part(points.begin() + first, points.begin() + first + n);
+    const auto tables_start = std::chrono::steady_clock::now();
     const Prepared P = prepare(spec, part, first, o);
     const auto engine = make_engine(P);
+    totals.tables_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - tables_start).count();
     trace_chunk(*engine, P, o, r, totals, [&](double f) {
       if (progress) progress("tracing", (static_cast<double>(k) + f) / static_cast<double>(n_chunks));
     });
   }
   r.mean_events = totals.walks > 0 ? totals.events / static_cast<double>(totals.walks) : 0.0;
+  spdlog::debug("truth: tables {:.3f} s, pilot walks {:.3f} s", totals.tables_s, totals.pilot_s);
   r.truncated = totals.truncated;
   if (totals.violations > 0)
     throw JobError("truth: a density exceeded its majorant " + std::to_string(totals.violations) +
