@@ -66,9 +66,7 @@ constexpr int kNodes = kSegments + 1 + 2 * kMaxKinkAltitudes;
 constexpr double kUniformMix = 1e-3;
 constexpr double kUniformMixPilot = 0.5;
 // Learned tables (deep-twilight points, whose free paths are guided; path_tracer.cl "learned
-// guides"): pilot walks per point, all channels together (at least one batch of
-// kPilotBatchWalks per channel: few, so that a point's pilot is several work items, which the
-// cores share — at the traces' 64, 48 channels took 3× the walks asked, one work item a launch); a
+// guides"): pilot walks per point, all channels together (at least one batch per channel); a
 // point keeps its learned tables wherever the pilot predicts they cut the view ray's second
 // moment below kLearnGain of the fixed table's, i.e. any gain (with 0.5 the twilight scene's
 // truth learned at 4 of 128 points and took 1.1× the time for a 10 % larger mean se).
@@ -81,7 +79,6 @@ constexpr double kUniformMixPilot = 0.5;
 // no region by more than 2× and ~3× in weight, so a region the pilot missed is not made rarer
 // still — with 0.2 and 0.1 the twilight scene's worst channels reached a relative se of 1.7).
 constexpr double kPilotWalks = 1024;
-constexpr int kPilotBatchWalks = 16;
 constexpr double kLearnGain = 1.0;
 constexpr int kLearnBins = 24;
 constexpr double kKeepFixed = 0.5;
@@ -864,15 +861,15 @@ struct Stat {
 };
 
 // Runs, for every point p and channel c of one channel group, count[p][c] batches from batch
-// base[p][c] (both [P][kGroup]; stride ≥ every count) of paths_per_batch walks each; returns
-// [P][stride][kStride]. A pilot launch (TRUTH_MODE_PILOT) also fills *pilot with
+// base[p][c] (both [P][kGroup]; stride ≥ every count); returns [P][stride][kStride]. A pilot
+// launch (TRUTH_MODE_PILOT) also fills *pilot with
 // [P][stride][paths_per_batch][kGroup][TRUTH_PILOT_STRIDE]; learn() replaces the view-ray
 // tables and first-direction cells that later TRUTH_MODE_LEARNED launches read.
 class Engine {
  public:
   virtual ~Engine() = default;
   virtual std::vector<double> run(std::size_t group, const std::vector<int>& base, const std::vector<int>& count,
-                                  int stride, int paths_per_batch, int mode, std::vector<double>* pilot) = 0;
+                                  int stride, int mode, std::vector<double>* pilot) = 0;
   virtual void learn(const Prepared& learned) = 0;
 };
 
@@ -915,17 +912,17 @@ class HostEngine final : public Engine {
  public:
   HostEngine(const Prepared& P, const TruthOptions& o) : P_(P), o_(o), groups_(groups_of(P)), cells_(P.cells) {}
   std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count, int stride,
-                          int paths_per_batch, int mode, std::vector<double>* pilot) override {
+                          int mode, std::vector<double>* pilot) override {
     const Group& g = groups_[gi];
     std::vector<double> out(P_.n_points * stride * kStride, 0.0);
-    const std::size_t item_pilot = static_cast<std::size_t>(paths_per_batch) * kGroup * TRUTH_PILOT_STRIDE;
-    if (mode == TRUTH_MODE_PILOT) pilot->assign(pilot_size(P_.n_points, stride, paths_per_batch), 0.0);
+    const std::size_t item_pilot = static_cast<std::size_t>(o_.paths_per_batch) * kGroup * TRUTH_PILOT_STRIDE;
+    if (mode == TRUTH_MODE_PILOT) pilot->assign(pilot_size(P_.n_points, stride, o_.paths_per_batch), 0.0);
     parallel_for(static_cast<long long>(P_.n_points) * stride, [&](long long id) {
       const int p = static_cast<int>(id / stride), j = static_cast<int>(id % stride);
       if (std::none_of(&count[p * kGroup], &count[p * kGroup] + kGroup, [&](int n) { return j < n; })) return;
       ref3::truth_trace_item(&g.a, P_.points.data(), P_.node_t.data(), g.tau.data(), g.cdf.data(), g.medium.data(),
                              kNodes, p, static_cast<int>(P_.point_base), j, &base[p * kGroup], &count[p * kGroup],
-                             paths_per_batch, o_.orders,
+                             o_.paths_per_batch, o_.orders,
                              o_.split_orders, static_cast<int>(o_.next_sun), order1_arg(o_),
                              static_cast<philox_u32>(o_.seed & 0xffffffffu),
                              seed_high(o_, mode), static_cast<int>(g.first), static_cast<int>(g.count), cells_.data(),
@@ -964,11 +961,11 @@ class DeviceEngine final : public Engine {
     }
   }
   std::vector<double> run(std::size_t gi, const std::vector<int>& base, const std::vector<int>& count, int stride,
-                          int paths_per_batch, int mode, std::vector<double>* pilot) override {
+                          int mode, std::vector<double>* pilot) override {
     const Group& g = groups_[gi];
     GroupBuffers& b = buffers_[gi];
     const std::size_t n_out = P_.n_points * stride * kStride;
-    const std::size_t n_pilot = mode == TRUTH_MODE_PILOT ? pilot_size(P_.n_points, stride, paths_per_batch) : 1;
+    const std::size_t n_pilot = mode == TRUTH_MODE_PILOT ? pilot_size(P_.n_points, stride, o_.paths_per_batch) : 1;
     return cl_util::checked("truth_trace", [&] {
       const cl::Buffer base_buf(dev_.context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, base.size() * sizeof(int),
                                 const_cast<int*>(base.data()));
@@ -990,7 +987,7 @@ class DeviceEngine final : public Engine {
       k.setArg(i++, base_buf);
       k.setArg(i++, count_buf);
       k.setArg(i++, static_cast<cl_int>(stride));
-      k.setArg(i++, static_cast<cl_int>(paths_per_batch));
+      k.setArg(i++, static_cast<cl_int>(o_.paths_per_batch));
       k.setArg(i++, static_cast<cl_int>(o_.orders));
       k.setArg(i++, static_cast<cl_int>(o_.split_orders));
       k.setArg(i++, static_cast<cl_int>(o_.next_sun));
@@ -1198,9 +1195,8 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
     if (P.guided_paths[p]) explore_table(P, p, &tables.node_cdf[p * P.n_channels * kNodes]);
   engine.learn(tables);
   const std::size_t n_groups = (P.n_channels + kGroup - 1) / kGroup;
-  const int ppb = std::min(o.paths_per_batch, kPilotBatchWalks);
-  const int batches =
-      std::max(1, static_cast<int>(std::ceil(kPilotWalks / static_cast<double>(P.n_channels) / ppb)));
+  const int batches = std::max(1, static_cast<int>(std::ceil(kPilotWalks / static_cast<double>(P.n_channels) /
+                                                             o.paths_per_batch)));
   std::vector<int> base(P.n_points * kGroup, 0), count(P.n_points * kGroup, 0);
   for (std::size_t p = 0; p < P.n_points; ++p)
     if (P.guided_paths[p]) std::fill_n(&count[p * kGroup], kGroup, batches);
@@ -1209,16 +1205,16 @@ void learn_tables(Engine& engine, const Prepared& P, const TruthOptions& o, Tota
   std::vector<double> pilot;
   for (std::size_t g = 0; g < n_groups; ++g) {
     const std::size_t first = g * kGroup, n_ch = std::min<std::size_t>(kGroup, P.n_channels - first);
-    const std::vector<double> out = engine.run(g, base, count, batches, ppb, TRUTH_MODE_PILOT, &pilot);
+    const std::vector<double> out = engine.run(g, base, count, batches, TRUTH_MODE_PILOT, &pilot);
     for (std::size_t p = 0; p < P.n_points; ++p)
       for (int j = 0; j < count[p * kGroup]; ++j) {
         const double* item = &out[(p * batches + j) * kStride];
         totals.events += item[2 * TRUTH_STATS * kGroup];
-        totals.walks += ppb * static_cast<long long>(n_ch);
+        totals.walks += o.paths_per_batch * static_cast<long long>(n_ch);
         totals.truncated += static_cast<long long>(item[2 * TRUTH_STATS * kGroup + 1]);
         totals.violations += static_cast<long long>(item[2 * TRUTH_STATS * kGroup + 2]);
-        const double* rec = &pilot[(p * batches + j) * ppb * kGroup * TRUTH_PILOT_STRIDE];
-        for (int i = 0; i < ppb; ++i)
+        const double* rec = &pilot[(p * batches + j) * o.paths_per_batch * kGroup * TRUTH_PILOT_STRIDE];
+        for (int i = 0; i < o.paths_per_batch; ++i)
           for (std::size_t c = 0; c < n_ch; ++c) {
             std::array<double, TRUTH_PILOT_STRIDE> r{};
             std::copy_n(rec + (i * kGroup + c) * TRUTH_PILOT_STRIDE, TRUTH_PILOT_STRIDE, r.begin());
@@ -1423,8 +1419,7 @@ void trace_chunk(Engine& engine, const Prepared& P, const TruthOptions& o, Truth
             stride = std::max(stride, most[p]);
           }
         if (stride == 0) continue;
-        const std::vector<double> out =
-            engine.run(g, base, n, stride, static_cast<int>(ppb), TRUTH_MODE_LEARNED, nullptr);
+        const std::vector<double> out = engine.run(g, base, n, stride, TRUTH_MODE_LEARNED, nullptr);
         for (std::size_t p = 0; p < P.n_points; ++p)
           for (int j = 0; j < most[p]; ++j) {
             const double* item = &out[(p * stride + j) * kStride];
