@@ -156,12 +156,13 @@ _baked = {}
 
 
 def measure_bake(spec, args):
-    """A cold run into an empty output folder, then `repeats` warm runs (--force, kept truth);
-    targets that read the same job share its runs."""
+    """`cold_runs` cold runs, each into an empty output folder, then `repeats` warm runs (--force,
+    kept truth) after the first; targets that read the same job share its runs."""
     repeats = spec.get("repeats", args.repeats)
-    key = (spec["config"], spec["job"], repeats)
+    cold_runs = args.cold_runs or spec.get("cold_runs", 1)
+    key = (spec["config"], spec["job"], repeats, cold_runs)
     if key not in _baked:
-        _baked[key] = bake_runs(spec, repeats, args)
+        _baked[key] = bake_runs(spec, repeats, cold_runs, args)
     return _baked[key]
 
 
@@ -178,35 +179,43 @@ def warm_truth_program(spec, args, tmp):
     subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
 
 
-def bake_runs(spec, repeats, args):
+def bake_runs(spec, repeats, cold_runs, args):
+    """The device, the cold runs' facts and the warm runs' facts."""
     exe = Path(args.specbake)
-    with tempfile.TemporaryDirectory(prefix="specbake-bench-") as out, \
-            tempfile.TemporaryDirectory(prefix="specbake-warm-") as tmp:
+    colds, warm, device = [], [], {}
+    with tempfile.TemporaryDirectory(prefix="specbake-warm-") as tmp:
         warm_truth_program(spec, args, tmp)
-        cmd = [str(exe), "-q", "run", str(ROOT / spec["config"]), "--only", spec["job"], "--out", out]
-        if args.device:
-            cmd += ["--device", args.device]
-        cold_wall = run(cmd)
-        cold_m = latest_manifest(out, spec["job"])
-        cold = bake_facts(cold_m, cold_wall)
-        warm = []
-        for _ in range(repeats):
-            w = run(cmd + ["--force"])
-            warm.append(bake_facts(latest_manifest(out, spec["job"]), w))
-    return cold_m.get("device", {}), cold, warm
+        for i in range(cold_runs):
+            with tempfile.TemporaryDirectory(prefix="specbake-bench-") as out:
+                cmd = [str(exe), "-q", "run", str(ROOT / spec["config"]), "--only", spec["job"], "--out", out]
+                if args.device:
+                    cmd += ["--device", args.device]
+                cold_wall = run(cmd)
+                cold_m = latest_manifest(out, spec["job"])
+                device = device or cold_m.get("device", {})
+                colds.append(bake_facts(cold_m, cold_wall))
+                for _ in range(repeats if i == 0 else 0):
+                    w = run(cmd + ["--force"])
+                    warm.append(bake_facts(latest_manifest(out, spec["job"]), w))
+    return device, colds, warm
 
 
-def figure_of(target, cold, warm):
-    """The target's figure, its spread and the runs it came from."""
+def check_share(cold):
+    """A cold run's check step as a percentage of the rest of its job."""
+    check = cold["steps_wall_s"].get("check", 0.0)
+    rest = cold["bake_s"] - check
+    return 100.0 * check / rest if rest > 0 else None
+
+
+def figure_of(target, colds, warm):
+    """The target's figure (the median of its runs), its spread and the runs it came from."""
     f = target["figure"]
     if f == "bake_s":
-        runs = [r["bake_s"] for r in warm] or [cold["bake_s"]]
+        runs = [r["bake_s"] for r in warm] or [c["bake_s"] for c in colds]
     elif f == "truth_s":
-        runs = [cold["truth_s"]]
+        runs = [c["truth_s"] for c in colds]
     elif f == "check_share_cold":
-        check = cold["steps_wall_s"].get("check", 0.0)
-        rest = cold["bake_s"] - check
-        runs = [100.0 * check / rest if rest > 0 else None]
+        runs = [check_share(c) for c in colds]
     else:
         raise SystemExit(f"{TARGETS}: target {target['id']}: unknown figure '{f}'")
     return statistics.median(runs), [min(runs), max(runs)], len(runs)
@@ -261,9 +270,11 @@ def measure(args):
         failed = None
         if kind == "bake":
             try:
-                device, cold, warm = measure_bake(t["measure"], args)
-                fig, spread, n = figure_of(t, cold, warm)
-                details = {"cold": cold, "warm": warm}
+                device, colds, warm = measure_bake(t["measure"], args)
+                fig, spread, n = figure_of(t, colds, warm)
+                details = {"cold": colds[0], "warm": warm}
+                if len(colds) > 1:
+                    details["more_cold"] = colds[1:]
             except Failed as e:  # recorded: how long it ran before it failed, and why
                 failed = e.why
                 device, fig, spread, n, details = {"type": "cpu" if args.device in (None, "cpu", "auto") else "gpu",
@@ -439,6 +450,8 @@ def main():
     m = sub.add_parser("measure", help="run the targets here and append their records")
     m.add_argument("--only", nargs="+", metavar="ID", help="these targets (slow ones included)")
     m.add_argument("--repeats", type=int, default=3, help="warm runs after the cold one (default 3)")
+    m.add_argument("--cold-runs", type=int, help="cold runs, each into an empty output folder (default: the "
+                   "target's `cold_runs`, else 1); figures read from cold runs are their median")
     m.add_argument("--slow", action="store_true", help="also the slow targets (settings search, fresh clone)")
     m.add_argument("--device", help="OpenCL device, as `specbake run --device`")
     m.add_argument("--specbake", default=str(ROOT / "build" / "specbake"), help="the binary (default build/specbake)")

@@ -1407,8 +1407,9 @@ TEST(TruthTracking, GroupSunTablesFromTheProfilesLengthsMatchTheirQuadrature) {
 // 1.25 (measured: 1.17 on Earth, where the ozone bands add to Rayleigh's λ⁻⁴, 1.0004 on Mars;
 // linear in λ instead gave 5.4 at the darkest nodes). The table only shapes pdfs, where a factor
 // of 2 only moves noise; an index or weight slip (a neighbour's channel, x outside [0, 1]) is off
-// by far more at the spectrum's blue end, where S̄ changes by ~1.4× per 10 nm in daylight and by
-// e-folds where the sun's light grazes the ground. 13–16 integrated: the subset is a subset.
+// by far more on Earth, whose neighbouring channels at the blue end (365, 375 nm) differ by up to
+// e^7.9 where the sun's light grazes the ground (3 % in daylight; Mars 8 %). 13–16 integrated: the
+// subset is a subset.
 TEST(TruthTracking, SkyLightOfASpectrumInterpolatesLogSBetweenChannelsIntegratedAlone) {
   for (const AtmosphereSpec& base : {earth(), mars()}) {
     AtmosphereSpec s = base;

@@ -41,6 +41,16 @@ with tempfile.TemporaryDirectory() as tmp:
     assert r["spread"] == [min(warm), max(warm)], r["spread"]
     assert r["machine"]["device"] and r["machine"]["class"].startswith("cpu"), r["machine"]
 
+    # cold runs, each into an empty output folder: the figure is their median, the first one's
+    # facts stay under details.cold and the others follow
+    run(*common, "measure", "--only", "dispersion", "--repeats", "0", "--cold-runs", "3", "--specbake", specbake,
+        "--device", "cpu")
+    c = [json.loads(l) for l in records.read_text().splitlines()][-1]
+    colds = [c["details"]["cold"]] + c["details"]["more_cold"]
+    assert c["runs"] == 3 and len(colds) == 3 and not c["details"]["warm"], c
+    assert c["figure"] == sorted(x["bake_s"] for x in colds)[1], (c["figure"], colds)
+    assert c["spread"] == [min(x["bake_s"] for x in colds), max(x["bake_s"] for x in colds)], c["spread"]
+
     run(*common, "render")
     text = page.read_text()
     section = text.split("## Bundled dispersion configs", 1)[1].split("\n## ", 1)[0]
