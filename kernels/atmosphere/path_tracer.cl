@@ -92,7 +92,8 @@
 #define TRUTH_SKY_MU 32
 #define TRUTH_SKY_AT (TRUTH_SUN_AT + TRUTH_SUN_H * TRUTH_SUN_MU * NCH)
 #define TRUTH_MEDIUM_SIZE (TRUTH_SKY_AT + TRUTH_SKY_H * TRUTH_SKY_MU * NCH)
-/* Exact optical depths (truth_optical_depth): the ray is cut where it crosses a cut altitude
+/* Exact optical depths (truth_optical_depth, from the three profiles' lengths that
+ * truth_optical_lengths integrates at once): the ray is cut where it crosses a cut altitude
  * (every kink of the profiles, and levels between them), so that each piece changes altitude
  * monotonically, holds no kink and is integrated by 5- or 8-point Gauss–Legendre to the
  * relative error TRUTH_DEPTH_ERROR. The host places the levels (medium_table, truth.cpp) from
@@ -504,8 +505,8 @@ FN real truth_table_bilinear(GLOBAL const real* T, int rows, int cols, int c, re
 }
 /* The optical depth towards the sun from altitude h (sun cosine mu_s; along the horizon when
  * the disc centre is below it, as truth_sun_transmittance), interpolated bilinearly in the
- * nodes' coordinates from the table the host fills with truth_optical_depth. Only to shape a
- * pdf: the walks' transmittances are never read from it. */
+ * nodes' coordinates from the table the host fills with exact depths (truth_optical_lengths).
+ * Only to shape a pdf: the walks' transmittances are never read from it. */
 FN real truth_sun_depth_table(const AtmosphereParameters* a, GLOBAL const real* medium, int c, real h, real mu_s) {
   const real t = a->top_radius - a->bottom_radius;
   const real hh = fmin(fmax(h, R(0.0)), t);
