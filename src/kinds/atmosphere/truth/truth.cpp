@@ -809,26 +809,22 @@ std::vector<double> medium_table(const Model& m, const Channels& group, const st
                              group.absorption_extinction[c] * ma) *
                             (1.0 + kMajorantMargin);
   }
-  // the optical depth towards the sun at the sun table's nodes: from the profiles' lengths, or
-  // by exact quadrature (the cuts above are already in place, which truth_optical_lengths reads)
-  if (lengths) {
-    for (int n = 0; n < TRUTH_SUN_H * TRUTH_SUN_MU; ++n) {
-      const double* l = &(*lengths)[ref3::kTruthSunAt + n * kGroup];
-      for (std::size_t c = 0; c < group.size(); ++c)
-        out[ref3::kTruthSunAt + n * kGroup + c] = depth_of_lengths(group, c, l);
-    }
-    return out;
-  }
-  for (int i = 0; i < TRUTH_SUN_H; ++i)
-    for (int j = 0; j < TRUTH_SUN_MU; ++j) {
+  // the optical depth towards the sun at the sun table's nodes: each channel's sum of the three
+  // profiles' optical lengths there, read from `lengths` or integrated exactly (over the cuts
+  // above, which truth_optical_lengths reads)
+  for (int n = 0; n < TRUTH_SUN_H * TRUTH_SUN_MU; ++n) {
+    double own[3];
+    const double* l = own;
+    if (lengths) {
+      l = &(*lengths)[ref3::kTruthSunAt + n * kGroup];
+    } else {
       double h, mu;
-      ref3::truth_sun_node(&ag, i, j, &h, &mu);
-      double len[3];
-      ref3::truth_optical_lengths(&ag, out.data(), h, mu, ref3::distance_to_top(&ag, h, mu), len);
-      for (std::size_t c = 0; c < group.size(); ++c)
-        out[ref3::kTruthSunAt + (i * TRUTH_SUN_MU + j) * kGroup + c] =
-            ref3::truth_depth_of_lengths(&ag, static_cast<int>(c), len);
+      ref3::truth_sun_node(&ag, n / TRUTH_SUN_MU, n % TRUTH_SUN_MU, &h, &mu);
+      ref3::truth_optical_lengths(&ag, out.data(), h, mu, ref3::distance_to_top(&ag, h, mu), own);
     }
+    for (std::size_t c = 0; c < group.size(); ++c)
+      out[ref3::kTruthSunAt + n * kGroup + c] = depth_of_lengths(group, c, l);
+  }
   return out;
 }
 
